@@ -1,0 +1,21 @@
+"""CANopen CiA 402 drives in profile velocity mode (driver name ``cia402``).
+
+* :mod:`~drivers.cia402.enums`: wire enums and the CiA 402 state machine as tables.
+* :mod:`~drivers.cia402.faults`: SDO abort codes, EMCY codes, error register.
+* :mod:`~drivers.cia402.codec`: pure frame builders and parsers (:class:`Cia402Codec`).
+* :mod:`~drivers.cia402.options`: the protocol keys of a motor block.
+* :mod:`~drivers.cia402.sequence`: the non-blocking enable and stop sequence of one node.
+* :mod:`~drivers.cia402.driver`: :class:`Cia402Driver`, one instance per bus.
+* :mod:`~drivers.cia402.sim`: :class:`Cia402Simulator`, a simulated drive.
+
+Reference: CiA 301 / CiA 402 (https://www.can-cia.org/can-knowledge/cia402-series) and
+``/work/shared/specs/can-protocols.md`` section 3.
+"""
+
+from __future__ import annotations
+
+from drivers.cia402.codec import Cia402Codec, PdoLayout
+from drivers.cia402.driver import Cia402Driver
+from drivers.cia402.sim import Cia402Simulator
+
+__all__ = ["Cia402Codec", "Cia402Driver", "Cia402Simulator", "PdoLayout"]

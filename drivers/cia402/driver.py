@@ -1,0 +1,340 @@
+"""The stateful CiA 402 driver: enable sequences, command RPDOs, SYNC, feedback and faults.
+
+Why not ``canopen.BaseNode402``: the gateway loop calls this driver with an explicit ``now_s``
+and sends what it returns, and it must never block.  ``BaseNode402`` blocks on every SDO and
+while it waits for each state (``TIMEOUT_SWITCH_STATE_SINGLE``), its ``op_mode`` setter catches
+SDO errors and only logs them, ``setup_pdos()`` guards with ``assert`` (a substring test at
+that), and its string-keyed state machine has no unit tests.  So the sequence is our own
+non-blocking state machine (:mod:`drivers.cia402.sequence`) over pure frame builders
+(:mod:`drivers.cia402.codec`); ``canopen`` only serves as an independent cross-check in tests.
+
+Per node, :meth:`Cia402Driver.enable` starts: NMT pre-operational; RPDO (controlword +
+target velocity) and two TPDOs (statusword + position, statusword + velocity) remapped by SDO
+with each PDO switched off meanwhile; the unused TPDOs switched off; transmission type 1 (every
+SYNC) when ``sync`` is on, else 255 with an event timer; producer heartbeat (0x1017); mode of
+operation 3 (profile velocity) and a read-back of 0x6061 until it says 3; NMT start; then the
+controlword walk (fault reset if FAULT, shutdown, switch on, enable operation) in the RPDO,
+each step confirmed by the statusword.  :meth:`Cia402Driver.disable` keeps ENABLE OPERATION
+with target 0 until the drive reports speed 0 (statusword bit 12, at most 1 s), then sends
+SHUTDOWN (to READY TO SWITCH ON: power stage off), so the wheel is braked by the drive's own
+profile deceleration rather than left to coast at speed.
+
+SYNC (0x080) goes out once per bus: after the RPDOs of every :meth:`command` call, and from
+:meth:`poll` every 10 ms while :meth:`command` is not being called (enable sequence, disabled
+drives), so TPDO feedback and liveness never stop.
+
+Reference: CiA 301 and CiA 402 (https://www.can-cia.org/can-knowledge/cia402-series),
+``/work/shared/specs/can-protocols.md`` section 3.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, ClassVar
+
+from drivers.cia402.codec import (
+    Cia402Codec,
+    Emergency,
+    FeedbackKind,
+    Heartbeat,
+    PdoFeedback,
+    make_sync,
+    velocity_to_raw,
+)
+from drivers.cia402.enums import CobBase, Controlword, NmtState, State
+from drivers.cia402.faults import describe_emcy, emcy_faults, is_error_reset
+from drivers.cia402.options import DEFAULT_LIVENESS_S, OPTIONS, NodeOptions
+from drivers.cia402.sdo import SdoResponse
+from drivers.cia402.sequence import NodeSequencer, Phase
+from drivers.cia402.sim import Cia402Simulator
+from drivers.cia402.steps import configuration_steps
+from gateway.driver import MotorDriver, OptionSpec
+from gateway.errors import ConfigError, DecodeError, EncodeError
+from gateway.types import DriveFault, DriveState, WheelFeedback
+
+if TYPE_CHECKING:
+    from collections.abc import Mapping, Sequence
+
+    from gateway.types import Frame, MotorConfig
+
+log = logging.getLogger(__name__)
+
+_ENABLING = frozenset({Phase.CONFIGURING, Phase.AWAIT_STATUS, Phase.WALKING})
+_INT32_SPAN = 1 << 32
+
+
+def wrap_delta(previous: int, current: int) -> int:
+    """Signed difference of two int32 counter readings, modulo 2^32.
+
+    >>> wrap_delta(0x7FFFFFFF, -0x80000000)
+    1
+    """
+    return (current - previous + (1 << 31)) % _INT32_SPAN - (1 << 31)
+
+
+@dataclass(slots=True)
+class _Node:
+    opts: NodeOptions
+    seq: NodeSequencer
+    last_seen_s: float | None = None
+    nmt: NmtState | None = None
+    emcy: Emergency | None = None
+    counts: int = 0
+    last_raw: int | None = None
+    velocity_rad_s: float = 0.0
+    restart_pending: bool = False
+    boot_restarts: int = 0
+
+
+class Cia402Driver(MotorDriver):
+    """CANopen CiA 402 drives in profile velocity mode, one instance per bus.
+
+    :param motors: the motors, each with ``driver: cia402`` and a node ID 1..127.
+    :raises ConfigError: for a bad option, a node ID out of range or used twice.
+    """
+
+    OPTIONS: ClassVar[Mapping[str, OptionSpec]] = OPTIONS
+    NODE_ID_RANGE: ClassVar[tuple[int, int]] = (1, 127)
+    DEFAULT_LIVENESS_S: ClassVar[float] = DEFAULT_LIVENESS_S
+    #: SYNC period of :meth:`poll` while :meth:`command` is not called (s).
+    SYNC_FALLBACK_PERIOD_S: ClassVar[float] = 0.01
+    #: Boot-up messages during one enable sequence that restart it; one more is a failure.
+    MAX_BOOT_RESTARTS: ClassVar[int] = 3
+
+    def __init__(self, motors: Sequence[MotorConfig]) -> None:
+        super().__init__(motors)
+        seen: set[int] = set()
+        for m in self.motors:
+            self.validate_node_id(m.node_id, f"wheel {m.wheel!r}.node_id")
+            if m.node_id in seen:
+                raise ConfigError(
+                    f"wheel {m.wheel!r}.node_id: expected a node ID no other CiA 402 motor on "
+                    f"this bus uses, got {m.node_id}"
+                )
+            seen.add(m.node_id)
+        opts = [NodeOptions.from_motor(m) for m in self.motors]
+        pairs = list(zip(self.motors, opts, strict=True))
+        self.codec = Cia402Codec({m.node_id: o.layout for m, o in pairs})
+        #: Whether this driver produces SYNC (any motor with ``sync: true``).
+        self.sync_enabled = any(o.sync for o in opts)
+        self._nodes = [
+            _Node(o, NodeSequencer(m.node_id, f"node {m.node_id} ({m.wheel!r})", self.codec,
+                                   configuration_steps(m.node_id, o)))
+            for m, o in pairs
+        ]
+        self._last_sync_s: float | None = None
+
+    # ----------------------------------------------------------------- hooks
+
+    def enable(self, now_s: float) -> list[Frame]:
+        """Start the enable sequence of every node that is not already armed."""
+        out: list[Frame] = []
+        for i, node in enumerate(self._nodes):
+            if node.seq.phase is not Phase.ARMED:
+                node.boot_restarts = 0
+                node.restart_pending = False
+                out += node.seq.start(now_s)
+            self._refresh(i)
+        return out
+
+    def disable(self, now_s: float) -> list[Frame]:
+        """Target 0 with ENABLE OPERATION now; :meth:`poll` sends SHUTDOWN at speed 0."""
+        out: list[Frame] = []
+        for i, node in enumerate(self._nodes):
+            out += node.seq.stop(now_s)
+            self._refresh(i)
+        if out and self.sync_enabled:
+            out.append(self._sync(now_s))
+        return out
+
+    def command(self, wheel_rad_s: Sequence[float], now_s: float) -> list[Frame]:
+        """One command RPDO per armed node, then one SYNC if ``sync`` is on.
+
+        :param wheel_rad_s: wheel speeds in rad/s, in :attr:`motors` order.
+        :raises EncodeError: for a wrong count, a speed that is not finite or beyond
+            ``max_rpm``; no frame is built then.
+        """
+        if len(wheel_rad_s) != len(self.motors):
+            raise EncodeError(
+                f"Expected {len(self.motors)} wheel speeds, but got {len(wheel_rad_s)}."
+            )
+        raws: list[int] = []
+        for m, node, w in zip(self.motors, self._nodes, wheel_rad_s, strict=True):
+            limit = m.max_wheel_rad_s
+            if not math.isfinite(w) or abs(w) > limit * (1.0 + 1e-9):
+                raise EncodeError(
+                    f"Expected velocity for node {m.node_id} ({m.wheel!r}) between "
+                    f"{-limit:.4g} and {limit:.4g} rad/s, but got {w!r}."
+                )
+            units = node.opts.rad_s_to_units(m.wheel_to_motor_rad_s(w))
+            raws.append(velocity_to_raw(units, f"target velocity for node {m.node_id}"))
+        out = [
+            self.codec.rpdo(m.node_id, Controlword.ENABLE_OPERATION, raw)
+            for m, node, raw in zip(self.motors, self._nodes, raws, strict=True)
+            if node.seq.phase is Phase.ARMED
+        ]
+        if self.sync_enabled:
+            out.append(self._sync(now_s))
+        return out
+
+    def poll(self, now_s: float) -> list[Frame]:
+        """Enable/stop sequence steps, deadlines, and the fallback SYNC."""
+        out: list[Frame] = []
+        for i, node in enumerate(self._nodes):
+            if node.restart_pending:
+                node.restart_pending = False
+                if node.seq.phase in _ENABLING:
+                    out += node.seq.start(now_s)
+            was = node.seq.phase
+            out += node.seq.poll(now_s)
+            if was is not Phase.ARMED and node.seq.phase is Phase.ARMED:
+                node.emcy = None  # the drive reached OPERATION ENABLED: no fault is active
+            self._refresh(i)
+        if self.sync_enabled and (
+            self._last_sync_s is None
+            or now_s - self._last_sync_s >= self.SYNC_FALLBACK_PERIOD_S - 1e-9
+        ):
+            out.append(self._sync(now_s))
+        return out
+
+    def on_frame(self, frame: Frame) -> bool:
+        """Take a frame: TPDO feedback, heartbeat, EMCY or SDO response of one of our nodes."""
+        try:
+            msg = self.codec.decode(frame)
+        except DecodeError as err:
+            self.reject("malformed CiA 402 frame", err)
+            i = self.index_of(frame.arbitration_id - CobBase.SDO_TX)
+            if i is not None and not frame.is_extended_id:
+                self._nodes[i].seq.on_sdo_error(err)
+                self._refresh(i)
+            return True
+        if msg is None:
+            return False
+        i = self.index_of(msg.node_id)
+        if i is None:  # not reached: the codec only knows our nodes
+            return False
+        node = self._nodes[i]
+        now_s = frame.timestamp_s
+        node.last_seen_s = now_s
+        if isinstance(msg, PdoFeedback):
+            self._on_feedback(i, msg, now_s)
+        elif isinstance(msg, Heartbeat):
+            self._on_heartbeat(i, msg)
+        elif isinstance(msg, Emergency):
+            self._on_emcy(i, msg)
+        elif isinstance(msg, SdoResponse) and not node.seq.on_sdo(msg, now_s):
+            self.reject("unexpected SDO response")
+        self._refresh(i)
+        return True
+
+    @classmethod
+    def make_simulator(cls, motor: MotorConfig) -> Cia402Simulator:
+        """A simulated CiA 402 drive for ``motor``."""
+        return Cia402Simulator(motor)
+
+    # ----------------------------------------------------------------- state
+
+    def state(self, index: int, now_s: float) -> DriveState:
+        """OFFLINE after ``liveness_s`` of silence; else FAULT, ENABLING, ENABLED or DISABLED."""
+        node = self._nodes[index]
+        if node.last_seen_s is None or now_s - node.last_seen_s > node.opts.liveness_s:
+            return DriveState.OFFLINE
+        phase = node.seq.phase
+        if phase is Phase.FAILED:
+            return DriveState.FAULT
+        if phase in _ENABLING:
+            return DriveState.ENABLING
+        if node.emcy is not None or node.seq.state in (State.FAULT, State.FAULT_REACTION_ACTIVE):
+            return DriveState.FAULT
+        return DriveState.ENABLED if phase is Phase.ARMED else DriveState.DISABLED
+
+    def drive_state(self, index: int) -> State | None:
+        """The CiA 402 state from motor ``index``'s latest statusword (``None`` if unknown)."""
+        return self._nodes[index].seq.state
+
+    def phase(self, index: int) -> Phase:
+        """Where motor ``index``'s enable/stop sequence stands."""
+        return self._nodes[index].seq.phase
+
+    # ----------------------------------------------------------------- internals
+
+    def _sync(self, now_s: float) -> Frame:
+        self._last_sync_s = now_s
+        return make_sync()
+
+    def _on_feedback(self, i: int, msg: PdoFeedback, now_s: float) -> None:
+        node, motor = self._nodes[i], self.motors[i]
+        node.seq.on_status(msg.statusword)
+        if msg.kind is FeedbackKind.POSITION:
+            if node.last_raw is not None:
+                node.counts += wrap_delta(node.last_raw, msg.value)
+            node.last_raw = msg.value
+        else:
+            node.velocity_rad_s = motor.motor_to_wheel_rad_s(
+                node.opts.units_to_rad_s(msg.value))
+        if node.last_raw is not None:
+            position = motor.motor_to_wheel_rad_s(node.opts.counts_to_rad(node.counts))
+            self.store_feedback(i, WheelFeedback(position, node.velocity_rad_s, now_s))
+        state = node.seq.state
+        if node.seq.phase is Phase.ARMED and state not in (State.OPERATION_ENABLED, None):
+            text = f"statusword 0x{msg.statusword:04X} reports {state.label}"
+            if state in (State.FAULT, State.FAULT_REACTION_ACTIVE):
+                node.seq.fail(text, DriveFault.CONTROLLER)
+            else:
+                node.seq.fail(f"drive left OPERATION ENABLED: {text}", DriveFault.CONTROLLER)
+
+    def _on_heartbeat(self, i: int, msg: Heartbeat) -> None:
+        node = self._nodes[i]
+        node.nmt = msg.state
+        seq = node.seq
+        if msg.state is NmtState.BOOT_UP:
+            node.last_raw = None  # the counter may restart: continue from the current angle
+            if seq.phase in _ENABLING:
+                node.boot_restarts += 1
+                if node.boot_restarts > self.MAX_BOOT_RESTARTS:
+                    seq.fail(f"rebooted {node.boot_restarts} times during the enable sequence",
+                             DriveFault.COMMUNICATION)
+                else:
+                    log.info("%s: boot-up during the enable sequence, restarting it", seq.label)
+                    node.restart_pending = True
+            elif seq.phase in (Phase.ARMED, Phase.STOPPING):
+                seq.fail("rebooted (boot-up message); its configuration is lost",
+                         DriveFault.COMMUNICATION)
+        elif seq.phase is Phase.ARMED and msg.state is not NmtState.OPERATIONAL:
+            seq.fail(f"heartbeat reports NMT {msg.state.name}; PDOs have stopped",
+                     DriveFault.COMMUNICATION)
+
+    def _on_emcy(self, i: int, msg: Emergency) -> None:
+        node = self._nodes[i]
+        text = describe_emcy(msg.code, msg.register, msg.data)
+        if is_error_reset(msg.code):
+            log.info("%s: %s", node.seq.label, text)
+            node.emcy = None
+            return
+        log.warning("%s: %s", node.seq.label, text)
+        node.emcy = msg
+        if node.seq.phase in (Phase.ARMED, Phase.STOPPING):
+            node.seq.fail(text, emcy_faults(msg.code, msg.register))
+
+    def _refresh(self, i: int) -> None:
+        """Publish node ``i``'s fault flags, detail and armed flag to the base."""
+        node = self._nodes[i]
+        seq, emcy = node.seq, node.emcy
+        flags, detail = DriveFault.NONE, ""
+        emcy_text = "" if emcy is None else describe_emcy(emcy.code, emcy.register, emcy.data)
+        if seq.phase is Phase.FAILED:
+            flags, detail = seq.error_flags, seq.error
+            if emcy is not None and emcy_text not in detail:
+                flags |= emcy_faults(emcy.code, emcy.register)
+                detail = f"{detail}; last {emcy_text}"
+        elif seq.phase in _ENABLING:
+            pass
+        elif emcy is not None:
+            flags, detail = emcy_faults(emcy.code, emcy.register), f"{seq.label}: {emcy_text}"
+        elif seq.state in (State.FAULT, State.FAULT_REACTION_ACTIVE):
+            flags = DriveFault.CONTROLLER
+            detail = f"{seq.label}: statusword 0x{seq.statusword or 0:04X} reports FAULT"
+        self.set_fault(i, flags, detail)
+        self.set_armed(i, seq.phase is Phase.ARMED)

@@ -1,0 +1,124 @@
+"""Protocol keys of a CiA 402 motor block, described once, and their parsed form.
+
+Units:
+
+* ``velocity_factor``: device velocity units (0x60FF, 0x606C) = motor RPM x velocity_factor.
+  1.0 for a drive that counts in RPM; 10.0 for 0.1 RPM units; ``counts_per_rev / 60`` for a
+  drive in increments per second.
+* ``counts_per_rev``: position units (0x6064) per motor revolution.
+
+Both act on the motor side; ``gear_ratio`` and ``invert`` of the motor block take the value to
+the wheel.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+from drivers.cia402.codec import PdoLayout
+from gateway.driver import MotorDriver, OptionSpec
+from gateway.errors import ConfigError
+
+if TYPE_CHECKING:
+    from gateway.types import MotorConfig
+
+#: Default liveness timeout (s): feedback TPDOs run at the loop rate, heartbeats every 100 ms.
+DEFAULT_LIVENESS_S = 0.25
+
+#: Every protocol key of a ``driver: cia402`` motor block.
+OPTIONS: dict[str, OptionSpec] = {
+    "velocity_factor": OptionSpec(
+        float, 1.0, minimum=1e-9,
+        help="device velocity units per motor RPM (units = motor RPM x factor)",
+    ),
+    "counts_per_rev": OptionSpec(
+        int, 4096, minimum=1, help="position units (0x6064) per motor revolution"
+    ),
+    "sync": OptionSpec(
+        bool, True, help="PDOs on SYNC, which the driver sends once per command cycle"
+    ),
+    "heartbeat_ms": OptionSpec(
+        int, 100, minimum=0, maximum=0xFFFF, help="producer heartbeat time written to 0x1017"
+    ),
+    "event_timer_ms": OptionSpec(
+        int, 10, minimum=1, maximum=0xFFFF,
+        help="TPDO event timer when sync is false (0x18xx:05)",
+    ),
+    "liveness_s": OptionSpec(
+        float, DEFAULT_LIVENESS_S, minimum=1e-3,
+        help="silence (no heartbeat, PDO, EMCY or SDO) after which a node is OFFLINE",
+    ),
+    "rpdo": OptionSpec(int, 4, minimum=1, maximum=4, help="RPDO number for the command"),
+    "tpdo_position": OptionSpec(
+        int, 3, minimum=1, maximum=4, help="TPDO number for statusword + position"
+    ),
+    "tpdo_velocity": OptionSpec(
+        int, 4, minimum=1, maximum=4, help="TPDO number for statusword + velocity"
+    ),
+}
+
+
+class _Options(MotorDriver):
+    """Only borrows :meth:`MotorDriver.validate_options` with our :data:`OPTIONS`."""
+
+    OPTIONS = OPTIONS
+
+
+@dataclass(frozen=True, slots=True)
+class NodeOptions:
+    """The protocol keys of one motor block, validated, with defaults filled in."""
+
+    velocity_factor: float = 1.0
+    counts_per_rev: int = 4096
+    sync: bool = True
+    heartbeat_ms: int = 100
+    event_timer_ms: int = 10
+    liveness_s: float = DEFAULT_LIVENESS_S
+    layout: PdoLayout = field(default_factory=PdoLayout)
+
+    @classmethod
+    def from_motor(cls, motor: MotorConfig) -> NodeOptions:
+        """Validate ``motor.options``.
+
+        :raises ConfigError: for an unknown key, a bad value, or both feedback TPDOs on one
+            PDO number.
+        """
+        where = f"wheel {motor.wheel!r} (node {motor.node_id})"
+        opts = _Options.validate_options(motor.options, where)
+        layout = PdoLayout(
+            rpdo=int(opts["rpdo"]),  # type: ignore[call-overload]
+            tpdo_position=int(opts["tpdo_position"]),  # type: ignore[call-overload]
+            tpdo_velocity=int(opts["tpdo_velocity"]),  # type: ignore[call-overload]
+        )
+        if layout.tpdo_position == layout.tpdo_velocity:
+            raise ConfigError(
+                f"{where}.tpdo_velocity: expected a TPDO other than tpdo_position "
+                f"({layout.tpdo_position}), got {layout.tpdo_velocity}"
+            )
+        return cls(
+            velocity_factor=float(opts["velocity_factor"]),  # type: ignore[arg-type]
+            counts_per_rev=int(opts["counts_per_rev"]),  # type: ignore[call-overload]
+            sync=bool(opts["sync"]),
+            heartbeat_ms=int(opts["heartbeat_ms"]),  # type: ignore[call-overload]
+            event_timer_ms=int(opts["event_timer_ms"]),  # type: ignore[call-overload]
+            liveness_s=float(opts["liveness_s"]),  # type: ignore[arg-type]
+            layout=layout,
+        )
+
+    def rpm_to_units(self, motor_rpm: float) -> float:
+        """Device velocity units for a motor speed in RPM."""
+        return motor_rpm * self.velocity_factor
+
+    def units_to_rad_s(self, units: float) -> float:
+        """Motor speed in rad/s for device velocity units."""
+        return units / self.velocity_factor * (2.0 * math.pi / 60.0)
+
+    def rad_s_to_units(self, motor_rad_s: float) -> float:
+        """Device velocity units (not rounded) for a motor speed in rad/s."""
+        return motor_rad_s * (60.0 / (2.0 * math.pi)) * self.velocity_factor
+
+    def counts_to_rad(self, counts: int) -> float:
+        """Motor angle in rad for position units."""
+        return counts * (2.0 * math.pi) / self.counts_per_rev

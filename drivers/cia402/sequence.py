@@ -1,0 +1,324 @@
+"""The enable and stop sequences of one CiA 402 node as a non-blocking state machine.
+
+:class:`NodeSequencer` runs the configuration steps of :mod:`drivers.cia402.steps` one SDO at
+a time, then walks the CiA 402 state machine to OPERATION ENABLED with controlwords sent in the
+command RPDO, checking the statusword from the feedback TPDOs after each step.  Every wait has
+a deadline; a missed deadline or an SDO abort ends in :attr:`Phase.FAILED` with a message
+naming the node, the step and the cause.
+
+Nothing here blocks or reads the clock: the driver passes ``now_s`` and sends what comes back.
+"""
+
+from __future__ import annotations
+
+import enum
+import logging
+from typing import TYPE_CHECKING
+
+from drivers.cia402.codec import make_nmt
+from drivers.cia402.enums import (
+    NEXT_TOWARD_ENABLED,
+    TRANSITIONS,
+    Controlword,
+    ServerCommand,
+    State,
+    StatuswordBit,
+    state_from_statusword,
+)
+from drivers.cia402.faults import sdo_abort_text
+from drivers.cia402.sdo import make_sdo_download, make_sdo_upload
+from drivers.cia402.steps import NmtStep, SdoExpectStep, SdoWriteStep
+from gateway.errors import DecodeError
+from gateway.types import DriveFault
+
+if TYPE_CHECKING:
+    from drivers.cia402.codec import Cia402Codec
+    from drivers.cia402.sdo import SdoResponse
+    from drivers.cia402.steps import Step
+    from gateway.types import Frame
+
+log = logging.getLogger(__name__)
+
+
+class Phase(enum.IntEnum):
+    """Where one node's sequence stands."""
+
+    #: Nothing under way (never enabled, or stopped).
+    IDLE = 0
+    #: NMT and SDO configuration steps.
+    CONFIGURING = 1
+    #: NMT start sent; waiting for the first statusword TPDO.
+    AWAIT_STATUS = 2
+    #: Controlword steps toward OPERATION ENABLED.
+    WALKING = 3
+    #: OPERATION ENABLED; the driver streams the command RPDO.
+    ARMED = 4
+    #: Target 0 with ENABLE OPERATION until speed 0, then SHUTDOWN.
+    STOPPING = 5
+    #: A step failed; :attr:`NodeSequencer.error` says why.  Cleared by the next start.
+    FAILED = 6
+
+
+#: States in which the power stage is off: a stop is complete.
+_STOPPED = frozenset({State.NOT_READY_TO_SWITCH_ON, State.SWITCH_ON_DISABLED,
+                      State.READY_TO_SWITCH_ON, State.FAULT_REACTION_ACTIVE, State.FAULT})
+#: Where a stop goes from each operating state.
+_STOP_TARGET = {State.OPERATION_ENABLED: State.READY_TO_SWITCH_ON,
+                State.SWITCHED_ON: State.READY_TO_SWITCH_ON,
+                State.QUICK_STOP_ACTIVE: State.SWITCH_ON_DISABLED}
+
+
+class NodeSequencer:
+    """The enable/stop state machine of one node.
+
+    :param node_id: the node.
+    :param label: how messages name it, e.g. ``node 3 ("left")``.
+    :param codec: builds the command RPDO for controlword steps.
+    :param steps: from :func:`configuration_steps`.
+    """
+
+    #: Deadline for each SDO answer (s).
+    SDO_TIMEOUT_S = 0.5
+    #: Deadline for an :class:`SdoExpectStep` to read the expected value (s).
+    EXPECT_TIMEOUT_S = 0.5
+    #: Pause between reads of an :class:`SdoExpectStep` (s).
+    EXPECT_RETRY_S = 0.01
+    #: Deadline for the first statusword after NMT start (s).
+    STATUS_TIMEOUT_S = 0.5
+    #: Deadline for each state-machine transition (s).
+    STEP_TIMEOUT_S = 0.5
+    #: Controlwords are resent at this period until the statusword follows (s).
+    CW_RESEND_S = 0.02
+    #: Longest wait for speed 0 before SHUTDOWN when stopping (s).
+    STOP_TIMEOUT_S = 1.0
+    #: More state changes than this on the way to OPERATION ENABLED is a failure.
+    MAX_WALK_STEPS = 8
+
+    def __init__(self, node_id: int, label: str, codec: Cia402Codec,
+                 steps: tuple[Step, ...]) -> None:
+        self.node_id = node_id
+        self.label = label
+        self.codec = codec
+        self.steps = steps
+        self.phase = Phase.IDLE
+        #: Why the sequence failed ("" unless FAILED).
+        self.error = ""
+        #: Fault class of the failure.
+        self.error_flags = DriveFault.NONE
+        #: Latest statusword and the state it reports (``None`` if none or not a state).
+        self.statusword: int | None = None
+        self.state: State | None = None
+        self._i = 0
+        self._awaiting = False
+        self._sent_s = 0.0
+        self._step_s = 0.0
+        self._retry_s = 0.0
+        self._last_read: int | None = None
+        self._edge: tuple[State, State] | None = None
+        self._edges = 0
+        self._cw_sent_s = float("-inf")
+        self._last_cw: int | None = None
+
+    # ----------------------------------------------------------------- inputs
+
+    def start(self, now_s: float) -> list[Frame]:
+        """Begin (or restart) the enable sequence."""
+        self.phase = Phase.CONFIGURING
+        self.error, self.error_flags = "", DriveFault.NONE
+        self._i, self._awaiting, self._retry_s = 0, False, now_s
+        self._step_s = now_s
+        self._edge, self._edges = None, 0
+        return self._issue(now_s)
+
+    def stop(self, now_s: float) -> list[Frame]:
+        """Begin a controlled stop: target 0, then SHUTDOWN once the speed is 0."""
+        if self.phase in (Phase.ARMED, Phase.AWAIT_STATUS, Phase.WALKING):
+            self.phase = Phase.STOPPING
+            self._step_s = now_s
+            self._cw_sent_s = float("-inf")
+            return self._poll_stop(now_s)
+        if self.phase is Phase.CONFIGURING:
+            self.phase = Phase.IDLE  # pre-operational: no PDO reaches the drive
+        return []
+
+    def fail(self, message: str, flags: DriveFault) -> list[Frame]:
+        """End the sequence with ``message``; a drive that may be powered gets SHUTDOWN."""
+        was = self.phase
+        self.phase = Phase.FAILED
+        self.error, self.error_flags = f"{self.label}: {message}", flags
+        log.error("%s", self.error)
+        if was in (Phase.AWAIT_STATUS, Phase.WALKING):
+            return [self._rpdo(Controlword.SHUTDOWN)]
+        return []
+
+    def on_status(self, statusword: int) -> None:
+        """Take a statusword from a feedback TPDO."""
+        self.statusword = statusword
+        self.state = state_from_statusword(statusword)
+
+    def on_sdo(self, resp: SdoResponse, now_s: float) -> bool:
+        """Take an SDO response; ``False`` if none was expected (late or foreign)."""
+        step = self.steps[self._i] if self._i < len(self.steps) else None
+        if (self.phase is not Phase.CONFIGURING or not self._awaiting
+                or not isinstance(step, (SdoWriteStep, SdoExpectStep))
+                or (resp.index, resp.subindex) != (step.index, step.subindex)):
+            return False
+        self._awaiting = False
+        where = f"0x{step.index:04X}:{step.subindex:02X} ({step.what})"
+        if resp.command is ServerCommand.ABORT:
+            verb = f"write of {step.value} to" if isinstance(step, SdoWriteStep) else "read of"
+            self.fail(f"SDO {verb} {where} aborted: {sdo_abort_text(resp.abort_code)}",
+                      DriveFault.COMMUNICATION)
+        elif isinstance(step, SdoWriteStep):
+            if resp.command is not ServerCommand.INITIATE_DOWNLOAD:
+                self.fail(f"expected a download confirmation for {where}, got {resp.command.name}",
+                          DriveFault.COMMUNICATION)
+            else:
+                self._advance(now_s)
+        else:
+            try:
+                value = resp.value(step.dtype)
+            except DecodeError as err:
+                self.fail(str(err), DriveFault.COMMUNICATION)
+                return True
+            self._last_read = value
+            if value == step.expected:
+                self._advance(now_s)
+            else:
+                self._retry_s = now_s + self.EXPECT_RETRY_S
+        return True
+
+    def on_sdo_error(self, err: DecodeError) -> None:
+        """A malformed SDO response arrived while one was expected."""
+        if self.phase is Phase.CONFIGURING and self._awaiting:
+            self.fail(str(err), DriveFault.COMMUNICATION)
+
+    # ----------------------------------------------------------------- periodic
+
+    def poll(self, now_s: float) -> list[Frame]:
+        """Frames due at ``now_s``; checks every deadline."""
+        if self.phase is Phase.CONFIGURING:
+            return self._poll_configure(now_s)
+        if self.phase is Phase.AWAIT_STATUS:
+            if self.state is not None:
+                self.phase = Phase.WALKING
+            elif now_s - self._step_s > self.STATUS_TIMEOUT_S:
+                got = "none" if self.statusword is None else f"0x{self.statusword:04X}"
+                return self.fail(
+                    f"no valid statusword in a TPDO within {self.STATUS_TIMEOUT_S:g} s after "
+                    f"NMT start (last: {got})", DriveFault.COMMUNICATION)
+            else:
+                return []
+        if self.phase is Phase.WALKING:
+            return self._poll_walk(now_s)
+        if self.phase is Phase.STOPPING:
+            return self._poll_stop(now_s)
+        return []
+
+    # ----------------------------------------------------------------- internals
+
+    def _rpdo(self, word: int) -> Frame:
+        self._last_cw = word
+        return self.codec.rpdo(self.node_id, word, 0)
+
+    def _advance(self, now_s: float) -> None:
+        self._i += 1
+        self._retry_s = now_s
+        self._step_s = now_s
+        self._last_read = None
+
+    def _issue(self, now_s: float) -> list[Frame]:
+        out: list[Frame] = []
+        while self._i < len(self.steps):
+            step = self.steps[self._i]
+            if isinstance(step, NmtStep):
+                out.append(make_nmt(step.command, self.node_id))
+                self._advance(now_s)
+                continue
+            if isinstance(step, SdoWriteStep):
+                out.append(make_sdo_download(self.node_id, step.index, step.subindex,
+                                             step.value, step.dtype))
+            else:
+                out.append(make_sdo_upload(self.node_id, step.index, step.subindex))
+            self._awaiting, self._sent_s = True, now_s
+            return out
+        self.phase, self._step_s = Phase.AWAIT_STATUS, now_s
+        self.statusword = self.state = None
+        return out
+
+    def _poll_configure(self, now_s: float) -> list[Frame]:
+        step = self.steps[self._i]
+        if isinstance(step, NmtStep):  # not reached: NMT steps never wait
+            return self._issue(now_s)
+        if isinstance(step, SdoExpectStep) and now_s - self._step_s > self.EXPECT_TIMEOUT_S:
+            return self.fail(
+                f"0x{step.index:04X}:{step.subindex:02X} ({step.what}) reads "
+                f"{self._last_read}, expected {step.expected} within "
+                f"{self.EXPECT_TIMEOUT_S:g} s", DriveFault.CONTROLLER)
+        if self._awaiting:
+            if now_s - self._sent_s > self.SDO_TIMEOUT_S:
+                op = (f"write of {step.value} to" if isinstance(step, SdoWriteStep)
+                      else "read of")
+                return self.fail(
+                    f"no SDO response within {self.SDO_TIMEOUT_S:g} s to the {op} "
+                    f"0x{step.index:04X}:{step.subindex:02X} ({step.what})",
+                    DriveFault.COMMUNICATION)
+            return []
+        if now_s >= self._retry_s:
+            return self._issue(now_s)
+        return []
+
+    def _poll_walk(self, now_s: float) -> list[Frame]:
+        state = self.state
+        if state is State.OPERATION_ENABLED:
+            self.phase = Phase.ARMED
+            log.info("%s: OPERATION ENABLED", self.label)
+            return []
+        if state is not None:
+            edge = (state, NEXT_TOWARD_ENABLED[state])
+            if edge != self._edge:
+                self._edge, self._step_s, self._cw_sent_s = edge, now_s, float("-inf")
+                self._edges += 1
+                if self._edges > self.MAX_WALK_STEPS:
+                    return self.fail(f"no OPERATION ENABLED after {self.MAX_WALK_STEPS} "
+                                     "state changes", DriveFault.CONTROLLER)
+        if self._edge is None:  # only invalid statuswords so far
+            return []
+        current, target = self._edge
+        word = TRANSITIONS.get(self._edge)
+        if now_s - self._step_s > self.STEP_TIMEOUT_S:
+            how = "on its own" if word is None else f"after controlword 0x{word:04X}"
+            return self.fail(
+                f"no transition {current.label} -> {target.label} within "
+                f"{self.STEP_TIMEOUT_S:g} s {how} (statusword 0x{self.statusword or 0:04X})",
+                DriveFault.CONTROLLER)
+        if word is None or now_s - self._cw_sent_s < self.CW_RESEND_S:
+            return []
+        self._cw_sent_s = now_s
+        if word is Controlword.FAULT_RESET and (self._last_cw is None or self._last_cw & 0x80):
+            return [self._rpdo(Controlword.DISABLE_VOLTAGE)]  # bit 7 low first: a rising edge
+        return [self._rpdo(word)]
+
+    def _poll_stop(self, now_s: float) -> list[Frame]:
+        state = self.state
+        if state in _STOPPED:
+            self.phase = Phase.IDLE
+            return []
+        if now_s - self._step_s > self.STOP_TIMEOUT_S + self.STEP_TIMEOUT_S:
+            log.warning("%s: stop not confirmed by the statusword (0x%04X)",
+                        self.label, self.statusword or 0)
+            self.phase = Phase.IDLE
+            return []
+        moving = (self.statusword is not None
+                  and not self.statusword & StatuswordBit.SPEED_ZERO)
+        if (state is State.OPERATION_ENABLED and moving
+                and now_s - self._step_s < self.STOP_TIMEOUT_S):
+            word: int = Controlword.ENABLE_OPERATION
+        elif state is not None and state in _STOP_TARGET:
+            word = TRANSITIONS[(state, _STOP_TARGET[state])]
+        else:
+            word = Controlword.SHUTDOWN
+        if word == self._last_cw and now_s - self._cw_sent_s < self.CW_RESEND_S:
+            return []
+        self._cw_sent_s = now_s
+        return [self._rpdo(word)]

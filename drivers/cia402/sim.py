@@ -1,0 +1,379 @@
+"""A simulated CiA 402 drive: NMT slave, SDO server, PDOs, SYNC, heartbeat, EMCY, state machine.
+
+The device decodes controlwords from their bits (CiA 402 "device control commands"), not from
+the driver's transition table, so the driver is tested against an independent reading of the
+standard.  Its default PDO mapping is deliberately not the gateway's (TPDO3 carries velocity,
+RPDO4 and TPDO4 are off, TPDO1/2 are on): a driver that does not remap fails the tests.
+
+Quantisation follows a real drive: position actual value (0x6064) is an int32 count that wraps
+modulo 2^32 (``initial_position`` lets a test start near the wrap), velocities are int32
+device units.  The motor follows 0x60FF only in OPERATION ENABLED with mode 3 displayed and
+halt clear.  Reference: CiA 301 and CiA 402; ``/work/shared/specs/can-protocols.md`` section 3.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from typing import TYPE_CHECKING
+
+from drivers.cia402.codec import make_emcy, make_heartbeat
+from drivers.cia402.enums import (
+    ClientCommand,
+    CobBase,
+    NmtCommand,
+    NmtState,
+    ObjectIndex,
+    OperationMode,
+    State,
+    StatuswordBit,
+)
+from drivers.cia402.faults import ErrorRegister, SdoAbortCode
+from drivers.cia402.options import NodeOptions
+from drivers.cia402.sdo import (
+    make_sdo_abort,
+    make_sdo_download_ack,
+    make_sdo_upload_response,
+    parse_sdo_request,
+)
+from drivers.cia402.sim_od import SimObjectDictionary
+from gateway.errors import DecodeError
+from gateway.sim import DeviceSimulator, SimFault
+from gateway.types import Frame
+
+if TYPE_CHECKING:
+    from collections.abc import Iterable
+
+    from gateway.sim import MotorModel
+    from gateway.types import MotorConfig
+
+log = logging.getLogger(__name__)
+
+_OPERATING = frozenset({State.OPERATION_ENABLED, State.QUICK_STOP_ACTIVE})
+_POWERED = frozenset({State.READY_TO_SWITCH_ON, State.SWITCHED_ON, *_OPERATING})
+
+
+def _wrap32(value: int) -> int:
+    return (value + (1 << 31)) % (1 << 32) - (1 << 31)
+
+
+def _clamp32(value: int) -> int:
+    return max(-(1 << 31), min((1 << 31) - 1, value))
+
+
+class Cia402Simulator(DeviceSimulator):
+    """The device side of one CiA 402 drive in profile velocity mode.
+
+    :param motor: the motor block (node ID, ``velocity_factor``, ``counts_per_rev``).
+    :param model: the motor physics (motor side).
+    :param initial_position: 0x6064 at motor angle 0 (counts, int32).
+    :param heartbeat_ms: 0x1017 at power-up (0 = no heartbeat until configured).
+    :param command_timeout_s: fault (EMCY 0x8250 RPDO timeout) when OPERATION ENABLED and no
+        RPDO came for this long; ``None`` disables the watchdog.
+    :param supported_modes: 0x6502; writing an unsupported 0x6060 is aborted.
+    :param mode_switch_delay_s: 0x6061 follows 0x6060 after this delay.
+    :param missing_objects: indices to leave out of the dictionary (SDO abort 0x06020000).
+    :param fault_code: EMCY code sent on an injected :attr:`SimFault.FAULT`.
+    :param fault_register: error register sent with it.
+    """
+
+    def __init__(
+        self, motor: MotorConfig, model: MotorModel | None = None, *,
+        initial_position: int = 0, heartbeat_ms: int = 0,
+        command_timeout_s: float | None = None, supported_modes: int = 0x6D,
+        mode_switch_delay_s: float = 0.0, missing_objects: Iterable[int] = (),
+        fault_code: int = 0x2310, fault_register: int = 0x03,
+    ) -> None:
+        super().__init__(motor, model)
+        self.opts = NodeOptions.from_motor(motor)
+        self.node_id = motor.node_id
+        self.initial_position = _wrap32(initial_position)
+        self.command_timeout_s = command_timeout_s
+        self.supported_modes = supported_modes
+        self.mode_switch_delay_s = mode_switch_delay_s
+        self.fault_code, self.fault_register = fault_code, fault_register
+        self.od = SimObjectDictionary(self.node_id, heartbeat_ms, supported_modes,
+                                      missing_objects)
+        #: Counters for assertions: SYNCs seen, RPDOs applied, SDO aborts sent, bad PDOs.
+        self.syncs = self.rpdos = self.aborts = self.pdo_errors = 0
+        self._power_on()
+
+    # ----------------------------------------------------------------- public
+
+    @property
+    def position_counts(self) -> int:
+        """0x6064 now: the motor angle in counts from ``initial_position``, wrapped to int32."""
+        turns = self.model.position_rad / (2.0 * math.pi)
+        return _wrap32(self.initial_position + round(turns * self.opts.counts_per_rev))
+
+    @property
+    def velocity_units(self) -> int:
+        """0x606C now, device units."""
+        return _clamp32(round(self.opts.rad_s_to_units(self.model.velocity_rad_s)))
+
+    def object_value(self, index: int, subindex: int = 0) -> int:
+        """The current value of an object (for assertions)."""
+        self._refresh()
+        return self.od.entries[(index, subindex)].value
+
+    # ----------------------------------------------------------------- state
+
+    def _power_on(self) -> None:
+        self.nmt = NmtState.PRE_OPERATIONAL
+        self.state = State.NOT_READY_TO_SWITCH_ON
+        self.od.entries = self.od.defaults()
+        self._boot_pending = True
+        self._reset_comm_state()
+        self._controlword = 0
+        self._mode_due: tuple[int, float] | None = None
+        self._error_register = 0
+        self._last_rpdo_s: float | None = None
+
+    def _reset_comm_state(self) -> None:
+        self._now = 0.0
+        self._pending: dict[int, bytes] = {}
+        self._emcy_out: list[Frame] = []
+        self._last_hb_s: float | None = None
+        self._tpdo_last_s = [0.0] * 4
+        self._tpdo_last_sw: list[int | None] = [None] * 4
+        self._sync_counter = [0] * 4
+
+    def _statusword(self) -> int:
+        sw = int(self.state) | StatuswordBit.REMOTE
+        if self.state in _POWERED:
+            sw |= StatuswordBit.VOLTAGE_ENABLED
+        if self.state is State.SWITCH_ON_DISABLED:
+            sw |= StatuswordBit.QUICK_STOP
+        rpm_units = abs(self.opts.rad_s_to_units(self.model.velocity_rad_s))
+        if rpm_units < self.opts.velocity_factor:  # below 1 RPM
+            sw |= StatuswordBit.SPEED_ZERO
+        if self.state is State.OPERATION_ENABLED:
+            target = self.od.get(0x60FF)
+            if abs(self.velocity_units - target) <= max(1.0, 0.01 * abs(target)):
+                sw |= StatuswordBit.TARGET_REACHED
+        return sw
+
+    def _refresh(self) -> None:
+        od = self.od
+        if self._mode_due is not None and self._now >= self._mode_due[1]:
+            od.set(0x6061, self._mode_due[0])
+            self._mode_due = None
+        od.set(0x6041, self._statusword())
+        od.set(0x6064, self.position_counts)
+        od.set(0x606C, self.velocity_units)
+        od.set(0x1001, self._error_register)
+
+    # ----------------------------------------------------------------- CiA 402 device control
+
+    def _apply_controlword(self, cw: int) -> None:
+        rising_reset = bool(cw & 0x80) and not self._controlword & 0x80
+        self._controlword = cw
+        st = self.state
+        if st is State.FAULT:
+            if rising_reset and not self.faults & SimFault.FAULT:
+                self.state = State.SWITCH_ON_DISABLED  # transition 15
+                self._error_register = 0
+                self._emcy_out.append(make_emcy(self.node_id, 0x0000, 0))
+            return
+        if st in (State.FAULT_REACTION_ACTIVE, State.NOT_READY_TO_SWITCH_ON):
+            return
+        switch_on, voltage, no_qs, enable_op = (bool(cw & b) for b in (0x1, 0x2, 0x4, 0x8))
+        if not voltage:  # disable voltage: 7, 9, 10, 12
+            self.state = State.SWITCH_ON_DISABLED
+        elif not no_qs:  # quick stop: 11, or 7 / 10
+            if st is State.OPERATION_ENABLED:
+                self.state = State.QUICK_STOP_ACTIVE
+            elif st in (State.READY_TO_SWITCH_ON, State.SWITCHED_ON):
+                self.state = State.SWITCH_ON_DISABLED
+        elif not switch_on:  # shutdown: 2, 6, 8
+            if st in (State.SWITCH_ON_DISABLED, State.SWITCHED_ON, State.OPERATION_ENABLED):
+                self.state = State.READY_TO_SWITCH_ON
+        elif not enable_op:  # switch on / disable operation: 3, 5
+            if st in (State.READY_TO_SWITCH_ON, State.OPERATION_ENABLED):
+                self.state = State.SWITCHED_ON
+        elif st in (State.READY_TO_SWITCH_ON, State.SWITCHED_ON, State.QUICK_STOP_ACTIVE):
+            self.state = State.OPERATION_ENABLED  # enable operation: 3+4, 4, 16
+        if self.state is State.OPERATION_ENABLED and st is not State.OPERATION_ENABLED:
+            self._last_rpdo_s = self._now
+
+    def _raise_fault(self, code: int, register: int) -> None:
+        if self.state in (State.FAULT, State.FAULT_REACTION_ACTIVE):
+            return
+        self.state = State.FAULT_REACTION_ACTIVE
+        self._error_register = register
+        self._emcy_out.append(make_emcy(self.node_id, code, register))
+
+    def _on_fault(self) -> None:
+        self._raise_fault(self.fault_code, self.fault_register)
+
+    def _write(self, index: int, sub: int, data: bytes, *, sdo: bool) -> SdoAbortCode | None:
+        """Write an object and act on it; the SDO abort code on refusal."""
+        value, abort = self.od.write(index, sub, data, sdo=sdo)
+        if abort is None:
+            if index == ObjectIndex.CONTROLWORD:
+                self._apply_controlword(value)
+            elif index == ObjectIndex.MODES_OF_OPERATION:
+                self._mode_due = (value, self._now + self.mode_switch_delay_s)
+        return abort
+
+    # ----------------------------------------------------------------- frames in
+
+    def _on_frame(self, frame: Frame, now_s: float) -> list[Frame]:
+        self._now = now_s
+        if frame.is_extended_id or frame.is_remote_frame:
+            return []
+        cob = frame.arbitration_id
+        if cob == CobBase.NMT:
+            return self._on_nmt(frame)
+        if self.nmt is NmtState.STOPPED:
+            return []
+        if cob == CobBase.SDO_RX + self.node_id:
+            return self._on_sdo(frame)
+        if self.nmt is not NmtState.OPERATIONAL:
+            return []
+        if cob == CobBase.SYNC:
+            return self._on_sync()
+        for k in range(4):
+            if self.od.pdo_valid(0x1400 + k) and self.od.get(0x1400 + k, 1) & 0x7FF == cob:
+                self._on_rpdo(k, frame.data)
+        return []
+
+    def _on_nmt(self, frame: Frame) -> list[Frame]:
+        if len(frame.data) != 2 or frame.data[1] not in (0, self.node_id):
+            return []
+        try:
+            command = NmtCommand(frame.data[0])
+        except ValueError:
+            return []
+        if command is NmtCommand.START:
+            self.nmt = NmtState.OPERATIONAL
+        elif command is NmtCommand.STOP:
+            self.nmt = NmtState.STOPPED
+        elif command is NmtCommand.ENTER_PRE_OPERATIONAL:
+            self.nmt = NmtState.PRE_OPERATIONAL
+        elif command is NmtCommand.RESET_NODE:
+            self._power_on()
+            self.model.armed = False
+        else:
+            self.od.reset_communication()
+            self._reset_comm_state()
+            self.nmt, self._boot_pending = NmtState.PRE_OPERATIONAL, True
+        return []
+
+    def _on_sdo(self, frame: Frame) -> list[Frame]:
+        n = self.node_id
+        try:
+            req = parse_sdo_request(frame)
+        except DecodeError:
+            if len(frame.data) != 8:
+                return []
+            index, sub = frame.data[1] | frame.data[2] << 8, frame.data[3]
+            self.aborts += 1
+            return [make_sdo_abort(n, index, sub, SdoAbortCode.INVALID_COMMAND_SPECIFIER)]
+        if req.command is ClientCommand.ABORT:
+            return []
+        if req.command is ClientCommand.INITIATE_DOWNLOAD:
+            abort = self._write(req.index, req.subindex, req.data, sdo=True)
+            if abort is None:
+                return [make_sdo_download_ack(n, req.index, req.subindex)]
+        else:
+            self._refresh()
+            entry = self.od.lookup(req.index, req.subindex)
+            if not isinstance(entry, SdoAbortCode):
+                return [make_sdo_upload_response(n, req.index, req.subindex, entry.value,
+                                                 entry.dtype)]
+            abort = entry
+        self.aborts += 1
+        return [make_sdo_abort(n, req.index, req.subindex, abort)]
+
+    def _on_rpdo(self, k: int, data: bytes) -> None:
+        mapped = self.od.mapped(0x1600 + k)
+        if len(data) < sum(bits for _, _, bits in mapped) // 8:
+            self.pdo_errors += 1
+            return
+        if self.od.get(0x1400 + k, 2) <= 240:
+            self._pending[k] = data  # synchronous: acts at the next SYNC
+        else:
+            self._apply_rpdo(k, data)
+
+    def _apply_rpdo(self, k: int, data: bytes) -> None:
+        self.rpdos += 1
+        self._last_rpdo_s = self._now
+        offset = 0
+        for index, sub, bits in self.od.mapped(0x1600 + k):
+            size = bits // 8
+            self._write(index, sub, data[offset:offset + size], sdo=False)
+            offset += size
+
+    def _on_sync(self) -> list[Frame]:
+        self.syncs += 1
+        for k, data in sorted(self._pending.items()):
+            self._apply_rpdo(k, data)
+        self._pending.clear()
+        self._step_states()
+        out = []
+        for k in range(4):
+            tx_type = self.od.get(0x1800 + k, 2)
+            if tx_type > 240 or not self._tpdo_on(k):
+                continue
+            self._sync_counter[k] += 1
+            if self._sync_counter[k] >= max(tx_type, 1):
+                self._sync_counter[k] = 0
+                out.append(self._tpdo(k))
+        return out
+
+    # ----------------------------------------------------------------- frames out
+
+    def _tpdo_on(self, k: int) -> bool:
+        return self.od.pdo_valid(0x1800 + k)
+
+    def _tpdo(self, k: int) -> Frame:
+        self._refresh()
+        payload = self.od.pack(0x1A00 + k)
+        self._tpdo_last_s[k] = self._now
+        self._tpdo_last_sw[k] = self.od.get(0x6041)
+        return Frame(self.od.get(0x1800 + k, 1) & 0x7FF, payload)
+
+    def _step_states(self) -> None:
+        """Automatic transitions, the RPDO watchdog, and what the motor is told to do."""
+        if self.state is State.NOT_READY_TO_SWITCH_ON:
+            self.state = State.SWITCH_ON_DISABLED  # transition 1
+        elif self.state is State.FAULT_REACTION_ACTIVE:
+            self.state = State.FAULT  # transition 14
+        if (self.command_timeout_s is not None and self.state is State.OPERATION_ENABLED
+                and self._last_rpdo_s is not None
+                and self._now - self._last_rpdo_s > self.command_timeout_s):
+            self._raise_fault(0x8250, ErrorRegister.GENERIC | ErrorRegister.COMMUNICATION)
+        self._refresh()
+        follow = (self.state is State.OPERATION_ENABLED and not self._controlword & 0x100
+                  and self.od.get(0x6061) == OperationMode.PROFILE_VELOCITY)
+        self.model.armed = self.state in _OPERATING
+        target = self.od.get(0x60FF) if follow else 0
+        self.model.target_rad_s = self.opts.units_to_rad_s(target)
+
+    def _on_tick(self, now_s: float) -> list[Frame]:
+        self._now = now_s
+        out: list[Frame] = []
+        if self._boot_pending:
+            self._boot_pending = False
+            out.append(make_heartbeat(self.node_id, NmtState.BOOT_UP))
+        self._step_states()
+        if self.nmt is not NmtState.STOPPED:
+            out += self._emcy_out
+            self._emcy_out = []
+        period_ms = self.od.get(0x1017)
+        if period_ms and (self._last_hb_s is None
+                          or now_s - self._last_hb_s >= period_ms / 1000.0 - 1e-9):
+            self._last_hb_s = now_s
+            out.append(make_heartbeat(self.node_id, self.nmt))
+        if self.nmt is NmtState.OPERATIONAL:
+            sw = self.od.get(0x6041)
+            for k in range(4):
+                if self.od.get(0x1800 + k, 2) < 254 or not self._tpdo_on(k):
+                    continue
+                timer_ms = self.od.get(0x1800 + k, 5)
+                due = timer_ms and now_s - self._tpdo_last_s[k] >= timer_ms / 1000.0 - 1e-9
+                mapped_sw = any(i == 0x6041 for i, _, _ in self.od.mapped(0x1A00 + k))
+                if due or (mapped_sw and sw != self._tpdo_last_sw[k]):
+                    out.append(self._tpdo(k))
+        return out

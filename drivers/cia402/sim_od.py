@@ -1,0 +1,204 @@
+"""The object dictionary of the simulated CiA 402 drive, with CiA 301 write rules.
+
+It holds the objects the gateway touches (0x1000, 0x1001, 0x1017, PDO parameters
+0x1400-0x1403 / 0x1600-0x1603 / 0x1800-0x1803 / 0x1A00-0x1A03, and 0x6040, 0x6041, 0x6060,
+0x6061, 0x6064, 0x606C, 0x60FF, 0x6502) and refuses what a real device refuses, with the SDO
+abort code CiA 301 gives: unknown object or subindex, read-only, wrong length, a mapping change
+while the PDO is valid or before its count is cleared, an unmappable object or more than
+64 bits, a COB-ID change of a valid PDO, an unsupported mode of operation.
+
+The default PDO mapping is deliberately not the gateway's (Faulhaber-like: RPDO3 = 6040 + 60FF,
+TPDO3 = 6041 + 606C, RPDO4/TPDO4 off), so a driver that does not remap fails the tests.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+from drivers.cia402.codec import unpack_mapping_entry
+from drivers.cia402.enums import (
+    PDO_COB_INVALID,
+    DataType,
+    ObjectIndex,
+    OperationMode,
+    rpdo_cob_id,
+    supported_mode_bit,
+    tpdo_cob_id,
+)
+from drivers.cia402.faults import SdoAbortCode
+
+if TYPE_CHECKING:
+    from collections.abc import Iterable
+
+_U8, _U16, _U32 = DataType.UNSIGNED8, DataType.UNSIGNED16, DataType.UNSIGNED32
+_I8, _I32 = DataType.INTEGER8, DataType.INTEGER32
+
+#: Default mappings of PDO 1..4 (entries ``index << 16 | sub << 8 | bits``).
+_RPDO_DEFAULTS: tuple[tuple[int, ...], ...] = (
+    (0x60400010,), (0x60400010, 0x60600008), (0x60400010, 0x60FF0020), ())
+_TPDO_DEFAULTS: tuple[tuple[int, ...], ...] = (
+    (0x60410010,), (0x60410010, 0x60610008), (0x60410010, 0x606C0020), ())
+
+
+@dataclass(slots=True)
+class Entry:
+    """One object (index, subindex) of the dictionary."""
+
+    dtype: DataType
+    value: int
+    writable: bool = True
+    mappable: bool = False
+
+
+class SimObjectDictionary:
+    """Objects of one simulated node.
+
+    :param node_id: the node (for the predefined PDO COB-IDs).
+    :param heartbeat_ms: 0x1017 at power-up.
+    :param supported_modes: 0x6502.
+    :param missing: indices to leave out.
+    """
+
+    def __init__(self, node_id: int, heartbeat_ms: int, supported_modes: int,
+                 missing: Iterable[int] = ()) -> None:
+        self.node_id = node_id
+        self.heartbeat_ms = heartbeat_ms
+        self.supported_modes = supported_modes
+        self.missing = frozenset(missing)
+        self.entries = self.defaults()
+
+    def defaults(self) -> dict[tuple[int, int], Entry]:
+        """Every object at its power-up value."""
+        od: dict[tuple[int, int], Entry] = {
+            (0x1000, 0): Entry(_U32, 0x00020192, writable=False),
+            (0x1001, 0): Entry(_U8, 0, writable=False),
+            (0x1017, 0): Entry(_U16, self.heartbeat_ms),
+            (0x6040, 0): Entry(_U16, 0, mappable=True),
+            (0x6041, 0): Entry(_U16, 0, writable=False, mappable=True),
+            (0x6060, 0): Entry(_I8, OperationMode.PROFILE_POSITION, mappable=True),
+            (0x6061, 0): Entry(_I8, OperationMode.PROFILE_POSITION, False, True),
+            (0x6064, 0): Entry(_I32, 0, writable=False, mappable=True),
+            (0x606C, 0): Entry(_I32, 0, writable=False, mappable=True),
+            (0x60FF, 0): Entry(_I32, 0, mappable=True),
+            (0x6502, 0): Entry(_U32, self.supported_modes, writable=False),
+        }
+        n = self.node_id
+        for k in range(4):
+            off = PDO_COB_INVALID if k == 3 else 0
+            od[(0x1400 + k, 0)] = Entry(_U8, 2, writable=False)
+            od[(0x1400 + k, 1)] = Entry(_U32, off | rpdo_cob_id(k + 1, n))
+            od[(0x1400 + k, 2)] = Entry(_U8, 255)
+            od[(0x1800 + k, 0)] = Entry(_U8, 5, writable=False)
+            od[(0x1800 + k, 1)] = Entry(_U32, off | tpdo_cob_id(k + 1, n))
+            od[(0x1800 + k, 2)] = Entry(_U8, 255)
+            od[(0x1800 + k, 3)] = Entry(_U16, 0)
+            od[(0x1800 + k, 5)] = Entry(_U16, 0)
+            for base, maps in ((0x1600, _RPDO_DEFAULTS), (0x1A00, _TPDO_DEFAULTS)):
+                od[(base + k, 0)] = Entry(_U8, len(maps[k]))
+                for sub in range(1, 9):
+                    value = maps[k][sub - 1] if sub <= len(maps[k]) else 0
+                    od[(base + k, sub)] = Entry(_U32, value)
+        return {key: e for key, e in od.items() if key[0] not in self.missing}
+
+    def reset_communication(self) -> None:
+        """Communication objects (0x1000-0x1FFF) back to their power-up values."""
+        self.entries.update({k: e for k, e in self.defaults().items() if k[0] < 0x2000})
+
+    # ----------------------------------------------------------------- access
+
+    def get(self, index: int, subindex: int = 0, default: int = 0) -> int:
+        """An object's value, ``default`` if it does not exist."""
+        entry = self.entries.get((index, subindex))
+        return default if entry is None else entry.value
+
+    def set(self, index: int, value: int, subindex: int = 0) -> None:
+        """Set an object the device itself updates (no checks); missing objects are skipped."""
+        entry = self.entries.get((index, subindex))
+        if entry is not None:
+            entry.value = value
+
+    def lookup(self, index: int, subindex: int) -> Entry | SdoAbortCode:
+        """The entry, or the abort code for an unknown object or subindex."""
+        entry = self.entries.get((index, subindex))
+        if entry is not None:
+            return entry
+        if any(k[0] == index for k in self.entries):
+            return SdoAbortCode.SUBINDEX_DOES_NOT_EXIST
+        return SdoAbortCode.OBJECT_DOES_NOT_EXIST
+
+    def write(self, index: int, subindex: int, data: bytes, *,
+              sdo: bool) -> tuple[int, SdoAbortCode | None]:
+        """Write an object from raw little-endian bytes.
+
+        :param sdo: an SDO write (checks the access right); PDO writes skip it.
+        :return: ``(value, None)`` on success, ``(0, abort code)`` on refusal.
+        """
+        entry = self.lookup(index, subindex)
+        if isinstance(entry, SdoAbortCode):
+            return 0, entry
+        if sdo and not entry.writable:
+            return 0, SdoAbortCode.WRITE_READ_ONLY
+        if len(data) != entry.dtype.size:
+            too_high = len(data) > entry.dtype.size
+            return 0, SdoAbortCode.LENGTH_TOO_HIGH if too_high else SdoAbortCode.LENGTH_TOO_LOW
+        value = int(entry.dtype.codec.unpack(data)[0])
+        abort = self._check(index, subindex, value, entry)
+        if abort is not None:
+            return 0, abort
+        entry.value = value
+        return value, None
+
+    def _check(self, index: int, sub: int, value: int, entry: Entry) -> SdoAbortCode | None:
+        if index == ObjectIndex.MODES_OF_OPERATION:
+            try:
+                mode = OperationMode(value)
+            except ValueError:
+                return SdoAbortCode.INVALID_VALUE
+            if mode is OperationMode.NO_MODE or not self.supported_modes & supported_mode_bit(mode):
+                return SdoAbortCode.INVALID_VALUE
+            return None
+        if (0x1400 <= index <= 0x1403 or 0x1800 <= index <= 0x1803) and sub == 1:
+            both_valid = not (entry.value | value) & PDO_COB_INVALID
+            return SdoAbortCode.INVALID_VALUE if both_valid and value != entry.value else None
+        if 0x1600 <= index <= 0x1603 or 0x1A00 <= index <= 0x1A03:
+            if not self.get(index - 0x200, 1) & PDO_COB_INVALID:
+                return SdoAbortCode.CANNOT_STORE_DEVICE_STATE  # PDO valid: no remapping
+            if sub == 0:
+                return self._check_mapping(index, value)
+            if self.get(index, 0) != 0:
+                return SdoAbortCode.CANNOT_STORE_DEVICE_STATE  # count not cleared first
+        return None
+
+    def _check_mapping(self, index: int, count: int) -> SdoAbortCode | None:
+        if count > 8:
+            return SdoAbortCode.INVALID_VALUE
+        bits = 0
+        for sub in range(1, count + 1):
+            obj, obj_sub, size = unpack_mapping_entry(self.get(index, sub))
+            target = self.entries.get((obj, obj_sub))
+            if target is None or not target.mappable or size != 8 * target.dtype.size:
+                return SdoAbortCode.CANNOT_MAP_TO_PDO
+            if index < 0x1A00 and not target.writable:
+                return SdoAbortCode.CANNOT_MAP_TO_PDO
+            bits += size
+        return SdoAbortCode.PDO_LENGTH_EXCEEDED if bits > 64 else None
+
+    # ----------------------------------------------------------------- PDOs
+
+    def mapped(self, mapping_index: int) -> list[tuple[int, int, int]]:
+        """``(index, subindex, bits)`` of each entry of a mapping parameter, in order."""
+        return [unpack_mapping_entry(self.get(mapping_index, s))
+                for s in range(1, self.get(mapping_index, 0) + 1)]
+
+    def pdo_valid(self, comm_index: int) -> bool:
+        """Whether a PDO's COB-ID has bit 31 clear."""
+        return (comm_index, 1) in self.entries and not self.get(comm_index, 1) & PDO_COB_INVALID
+
+    def pack(self, mapping_index: int) -> bytes:
+        """A TPDO payload: the mapped objects, little endian, in mapping order."""
+        out = b""
+        for index, sub, _bits in self.mapped(mapping_index):
+            entry = self.entries[(index, sub)]
+            out += entry.dtype.codec.pack(entry.value)
+        return out

@@ -1,0 +1,127 @@
+"""What the gateway writes into a CiA 402 node before starting it, as data.
+
+:func:`configuration_steps` lists the steps in order: NMT pre-operational; the command RPDO
+and the two feedback TPDOs remapped by SDO, each switched off through COB-ID bit 31 while its
+mapping changes; the unused TPDOs switched off; transmission types (1 = every SYNC, or 255 =
+event-driven with an event timer); the producer heartbeat time (0x1017); mode of operation 3
+(profile velocity) and a read-back of 0x6061 until it says 3 (``canopen``'s ``op_mode`` setter
+only logs a failed switch); NMT start.  :class:`~drivers.cia402.sequence.NodeSequencer` runs
+them.
+
+Reference: CiA 301 (PDO communication and mapping parameters), CiA 402 (0x6060/0x6061).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+from drivers.cia402.codec import RPDO_MAP, TPDO_POSITION_MAP, TPDO_VELOCITY_MAP, mapping_entry
+from drivers.cia402.enums import (
+    PDO_COB_INVALID,
+    DataType,
+    NmtCommand,
+    ObjectIndex,
+    OperationMode,
+    PdoParameter,
+    TransmissionType,
+    rpdo_cob_id,
+    tpdo_cob_id,
+)
+
+if TYPE_CHECKING:
+    from drivers.cia402.options import NodeOptions
+
+
+@dataclass(frozen=True, slots=True)
+class NmtStep:
+    """Send an NMT command to the node (no answer expected)."""
+
+    command: NmtCommand
+
+
+@dataclass(frozen=True, slots=True)
+class SdoWriteStep:
+    """Write one object by expedited SDO download and wait for the confirmation."""
+
+    index: int
+    subindex: int
+    value: int
+    dtype: DataType
+    what: str
+
+
+@dataclass(frozen=True, slots=True)
+class SdoExpectStep:
+    """Read one object by SDO upload until it equals ``expected`` (or the step times out)."""
+
+    index: int
+    subindex: int
+    expected: int
+    dtype: DataType
+    what: str
+
+
+Step = NmtStep | SdoWriteStep | SdoExpectStep
+
+
+def _pdo_steps(
+    kind: str, number: int, cob_id: int, comm: int, mapping: int,
+    entries: tuple[tuple[int, int, int], ...], tx_type: int, event_timer_ms: int | None,
+) -> list[Step]:
+    name = f"{kind}{number}"
+    comm += number - 1
+    mapping += number - 1
+    u8, u16, u32 = DataType.UNSIGNED8, DataType.UNSIGNED16, DataType.UNSIGNED32
+    steps: list[Step] = [
+        SdoWriteStep(comm, PdoParameter.COB_ID, PDO_COB_INVALID | cob_id, u32,
+                     f"{name} COB-ID, switch off"),
+        SdoWriteStep(mapping, 0, 0, u8, f"{name} mapping count, clear"),
+    ]
+    for sub, (index, subindex, bits) in enumerate(entries, start=1):
+        steps.append(SdoWriteStep(mapping, sub, mapping_entry(index, subindex, bits), u32,
+                                  f"{name} mapping entry {sub} (0x{index:04X})"))
+    steps.append(SdoWriteStep(mapping, 0, len(entries), u8, f"{name} mapping count"))
+    steps.append(SdoWriteStep(comm, PdoParameter.TRANSMISSION_TYPE, tx_type, u8,
+                              f"{name} transmission type"))
+    if event_timer_ms is not None:
+        steps.append(SdoWriteStep(comm, PdoParameter.EVENT_TIMER, event_timer_ms, u16,
+                                  f"{name} event timer"))
+    steps.append(SdoWriteStep(comm, PdoParameter.COB_ID, cob_id, u32, f"{name} COB-ID, on"))
+    return steps
+
+
+def configuration_steps(node_id: int, opts: NodeOptions) -> tuple[Step, ...]:
+    """Everything written into a node before NMT start, in order, ending with NMT start.
+
+    :param node_id: the node (1..127).
+    :param opts: its options (PDO numbers, SYNC or event-driven, heartbeat time).
+    """
+    lay = opts.layout
+    tx_type = TransmissionType.SYNC_EVERY if opts.sync else TransmissionType.EVENT_PROFILE
+    timer = None if opts.sync else opts.event_timer_ms
+    steps: list[Step] = [NmtStep(NmtCommand.ENTER_PRE_OPERATIONAL)]
+    steps += _pdo_steps("RPDO", lay.rpdo, rpdo_cob_id(lay.rpdo, node_id),
+                        ObjectIndex.RPDO_COMMUNICATION, ObjectIndex.RPDO_MAPPING, RPDO_MAP,
+                        tx_type, None)
+    for number, entries in ((lay.tpdo_position, TPDO_POSITION_MAP),
+                            (lay.tpdo_velocity, TPDO_VELOCITY_MAP)):
+        steps += _pdo_steps("TPDO", number, tpdo_cob_id(number, node_id),
+                            ObjectIndex.TPDO_COMMUNICATION, ObjectIndex.TPDO_MAPPING, entries,
+                            tx_type, timer)
+    for number in range(1, 5):  # other TPDOs off: they would only load the bus
+        if number not in (lay.tpdo_position, lay.tpdo_velocity):
+            steps.append(SdoWriteStep(
+                ObjectIndex.TPDO_COMMUNICATION + number - 1, PdoParameter.COB_ID,
+                PDO_COB_INVALID | tpdo_cob_id(number, node_id), DataType.UNSIGNED32,
+                f"TPDO{number} COB-ID, switch off (unused)"))
+    steps += [
+        SdoWriteStep(ObjectIndex.PRODUCER_HEARTBEAT_TIME, 0, opts.heartbeat_ms,
+                     DataType.UNSIGNED16, "producer heartbeat time"),
+        SdoWriteStep(ObjectIndex.MODES_OF_OPERATION, 0, OperationMode.PROFILE_VELOCITY,
+                     DataType.INTEGER8, "modes of operation = profile velocity"),
+        SdoExpectStep(ObjectIndex.MODES_OF_OPERATION_DISPLAY, 0, OperationMode.PROFILE_VELOCITY,
+                      DataType.INTEGER8, "modes of operation display"),
+        NmtStep(NmtCommand.START),
+    ]
+    return tuple(steps)

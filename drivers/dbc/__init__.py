@@ -1,0 +1,35 @@
+"""Generic driver for any motor controller whose CAN messages are described by a DBC file.
+
+The user names a DBC file and, in the motor block, the message and signal that carry the
+velocity command and those that carry the velocity and position feedback, with their units;
+cantools (https://cantools.readthedocs.io/) encodes and decodes them.  The DBC format is
+Vector's "DBC File Format Documentation" (v1.0.5); ``config/example_controller.dbc`` is a small
+commented example and ODrive's official ``odrive-cansimple.dbc``
+(https://github.com/odriverobotics/ODrive/blob/master/tools/odrive-cansimple.dbc) works too.
+
+Modules: :mod:`~drivers.dbc.options` (the protocol keys and unit conversions),
+:mod:`~drivers.dbc.binding` (names -> cantools messages and signals),
+:mod:`~drivers.dbc.codec` (the pure :class:`DbcCodec`), :mod:`~drivers.dbc.driver`
+(:class:`DbcDriver`) and :mod:`~drivers.dbc.sim` (:class:`DbcSimulator`).
+"""
+
+from __future__ import annotations
+
+from drivers.dbc.codec import DbcCodec, DbcReading, DbcRequest, Role, describe_fault
+from drivers.dbc.driver import DbcDriver
+from drivers.dbc.options import OPTIONS, DbcOptions, UnitConversion, parse_options
+from drivers.dbc.sim import DbcSimulator
+
+__all__ = [
+    "OPTIONS",
+    "DbcCodec",
+    "DbcDriver",
+    "DbcOptions",
+    "DbcReading",
+    "DbcRequest",
+    "DbcSimulator",
+    "Role",
+    "UnitConversion",
+    "describe_fault",
+    "parse_options",
+]

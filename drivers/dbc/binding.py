@@ -1,0 +1,272 @@
+"""Binds a motor block's names to the messages and signals of its DBC file.
+
+:func:`bind_motor` loads the DBC (through a :class:`DatabaseCache`, so motors that share a
+file parse it once), looks up every configured message and signal, computes the frame IDs on
+the wire from the node ID, and the range each signal can carry.  Names that do not exist raise
+:class:`~gateway.errors.ConfigError` listing the names that do.  The result is a frozen
+:class:`MotorBinding`, the only input the pure codec needs.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import cantools
+
+from gateway.errors import ConfigError
+from gateway.types import MAX_EXTENDED_ID, MAX_STANDARD_ID
+
+if TYPE_CHECKING:
+    from drivers.dbc.options import DbcOptions
+    from gateway.types import MotorConfig
+
+log = logging.getLogger(__name__)
+
+#: Largest finite IEEE-754 float32.
+FLOAT32_MAX = 3.4028234663852886e38
+
+
+@dataclass(frozen=True, slots=True)
+class SignalRef:
+    """One configured signal of one message, as it goes on the wire for one node.
+
+    :param message: the cantools ``Message``.
+    :param signal: the cantools ``Signal`` inside it.
+    :param frame_id: the arbitration ID on the wire (DBC ID plus the node part).
+    :param minimum: smallest physical value the signal carries (DBC range and bit width).
+    :param maximum: largest physical value the signal carries.
+    """
+
+    message: Any
+    signal: Any
+    frame_id: int
+    minimum: float
+    maximum: float
+
+    @property
+    def name(self) -> str:
+        """The signal's name."""
+        return str(self.signal.name)
+
+    @property
+    def message_name(self) -> str:
+        """The message's name."""
+        return str(self.message.name)
+
+    @property
+    def is_extended(self) -> bool:
+        """Whether the message uses a 29-bit identifier."""
+        return bool(self.message.is_extended_frame)
+
+    @property
+    def is_float(self) -> bool:
+        """Whether the raw value is an IEEE-754 float."""
+        return bool(self.signal.is_float)
+
+    @property
+    def scale(self) -> float:
+        """Physical units per raw step."""
+        return float(self.signal.scale)
+
+    def to_physical(self, raw: float) -> float:
+        """The physical value of a raw value."""
+        return float(self.signal.conversion.raw_to_scaled(raw, False))
+
+
+@dataclass(frozen=True, slots=True)
+class MotorBinding:
+    """Everything the codec needs to know about one motor.
+
+    :param node_id: the controller's node ID.
+    :param label: the wheel's name, for messages.
+    :param command: the velocity command signal.
+    :param velocity: the velocity feedback signal.
+    :param position: the position feedback signal.
+    :param fault: the fault-code signal, if configured.
+    :param enable: the arming signal, if configured.
+    :param enable_value: value of ``enable`` that arms.
+    :param disable_value: value of ``enable`` that disarms.
+    """
+
+    node_id: int
+    label: str
+    command: SignalRef
+    velocity: SignalRef
+    position: SignalRef
+    fault: SignalRef | None = None
+    enable: SignalRef | None = None
+    enable_value: float = 1.0
+    disable_value: float = 0.0
+
+
+class DatabaseCache:
+    """Loads DBC files once per resolved path (one cache per driver, never global)."""
+
+    def __init__(self) -> None:
+        self._dbs: dict[str, Any] = {}
+
+    def load(self, path: str, where: str) -> Any:
+        """The cantools database in ``path``.
+
+        :raises ConfigError: if the file cannot be read or is not a valid DBC file.
+        """
+        if path not in self._dbs:
+            try:
+                self._dbs[path] = cantools.database.load_file(
+                    path, database_format="dbc", strict=True
+                )
+            except OSError as err:
+                raise ConfigError(
+                    f"{where}.dbc: cannot read DBC file {path!r}: {err.strerror or err}"
+                ) from err
+            except (cantools.database.errors.Error, ValueError) as err:
+                raise ConfigError(f"{where}.dbc: {path!r} is not a valid DBC file: {err}") from err
+            log.debug("loaded DBC %s", path)
+        return self._dbs[path]
+
+
+def resolve_path(opts: DbcOptions) -> str:
+    """The DBC path: absolute as given, else relative to ``config_dir`` (or the cwd)."""
+    path = os.path.expanduser(opts.dbc)
+    if not os.path.isabs(path) and opts.config_dir:
+        path = os.path.join(opts.config_dir, path)
+    return os.path.normpath(path)
+
+
+def signal_range(signal: Any) -> tuple[float, float]:
+    """The physical range a signal can carry: its DBC range within what its bits can hold."""
+    if signal.is_float:
+        top = FLOAT32_MAX if signal.length == 32 else float("inf")
+        raw_lo, raw_hi = -top, top
+    elif signal.is_signed:
+        raw_lo, raw_hi = -(2 ** (signal.length - 1)), 2 ** (signal.length - 1) - 1
+    else:
+        raw_lo, raw_hi = 0, 2**signal.length - 1
+    a = float(signal.conversion.raw_to_scaled(raw_lo, False))
+    b = float(signal.conversion.raw_to_scaled(raw_hi, False))
+    lo, hi = min(a, b), max(a, b)
+    if signal.minimum is not None:
+        lo = max(lo, float(signal.minimum))
+    if signal.maximum is not None:
+        hi = min(hi, float(signal.maximum))
+    return lo, hi
+
+
+def _known(names: list[str]) -> str:
+    return ", ".join(sorted(names)) or "none"
+
+
+def _message(db: Any, name: str, key: str, path: str, where: str) -> Any:
+    try:
+        return db.get_message_by_name(name)
+    except KeyError:
+        known = _known([m.name for m in db.messages])
+        raise ConfigError(
+            f"{where}.{key}: no message {name!r} in {path}; known messages: {known}"
+        ) from None
+
+
+def _signal(
+    db: Any,
+    msg_name: str,
+    sig_name: str,
+    keys: tuple[str, str],
+    path: str,
+    where: str,
+    motor: MotorConfig,
+    opts: DbcOptions,
+) -> SignalRef:
+    msg = _message(db, msg_name, keys[0], path, where)
+    try:
+        sig = msg.get_signal_by_name(sig_name)
+    except KeyError:
+        known = _known([s.name for s in msg.signals])
+        raise ConfigError(
+            f"{where}.{keys[1]}: message {msg_name!r} has no signal {sig_name!r}; "
+            f"known signals: {known}"
+        ) from None
+    if msg.is_container or sig.multiplexer_ids:
+        raise ConfigError(
+            f"{where}.{keys[1]}: signal {sig_name!r} of {msg_name!r} is multiplexed or in a "
+            "container message, which this driver does not support"
+        )
+    frame_id = int(msg.frame_id)
+    if opts.node_id_in_frame == "add":
+        frame_id += motor.node_id << opts.node_id_shift
+    top = MAX_EXTENDED_ID if msg.is_extended_frame else MAX_STANDARD_ID
+    if frame_id > top:
+        raise ConfigError(
+            f"{where}.{keys[0]}: expected a frame ID of at most 0x{top:X} for message "
+            f"{msg_name!r} (0x{msg.frame_id:X}) with node {motor.node_id}, "
+            f"got 0x{frame_id:X}"
+        )
+    lo, hi = signal_range(sig)
+    return SignalRef(msg, sig, frame_id, lo, hi)
+
+
+def bind_motor(
+    motor: MotorConfig, opts: DbcOptions, cache: DatabaseCache, where: str
+) -> MotorBinding:
+    """Look up every configured name of ``motor`` in its DBC file.
+
+    :param motor: the motor block (node ID, wheel name).
+    :param opts: its validated protocol keys.
+    :param cache: where loaded databases are kept.
+    :param where: file and key path of the block for messages.
+    :raises ConfigError: for a missing or invalid file, an unknown message or signal (the
+        message lists the known names), a frame ID out of range, or a position signal that
+        cannot wrap as configured.
+    """
+    path = resolve_path(opts)
+    db = cache.load(path, where)
+
+    def ref(msg: str, sig: str, keys: tuple[str, str]) -> SignalRef:
+        return _signal(db, msg, sig, keys, path, where, motor, opts)
+
+    command = ref(opts.command_message, opts.command_signal, ("command_message", "command_signal"))
+    velocity = ref(
+        opts.feedback_message, opts.velocity_signal, ("feedback_message", "velocity_signal")
+    )
+    position = ref(
+        opts.position_message, opts.position_signal, ("position_message", "position_signal")
+    )
+    bits = opts.position_wrap_bits
+    if bits and (position.is_float or bits > position.signal.length):
+        raise ConfigError(
+            f"{where}.position_wrap_bits: expected 0 or 1..{position.signal.length} for "
+            f"{'float ' if position.is_float else ''}signal {position.name!r}, got {bits}"
+        )
+    fault = (
+        ref(opts.fault_message, opts.fault_signal, ("fault_message", "fault_signal"))
+        if opts.fault_signal
+        else None
+    )
+    enable = (
+        ref(opts.enable_message, opts.enable_signal, ("enable_message", "enable_signal"))
+        if opts.enable_message
+        else None
+    )
+    if enable is not None:
+        for key, value in (
+            ("enable_value", opts.enable_value),
+            ("disable_value", opts.disable_value),
+        ):
+            if not enable.minimum <= value <= enable.maximum:
+                raise ConfigError(
+                    f"{where}.{key}: expected a value between {enable.minimum:g} and "
+                    f"{enable.maximum:g} for signal {enable.name!r}, got {value!r}"
+                )
+    return MotorBinding(
+        node_id=motor.node_id,
+        label=motor.wheel,
+        command=command,
+        velocity=velocity,
+        position=position,
+        fault=fault,
+        enable=enable,
+        enable_value=opts.enable_value,
+        disable_value=opts.disable_value,
+    )

@@ -1,0 +1,325 @@
+"""Stateful driver for DJI RoboMaster C620 (M3508) and C610 (M2006) ESCs.
+
+Protocol reference: DJI's `Development-Board-C-Examples
+<https://github.com/RoboMaster/Development-Board-C-Examples>`_ (``14.CAN``) and
+``specs/can-protocols.md`` section 4.  The wire format lives in :mod:`drivers.dji.codec`.
+
+The ESCs take only a current set point, so this driver closes the wheel-speed loop on the host
+(:class:`drivers.dji.pi.SpeedPi`, one per motor) every time :meth:`DjiDriver.command` is called,
+from the rotor speed in the latest feedback frame.  Call it at a steady rate (DJI's own examples
+run at 1 kHz; 100 Hz or more works with the default gains); each call returns one frame per
+command group (``0x200`` for ESC 1-4, ``0x1FF`` for ESC 5-8) that holds a configured motor.
+
+Things the protocol does not have, and what the driver does instead:
+
+* **no enable / disable**: :meth:`~DjiDriver.enable` only arms the host-side loop (no frames);
+  a disarmed driver sends zero current every cycle; :meth:`~DjiDriver.disable` returns
+  zero-current frames, which the gateway must send on shutdown because the ESC holds its last
+  set point;
+* **no heartbeat**: a motor is OFFLINE when its feedback is older than ``liveness_s``; it then
+  gets zero current and its integrator is reset;
+* **no fault frame**: over-temperature is a **host-side** check of the temperature byte (C620
+  only): above ``max_temp_c`` the motor goes to FAULT (``DriveFault.OVER_TEMPERATURE``) and is
+  disarmed; the flag clears once the temperature is back at or below
+  ``max_temp_c - TEMP_HYSTERESIS_C``, and :meth:`~DjiDriver.enable` re-arms it;
+* ``0x700`` (quick ID setting) is never sent.
+
+Motor-block keys (``OPTIONS``): ``esc`` (``"c620"`` default, or ``"c610"``), ``kp`` (A per rad/s
+of **rotor** speed error, default 0.1), ``ki`` (A per rad of integrated rotor speed error,
+default 1.0), ``max_current_a`` (0 = the ESC's full scale: 20 A C620, 10 A C610),
+``liveness_s`` (0.1, the same for every motor of the bus) and ``max_temp_c`` (80 degC).
+The common ``gear_ratio`` must be set to the gearbox ratio: 3591/187 (~19.2032) for the M3508,
+36 for the M2006; ``max_rpm`` is at the rotor (about 9000 for an M3508 at 24 V).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from types import MappingProxyType
+from typing import TYPE_CHECKING, ClassVar
+
+from drivers.dji.codec import (
+    COUNTS_PER_REV,
+    ESC_MODELS,
+    RAD_S_PER_RPM,
+    DjiCodec,
+    DjiFeedback,
+    feedback_id,
+    unwrap_delta,
+)
+from drivers.dji.pi import SpeedPi
+from drivers.dji.sim import DjiSimulator
+from gateway.driver import MotorDriver, OptionSpec
+from gateway.errors import ConfigError, DecodeError, EncodeError
+from gateway.types import DriveFault, DriveState, WheelFeedback
+
+if TYPE_CHECKING:
+    from collections.abc import Mapping, Sequence
+
+    from drivers.dji.codec import EscModel
+    from gateway.types import Frame, MotorConfig
+
+log = logging.getLogger(__name__)
+
+#: The over-temperature flag clears this far below ``max_temp_c`` (degC).
+TEMP_HYSTERESIS_C = 5.0
+
+
+def _number(opts: Mapping[str, object], key: str) -> float:
+    value = opts[key]
+    if not isinstance(value, (int, float)):  # validate_options guarantees it
+        raise ConfigError(f"{key}: expected a number, got {value!r}")
+    return float(value)
+
+
+class DjiDriver(MotorDriver):
+    """Host-side speed control of up to eight C620 / C610 ESCs on one bus.
+
+    :param motors: the motors, ``node_id`` = ESC ID 1..8 (set with the ESC's button).
+    :raises ConfigError: for a bad option, a repeated ESC ID, a current limit above the ESC's
+        full scale, or different ``liveness_s`` values.
+    """
+
+    OPTIONS: ClassVar[Mapping[str, OptionSpec]] = MappingProxyType(
+        {
+            "esc": OptionSpec(
+                str, "c620", choices=tuple(ESC_MODELS), help="ESC type: c620 (M3508), c610 (M2006)"
+            ),
+            "kp": OptionSpec(
+                float, 0.1, minimum=0.0, help="proportional gain, A per rad/s of rotor speed error"
+            ),
+            "ki": OptionSpec(
+                float, 1.0, minimum=0.0, help="integral gain, A per rad of integrated rotor error"
+            ),
+            "max_current_a": OptionSpec(
+                float, 0.0, minimum=0.0, maximum=20.0, help="current limit in A, 0 = full scale"
+            ),
+            "liveness_s": OptionSpec(
+                float, 0.1, minimum=0.001, help="feedback older than this is OFFLINE (s)"
+            ),
+            "max_temp_c": OptionSpec(
+                float, 80.0, minimum=0.0, maximum=255.0, help="C620 over-temperature limit (degC)"
+            ),
+        }
+    )
+    NODE_ID_RANGE: ClassVar[tuple[int, int]] = (1, 8)
+    DEFAULT_LIVENESS_S: ClassVar[float] = 0.1
+
+    def __init__(self, motors: Sequence[MotorConfig]) -> None:
+        super().__init__(motors)
+        self._esc: list[EscModel] = []
+        self._pi: list[SpeedPi] = []
+        self._max_temp_c: list[float] = []
+        liveness: set[float] = set()
+        for m in self.motors:
+            where = f"motor {m.wheel!r}"
+            self.validate_node_id(m.node_id, f"{where}.node_id")
+            opts = self.validate_options(m.options, where)
+            esc = ESC_MODELS[str(opts["esc"])]
+            limit = _number(opts, "max_current_a") or esc.full_scale_a
+            if limit > esc.full_scale_a:
+                raise ConfigError(
+                    f"{where}.max_current_a: expected at most {esc.full_scale_a:g} A for a "
+                    f"{esc.name.upper()}, got {limit:g}"
+                )
+            self._esc.append(esc)
+            self._pi.append(SpeedPi(_number(opts, "kp"), _number(opts, "ki"), limit))
+            self._max_temp_c.append(_number(opts, "max_temp_c"))
+            liveness.add(_number(opts, "liveness_s"))
+            if m.gear_ratio == 1.0:
+                log.warning(
+                    "%s: gear_ratio is 1.0; an %s needs %.6g", where, esc.motor, esc.gear_ratio
+                )
+        if len(self._index) != len(self.motors):
+            ids = sorted(m.node_id for m in self.motors)
+            raise ConfigError(f"DJI motors: expected distinct ESC IDs, got {ids}")
+        if len(liveness) > 1:
+            raise ConfigError(
+                f"DJI motors: expected one liveness_s for every motor, got {sorted(liveness)}"
+            )
+        self.liveness_s = liveness.pop() if liveness else self.DEFAULT_LIVENESS_S
+        self.codec = DjiCodec({m.node_id: e for m, e in zip(self.motors, self._esc, strict=True)})
+        self._feedback_index = {feedback_id(m.node_id): i for i, m in enumerate(self.motors)}
+        n = len(self.motors)
+        self._integral_a = [0.0] * n
+        self._current_a = [0.0] * n
+        self._rotor_rad_s = [0.0] * n
+        self._last_count: list[int | None] = [None] * n
+        self._count_sum = [0] * n
+        self._raw: list[DjiFeedback | None] = [None] * n
+        self._last_command_s: float | None = None
+
+    # ----------------------------------------------------------------- hooks
+
+    def enable(self, now_s: float) -> list[Frame]:
+        """Arm the host-side speed loop of every motor that is not in fault (no frames)."""
+        self._reset_loops()
+        for i, m in enumerate(self.motors):
+            if self._faults[i]:
+                log.warning("ESC %d (%s) stays disarmed: %s", m.node_id, m.wheel, self._detail[i])
+                continue
+            self.set_armed(i, True)
+        return []
+
+    def disable(self, now_s: float) -> list[Frame]:
+        """Disarm every motor; zero-current frames for every group that holds a motor."""
+        self._reset_loops()
+        for i in range(len(self.motors)):
+            self.set_armed(i, False)
+        return self._frames([0.0] * len(self.motors))
+
+    def command(self, wheel_rad_s: Sequence[float], now_s: float) -> list[Frame]:
+        """Run every motor's speed loop once and pack the currents.
+
+        A motor gets zero current (and an empty integrator) unless it is ENABLED, i.e. armed,
+        with fresh feedback and no fault.
+
+        :param wheel_rad_s: one wheel speed per motor, rad/s, within ``max_rpm``.
+        :raises EncodeError: for a wrong number of speeds, or a speed that is not finite or
+            above the motor's ``max_rpm``.
+        """
+        targets = self._rotor_targets(wheel_rad_s)
+        dt = 0.0 if self._last_command_s is None else now_s - self._last_command_s
+        dt = min(max(dt, 0.0), self.liveness_s)
+        self._last_command_s = now_s
+        currents = []
+        for i, target in enumerate(targets):
+            if self.state(i, now_s) is not DriveState.ENABLED:
+                self._integral_a[i] = 0.0
+                currents.append(0.0)
+                continue
+            current, self._integral_a[i] = self._pi[i].step(
+                self._integral_a[i], target - self._rotor_rad_s[i], dt
+            )
+            currents.append(current)
+        return self._frames(currents)
+
+    def preview_command(self, wheel_rad_s: Sequence[float]) -> list[Frame]:
+        """The frames :meth:`command` would send for zero measured speed and empty integrators.
+
+        Pure: ignores armed state and feedback and changes nothing (for ``frames`` output).
+
+        :raises EncodeError: as :meth:`command`.
+        """
+        targets = self._rotor_targets(wheel_rad_s)
+        currents = [pi.preview(t) for pi, t in zip(self._pi, targets, strict=True)]
+        return list(self.codec.encode_command(self._raw_currents(currents)))
+
+    def on_frame(self, frame: Frame) -> bool:
+        """Take a feedback frame of a configured ESC (others are not this driver's).
+
+        :return: whether it was the feedback ID of a configured ESC; malformed ones are
+            counted in :attr:`rejected`.
+        """
+        index = self._feedback_index.get(frame.arbitration_id)
+        if index is None:
+            return False
+        try:
+            fb = self.codec.decode(frame)
+        except DecodeError as err:
+            self.reject("malformed feedback", err)
+            return True
+        if fb is None:  # cannot happen for a feedback ID; keeps mypy honest
+            return False
+        self._take_feedback(index, fb, frame.timestamp_s)
+        return True
+
+    @classmethod
+    def make_simulator(cls, motor: MotorConfig) -> DjiSimulator:
+        """A simulated ESC with a current-driven motor for ``motor``."""
+        return DjiSimulator(motor)
+
+    # ----------------------------------------------------------------- read-outs
+
+    @property
+    def currents_a(self) -> tuple[float, ...]:
+        """The currents of the last frames built, per motor (A)."""
+        return tuple(self._current_a)
+
+    def measurement(self, index: int) -> DjiFeedback | None:
+        """The last decoded feedback of motor ``index`` (raw device units)."""
+        return self._raw[index]
+
+    # ----------------------------------------------------------------- internals
+
+    def _reset_loops(self) -> None:
+        self._integral_a = [0.0] * len(self.motors)
+        self._last_command_s = None
+
+    def _rotor_targets(self, wheel_rad_s: Sequence[float]) -> list[float]:
+        if len(wheel_rad_s) != len(self.motors):
+            raise EncodeError(
+                f"Expected {len(self.motors)} wheel speeds for the DJI motors, "
+                f"but got {len(wheel_rad_s)}."
+            )
+        out = []
+        for m, w in zip(self.motors, wheel_rad_s, strict=True):
+            lim = m.max_wheel_rad_s
+            if not (math.isfinite(w) and abs(w) <= lim * (1.0 + 1e-9)):
+                raise EncodeError(
+                    f'Expected velocity for node {m.node_id} ("{m.wheel}") between '
+                    f"{-lim:.4g} and {lim:.4g} rad/s, but got {w}."
+                )
+            out.append(m.wheel_to_motor_rad_s(w))
+        return out
+
+    def _raw_currents(self, currents_a: Sequence[float]) -> dict[int, int]:
+        rows = zip(self.motors, self._esc, currents_a, strict=True)
+        return {m.node_id: esc.amps_to_raw(a) for m, esc, a in rows}
+
+    def _frames(self, currents_a: list[float]) -> list[Frame]:
+        self._current_a = list(currents_a)
+        return list(self.codec.encode_command(self._raw_currents(currents_a)))
+
+    def _take_feedback(self, i: int, fb: DjiFeedback, t: float) -> None:
+        m = self.motors[i]
+        last = self._last_count[i]
+        if last is not None:
+            prev = self._feedback[i]
+            if prev is not None and t - prev.timestamp_s > self.liveness_s:
+                log.warning(
+                    "ESC %d (%s): feedback resumed after %.3f s; turns made meanwhile are lost",
+                    m.node_id,
+                    m.wheel,
+                    t - prev.timestamp_s,
+                )
+            self._count_sum[i] += unwrap_delta(last, fb.angle_count)
+        self._last_count[i] = fb.angle_count
+        self._raw[i] = fb
+        self._rotor_rad_s[i] = fb.speed_rpm * RAD_S_PER_RPM
+        rotor_rad = self._count_sum[i] * 2.0 * math.pi / COUNTS_PER_REV
+        self.store_feedback(
+            i,
+            WheelFeedback(
+                position_rad=m.motor_to_wheel_rad_s(rotor_rad),
+                velocity_rad_s=m.motor_to_wheel_rad_s(self._rotor_rad_s[i]),
+                timestamp_s=t,
+            ),
+        )
+        self._check_temperature(i, fb)
+
+    def _check_temperature(self, i: int, fb: DjiFeedback) -> None:
+        if not self._esc[i].reports_temperature:
+            return
+        limit = self._max_temp_c[i]
+        if fb.temperature_c > limit:
+            if not self._faults[i]:
+                m = self.motors[i]
+                log.error(
+                    "ESC %d (%s): %d degC is above max_temp_c %g; disarmed",
+                    m.node_id,
+                    m.wheel,
+                    fb.temperature_c,
+                    limit,
+                )
+            self.set_fault(
+                i,
+                DriveFault.OVER_TEMPERATURE,
+                f"temperature {fb.temperature_c} degC above max_temp_c {limit:g} (host-side)",
+            )
+            self.set_armed(i, False)
+            self._integral_a[i] = 0.0
+        elif self._faults[i] and fb.temperature_c <= limit - TEMP_HYSTERESIS_C:
+            log.info("ESC %d: back to %d degC", self.motors[i].node_id, fb.temperature_c)
+            self.set_fault(i, DriveFault.NONE)

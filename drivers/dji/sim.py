@@ -1,0 +1,219 @@
+"""Simulated DJI C620 / C610 ESC with a current-driven motor (for tests and ``--sim``).
+
+Protocol reference: ``specs/can-protocols.md`` section 4 and DJI's
+`Development-Board-C-Examples <https://github.com/RoboMaster/Development-Board-C-Examples>`_.
+
+What the simulated ESC does:
+
+* takes its int16 slot of ``0x200`` / ``0x1FF`` as a torque-current set point, clamped to the
+  ESC's full scale, and applies it at once (the real ESC's FOC current loop is much faster
+  than the 1 kHz bus, so it is not modelled);
+* emits feedback every ``feedback_period_s`` (1 ms by default): the rotor angle quantised to
+  13 bits (``floor``), the rotor speed rounded to whole rpm, the applied current and the
+  temperature (0 on a C610, which does not report one);
+* **command timeout**: the spec (section 8) says the ESC has none and holds its last set point,
+  so ``command_timeout_s`` defaults to ``None`` (hold, the worst case for the gateway).  Give a
+  number to model an ESC that zeroes its output after that long without a command frame;
+* injected ``SimFault.FAULT`` reports ``fault_temperature_c`` and switches the output off (the
+  ESC protecting itself); clearing it restores the normal temperature, and the next command
+  frame switches the output on again (DJI has no clear command);
+* ``SimFault.SILENT`` stops the feedback (the base class does this);
+* ``0x700`` frames are counted in :attr:`DjiSimulator.id_set_requests` and otherwise ignored.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+from drivers.dji.codec import (
+    COUNTS_PER_REV,
+    ESC_MODELS,
+    RAD_S_PER_RPM,
+    DjiFeedback,
+    DjiFrameId,
+    EscModel,
+    decode_command,
+    encode_feedback,
+)
+from gateway.errors import ConfigError, DecodeError
+from gateway.sim import DeviceSimulator, MotorModel, SimFault
+
+if TYPE_CHECKING:
+    from gateway.types import Frame, MotorConfig
+
+log = logging.getLogger(__name__)
+
+_INT16_MAX = 0x7FFF
+
+
+@dataclass(slots=True)
+class DjiMotorModel(MotorModel):
+    """A current-driven motor, rotor side: torque from current, inertia and viscous friction.
+
+    .. math::
+
+        J \\dot\\omega = k_t i - b \\omega, \\qquad \\dot\\theta = \\omega
+
+    integrated exactly for a constant current over each step, so it is stable for any step.
+    There is no voltage limit (back-EMF), so the gateway's ``max_rpm`` is what bounds speed.
+    The inherited ``target_rad_s`` / ``time_constant_s`` fields are not used.
+
+    :param torque_constant_nm_a: rotor-side torque per A (N m / A, > 0).
+    :param inertia_kg_m2: rotor-side inertia including the reflected wheel load (kg m^2, > 0).
+    :param damping_nm_s_rad: viscous friction (N m s / rad, > 0).
+    """
+
+    torque_constant_nm_a: float = 0.3 / (3591.0 / 187.0)
+    inertia_kg_m2: float = 6e-5
+    damping_nm_s_rad: float = 1.6e-5
+    #: Current the ESC applies while armed (A).
+    current_a: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name in ("torque_constant_nm_a", "inertia_kg_m2", "damping_nm_s_rad"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0.0):
+                raise ConfigError(f"DjiMotorModel.{name}: expected a number > 0, got {value!r}")
+
+    @classmethod
+    def for_esc(cls, esc: EscModel) -> DjiMotorModel:
+        """Default physics for the motor an ESC type drives.
+
+        M3508 (C620): 0.3 N m/A at the output (DJI datasheet figure) over 3591/187, a loaded
+        wheel of 6e-5 kg m^2 at the rotor.  M2006 (C610): 0.18 N m/A over 36, 1.2e-5 kg m^2.
+        The inertias and the friction are plausible round numbers, not measurements.
+        """
+        if esc.name == "c610":
+            return cls(
+                torque_constant_nm_a=0.18 / esc.gear_ratio,
+                inertia_kg_m2=1.2e-5,
+                damping_nm_s_rad=1e-6,
+            )
+        return cls(torque_constant_nm_a=0.3 / esc.gear_ratio)
+
+    def step(self, dt_s: float) -> None:
+        """Advance by ``dt_s`` seconds with the present current (zero when disarmed)."""
+        if dt_s <= 0.0:
+            return
+        current = self.current_a if self.armed else 0.0
+        tau = self.inertia_kg_m2 / self.damping_nm_s_rad
+        v_inf = self.torque_constant_nm_a * current / self.damping_nm_s_rad
+        v0 = self.velocity_rad_s
+        decay = math.exp(-dt_s / tau)
+        self.position_rad += v_inf * dt_s + (v0 - v_inf) * tau * (1.0 - decay)
+        self.velocity_rad_s = v_inf + (v0 - v_inf) * decay
+
+
+class DjiSimulator(DeviceSimulator):
+    """The device side of one C620 / C610 ESC.
+
+    :param motor: the motor block (``node_id`` is the ESC ID; ``options["esc"]`` the type).
+    :param model: motor physics; :meth:`DjiMotorModel.for_esc` when omitted.
+    :param feedback_period_s: feedback interval (s), 1 ms like the real ESC.
+    :param command_timeout_s: zero the output after this long without a command frame;
+        ``None`` (default) holds the last set point, as the spec says the ESC does.
+    :param temperature_c: temperature reported while healthy (degC).
+    :param fault_temperature_c: temperature reported while ``SimFault.FAULT`` is injected.
+    :param initial_position_rad: rotor angle at start (rad), e.g. just below a 13-bit wrap.
+    """
+
+    def __init__(
+        self,
+        motor: MotorConfig,
+        model: DjiMotorModel | None = None,
+        *,
+        feedback_period_s: float = 0.001,
+        command_timeout_s: float | None = None,
+        temperature_c: int = 35,
+        fault_temperature_c: int = 110,
+        initial_position_rad: float = 0.0,
+    ) -> None:
+        esc_name = motor.options.get("esc", "c620")
+        if esc_name not in ESC_MODELS:
+            raise ConfigError(
+                f"motor {motor.wheel!r}: esc: expected one of {sorted(ESC_MODELS)}, "
+                f"got {esc_name!r}"
+            )
+        self.esc: EscModel = ESC_MODELS[str(esc_name)]
+        self.physics = model if model is not None else DjiMotorModel.for_esc(self.esc)
+        super().__init__(motor, self.physics)
+        self.physics.position_rad = initial_position_rad
+        self.esc_id = motor.node_id
+        self.feedback_period_s = feedback_period_s
+        self.command_timeout_s = command_timeout_s
+        self.temperature_c = temperature_c
+        self.fault_temperature_c = fault_temperature_c
+        #: Raw current set point last received.
+        self.command_raw = 0
+        #: When the last command frame for this ESC arrived (s), ``None`` before the first.
+        self.last_command_s: float | None = None
+        #: ``0x700`` frames seen (must stay 0).
+        self.id_set_requests = 0
+        #: Malformed command frames seen.
+        self.malformed = 0
+        self._next_feedback_s: float | None = None
+
+    # ----------------------------------------------------------------- hooks
+
+    def _on_frame(self, frame: Frame, now_s: float) -> list[Frame]:
+        if frame.arbitration_id == DjiFrameId.QUICK_ID_SET and not frame.is_extended_id:
+            self.id_set_requests += 1
+            log.warning("ESC %d received 0x700 (quick ID-setting mode)", self.esc_id)
+            return []
+        try:
+            commands = decode_command(frame)
+        except DecodeError as err:
+            self.malformed += 1
+            log.debug("ESC %d ignores %s: %s", self.esc_id, frame.to_cansend(), err)
+            return []
+        if commands is None or self.esc_id not in commands:
+            return []
+        fs = self.esc.full_scale_raw
+        self.command_raw = min(max(commands[self.esc_id], -fs), fs)
+        self.last_command_s = now_s
+        self.physics.current_a = self.esc.raw_to_amps(self.command_raw)
+        if not self.faults & SimFault.FAULT:
+            self.physics.armed = True
+        return []
+
+    def _on_tick(self, now_s: float) -> list[Frame]:
+        if (
+            self.command_timeout_s is not None
+            and self.last_command_s is not None
+            and now_s - self.last_command_s > self.command_timeout_s
+        ):
+            self.command_raw = 0
+            self.physics.current_a = 0.0
+        if self.faults & SimFault.FAULT:
+            self.physics.armed = False
+        if self._next_feedback_s is not None and now_s < self._next_feedback_s - 1e-9:
+            return []
+        nxt = now_s if self._next_feedback_s is None else self._next_feedback_s
+        nxt += self.feedback_period_s
+        self._next_feedback_s = nxt if nxt > now_s else now_s + self.feedback_period_s
+        return [encode_feedback(self.measure())]
+
+    # ----------------------------------------------------------------- measurement
+
+    def measure(self) -> DjiFeedback:
+        """What the ESC reports now: quantised like the real encoder and fields."""
+        turns = self.physics.position_rad / (2.0 * math.pi)
+        angle = math.floor(turns * COUNTS_PER_REV) % COUNTS_PER_REV
+        rpm = round(self.physics.velocity_rad_s / RAD_S_PER_RPM)
+        current = self.esc.amps_to_raw(self.physics.current_a) if self.physics.armed else 0
+        if not self.esc.reports_temperature:
+            temp = 0
+        elif self.faults & SimFault.FAULT:
+            temp = self.fault_temperature_c
+        else:
+            temp = self.temperature_c
+        return DjiFeedback(
+            esc_id=self.esc_id,
+            angle_count=angle,
+            speed_rpm=min(max(rpm, -_INT16_MAX), _INT16_MAX),
+            current_raw=min(max(current, -_INT16_MAX), _INT16_MAX),
+            temperature_c=min(max(temp, 0), 0xFF),
+        )

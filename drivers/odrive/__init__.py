@@ -1,0 +1,31 @@
+"""ODrive "CANSimple" driver for firmware 0.5.x (ODrive v3.x) and 0.6.x (Pro, S1, Micro).
+
+Reference: the `ODrive CAN protocol
+<https://docs.odriverobotics.com/v/latest/manual/can-protocol.html>`_ and the official DBC
+``odrive-cansimple.dbc``; summarised with worked frames in ``specs/can-protocols.md`` section 1.
+
+* :mod:`drivers.odrive.enums`: command IDs, axis states, modes, error flags and their mapping
+  onto :class:`gateway.types.DriveFault`.
+* :mod:`drivers.odrive.codec`: the pure :class:`OdriveCodec` and the transition table.
+* :mod:`drivers.odrive.driver`: the stateful :class:`OdriveDriver` (registry name ``odrive``).
+* :mod:`drivers.odrive.sim`: :class:`OdriveSimulator`, the device side for tests and ``--sim``.
+"""
+
+from __future__ import annotations
+
+from drivers.odrive.codec import OdriveCodec
+from drivers.odrive.driver import OdriveDriver
+from drivers.odrive.enums import AxisError, AxisError05, AxisState, ControlMode, Firmware, InputMode
+from drivers.odrive.sim import OdriveSimulator
+
+__all__ = [
+    "AxisError",
+    "AxisError05",
+    "AxisState",
+    "ControlMode",
+    "Firmware",
+    "InputMode",
+    "OdriveCodec",
+    "OdriveDriver",
+    "OdriveSimulator",
+]

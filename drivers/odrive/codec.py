@@ -1,0 +1,557 @@
+"""Pure codec of ODrive "CANSimple" (firmware 0.5.x and 0.6.x): no I/O, no clock.
+
+Reference: the `ODrive CAN protocol
+<https://docs.odriverobotics.com/v/latest/manual/can-protocol.html>`_, the 0.5.x
+`can_simple.cpp <https://github.com/odriverobotics/ODrive/blob/master/Firmware/communication/
+can/can_simple.cpp>`_ and the official DBC ``odrive-cansimple.dbc`` (0.5.6); summarised with
+worked frames in ``specs/can-protocols.md`` section 1.
+
+Arbitration ID = ``node_id << 5 | cmd_id``, with 11-bit IDs (node 0..0x3F) or, when the axis is
+configured ``is_extended``, 29-bit IDs (node 0..0xFFFFFF).  The firmware ignores frames whose IDE
+flag does not match its configuration, so this codec treats them as "not mine".  Every payload
+is little endian; floats are IEEE-754 float32.
+
+Each message is described once, as a :class:`Layout` (command ID, precompiled ``struct.Struct``,
+the DBC's signal names and the DLCs accepted); encoders and decoders, the tests' cantools
+cross-check and the benchmark all derive from these tables.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+import struct
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import TYPE_CHECKING, TypeAlias
+
+from drivers.odrive.enums import AxisState, CmdId, ControlMode, Firmware, InputMode, ProcedureResult
+from gateway.codec import MotorCodec
+from gateway.errors import DecodeError, EncodeError, IllegalTransitionError
+from gateway.types import Frame
+
+if TYPE_CHECKING:
+    from collections.abc import Mapping
+
+#: Bits of the command ID in the arbitration ID.
+CMD_BITS = 5
+CMD_MASK = (1 << CMD_BITS) - 1
+#: Largest node ID with 11-bit identifiers (0x3F is the 0.6 broadcast address).
+MAX_STANDARD_NODE_ID = 0x3F
+#: Largest node ID with 29-bit identifiers.
+MAX_EXTENDED_NODE_ID = 0xFFFFFF
+#: Largest finite float32.
+FLOAT32_MAX = 3.4028234663852886e38
+U32_MAX = 0xFFFFFFFF
+#: Defaults of the ``firmware`` and ``extended_id`` motor-block keys.
+DEFAULT_FIRMWARE = Firmware.V0_6
+DEFAULT_EXTENDED_ID = False
+
+
+@dataclass(frozen=True, slots=True)
+class Layout:
+    """One CANSimple message, described once.
+
+    :param cmd: command ID.
+    :param name: message name in the official DBC (without the ``AxisN_`` prefix).
+    :param packer: packing of the fields, little endian.
+    :param signals: DBC signal names of the fields, in ``packer`` order.
+    :param dlcs: data lengths accepted when decoding; the first is the one encoded (the
+        payload is zero-padded up to it).
+    """
+
+    cmd: CmdId
+    name: str
+    packer: struct.Struct
+    signals: tuple[str, ...]
+    dlcs: tuple[int, ...] = (8,)
+    #: Zero bytes appended to the packed fields to reach ``dlcs[0]``.
+    padding: bytes = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "padding", bytes(self.dlcs[0] - self.packer.size))
+
+    def pack(self, *values: float) -> bytes:
+        """The payload for ``values``, zero-padded to the encoded DLC."""
+        data = self.packer.pack(*values)
+        return data + self.padding if self.padding else data
+
+
+SET_INPUT_VEL = Layout(
+    CmdId.SET_INPUT_VEL, "Set_Input_Vel", struct.Struct("<ff"), ("Input_Vel", "Input_Torque_FF")
+)
+_SET_INPUT_VEL_PACK = SET_INPUT_VEL.packer.pack
+#: DLC 8 as in the DBC and the generated 0.6 header; the official python example sends 4 and
+#: the firmware reads only 4, so both are accepted.
+SET_AXIS_STATE = Layout(
+    CmdId.SET_AXIS_STATE, "Set_Axis_State", struct.Struct("<I"), ("Axis_Requested_State",), (8, 4)
+)
+SET_CONTROLLER_MODE = Layout(
+    CmdId.SET_CONTROLLER_MODE,
+    "Set_Controller_Mode",
+    struct.Struct("<II"),
+    ("Control_Mode", "Input_Mode"),
+)
+CLEAR_ERRORS_05 = Layout(CmdId.CLEAR_ERRORS, "Clear_Errors", struct.Struct("<"), (), (0,))
+CLEAR_ERRORS_06 = Layout(
+    CmdId.CLEAR_ERRORS, "Clear_Errors", struct.Struct("<B"), ("Identify",), (1,)
+)
+ESTOP = Layout(CmdId.ESTOP, "Estop", struct.Struct("<"), (), (0,))
+#: Bytes 5..7 differ: 0.5 motor/encoder/controller error flags (byte 7 bit 7 = trajectory done),
+#: 0.6 procedure result, trajectory done (byte 6 bit 0), reserved.
+HEARTBEAT = Layout(
+    CmdId.HEARTBEAT, "Heartbeat", struct.Struct("<IBBBB"), ("Axis_Error", "Axis_State")
+)
+ENCODER_ESTIMATES = Layout(
+    CmdId.GET_ENCODER_ESTIMATES,
+    "Get_Encoder_Estimates",
+    struct.Struct("<ff"),
+    ("Pos_Estimate", "Vel_Estimate"),
+)
+GET_ERROR_06 = Layout(
+    CmdId.GET_ERROR, "Get_Error", struct.Struct("<II"), ("Active_Errors", "Disarm_Reason")
+)
+#: The firmware sends 64 bits; the 0.5.6 DBC declares 32 (quirk 3 of the spec).
+GET_MOTOR_ERROR_05 = Layout(
+    CmdId.GET_ERROR, "Get_Motor_Error", struct.Struct("<Q"), ("Motor_Error",)
+)
+
+_TRAJ_DONE_05 = 0x80
+_CONTROLLER_ERROR_05 = 0x01
+
+
+# ----------------------------------------------------------------------------- messages
+
+
+@dataclass(frozen=True, slots=True)
+class Heartbeat:
+    """Cyclic status of one axis (0x01).
+
+    :param node_id: sender.
+    :param axis_error: raw u32 error word (:class:`~drivers.odrive.enums.AxisError` in 0.6,
+        :class:`~drivers.odrive.enums.AxisError05` in 0.5).
+    :param axis_state: current axis state (a plain int if this firmware's enum lacks it).
+    :param trajectory_done: the trajectory-done flag.
+    :param procedure_result: 0.6 only (``SUCCESS`` in 0.5 frames).
+    :param motor_error: 0.5 only: the motor reports an error.
+    :param encoder_error: 0.5 only: the encoder reports an error.
+    :param controller_error: 0.5 only: the controller reports an error.
+    """
+
+    node_id: int
+    axis_error: int
+    axis_state: AxisState | int
+    trajectory_done: bool = False
+    procedure_result: ProcedureResult | int = ProcedureResult.SUCCESS
+    motor_error: bool = False
+    encoder_error: bool = False
+    controller_error: bool = False
+
+
+@dataclass(frozen=True, slots=True)
+class EncoderEstimates:
+    """Get_Encoder_Estimates (0x09).
+
+    :param node_id: sender.
+    :param pos_turns: position estimate in turns (float32, unwrapped by the firmware).
+    :param vel_turns_s: velocity estimate in turns/s.
+    """
+
+    node_id: int
+    pos_turns: float
+    vel_turns_s: float
+
+
+@dataclass(frozen=True, slots=True)
+class ErrorStatus:
+    """0.6 Get_Error (0x03).
+
+    :param node_id: sender.
+    :param active_errors: raw :class:`~drivers.odrive.enums.AxisError` bits now active.
+    :param disarm_reason: raw :class:`~drivers.odrive.enums.AxisError` bits of the last disarm.
+    """
+
+    node_id: int
+    active_errors: int
+    disarm_reason: int
+
+
+@dataclass(frozen=True, slots=True)
+class MotorErrorStatus:
+    """0.5 Get_Motor_Error (0x03).
+
+    :param node_id: sender.
+    :param motor_error: raw u64 :class:`~drivers.odrive.enums.MotorError05` bits.
+    """
+
+    node_id: int
+    motor_error: int
+
+
+@dataclass(frozen=True, slots=True)
+class SetInputVel:
+    """Set_Input_Vel (0x0D). :param vel_turns_s: turns/s. :param torque_ff_nm: N*m."""
+
+    node_id: int
+    vel_turns_s: float
+    torque_ff_nm: float = 0.0
+
+
+@dataclass(frozen=True, slots=True)
+class SetAxisState:
+    """Set_Axis_State (0x07). :param state: requested state (int if unknown)."""
+
+    node_id: int
+    state: AxisState | int
+
+
+@dataclass(frozen=True, slots=True)
+class SetControllerMode:
+    """Set_Controller_Mode (0x0B)."""
+
+    node_id: int
+    control_mode: int
+    input_mode: int
+
+
+@dataclass(frozen=True, slots=True)
+class ClearErrors:
+    """Clear_Errors (0x18). :param identify: 0.6 only: blink the LED."""
+
+    node_id: int
+    identify: bool = False
+
+
+@dataclass(frozen=True, slots=True)
+class Estop:
+    """Estop (0x02)."""
+
+    node_id: int
+
+
+@dataclass(frozen=True, slots=True)
+class Request:
+    """A request for a cyclic message (RTR frame, or DLC 0 data frame in 0.5)."""
+
+    node_id: int
+    cmd: CmdId
+
+
+#: Everything :meth:`OdriveCodec.decode` returns.
+Feedback: TypeAlias = Heartbeat | EncoderEstimates | ErrorStatus | MotorErrorStatus
+#: Everything :meth:`OdriveCodec.decode_command` returns.
+Command: TypeAlias = SetInputVel | SetAxisState | SetControllerMode | ClearErrors | Estop | Request
+
+
+class Step(enum.Enum):
+    """What a requested axis-state change sends."""
+
+    #: Clear_Errors, Set_Controller_Mode(velocity, input mode), Set_Axis_State(CLOSED_LOOP).
+    ARM = "arm"
+    #: Set_Input_Vel(0), Set_Axis_State(IDLE).
+    DISARM = "disarm"
+
+
+def _transitions() -> Mapping[tuple[AxisState, AxisState], Step]:
+    table = {(s, AxisState.IDLE): Step.DISARM for s in AxisState}
+    for s in (AxisState.UNDEFINED, AxisState.IDLE, AxisState.CLOSED_LOOP_CONTROL):
+        table[(s, AxisState.CLOSED_LOOP_CONTROL)] = Step.ARM
+    return MappingProxyType(table)
+
+
+#: (current axis state, requested axis state) -> step.  Disarming is allowed from every state
+#: (it must be able to stop a running calibration); arming only from IDLE, CLOSED_LOOP_CONTROL
+#: (harmless repeat) or UNDEFINED (no heartbeat seen yet), never in the middle of a
+#: calibration or homing procedure, which a new request would abort.  Any other pair is illegal.
+TRANSITIONS: Mapping[tuple[AxisState, AxisState], Step] = _transitions()
+
+
+def _enum_or_int(cls: type[enum.IntEnum], value: int) -> int:
+    try:
+        return cls(value)
+    except ValueError:
+        return value
+
+
+class OdriveCodec(MotorCodec[Feedback]):
+    """Frames of one ODrive CAN bus configuration.
+
+    :param firmware: firmware family of the axes (heartbeat layout, Clear_Errors DLC, 0x03).
+    :param extended_id: 29-bit identifiers (``axis.config.can.is_extended``).
+    """
+
+    def __init__(
+        self, firmware: Firmware = DEFAULT_FIRMWARE, extended_id: bool = DEFAULT_EXTENDED_ID
+    ) -> None:
+        self.firmware = firmware
+        self.extended_id = extended_id
+        self.max_node_id = MAX_EXTENDED_NODE_ID if extended_id else MAX_STANDARD_NODE_ID
+        self.clear_errors_layout = CLEAR_ERRORS_06 if firmware is Firmware.V0_6 else CLEAR_ERRORS_05
+        self.error_layout = GET_ERROR_06 if firmware is Firmware.V0_6 else GET_MOTOR_ERROR_05
+        self._feedback: dict[int, Layout] = {
+            HEARTBEAT.cmd: HEARTBEAT,
+            ENCODER_ESTIMATES.cmd: ENCODER_ESTIMATES,
+            self.error_layout.cmd: self.error_layout,
+        }
+
+    @classmethod
+    def from_options(cls, options: Mapping[str, object]) -> OdriveCodec:
+        """The codec for a motor block's ``firmware`` and ``extended_id`` keys."""
+        firmware = Firmware(str(options.get("firmware", DEFAULT_FIRMWARE.value)))
+        return cls(firmware, bool(options.get("extended_id", DEFAULT_EXTENDED_ID)))
+
+    # ------------------------------------------------------------------ identifiers
+
+    def arbitration_id(self, node_id: int, cmd: int) -> int:
+        """``node_id << 5 | cmd``.
+
+        :raises EncodeError: if ``node_id`` does not fit this ID mode.
+        """
+        if not 0 <= node_id <= self.max_node_id:
+            kind = "29-bit" if self.extended_id else "11-bit"
+            raise EncodeError(
+                f"Expected ODrive node ID between 0 and {self.max_node_id:#x} with {kind} "
+                f"identifiers, but got {node_id!r}."
+            )
+        return node_id << CMD_BITS | cmd
+
+    def split_id(self, frame: Frame) -> tuple[int, int] | None:
+        """``(node_id, cmd_id)`` of a frame, or ``None`` if its IDE flag is not this mode's."""
+        if frame.is_extended_id != self.extended_id:
+            return None
+        return frame.arbitration_id >> CMD_BITS, frame.arbitration_id & CMD_MASK
+
+    def _frame(self, node_id: int, layout: Layout, *values: float) -> Frame:
+        return Frame(
+            self.arbitration_id(node_id, layout.cmd), layout.pack(*values), self.extended_id
+        )
+
+    # ------------------------------------------------------------------ host -> axis
+
+    def encode_command(self, commands: Mapping[int, float]) -> tuple[Frame, ...]:
+        """One Set_Input_Vel per node, in the mapping's order.
+
+        :param commands: node ID -> velocity in turns/s (torque feed-forward 0).
+        :raises EncodeError: for a value that is not a finite float32 or a bad node ID.
+        """
+        return tuple(self.make_set_input_vel(n, v) for n, v in commands.items())
+
+    def make_set_input_vel(
+        self, node_id: int, vel_turns_s: float, torque_ff_nm: float = 0.0
+    ) -> Frame:
+        """Set_Input_Vel.
+
+        :param vel_turns_s: velocity set point in turns/s (finite float32).
+        :param torque_ff_nm: torque feed-forward in N*m (finite float32).
+        :raises EncodeError: for a non-finite or out-of-float32-range value, or a bad node ID.
+        """
+        # The hot path of every cycle: one chained comparison rejects NaN and +-inf too.
+        try:
+            ok = -FLOAT32_MAX <= vel_turns_s <= FLOAT32_MAX
+            ok = ok and -FLOAT32_MAX <= torque_ff_nm <= FLOAT32_MAX
+        except TypeError:
+            ok = False
+        if not ok:
+            _check_float32("Input_Vel", node_id, vel_turns_s, "turns/s")
+            _check_float32("Input_Torque_FF", node_id, torque_ff_nm, "Nm")
+        return Frame(
+            self.arbitration_id(node_id, CmdId.SET_INPUT_VEL),
+            _SET_INPUT_VEL_PACK(vel_turns_s, torque_ff_nm),
+            self.extended_id,
+        )
+
+    def make_set_axis_state(self, node_id: int, state: int) -> Frame:
+        """Set_Axis_State, DLC 8.
+
+        :raises EncodeError: if ``state`` is not a u32 or the node ID is bad.
+        """
+        _check_u32("Axis_Requested_State", node_id, state)
+        return self._frame(node_id, SET_AXIS_STATE, state)
+
+    def make_set_controller_mode(self, node_id: int, control_mode: int, input_mode: int) -> Frame:
+        """Set_Controller_Mode.
+
+        :raises EncodeError: if a mode is not a u32 or the node ID is bad.
+        """
+        _check_u32("Control_Mode", node_id, control_mode)
+        _check_u32("Input_Mode", node_id, input_mode)
+        return self._frame(node_id, SET_CONTROLLER_MODE, control_mode, input_mode)
+
+    def make_clear_errors(self, node_id: int, identify: bool = False) -> Frame:
+        """Clear_Errors: DLC 0 in 0.5, one ``Identify`` byte in 0.6 (ignored in 0.5)."""
+        if self.firmware is Firmware.V0_6:
+            return self._frame(node_id, CLEAR_ERRORS_06, int(identify))
+        return self._frame(node_id, CLEAR_ERRORS_05)
+
+    def make_estop(self, node_id: int) -> Frame:
+        """Estop (DLC 0): the axis disarms with ESTOP_REQUESTED."""
+        return self._frame(node_id, ESTOP)
+
+    def make_request(self, node_id: int, cmd: CmdId) -> Frame:
+        """An RTR request (DLC 0) for ``cmd``; the axis answers with a data frame on the same ID."""
+        return Frame(self.arbitration_id(node_id, cmd), b"", self.extended_id, is_remote_frame=True)
+
+    def make_transition(
+        self,
+        node_id: int,
+        current: AxisState | int,
+        requested: AxisState,
+        input_mode: InputMode = InputMode.PASSTHROUGH,
+    ) -> tuple[Frame, ...]:
+        """The frames that take an axis from ``current`` to ``requested`` (:data:`TRANSITIONS`).
+
+        :param current: the axis state last reported (``UNDEFINED`` when unknown).
+        :param requested: ``IDLE`` or ``CLOSED_LOOP_CONTROL``.
+        :param input_mode: input mode selected when arming (velocity control).
+        :raises IllegalTransitionError: for a pair the table does not allow.
+        """
+        step = TRANSITIONS.get((current, requested)) if isinstance(current, AxisState) else None
+        if step is None and requested is AxisState.IDLE:
+            step = Step.DISARM  # an unknown (newer) state can always be left for IDLE
+        if step is None:
+            cur = current.name if isinstance(current, AxisState) else str(current)
+            raise IllegalTransitionError(
+                f"Expected ODrive node {node_id} in IDLE, CLOSED_LOOP_CONTROL or UNDEFINED to "
+                f"request {requested.name}, but it is in {cur}."
+            )
+        if step is Step.DISARM:
+            return (
+                self.make_set_input_vel(node_id, 0.0),
+                self.make_set_axis_state(node_id, AxisState.IDLE),
+            )
+        return (
+            self.make_clear_errors(node_id),
+            self.make_set_controller_mode(node_id, ControlMode.VELOCITY_CONTROL, input_mode),
+            self.make_set_axis_state(node_id, AxisState.CLOSED_LOOP_CONTROL),
+        )
+
+    # ------------------------------------------------------------------ axis -> host
+
+    def make_heartbeat(self, hb: Heartbeat) -> Frame:
+        """The heartbeat frame an axis of this firmware sends (used by the simulator)."""
+        if self.firmware is Firmware.V0_6:
+            tail = (int(hb.procedure_result), int(hb.trajectory_done), 0)
+        else:
+            flags7 = (_TRAJ_DONE_05 if hb.trajectory_done else 0) | int(hb.controller_error)
+            tail = (int(hb.motor_error), int(hb.encoder_error), flags7)
+        _check_u32("Axis_Error", hb.node_id, hb.axis_error)
+        return self._frame(hb.node_id, HEARTBEAT, hb.axis_error, int(hb.axis_state), *tail)
+
+    def make_encoder_estimates(self, node_id: int, pos_turns: float, vel_turns_s: float) -> Frame:
+        """Get_Encoder_Estimates reply (both values rounded to float32 like the firmware's)."""
+        _check_float32("Pos_Estimate", node_id, pos_turns, "turns")
+        _check_float32("Vel_Estimate", node_id, vel_turns_s, "turns/s")
+        return self._frame(node_id, ENCODER_ESTIMATES, pos_turns, vel_turns_s)
+
+    def make_error_status(self, status: ErrorStatus | MotorErrorStatus) -> Frame:
+        """Get_Error (0.6) or Get_Motor_Error (0.5) reply."""
+        if isinstance(status, ErrorStatus):
+            return self._frame(
+                status.node_id, GET_ERROR_06, status.active_errors, status.disarm_reason
+            )
+        return self._frame(status.node_id, GET_MOTOR_ERROR_05, status.motor_error)
+
+    def decode(self, frame: Frame) -> Feedback | None:
+        """Decode a reply: heartbeat, encoder estimates, Get_Error / Get_Motor_Error.
+
+        :return: ``None`` for a frame of the other ID type, any other command ID, and requests
+            (RTR frames, and 0.5's DLC 0 data frames), which are not replies.
+        :raises DecodeError: for a wrong DLC or a non-finite encoder estimate.
+        """
+        ids = self.split_id(frame)
+        if ids is None or frame.is_remote_frame:
+            return None
+        node, cmd = ids
+        layout = self._feedback.get(cmd)
+        if layout is None or (frame.dlc == 0 and self.firmware is Firmware.V0_5):
+            return None
+        values = _unpack(layout, node, frame)
+        if layout is ENCODER_ESTIMATES:
+            pos, vel = values
+            if not (math.isfinite(pos) and math.isfinite(vel)):
+                raise DecodeError(
+                    f"Expected finite encoder estimates from ODrive node {node}, "
+                    f"but got position {pos} turns, velocity {vel} turns/s."
+                )
+            return EncoderEstimates(node, pos, vel)
+        if layout is HEARTBEAT:
+            return self._heartbeat(node, values)
+        if layout is GET_ERROR_06:
+            return ErrorStatus(node, int(values[0]), int(values[1]))
+        return MotorErrorStatus(node, int(values[0]))
+
+    def _heartbeat(self, node: int, values: tuple[float, ...]) -> Heartbeat:
+        error, state, b5, b6, b7 = (int(v) for v in values)
+        axis_state = _enum_or_int(AxisState, state)
+        if self.firmware is Firmware.V0_6:
+            result = _enum_or_int(ProcedureResult, b5)
+            return Heartbeat(node, error, axis_state, bool(b6 & 1), procedure_result=result)
+        return Heartbeat(
+            node,
+            error,
+            axis_state,
+            trajectory_done=bool(b7 & _TRAJ_DONE_05),
+            motor_error=bool(b5 & 1),
+            encoder_error=bool(b6 & 1),
+            controller_error=bool(b7 & _CONTROLLER_ERROR_05),
+        )
+
+    def decode_command(self, frame: Frame) -> Command | None:
+        """Decode a host-to-axis frame (the device side, used by the simulator).
+
+        :return: ``None`` for a frame of the other ID type or a command this codec does not
+            model.
+        :raises DecodeError: for a wrong DLC.
+        """
+        ids = self.split_id(frame)
+        if ids is None:
+            return None
+        node, cmd = ids
+        getter = cmd in self._feedback
+        if frame.is_remote_frame or (getter and frame.dlc == 0 and self.firmware is Firmware.V0_5):
+            return Request(node, CmdId(cmd)) if getter else None
+        if cmd == CmdId.SET_INPUT_VEL:
+            vel, torque = _unpack(SET_INPUT_VEL, node, frame)
+            return SetInputVel(node, vel, torque)
+        if cmd == CmdId.SET_AXIS_STATE:
+            (state,) = _unpack(SET_AXIS_STATE, node, frame)
+            return SetAxisState(node, _enum_or_int(AxisState, int(state)))
+        if cmd == CmdId.SET_CONTROLLER_MODE:
+            control, inp = _unpack(SET_CONTROLLER_MODE, node, frame)
+            return SetControllerMode(node, int(control), int(inp))
+        if cmd == CmdId.CLEAR_ERRORS:
+            values = _unpack(self.clear_errors_layout, node, frame)
+            return ClearErrors(node, bool(values and values[0]))
+        if cmd == CmdId.ESTOP:
+            _unpack(ESTOP, node, frame)
+            return Estop(node)
+        return None
+
+
+def _unpack(layout: Layout, node: int, frame: Frame) -> tuple[float, ...]:
+    if frame.dlc not in layout.dlcs or len(frame.data) != frame.dlc:
+        expected = " or ".join(str(d) for d in layout.dlcs)
+        raise DecodeError(
+            f"Expected {expected} data bytes in {layout.name} of ODrive node {node} "
+            f"(ID {frame.arbitration_id:#x}), but got {len(frame.data)}."
+        )
+    return layout.packer.unpack_from(frame.data)
+
+
+def _check_float32(name: str, node_id: int, value: float, unit: str) -> None:
+    try:
+        ok = -FLOAT32_MAX <= value <= FLOAT32_MAX  # False for NaN and +-inf
+    except TypeError:
+        ok = False
+    if not ok:
+        raise EncodeError(
+            f"Expected {name} for node {node_id} between {-FLOAT32_MAX:.7g} and "
+            f"{FLOAT32_MAX:.7g} {unit}, but got {value!r}."
+        )
+
+
+def _check_u32(name: str, node_id: int, value: int) -> None:
+    if not (isinstance(value, int) and 0 <= value <= U32_MAX):
+        raise EncodeError(
+            f"Expected {name} for node {node_id} between 0 and {U32_MAX}, but got {value!r}."
+        )

@@ -1,0 +1,373 @@
+"""Stateful ODrive CANSimple driver: enable sequence, liveness, faults and odometry.
+
+Reference: the `ODrive CAN protocol
+<https://docs.odriverobotics.com/v/latest/manual/can-protocol.html>`_ and
+``specs/can-protocols.md`` section 1.  Frame layouts live in :mod:`drivers.odrive.codec`.
+
+Per motor, the driver
+
+* arms with Clear_Errors, Set_Controller_Mode (velocity control, the configured input mode) and
+  Set_Axis_State CLOSED_LOOP_CONTROL, and reports ENABLING until a heartbeat shows
+  CLOSED_LOOP_CONTROL (the official ``can_simple.py`` example does the same).  An enable that
+  does not take is repeated every :attr:`OdriveDriver.ENABLE_RETRY_S` while the axis is alive,
+  idle and error-free, :attr:`OdriveDriver.ENABLE_ATTEMPTS` times at most; a reported error is
+  never cleared automatically;
+* disarms with Set_Input_Vel 0 then Set_Axis_State IDLE;
+* streams Set_Input_Vel every cycle, which also feeds the axis watchdog;
+* is alive while both heartbeats and encoder estimates are younger than ``liveness_s``
+  (heartbeats give the state, estimates the odometry);
+* reports FAULT with the decoded flag names when the heartbeat carries an axis error (0.5: also
+  the motor/encoder/controller flags) and then asks once for Get_Error (0.6: active errors and
+  disarm reason) or Get_Motor_Error (0.5) to complete the detail text.
+
+Odometry precision: the position is the firmware's float32 estimate in turns.  Its resolution
+is one float32 ULP, 2**(e - 23) turns for a value in [2**e, 2**(e + 1)): 1.2e-7 turn near 1
+turn, 0.0078 turn at 1e5 turns, 0.125 turn beyond 2**20 turns.  The driver subtracts the first
+sample in float64 (exact), so the only loss is the firmware's own rounding; for long missions
+re-zero the axis position (0.6 Set_Absolute_Position, 0.5 Set_Linear_Count) while stopped.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from typing import TYPE_CHECKING, ClassVar, cast
+
+from drivers.odrive.codec import (
+    DEFAULT_EXTENDED_ID,
+    DEFAULT_FIRMWARE,
+    MAX_EXTENDED_NODE_ID,
+    EncoderEstimates,
+    ErrorStatus,
+    Heartbeat,
+    MotorErrorStatus,
+    OdriveCodec,
+)
+from drivers.odrive.enums import (
+    AxisError05,
+    AxisState,
+    CmdId,
+    Firmware,
+    InputMode,
+    MotorError05,
+    error_class,
+    error_faults,
+    flag_names,
+)
+from drivers.odrive.sim import OdriveSimulator
+from gateway.driver import MotorDriver, OptionSpec
+from gateway.errors import ConfigError, DecodeError, EncodeError, IllegalTransitionError
+from gateway.types import DriveFault, DriveState, WheelFeedback
+
+if TYPE_CHECKING:
+    from collections.abc import Mapping, Sequence
+
+    from gateway.sim import DeviceSimulator
+    from gateway.types import Frame, MotorConfig
+
+log = logging.getLogger(__name__)
+
+TAU = 2.0 * math.pi
+
+
+class OdriveDriver(MotorDriver):
+    """All ODrive axes on one bus (one firmware family and one ID mode per driver).
+
+    :param motors: the motors, in the order :meth:`command` receives speeds.
+    :raises ConfigError: for a bad protocol key, a node ID out of range for the ID mode, a
+        repeated node ID, or motors that disagree on ``firmware`` or ``extended_id``.
+    """
+
+    OPTIONS: ClassVar[Mapping[str, OptionSpec]] = {
+        "firmware": OptionSpec(
+            str,
+            DEFAULT_FIRMWARE.value,
+            choices=tuple(f.value for f in Firmware),
+            help="firmware family: 0.5 (ODrive v3.x) or 0.6 (ODrive Pro, S1, Micro)",
+        ),
+        "extended_id": OptionSpec(
+            bool, DEFAULT_EXTENDED_ID, help="29-bit identifiers (axis.config.can.is_extended)"
+        ),
+        "input_mode": OptionSpec(
+            int,
+            int(InputMode.PASSTHROUGH),
+            choices=(int(InputMode.PASSTHROUGH), int(InputMode.VEL_RAMP)),
+            help="controller input mode: 1 passthrough, 2 vel_ramp (the axis ramps speed)",
+        ),
+        "encoder_request": OptionSpec(
+            str,
+            "cyclic",
+            choices=("cyclic", "rtr"),
+            help="cyclic encoder estimates, or an RTR request on every poll",
+        ),
+        "liveness_s": OptionSpec(
+            float,
+            MotorDriver.DEFAULT_LIVENESS_S,
+            minimum=0.001,
+            help="seconds without heartbeat or encoder estimates before a motor is OFFLINE",
+        ),
+    }
+    #: Config-time range: 29-bit mode allows up to 0xFFFFFF; ``__init__`` narrows 11-bit mode
+    #: to :attr:`STANDARD_NODE_ID_RANGE` once it knows ``extended_id``.
+    NODE_ID_RANGE: ClassVar[tuple[int, int]] = (0, MAX_EXTENDED_NODE_ID)
+    #: Node IDs with 11-bit identifiers; 0x3F is the 0.6 broadcast address.
+    STANDARD_NODE_ID_RANGE: ClassVar[tuple[int, int]] = (0, 0x3E)
+    #: Seconds between enable attempts that have not reached CLOSED_LOOP_CONTROL.
+    ENABLE_RETRY_S: ClassVar[float] = 0.5
+    #: Enable attempts (while the axis answers) before giving up.
+    ENABLE_ATTEMPTS: ClassVar[int] = 3
+    #: Heartbeats this soon after an enable may still carry the errors it just cleared.
+    ENABLE_GRACE_S: ClassVar[float] = 0.3
+
+    def __init__(self, motors: Sequence[MotorConfig]) -> None:
+        super().__init__(motors)
+        opts = [self.validate_options(m.options, f"motor {m.wheel!r}") for m in self.motors]
+        first = opts[0] if opts else {"firmware": DEFAULT_FIRMWARE.value, "extended_id": False}
+        for m, o in zip(self.motors, opts, strict=True):
+            for key in ("firmware", "extended_id"):
+                if o[key] != first[key]:
+                    raise ConfigError(
+                        f"motor {m.wheel!r}.{key}: expected {first[key]!r} like motor "
+                        f"{self.motors[0].wheel!r} on the same ODrive bus, got {o[key]!r}"
+                    )
+        self.codec = OdriveCodec(Firmware(first["firmware"]), bool(first["extended_id"]))
+        lo, hi = self.NODE_ID_RANGE if self.codec.extended_id else self.STANDARD_NODE_ID_RANGE
+        seen: set[int] = set()
+        for m in self.motors:
+            if not lo <= m.node_id <= hi or m.node_id in seen:
+                problem = "a node ID used twice" if m.node_id in seen else f"int {lo}..{hi:#x}"
+                raise ConfigError(f"motor {m.wheel!r}.node_id: expected {problem}, got {m.node_id}")
+            seen.add(m.node_id)
+        if opts:
+            self.liveness_s = cast("float", opts[0]["liveness_s"])
+        n = len(self.motors)
+        self._input_mode = [InputMode(cast("int", o["input_mode"])) for o in opts]
+        self._rtr = [o["encoder_request"] == "rtr" for o in opts]
+        self._axis_state: list[AxisState | int] = [AxisState.UNDEFINED] * n
+        self._heartbeat_s: list[float | None] = [None] * n
+        self._encoder_s: list[float | None] = [None] * n
+        self._pos0_turns: list[float | None] = [None] * n
+        self._enabling = [False] * n
+        self._enable_sent_s = [0.0] * n
+        self._attempts = [0] * n
+        self._axis_detail = [""] * n
+        self._error_detail = [""] * n
+        self._error_request_due = [False] * n
+
+    @classmethod
+    def make_simulator(cls, motor: MotorConfig) -> DeviceSimulator:
+        """An :class:`~drivers.odrive.sim.OdriveSimulator` for ``motor``."""
+        return OdriveSimulator(motor)
+
+    # ----------------------------------------------------------------- state
+
+    def _alive(self, i: int, now_s: float) -> bool:
+        hb, enc = self._heartbeat_s[i], self._encoder_s[i]
+        return (
+            hb is not None
+            and enc is not None
+            and now_s - hb <= self.liveness_s
+            and now_s - enc <= self.liveness_s
+        )
+
+    def state(self, index: int, now_s: float) -> DriveState:
+        """OFFLINE, FAULT, ENABLED (heartbeat shows CLOSED_LOOP_CONTROL), ENABLING or DISABLED."""
+        if not self._alive(index, now_s):
+            return DriveState.OFFLINE
+        if self._faults[index]:
+            return DriveState.FAULT
+        if self._axis_state[index] == AxisState.CLOSED_LOOP_CONTROL:
+            return DriveState.ENABLED
+        return DriveState.ENABLING if self._enabling[index] else DriveState.DISABLED
+
+    def axis_state(self, index: int) -> AxisState | int:
+        """The axis state of motor ``index`` in its last heartbeat (``UNDEFINED`` before one)."""
+        return self._axis_state[index]
+
+    # ----------------------------------------------------------------- hooks
+
+    def enable(self, now_s: float) -> list[Frame]:
+        """Clear errors, select velocity control and request CLOSED_LOOP_CONTROL on every axis.
+
+        :raises IllegalTransitionError: if an axis reports a calibration or homing procedure
+            (a new state request would abort it); no frame is sent then.
+        """
+        frames: list[Frame] = []
+        for i in range(len(self.motors)):
+            frames.extend(self._arm_frames(i, now_s))
+        for i in range(len(self.motors)):
+            self._enabling[i] = True
+            self._enable_sent_s[i] = now_s
+            self._attempts[i] = 1
+            self._error_detail[i] = ""
+        return frames
+
+    def _arm_frames(self, i: int, now_s: float) -> tuple[Frame, ...]:
+        m = self.motors[i]
+        current = self._axis_state[i] if self._alive(i, now_s) else AxisState.UNDEFINED
+        try:
+            return self.codec.make_transition(
+                m.node_id, current, AxisState.CLOSED_LOOP_CONTROL, self._input_mode[i]
+            )
+        except IllegalTransitionError as err:
+            raise IllegalTransitionError(f'Cannot enable wheel "{m.wheel}": {err}') from err
+
+    def disable(self, now_s: float) -> list[Frame]:
+        """Set_Input_Vel 0 and Set_Axis_State IDLE on every axis (allowed from any state)."""
+        frames: list[Frame] = []
+        for i, m in enumerate(self.motors):
+            self._enabling[i] = False
+            frames.extend(
+                self.codec.make_transition(m.node_id, self._axis_state[i], AxisState.IDLE)
+            )
+        return frames
+
+    def command(self, wheel_rad_s: Sequence[float], now_s: float) -> list[Frame]:
+        """One Set_Input_Vel per axis: turns/s = wheel rad/s * gear_ratio * sign / (2 pi).
+
+        :param wheel_rad_s: wheel speeds in rad/s, in :attr:`motors` order.
+        :raises EncodeError: for a speed that is not finite or beyond the motor's ``max_rpm``,
+            or a number of speeds other than the number of motors.
+        """
+        if len(wheel_rad_s) != len(self.motors):
+            raise EncodeError(
+                f"Expected {len(self.motors)} wheel speeds for the ODrive axes, "
+                f"but got {len(wheel_rad_s)}."
+            )
+        commands: dict[int, float] = {}
+        for m, w in zip(self.motors, wheel_rad_s, strict=True):
+            limit = m.max_wheel_rad_s
+            if not (math.isfinite(w) and abs(w) <= limit * (1.0 + 1e-12)):
+                raise EncodeError(
+                    f'Expected velocity for node {m.node_id} ("{m.wheel}") between '
+                    f"{-limit:.3g} and {limit:.3g} rad/s, but got {w}."
+                )
+            commands[m.node_id] = m.wheel_to_motor_rad_s(w) / TAU
+        return list(self.codec.encode_command(commands))
+
+    def poll(self, now_s: float) -> list[Frame]:
+        """RTR encoder requests (``encoder_request: rtr``), error queries and enable retries."""
+        frames: list[Frame] = []
+        for i, m in enumerate(self.motors):
+            if self._rtr[i]:
+                frames.append(self.codec.make_request(m.node_id, CmdId.GET_ENCODER_ESTIMATES))
+            if self._error_request_due[i]:
+                self._error_request_due[i] = False
+                frames.append(self.codec.make_request(m.node_id, CmdId.GET_ERROR))
+            if self._enabling[i] and now_s - self._enable_sent_s[i] >= self.ENABLE_RETRY_S:
+                frames.extend(self._retry_enable(i, now_s))
+        return frames
+
+    def _retry_enable(self, i: int, now_s: float) -> tuple[Frame, ...]:
+        m = self.motors[i]
+        if self._faults[i]:
+            if now_s - self._enable_sent_s[i] > self.ENABLE_GRACE_S:
+                self._enabling[i] = False  # the axis refused: stay in FAULT, never auto-clear
+            return ()
+        if not self._alive(i, now_s) or self._axis_state[i] != AxisState.IDLE:
+            return ()  # not answering yet, or busy: wait without using up an attempt
+        if self._attempts[i] >= self.ENABLE_ATTEMPTS:
+            log.warning(
+                'ODrive node %d ("%s") stayed in IDLE after %d enable attempts; giving up',
+                m.node_id,
+                m.wheel,
+                self._attempts[i],
+            )
+            self._enabling[i] = False
+            return ()
+        self._attempts[i] += 1
+        self._enable_sent_s[i] = now_s
+        log.info('ODrive node %d ("%s"): enable attempt %d', m.node_id, m.wheel, self._attempts[i])
+        return self._arm_frames(i, now_s)
+
+    def on_frame(self, frame: Frame) -> bool:
+        """Take a heartbeat, encoder estimate or error reply of one of our axes.
+
+        Frames of the other ID type or of other nodes are not ours.  Of ours, malformed frames
+        and remote frames on reply IDs are counted in :attr:`rejected`; command frames (another
+        master talking to our axes) are ignored.
+        """
+        ids = self.codec.split_id(frame)
+        if ids is None:
+            return False
+        i = self.index_of(ids[0])
+        if i is None:
+            return False
+        try:
+            msg = self.codec.decode(frame)
+        except DecodeError as err:
+            self.reject("malformed", err)
+            return True
+        if isinstance(msg, EncoderEstimates):
+            self._on_estimates(i, msg, frame.timestamp_s)
+        elif isinstance(msg, Heartbeat):
+            self._on_heartbeat(i, msg, frame.timestamp_s)
+        elif isinstance(msg, (ErrorStatus, MotorErrorStatus)):
+            self._on_error_status(i, msg)
+        elif frame.is_remote_frame and ids[1] in (CmdId.HEARTBEAT, CmdId.GET_ENCODER_ESTIMATES):
+            self.reject("remote frame where data expected")
+        return True
+
+    # ----------------------------------------------------------------- receive helpers
+
+    def _on_estimates(self, i: int, msg: EncoderEstimates, t: float) -> None:
+        m = self.motors[i]
+        pos0 = self._pos0_turns[i]
+        if pos0 is None:
+            pos0 = self._pos0_turns[i] = msg.pos_turns
+        # float32 - float32 is exact in float64; the wheel angle is relative to the first sample.
+        position = m.motor_to_wheel_rad_s((msg.pos_turns - pos0) * TAU)
+        velocity = m.motor_to_wheel_rad_s(msg.vel_turns_s * TAU)
+        self._encoder_s[i] = t
+        self.store_feedback(i, WheelFeedback(position, velocity, t))
+
+    def _on_heartbeat(self, i: int, hb: Heartbeat, t: float) -> None:
+        fw = self.codec.firmware
+        self._heartbeat_s[i] = t
+        self._axis_state[i] = hb.axis_state
+        faults = error_faults(fw, hb.axis_error)
+        parts = []
+        if hb.axis_error:
+            names = flag_names(error_class(fw), hb.axis_error)
+            parts.append(f"axis error {hb.axis_error:#010x}: {names}")
+        for flag, fault, name in (
+            (hb.motor_error, DriveFault.MOTOR, "motor"),
+            (hb.encoder_error, DriveFault.ENCODER, "encoder"),
+            (hb.controller_error, DriveFault.CONTROLLER, "controller"),
+        ):
+            if flag:
+                faults |= fault
+                parts.append(f"{name} error flag")
+        if faults and not self._faults[i]:
+            m = self.motors[i]
+            log.warning('ODrive node %d ("%s") reports %s', m.node_id, m.wheel, "; ".join(parts))
+            self._error_request_due[i] = (
+                fw is Firmware.V0_6
+                or hb.motor_error
+                or bool(hb.axis_error & AxisError05.MOTOR_FAILED)
+            )
+        if faults and self._enabling[i] and t - self._enable_sent_s[i] > self.ENABLE_GRACE_S:
+            self._enabling[i] = False
+        if not faults:
+            self._error_detail[i] = ""
+            self._error_request_due[i] = False
+        self._axis_detail[i] = "; ".join(parts)
+        self._publish_fault(i, faults)
+        armed = hb.axis_state == AxisState.CLOSED_LOOP_CONTROL
+        if armed:
+            self._enabling[i] = False
+        self.set_armed(i, armed)
+
+    def _on_error_status(self, i: int, msg: ErrorStatus | MotorErrorStatus) -> None:
+        if isinstance(msg, ErrorStatus):
+            cls = error_class(self.codec.firmware)
+            self._error_detail[i] = f"disarm reason: {flag_names(cls, msg.disarm_reason)}"
+        else:
+            self._error_detail[i] = (
+                f"motor error {msg.motor_error:#x}: {flag_names(MotorError05, msg.motor_error)}"
+            )
+        self._publish_fault(i, self._faults[i])
+
+    def _publish_fault(self, i: int, faults: DriveFault) -> None:
+        detail = "; ".join(p for p in (self._axis_detail[i], self._error_detail[i]) if p)
+        self.set_fault(i, faults, detail if faults else "")

@@ -1,0 +1,40 @@
+"""VESC (vedderb/bldc) over CAN: velocity in electrical RPM, odometry from the tachometer.
+
+Protocol reference: https://github.com/vedderb/bldc/blob/master/documentation/comm_can.md
+(simple commands and status messages) and ``comm/comm_can.c``.
+
+* :mod:`drivers.vesc.codec`: the pure frame builders and parsers (:class:`VescCodec`).
+* :mod:`drivers.vesc.driver`: :class:`VescDriver`, the stateful driver (registry name ``vesc``).
+* :mod:`drivers.vesc.sim`: :class:`VescSimulator`, the controller side for tests and ``--sim``.
+"""
+
+from __future__ import annotations
+
+from drivers.vesc.codec import (
+    BROADCAST_ID,
+    CanPacketId,
+    HwType,
+    VescCodec,
+    VescCommand,
+    VescPing,
+    VescPong,
+    VescStatus,
+    VescStatus5,
+)
+from drivers.vesc.driver import VescDriver
+from drivers.vesc.sim import SimMode, VescSimulator
+
+__all__ = [
+    "BROADCAST_ID",
+    "CanPacketId",
+    "HwType",
+    "SimMode",
+    "VescCodec",
+    "VescCommand",
+    "VescDriver",
+    "VescPing",
+    "VescPong",
+    "VescSimulator",
+    "VescStatus",
+    "VescStatus5",
+]

@@ -1,0 +1,388 @@
+"""Pure codec of the VESC CAN protocol (vedderb/bldc, ``CAN_MODE_VESC``).
+
+Reference: the firmware's own description, ``documentation/comm_can.md``, and its
+implementation ``comm/comm_can.c`` (``decode_msg``, ``comm_can_send_status1..6``) and
+``datatypes.h`` (``CAN_PACKET_ID``, ``HW_TYPE``) in https://github.com/vedderb/bldc
+(read at ``b9d287b3``); digested in section 2 of ``can-protocols.md``.
+
+* 29-bit extended identifiers only: ``eid = (packet << 8) | vesc_id``.  Standard-ID frames are
+  never VESC frames (the firmware hands them to its Lisp and BMS hooks).
+* Every multi-byte field is big endian.  Commands are one int32 ``value * scale`` (DLC 4).  The
+  6-byte SET_CURRENT variant with an off-delay is inconsistent between the firmware's sender and
+  receiver since commit ``766f6e02``, so only the 4-byte forms exist here.
+* Status frames (STATUS, STATUS_5) are cyclic only; there is no RTR.  They carry no fault code.
+
+Everything here is pure: no I/O, no clock.  Host side: :func:`make_command` (and its
+``make_set_*`` shorthands), :func:`make_ping`, :func:`decode`.  Device side (the simulator):
+:func:`decode_command`, :func:`make_status`, :func:`make_status5`, :func:`make_pong`.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+import struct
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, TypeAlias
+
+from gateway.codec import MotorCodec
+from gateway.errors import DecodeError, EncodeError
+from gateway.types import Frame
+
+if TYPE_CHECKING:
+    from collections.abc import Mapping
+
+#: The controller-ID byte that addresses every VESC on the bus.
+BROADCAST_ID = 0xFF
+#: Tachometer steps per electrical revolution (``mcpwm_foc.c``: one step per 60 degrees).
+TACHO_STEPS_PER_EREV = 6
+#: RPM per rad/s (eRPM = motor rad/s * RPM_PER_RAD_S * pole pairs).
+RPM_PER_RAD_S = 60.0 / (2.0 * math.pi)
+
+_I32_MIN = -(2**31)
+_I32_MAX = 2**31 - 1
+_I16_MIN = -(2**15)
+_I16_MAX = 2**15 - 1
+
+_I32 = struct.Struct(">i")
+#: STATUS and STATUS_5 share one layout: int32, int16, int16.
+_STATUS = struct.Struct(">ihh")
+_PONG = struct.Struct(">BB")
+
+
+class CanPacketId(enum.IntEnum):
+    """``CAN_PACKET_ID`` values used here (``datatypes.h``); the high bits of the ID."""
+
+    SET_DUTY = 0
+    SET_CURRENT = 1
+    SET_CURRENT_BRAKE = 2
+    SET_RPM = 3
+    SET_POS = 4
+    STATUS = 9
+    STATUS_2 = 14
+    STATUS_3 = 15
+    STATUS_4 = 16
+    PING = 17
+    PONG = 18
+    STATUS_5 = 27
+    SHUTDOWN = 31
+    STATUS_6 = 58
+
+
+class HwType(enum.IntEnum):
+    """``HW_TYPE`` (``datatypes.h``), byte 1 of a PONG."""
+
+    VESC = 0
+    VESC_BMS = 1
+    CUSTOM_MODULE = 2
+
+
+@dataclass(frozen=True, slots=True)
+class CommandField:
+    """The one int32 field of a simple command: ``raw = round(value * scale)``.
+
+    :param name: what the value is, for error messages.
+    :param unit: its unit, for error messages.
+    :param scale: raw counts per unit.
+    """
+
+    name: str
+    unit: str
+    scale: float
+
+    @property
+    def minimum(self) -> float:
+        """Smallest encodable value in the field's unit."""
+        return _I32_MIN / self.scale
+
+    @property
+    def maximum(self) -> float:
+        """Largest encodable value in the field's unit."""
+        return _I32_MAX / self.scale
+
+
+#: The simple commands this codec speaks, described once (``decode_msg`` in ``comm_can.c``).
+COMMANDS: Mapping[CanPacketId, CommandField] = {
+    CanPacketId.SET_CURRENT: CommandField("current", "A", 1e3),
+    CanPacketId.SET_CURRENT_BRAKE: CommandField("brake current", "A", 1e3),
+    CanPacketId.SET_RPM: CommandField("speed", "eRPM", 1.0),
+}
+
+
+@dataclass(frozen=True, slots=True)
+class VescStatus:
+    """STATUS (packet 9), ``comm_can_send_status1``.
+
+    :param node_id: the sending controller.
+    :param erpm: electrical RPM (mechanical RPM times pole pairs), signed.
+    :param current_a: total motor current, filtered, resolution 0.1 A.
+    :param duty: duty cycle -1..1, resolution 0.001.
+    """
+
+    node_id: int
+    erpm: int
+    current_a: float
+    duty: float
+
+
+@dataclass(frozen=True, slots=True)
+class VescStatus5:
+    """STATUS_5 (packet 27), ``comm_can_send_status5``.
+
+    :param node_id: the sending controller.
+    :param tachometer: int32 step counter, 6 steps per electrical revolution; wraps.
+    :param v_in_v: input voltage, resolution 0.1 V.
+    """
+
+    node_id: int
+    tachometer: int
+    v_in_v: float
+
+
+@dataclass(frozen=True, slots=True)
+class VescPong:
+    """PONG (packet 18): the answer to a PING.
+
+    :param node_id: the answering controller (byte 0; the firmware echoes the ID the PING was
+        addressed to, so a broadcast PING is answered with 255).
+    :param to_id: the pinger's ID (the low byte of the arbitration ID).
+    :param hw_type: ``HW_TYPE`` of the answering device; an int so that future types decode.
+    """
+
+    node_id: int
+    to_id: int
+    hw_type: int
+
+
+@dataclass(frozen=True, slots=True)
+class VescCommand:
+    """A simple command as the controller receives it (device side).
+
+    :param node_id: the addressed controller, 255 for all.
+    :param packet: which command.
+    :param value: the value in the unit of ``COMMANDS[packet]``.
+    """
+
+    node_id: int
+    packet: CanPacketId
+    value: float
+
+
+@dataclass(frozen=True, slots=True)
+class VescPing:
+    """A PING as the controller receives it (device side).
+
+    :param node_id: the addressed controller, 255 for all.
+    :param sender_id: where the PONG goes.
+    """
+
+    node_id: int
+    sender_id: int
+
+
+#: Everything :func:`decode` returns.
+VescMessage: TypeAlias = VescStatus | VescStatus5 | VescPong
+
+
+def _eid(packet: CanPacketId, node_id: int) -> int:
+    return (int(packet) << 8) | node_id
+
+
+def _check_id(node_id: int, what: str = "VESC ID") -> None:
+    if not isinstance(node_id, int) or isinstance(node_id, bool) or not 0 <= node_id <= 0xFF:
+        raise EncodeError(f"Expected {what} between 0 and 255, but got {node_id!r}.")
+
+
+# ----------------------------------------------------------------------- host side
+
+
+def make_command(packet: CanPacketId, node_id: int, value: float) -> Frame:
+    """A simple 4-byte command frame.
+
+    :param packet: a key of :data:`COMMANDS`.
+    :param node_id: the controller, 0..254, or 255 for every controller.
+    :param value: in the unit of the command (A or eRPM), rounded to the field's resolution.
+    :raises EncodeError: for an unknown packet, a bad ID, or a value that is not finite or does
+        not fit the int32 field.
+    """
+    field = COMMANDS.get(packet)
+    if field is None:
+        raise EncodeError(f"Expected one of {', '.join(p.name for p in COMMANDS)}, got {packet!r}.")
+    _check_id(node_id)
+    if not math.isfinite(value) or not field.minimum <= value <= field.maximum:
+        raise EncodeError(
+            f"Expected {field.name} for VESC {node_id} between {field.minimum:.10g} and "
+            f"{field.maximum:.10g} {field.unit}, but got {value!r}."
+        )
+    raw = round(value * field.scale)
+    raw = min(max(raw, _I32_MIN), _I32_MAX)  # value * scale may round just past the edge
+    return Frame(_eid(packet, node_id), _I32.pack(raw), is_extended_id=True)
+
+
+def make_set_rpm(node_id: int, erpm: float) -> Frame:
+    """SET_RPM: run the speed controller at ``erpm`` electrical RPM."""
+    return make_command(CanPacketId.SET_RPM, node_id, erpm)
+
+
+def make_set_current(node_id: int, current_a: float) -> Frame:
+    """SET_CURRENT: motor current in A.  Below ``cc_min_current`` (0.05 A) it releases the motor."""
+    return make_command(CanPacketId.SET_CURRENT, node_id, current_a)
+
+
+def make_set_current_brake(node_id: int, current_a: float) -> Frame:
+    """SET_CURRENT_BRAKE: brake with ``current_a`` A."""
+    return make_command(CanPacketId.SET_CURRENT_BRAKE, node_id, current_a)
+
+
+def make_ping(node_id: int, sender_id: int) -> Frame:
+    """PING ``node_id``; the PONG comes back to ``(18 << 8) | sender_id``.
+
+    :raises EncodeError: if an ID is outside 0..255.
+    """
+    _check_id(node_id)
+    _check_id(sender_id, "sender ID")
+    return Frame(_eid(CanPacketId.PING, node_id), bytes((sender_id,)), is_extended_id=True)
+
+
+def _split(frame: Frame) -> tuple[int, int] | None:
+    """(packet, node ID) of a frame that may be VESC's, else ``None``."""
+    if not frame.is_extended_id:
+        return None
+    return frame.arbitration_id >> 8, frame.arbitration_id & 0xFF
+
+
+def _check_data(frame: Frame, packet: CanPacketId, node_id: int, sizes: tuple[int, ...]) -> None:
+    if frame.is_remote_frame:
+        raise DecodeError(
+            f"Expected a data frame for {packet.name} from VESC {node_id}, but got a remote frame."
+        )
+    if len(frame.data) not in sizes:
+        want = " or ".join(str(s) for s in sizes)
+        raise DecodeError(
+            f"Expected {want} data bytes for {packet.name} of VESC {node_id}, "
+            f"but got {len(frame.data)}."
+        )
+
+
+def decode(frame: Frame) -> VescMessage | None:
+    """Decode a frame a controller sent (STATUS, STATUS_5, PONG).
+
+    :return: the message, or ``None`` for anything else (standard IDs, commands, other
+        status packets, IDs with bits above 15).
+    :raises DecodeError: for a STATUS, STATUS_5 or PONG that is a remote frame or has the
+        wrong length.
+    """
+    split = _split(frame)
+    if split is None:
+        return None
+    packet, node_id = split
+    if packet in (CanPacketId.STATUS, CanPacketId.STATUS_5):
+        _check_data(frame, CanPacketId(packet), node_id, (8,))
+        first, second, _third = _STATUS.unpack(frame.data)
+        if packet == CanPacketId.STATUS:
+            return VescStatus(node_id, first, second / 10.0, _third / 1000.0)
+        return VescStatus5(node_id, first, second / 10.0)
+    if packet == CanPacketId.PONG:
+        _check_data(frame, CanPacketId.PONG, node_id, (1, 2))
+        # ``decode_msg``: a one-byte PONG means HW_TYPE_VESC.
+        hw = frame.data[1] if len(frame.data) == 2 else HwType.VESC
+        return VescPong(frame.data[0], node_id, int(hw))
+    return None
+
+
+class VescCodec(MotorCodec[VescMessage]):
+    """The :class:`~gateway.codec.MotorCodec` of VESC: SET_RPM out, status frames in."""
+
+    def encode_command(self, commands: Mapping[int, float]) -> tuple[Frame, ...]:
+        """One SET_RPM frame per controller, in the mapping's order.
+
+        :param commands: VESC ID -> electrical RPM.
+        :raises EncodeError: if an ID or a speed cannot be encoded.
+        """
+        return tuple(make_set_rpm(node_id, erpm) for node_id, erpm in commands.items())
+
+    def decode(self, frame: Frame) -> VescMessage | None:
+        """See :func:`decode`."""
+        return decode(frame)
+
+
+# ----------------------------------------------------------------------- device side
+
+
+def decode_command(frame: Frame) -> VescCommand | VescPing | None:
+    """Decode a frame as a controller receives it (SET_CURRENT, SET_CURRENT_BRAKE, SET_RPM, PING).
+
+    :return: the command, or ``None`` for anything else.
+    :raises DecodeError: for one of those packets as a remote frame or with the wrong length
+        (only the 4-byte command forms are accepted).
+    """
+    split = _split(frame)
+    if split is None:
+        return None
+    packet, node_id = split
+    if packet == CanPacketId.PING:
+        _check_data(frame, CanPacketId.PING, node_id, (1,))
+        return VescPing(node_id, frame.data[0])
+    if packet not in COMMANDS:
+        return None
+    cmd = CanPacketId(packet)
+    _check_data(frame, cmd, node_id, (4,))
+    (raw,) = _I32.unpack(frame.data)
+    return VescCommand(node_id, cmd, raw / COMMANDS[cmd].scale)
+
+
+def _fixed(value: float, scale: float, *, name: str, node_id: int, lo: int, hi: int) -> int:
+    raw = round(value * scale) if math.isfinite(value) else None
+    if raw is None or not lo <= raw <= hi:
+        raise EncodeError(
+            f"Expected {name} for VESC {node_id} between {lo / scale:g} and {hi / scale:g}, "
+            f"but got {value!r}."
+        )
+    return raw
+
+
+def make_status(node_id: int, erpm: int, current_a: float, duty: float) -> Frame:
+    """STATUS as a controller sends it.
+
+    :raises EncodeError: if a value does not fit its field.
+    """
+    _check_id(node_id)
+    raw_erpm = _fixed(erpm, 1.0, name="eRPM", node_id=node_id, lo=_I32_MIN, hi=_I32_MAX)
+    raw_current = _fixed(current_a, 10.0, name="current", node_id=node_id, lo=_I16_MIN, hi=_I16_MAX)
+    raw_duty = _fixed(duty, 1000.0, name="duty", node_id=node_id, lo=_I16_MIN, hi=_I16_MAX)
+    data = _STATUS.pack(raw_erpm, raw_current, raw_duty)
+    return Frame(_eid(CanPacketId.STATUS, node_id), data, is_extended_id=True)
+
+
+def make_status5(node_id: int, tachometer: int, v_in_v: float) -> Frame:
+    """STATUS_5 as a controller sends it (bytes 6-7 reserved, zero).
+
+    :raises EncodeError: if a value does not fit its field.
+    """
+    _check_id(node_id)
+    raw_tacho = _fixed(
+        tachometer, 1.0, name="tachometer", node_id=node_id, lo=_I32_MIN, hi=_I32_MAX
+    )
+    raw_v = _fixed(v_in_v, 10.0, name="input voltage", node_id=node_id, lo=_I16_MIN, hi=_I16_MAX)
+    data = _STATUS.pack(raw_tacho, raw_v, 0)
+    return Frame(_eid(CanPacketId.STATUS_5, node_id), data, is_extended_id=True)
+
+
+def make_pong(to_id: int, responder_id: int, hw_type: HwType = HwType.VESC) -> Frame:
+    """PONG as a controller sends it, to the pinger ``to_id``.
+
+    :raises EncodeError: if an ID is outside 0..255.
+    """
+    _check_id(to_id, "pinger ID")
+    _check_id(responder_id)
+    data = _PONG.pack(responder_id, int(hw_type))
+    return Frame(_eid(CanPacketId.PONG, to_id), data, is_extended_id=True)
+
+
+def wrap_int32(value: int) -> int:
+    """``value`` wrapped into int32 the way a C ``int`` counter overflows.
+
+    >>> wrap_int32(2**31)
+    -2147483648
+    """
+    return ((value + 2**31) % 2**32) - 2**31

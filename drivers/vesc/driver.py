@@ -1,0 +1,365 @@
+"""The stateful VESC driver: wheel rad/s to eRPM, tachometer odometry, liveness.
+
+Protocol reference: https://github.com/vedderb/bldc/blob/master/documentation/comm_can.md and
+``comm/comm_can.c`` (section 2 of ``can-protocols.md``); the frames are built and parsed by
+:mod:`drivers.vesc.codec`.
+
+Behaviour that follows from the protocol:
+
+* **No enable or arm state.**  A VESC drives the motor on any valid command.  :meth:`enable`
+  therefore only starts the command stream (SET_RPM 0 to every motor) and marks the driver
+  enabled; :meth:`disable` sends SET_CURRENT 0, which releases the motor (below
+  ``cc_min_current`` the firmware stops switching), and stops the stream.  A motor reads
+  ENABLING after :meth:`enable` until both status frames have arrived again, then ENABLED.
+* **Keep-alive.**  The VESC releases the motor when no command arrives for its own
+  ``timeout_msec`` (``timeout_s`` here; firmware default 1 s, the doc says 0.5 s, so set it to
+  what the device is configured to).  :meth:`command` sends SET_RPM on every call.
+  :meth:`poll` resends the last command once ``command_period_s`` has passed since the last
+  send, so a caller that ticks :meth:`poll` at :attr:`VescDriver.keepalive_period_s` keeps the
+  motor running even when commands come slower.  If neither is called within ``timeout_s``
+  (the gateway stalled or died), the VESC stops the motor by itself, which is the fail-safe we
+  want.  ``command_period_s < timeout_s / 2`` is enforced so that one lost frame cannot release
+  the motor.
+* **Feedback.**  Velocity comes from STATUS (eRPM), position from the STATUS_5 tachometer
+  (6 steps per electrical revolution, int32, unwrapped modulo 2**32 so odometry is exact to one
+  step).  Both streams are needed; the VESC sends neither until ``can_status_msgs_r1`` is set in
+  VESC Tool (App Settings, General), so the driver logs a hint when they do not come.
+* **Faults.**  The simple status frames carry no fault code (that takes COMM_GET_VALUES over
+  the multi-frame buffer protocol, not implemented).  A VESC fault releases the motor, makes the
+  firmware ignore commands for ``m_fault_stop_time_ms`` and then clears itself; the gateway sees
+  only the motor not following.  What the driver does detect is silence: a motor whose STATUS
+  or STATUS_5 stream is older than ``liveness_s`` is OFFLINE.  FAULT is never reported.
+* **Controller reset.**  A power-cycled VESC restarts its tachometer at 0; the protocol does not
+  say so, and the unwrap takes the jump as motion.  Re-create the driver after a reset.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+from types import MappingProxyType
+from typing import TYPE_CHECKING, ClassVar, cast
+
+from drivers.vesc.codec import (
+    RPM_PER_RAD_S,
+    TACHO_STEPS_PER_EREV,
+    CanPacketId,
+    VescStatus,
+    VescStatus5,
+    decode,
+    make_set_current,
+    make_set_rpm,
+    wrap_int32,
+)
+from drivers.vesc.sim import VescSimulator
+from gateway.driver import MotorDriver, OptionSpec
+from gateway.errors import ConfigError, DecodeError, EncodeError
+from gateway.types import DriveState, WheelFeedback
+
+if TYPE_CHECKING:
+    from collections.abc import Mapping, Sequence
+
+    from gateway.sim import DeviceSimulator
+    from gateway.types import Frame, MotorConfig
+
+log = logging.getLogger(__name__)
+
+#: Status packets a VESC may send that this driver does not decode.
+_UNUSED_STATUS = frozenset(
+    {CanPacketId.STATUS_2, CanPacketId.STATUS_3, CanPacketId.STATUS_4, CanPacketId.STATUS_6}
+)
+
+
+@dataclass(frozen=True, slots=True)
+class _Options:
+    pole_pairs: int
+    command_period_s: float
+    timeout_s: float
+    liveness_s: float
+
+
+@dataclass(slots=True)
+class _Track:
+    """What the driver keeps per motor."""
+
+    erpm: int = 0
+    sent_s: float | None = None
+    tacho: int | None = None
+    steps: int = 0
+    velocity_rad_s: float = 0.0
+    status: VescStatus | None = None
+    status_s: float | None = None
+    status5: VescStatus5 | None = None
+    status5_s: float | None = None
+    hinted: bool = False
+
+
+class VescDriver(MotorDriver):
+    """Every VESC on one bus, commanded in electrical RPM.
+
+    :param motors: the motor blocks, each with ``driver: vesc`` and its protocol keys.
+    :raises ConfigError: for a node ID outside 0..254, a node ID used twice, or bad options.
+    """
+
+    OPTIONS: ClassVar[Mapping[str, OptionSpec]] = MappingProxyType(
+        {
+            "pole_pairs": OptionSpec(
+                int, minimum=1, help="motor pole pairs (poles / 2); eRPM = RPM * pole_pairs"
+            ),
+            "command_period_s": OptionSpec(
+                float,
+                0.02,
+                minimum=0.001,
+                help="resend the last command at least this often (s); < timeout_s / 2",
+            ),
+            "timeout_s": OptionSpec(
+                float,
+                0.5,
+                minimum=0.01,
+                help="the VESC's own command timeout, App Settings > General > Timeout (s); "
+                "0 (timeout off) is refused",
+            ),
+            "liveness_s": OptionSpec(
+                float, 0.25, minimum=0.001, help="status frames older than this: OFFLINE (s)"
+            ),
+        }
+    )
+    #: VESC controller IDs; 255 is broadcast.
+    NODE_ID_RANGE: ClassVar[tuple[int, int]] = (0, 254)
+    #: After :meth:`enable`, how long status frames may be missing before the hint is logged.
+    STATUS_HINT_AFTER_S: ClassVar[float] = 1.0
+
+    def __init__(self, motors: Sequence[MotorConfig]) -> None:
+        super().__init__(motors)
+        owners: dict[int, str] = {}
+        opts: list[_Options] = []
+        for m in self.motors:
+            where = f"motor {m.wheel!r}"
+            self.validate_node_id(m.node_id, f"{where}.node_id")
+            if m.node_id in owners:
+                raise ConfigError(
+                    f"{where}.node_id: VESC ID {m.node_id} is already used by motor "
+                    f"{owners[m.node_id]!r}"
+                )
+            owners[m.node_id] = m.wheel
+            raw = self.validate_options(m.options, where)
+            opts.append(
+                _Options(
+                    pole_pairs=cast("int", raw["pole_pairs"]),
+                    command_period_s=cast("float", raw["command_period_s"]),
+                    timeout_s=cast("float", raw["timeout_s"]),
+                    liveness_s=cast("float", raw["liveness_s"]),
+                )
+            )
+        self._opts: tuple[_Options, ...] = tuple(opts)
+        self._track = [_Track() for _ in self.motors]
+        self._enabled = False
+        self._enabled_at_s: float | None = None
+
+    @classmethod
+    def validate_options(cls, raw: Mapping[str, object], where: str) -> dict[str, object]:
+        """Validate the protocol keys and check ``command_period_s < timeout_s / 2``.
+
+        :raises ConfigError: for an unknown, missing or bad key, or a keep-alive period too
+            long for the VESC's timeout.
+        """
+        out = super().validate_options(raw, where)
+        period = cast("float", out["command_period_s"])
+        timeout = cast("float", out["timeout_s"])
+        if not period < timeout / 2.0:
+            raise ConfigError(
+                f"{where}.command_period_s: expected less than timeout_s / 2 = {timeout / 2:g} s "
+                f"(one lost frame must not let the VESC release the motor), got {period!r}"
+            )
+        return out
+
+    @classmethod
+    def make_simulator(cls, motor: MotorConfig) -> DeviceSimulator:
+        """A :class:`~drivers.vesc.sim.VescSimulator` for ``motor``."""
+        return VescSimulator(motor)
+
+    # ----------------------------------------------------------------- units
+
+    @property
+    def keepalive_period_s(self) -> float:
+        """Call :meth:`poll` at least this often (s) to keep every VESC from timing out."""
+        return min((o.command_period_s for o in self._opts), default=math.inf)
+
+    def erpm_for(self, index: int, wheel_rad_s: float) -> int:
+        """The SET_RPM value for a wheel speed.
+
+        :param index: the motor's position in :attr:`motors`.
+        :param wheel_rad_s: wheel speed in rad/s, within the motor's ``max_rpm``.
+        :raises EncodeError: if the speed is not finite or beyond ``max_rpm``.
+        """
+        m = self.motors[index]
+        limit = m.max_wheel_rad_s
+        if not (math.isfinite(wheel_rad_s) and -limit <= wheel_rad_s <= limit):
+            raise EncodeError(
+                f'Expected velocity for node {m.node_id} ("{m.wheel}") between {-limit:.1f} and '
+                f"{limit:.1f} rad/s, but got {wheel_rad_s!r}."
+            )
+        motor_rad_s = m.wheel_to_motor_rad_s(wheel_rad_s)
+        return round(motor_rad_s * RPM_PER_RAD_S * self._opts[index].pole_pairs)
+
+    def wheel_rad_s_for(self, index: int, erpm: float) -> float:
+        """The wheel speed in rad/s for an eRPM reading of motor ``index``."""
+        motor_rad_s = erpm / self._opts[index].pole_pairs / RPM_PER_RAD_S
+        return self.motors[index].motor_to_wheel_rad_s(motor_rad_s)
+
+    def wheel_rad_for(self, index: int, steps: int) -> float:
+        """The wheel angle in rad for ``steps`` tachometer steps of motor ``index``."""
+        revs = steps / (TACHO_STEPS_PER_EREV * self._opts[index].pole_pairs)
+        return self.motors[index].motor_to_wheel_rad_s(revs * 2.0 * math.pi)
+
+    # ----------------------------------------------------------------- hooks
+
+    def enable(self, now_s: float) -> list[Frame]:
+        """Start the command stream: SET_RPM 0 to every motor (VESC has no arm state)."""
+        self._enabled = True
+        self._enabled_at_s = now_s
+        out = []
+        for i, m in enumerate(self.motors):
+            track = self._track[i]
+            track.erpm = 0
+            track.sent_s = now_s
+            track.hinted = False
+            self.set_armed(i, True)
+            out.append(make_set_rpm(m.node_id, 0))
+        return out
+
+    def disable(self, now_s: float) -> list[Frame]:
+        """SET_CURRENT 0 to every motor, which releases it, and stop the command stream."""
+        self._enabled = False
+        self._enabled_at_s = None
+        for i, track in enumerate(self._track):
+            track.erpm = 0
+            track.sent_s = None
+            self.set_armed(i, False)
+        return [make_set_current(m.node_id, 0.0) for m in self.motors]
+
+    def command(self, wheel_rad_s: Sequence[float], now_s: float) -> list[Frame]:
+        """SET_RPM for every motor; nothing while disabled (the speeds are checked anyway).
+
+        :raises EncodeError: for the wrong number of speeds, or a speed that is not finite or
+            beyond the motor's ``max_rpm``.
+        """
+        if len(wheel_rad_s) != len(self.motors):
+            raise EncodeError(
+                f"Expected {len(self.motors)} wheel speeds for the VESC driver, "
+                f"but got {len(wheel_rad_s)}."
+            )
+        erpms = [self.erpm_for(i, w) for i, w in enumerate(wheel_rad_s)]
+        if not self._enabled:
+            return []
+        out = []
+        for m, track, erpm in zip(self.motors, self._track, erpms, strict=True):
+            track.erpm = erpm
+            track.sent_s = now_s
+            out.append(make_set_rpm(m.node_id, erpm))
+        return out
+
+    def poll(self, now_s: float) -> list[Frame]:
+        """Resend the last command to every motor not commanded for ``command_period_s``."""
+        out: list[Frame] = []
+        if not self._enabled:
+            return out
+        for i, (m, track) in enumerate(zip(self.motors, self._track, strict=True)):
+            if track.sent_s is None or now_s - track.sent_s >= self._opts[i].command_period_s:
+                track.sent_s = now_s
+                out.append(make_set_rpm(m.node_id, track.erpm))
+            self._hint(i, now_s)
+        return out
+
+    def on_frame(self, frame: Frame) -> bool:
+        """Take the frames this driver's VESCs send (STATUS, STATUS_5 used; others claimed).
+
+        :return: whether the frame came from one of them (malformed ones are counted in
+            :attr:`rejected`).
+        """
+        try:
+            msg = decode(frame)
+        except DecodeError as err:
+            if self.index_of(frame.arbitration_id & 0xFF) is None:
+                return False
+            self.reject("malformed", err)
+            return True
+        if msg is None:
+            # STATUS_2/3/4/6 of our VESCs are ours too, but carry nothing the gateway uses.
+            return (
+                frame.is_extended_id
+                and frame.arbitration_id >> 8 in _UNUSED_STATUS
+                and self.index_of(frame.arbitration_id & 0xFF) is not None
+            )
+        index = self.index_of(msg.node_id)
+        if index is None:
+            return False
+        track = self._track[index]
+        if isinstance(msg, VescStatus):
+            track.status = msg
+            track.status_s = frame.timestamp_s
+            track.velocity_rad_s = self.wheel_rad_s_for(index, msg.erpm)
+        elif isinstance(msg, VescStatus5):
+            if track.tacho is not None:
+                track.steps += wrap_int32(msg.tachometer - track.tacho)
+            track.tacho = msg.tachometer
+            track.status5 = msg
+            track.status5_s = frame.timestamp_s
+        else:  # a PONG: proof of life, but liveness is defined by the status streams
+            return True
+        if track.status_s is not None and track.status5_s is not None:
+            # Stamped with the older of the two frames, so a stalled stream shows its age.
+            stamp = min(track.status_s, track.status5_s)
+            position = self.wheel_rad_for(index, track.steps)
+            self.store_feedback(index, WheelFeedback(position, track.velocity_rad_s, stamp))
+        return True
+
+    # ----------------------------------------------------------------- state
+
+    def state(self, index: int, now_s: float) -> DriveState:
+        """OFFLINE unless both status streams are fresh; ENABLING until they arrive after
+        :meth:`enable`; then ENABLED (DISABLED when not enabled).  Never FAULT (see module).
+        """
+        track = self._track[index]
+        if track.status_s is None or track.status5_s is None:
+            return DriveState.OFFLINE
+        oldest = min(track.status_s, track.status5_s)
+        if now_s - oldest > self._opts[index].liveness_s:
+            return DriveState.OFFLINE
+        if not self._enabled:
+            return DriveState.DISABLED
+        if self._enabled_at_s is not None and oldest < self._enabled_at_s:
+            return DriveState.ENABLING
+        return DriveState.ENABLED
+
+    def last_status(self, index: int) -> VescStatus | None:
+        """The latest STATUS of motor ``index`` (current and duty), or ``None``."""
+        return self._track[index].status
+
+    def last_status5(self, index: int) -> VescStatus5 | None:
+        """The latest STATUS_5 of motor ``index`` (tachometer and input voltage), or ``None``."""
+        return self._track[index].status5
+
+    def _hint(self, index: int, now_s: float) -> None:
+        track = self._track[index]
+        if track.hinted or self._enabled_at_s is None:
+            return
+        if now_s - self._enabled_at_s < self.STATUS_HINT_AFTER_S:
+            return
+        missing = [
+            name
+            for name, seen in (("STATUS", track.status_s), ("STATUS_5", track.status5_s))
+            if seen is None
+        ]
+        if missing:
+            track.hinted = True
+            log.warning(
+                "VESC %d (%r) has sent no %s frames %.1f s after enable: check that it is on "
+                "the bus in CAN_MODE_VESC and that VESC Tool, App Settings > General, sends "
+                "STATUS and STATUS_5 (can_status_msgs_r1 bits 0 and 4; the default is none)",
+                self.motors[index].node_id,
+                self.motors[index].wheel,
+                " and ".join(missing),
+                now_s - self._enabled_at_s,
+            )

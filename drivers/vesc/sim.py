@@ -1,0 +1,241 @@
+"""A simulated VESC: the controller side of :mod:`drivers.vesc.codec`.
+
+Modelled on the firmware (https://github.com/vedderb/bldc, ``comm/comm_can.c``,
+``motor/mc_interface.c``, ``timeout.c``):
+
+* STATUS and STATUS_5 every ``1 / status_rate_hz`` (VESC Tool's status rate 1, 50 Hz by
+  default), as if ``can_status_msgs_r1`` had bits 0 and 4 set.
+* The tachometer counts 60-degree steps of the electrical angle (6 per electrical revolution),
+  is an int32 that wraps, and starts at ``initial_tacho`` so tests can begin near the wrap.
+* SET_RPM runs the speed controller.  SET_CURRENT and SET_CURRENT_BRAKE below
+  ``min_current_a`` (``cc_min_current``, 0.05 A) release the motor; above it SET_CURRENT drives
+  toward the no-load speed (``max_rpm``) and SET_CURRENT_BRAKE brakes to a stop, both with an
+  acceleration of ``accel_per_a_rad_s2`` per ampere (the model has no torque physics).
+* No command for ``timeout_s`` releases the motor (``timeout_brake_current`` 0, freewheel).
+* PING is answered with a PONG carrying the ID the PING was addressed to (the firmware's
+  choice, so a broadcast PING gets 255), HW_TYPE_VESC.
+* An injected :attr:`~gateway.sim.SimFault.FAULT` releases the motor; commands are ignored for
+  ``fault_stop_s`` (``m_fault_stop_time_ms``, 500 ms by default) and then the fault clears
+  itself.  The motor stays released until the next command.  Status frames and PONGs go on
+  meanwhile and carry no fault code, as on the device.
+"""
+
+from __future__ import annotations
+
+import enum
+import logging
+import math
+from typing import TYPE_CHECKING
+
+from drivers.vesc.codec import (
+    BROADCAST_ID,
+    RPM_PER_RAD_S,
+    TACHO_STEPS_PER_EREV,
+    CanPacketId,
+    VescCommand,
+    VescPing,
+    decode_command,
+    make_pong,
+    make_status,
+    make_status5,
+    wrap_int32,
+)
+from gateway.errors import ConfigError, DecodeError
+from gateway.sim import DeviceSimulator, SimFault
+
+if TYPE_CHECKING:
+    from gateway.sim import MotorModel
+    from gateway.types import Frame, MotorConfig
+
+log = logging.getLogger(__name__)
+
+_MAX_CURRENT_A = 3276.7  # int16 / 10
+_MAX_ERPM = 2**31 - 1
+
+
+class SimMode(enum.IntEnum):
+    """What the simulated controller is doing."""
+
+    RELEASED = 0
+    SPEED = 1
+    CURRENT = 2
+    BRAKE = 3
+
+
+class VescSimulator(DeviceSimulator):
+    """One simulated VESC.
+
+    :param motor: the motor block; ``options["pole_pairs"]`` is required, ``timeout_s`` is read
+        when ``timeout_s`` is not given.
+    :param model: the motor physics.
+    :param status_rate_hz: STATUS and STATUS_5 rate (Hz).
+    :param initial_tacho: tachometer value at the start (int32).
+    :param timeout_s: the device's command timeout (s).
+    :param fault_stop_s: how long an injected FAULT lasts before it clears itself (s).
+    :param v_in_v: input voltage reported in STATUS_5 (V).
+    :param min_current_a: current commands below this release the motor (A).
+    :param accel_per_a_rad_s2: motor acceleration per ampere in current and brake mode.
+    :raises ConfigError: if ``pole_pairs`` is missing or not a positive int.
+    """
+
+    def __init__(
+        self,
+        motor: MotorConfig,
+        model: MotorModel | None = None,
+        *,
+        status_rate_hz: float = 50.0,
+        initial_tacho: int = 0,
+        timeout_s: float | None = None,
+        fault_stop_s: float = 0.5,
+        v_in_v: float = 24.0,
+        min_current_a: float = 0.05,
+        accel_per_a_rad_s2: float = 50.0,
+    ) -> None:
+        super().__init__(motor, model)
+        pole_pairs = motor.options.get("pole_pairs")
+        if not isinstance(pole_pairs, int) or isinstance(pole_pairs, bool) or pole_pairs < 1:
+            raise ConfigError(
+                f"motor {motor.wheel!r}.pole_pairs: expected int >= 1, got {pole_pairs!r}"
+            )
+        if timeout_s is None:
+            timeout = motor.options.get("timeout_s", 0.5)
+            timeout_s = float(timeout) if isinstance(timeout, (int, float)) else 0.5
+        self.pole_pairs = pole_pairs
+        self.status_period_s = 1.0 / status_rate_hz
+        self.timeout_s = timeout_s
+        self.fault_stop_s = fault_stop_s
+        self.v_in_v = v_in_v
+        self.min_current_a = min_current_a
+        self.accel_per_a_rad_s2 = accel_per_a_rad_s2
+        #: What the controller is doing.
+        self.mode = SimMode.RELEASED
+        #: Frames addressed to this VESC that it could not parse.
+        self.rejected = 0
+        self._initial_tacho = wrap_int32(initial_tacho)
+        self._steps0 = self._steps_now()
+        self._speed_accel = self.model.max_accel_rad_s2
+        self._current_a = 0.0
+        self._last_cmd_s: float | None = None
+        self._fault_since_s: float | None = None
+        self._next_status_s: float | None = None
+        self._now_s: float | None = None
+        self._prev: tuple[float, float] | None = None
+
+    @property
+    def node_id(self) -> int:
+        """This controller's ID."""
+        return self.motor.node_id
+
+    @property
+    def tachometer(self) -> int:
+        """The tachometer as STATUS_5 would report it now."""
+        return wrap_int32(self._initial_tacho + self._steps_now() - self._steps0)
+
+    def _steps_now(self) -> int:
+        electrical_rad = self.model.position_rad * self.pole_pairs
+        return math.floor(electrical_rad * TACHO_STEPS_PER_EREV / (2.0 * math.pi))
+
+    # ----------------------------------------------------------------- hooks
+
+    def _on_frame(self, frame: Frame, now_s: float) -> list[Frame]:
+        self._now_s = now_s
+        try:
+            msg = decode_command(frame)
+        except DecodeError as err:
+            if frame.arbitration_id & 0xFF in (self.node_id, BROADCAST_ID):
+                self.rejected += 1
+                log.debug("simulated VESC %d ignores %s: %s", self.node_id, frame, err)
+            return []
+        if msg is None or msg.node_id not in (self.node_id, BROADCAST_ID):
+            return []
+        if isinstance(msg, VescPing):
+            return [make_pong(msg.sender_id, msg.node_id)]
+        # decode_msg() resets the timeout even while a fault makes the motor ignore commands.
+        self._last_cmd_s = now_s
+        if not self.faults & SimFault.FAULT:
+            self._apply(msg)
+        return []
+
+    def _apply(self, cmd: VescCommand) -> None:
+        model = self.model
+        if cmd.packet == CanPacketId.SET_RPM:
+            self.mode = SimMode.SPEED
+            model.max_accel_rad_s2 = self._speed_accel
+            model.target_rad_s = cmd.value / self.pole_pairs / RPM_PER_RAD_S
+            model.armed = True
+            return
+        if abs(cmd.value) < self.min_current_a:
+            self._release()
+            return
+        model.max_accel_rad_s2 = min(self._speed_accel, abs(cmd.value) * self.accel_per_a_rad_s2)
+        model.armed = True
+        if cmd.packet == CanPacketId.SET_CURRENT:
+            self.mode = SimMode.CURRENT
+            self._current_a = cmd.value
+            model.target_rad_s = math.copysign(self.motor.max_rpm / RPM_PER_RAD_S, cmd.value)
+        else:
+            self.mode = SimMode.BRAKE
+            self._current_a = abs(cmd.value)
+            model.target_rad_s = 0.0
+
+    def _release(self) -> None:
+        self.mode = SimMode.RELEASED
+        self._current_a = 0.0
+        self.model.armed = False
+        self.model.target_rad_s = 0.0
+        self.model.max_accel_rad_s2 = self._speed_accel
+
+    def _on_fault(self) -> None:
+        self._release()
+        self._fault_since_s = self._now_s
+
+    def _on_tick(self, now_s: float) -> list[Frame]:
+        self._now_s = now_s
+        if not self.faults & SimFault.FAULT:
+            self._fault_since_s = None
+        elif self._fault_since_s is None:
+            self._fault_since_s = now_s
+        elif now_s - self._fault_since_s >= self.fault_stop_s:
+            log.debug("simulated VESC %d: fault cleared itself", self.node_id)
+            self.clear(SimFault.FAULT)
+            self._fault_since_s = None
+        if (
+            self.mode != SimMode.RELEASED
+            and self._last_cmd_s is not None
+            and now_s - self._last_cmd_s > self.timeout_s
+        ):
+            log.debug("simulated VESC %d: command timeout, motor released", self.node_id)
+            self._release()
+        current_a = self._estimate_current(now_s)
+        due = self._next_status_s
+        if due is not None and now_s < due - 1e-9:
+            return []
+        if due is None or now_s - due >= self.status_period_s:
+            due = now_s  # first frame, or fell behind: restart the schedule
+        self._next_status_s = due + self.status_period_s
+        return self._status_frames(current_a)
+
+    # ----------------------------------------------------------------- internals
+
+    def _estimate_current(self, now_s: float) -> float:
+        v = self.model.velocity_rad_s
+        prev, self._prev = self._prev, (now_s, v)
+        if self.mode == SimMode.RELEASED:
+            return 0.0
+        if self.mode != SimMode.SPEED:
+            return self._current_a
+        if prev is None or now_s <= prev[0]:
+            return 0.0
+        accel = (v - prev[1]) / (now_s - prev[0])
+        return accel / self.accel_per_a_rad_s2
+
+    def _status_frames(self, current_a: float) -> list[Frame]:
+        erpm = round(self.model.velocity_rad_s * RPM_PER_RAD_S * self.pole_pairs)
+        erpm = min(max(erpm, -_MAX_ERPM), _MAX_ERPM)
+        max_erpm = self.motor.max_rpm * self.pole_pairs
+        duty = 0.0 if self.mode == SimMode.RELEASED else min(max(erpm / max_erpm, -1.0), 1.0)
+        current_a = min(max(current_a, -_MAX_CURRENT_A), _MAX_CURRENT_A)
+        return [
+            make_status(self.node_id, erpm, current_a, duty),
+            make_status5(self.node_id, self.tachometer, self.v_in_v),
+        ]

@@ -1,0 +1,95 @@
+"""The only module that touches ``can.Bus`` and ``can.Message``.
+
+It converts between python-can messages and wheelgate's frozen :class:`~gateway.types.Frame`,
+and wraps python-can errors into :class:`~gateway.errors.BusError`.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from typing import TYPE_CHECKING, Any
+
+import can
+
+from gateway.errors import BusError
+from gateway.types import Frame
+
+if TYPE_CHECKING:
+    from collections.abc import Iterable
+
+log = logging.getLogger(__name__)
+
+
+def to_message(frame: Frame) -> can.Message:
+    """A python-can message for ``frame``."""
+    return can.Message(
+        arbitration_id=frame.arbitration_id,
+        data=frame.data,
+        is_extended_id=frame.is_extended_id,
+        is_remote_frame=frame.is_remote_frame,
+        dlc=frame.dlc,
+    )
+
+
+def to_frame(msg: can.Message, timestamp_s: float | None = None) -> Frame:
+    """A frame for a python-can message.
+
+    :param timestamp_s: receive time to record; the message's own stamp when omitted.
+    """
+    return Frame(
+        arbitration_id=msg.arbitration_id,
+        data=bytes(msg.data) if not msg.is_remote_frame else b"",
+        is_extended_id=msg.is_extended_id,
+        is_remote_frame=msg.is_remote_frame,
+        dlc=msg.dlc,
+        timestamp_s=msg.timestamp if timestamp_s is None else timestamp_s,
+    )
+
+
+def open_bus(interface: str, channel: str, **kwargs: Any) -> can.BusABC:
+    """Open a python-can bus.
+
+    :raises BusError: if python-can cannot open it.
+    """
+    try:
+        return can.Bus(interface=interface, channel=channel, **kwargs)
+    except (can.CanError, OSError, ValueError, ImportError) as err:
+        raise BusError(f"Cannot open CAN bus {interface}:{channel}: {err}") from err
+
+
+def send_frames(bus: can.BusABC, frames: Iterable[Frame]) -> int:
+    """Send frames in order.
+
+    :return: how many were sent.
+    :raises BusError: on the first frame that python-can refuses.
+    """
+    sent = 0
+    for frame in frames:
+        try:
+            bus.send(to_message(frame))
+        except (can.CanError, OSError) as err:
+            raise BusError(f"Sending {frame.to_cansend()} failed: {err}") from err
+        sent += 1
+    return sent
+
+
+def drain(bus: can.BusABC, limit: int = 10_000) -> list[Frame]:
+    """Every frame waiting in ``bus``'s receive queue, stamped with ``time.monotonic()``.
+
+    Error frames are skipped (they carry no data for the drivers).
+
+    :raises BusError: if receiving fails.
+    """
+    out: list[Frame] = []
+    try:
+        for _ in range(limit):
+            msg = bus.recv(0.0)
+            if msg is None:
+                break
+            if msg.is_error_frame:
+                continue
+            out.append(to_frame(msg, time.monotonic()))
+    except (can.CanError, OSError) as err:
+        raise BusError(f"Receiving failed: {err}") from err
+    return out

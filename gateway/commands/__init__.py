@@ -1,0 +1,1 @@
+"""One module per ``wheelgate`` subcommand, each exporting ``command``."""

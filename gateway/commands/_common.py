@@ -1,0 +1,67 @@
+"""Helpers shared by subcommands: loading the config with CLI overrides, parsing twists."""
+
+from __future__ import annotations
+
+import json
+import math
+from typing import TYPE_CHECKING, Any
+
+import click
+
+from gateway.config import GatewayConfig, load_config
+
+if TYPE_CHECKING:
+    from gateway.errors import InfeasibleTwistError
+    from gateway.types import Twist
+
+
+def load(ctx: click.Context, path: str | None) -> GatewayConfig:
+    """The configuration at ``path`` with the root group's bus overrides."""
+    obj = ctx.find_root().obj or {}
+    return load_config(path, {"interface": obj.get("interface"), "channel": obj.get("channel")})
+
+
+def twist_options(func: Any) -> Any:
+    """``--vx --vy --wz`` options."""
+    for name, unit in (("wz", "rad/s, CCW positive"), ("vy", "m/s, left"), ("vx", "m/s, forward")):
+        func = click.option(f"--{name}", type=float, default=0.0, show_default=True,
+                            help=f"Body twist component ({unit}).")(func)
+    return func
+
+
+def check_finite(**values: float) -> None:
+    """Reject NaN and infinity in numeric options (click accepts them as floats).
+
+    :raises click.BadParameter: naming the option.
+    """
+    for name, value in values.items():
+        if not math.isfinite(value):
+            raise click.BadParameter(f"expected a finite number, got {value!r}",
+                                     param_hint=f"--{name}")
+
+
+def twist_json(t: Twist) -> dict[str, float]:
+    """A twist as a JSON object."""
+    return {"vx_m_s": t.vx_m_s, "vy_m_s": t.vy_m_s, "wz_rad_s": t.wz_rad_s}
+
+
+def infeasible_json(err: InfeasibleTwistError) -> str:
+    """The JSON error object printed on stdout for an infeasible twist with ``--json``."""
+    return json.dumps(
+        {
+            "error": {
+                "type": "infeasible_twist",
+                "message": str(err),
+                "wheel": err.wheel,
+                "constraint": err.constraint,
+                "residual_m_s": err.residual_m_s,
+                "twist": twist_json(err.twist),
+                "nearest": twist_json(err.nearest),
+            }
+        }
+    )
+
+
+def rad_s_to_rpm(value: float) -> float:
+    """rad/s to revolutions per minute."""
+    return value * 60.0 / (2.0 * math.pi)

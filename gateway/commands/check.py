@@ -1,0 +1,62 @@
+"""``wheelgate check``: validate a configuration and summarise the robot."""
+
+from __future__ import annotations
+
+import math
+
+import click
+
+from gateway.cli import config_option
+from gateway.commands._common import load, rad_s_to_rpm
+from gateway.kinematics import PRESETS
+
+
+def _num(value: float) -> str:
+    return "-" if math.isinf(value) else f"{value:.4g}"
+
+
+@click.command()
+@config_option
+@click.pass_context
+def command(ctx: click.Context, config_path: str | None) -> None:
+    """Validate a configuration and print a summary of the robot."""
+    cfg = load(ctx, config_path)
+    model = cfg.model
+    mob = model.mobility
+    click.echo(f"config:   {cfg.source}")
+    click.echo(f"robot:    {cfg.name}")
+    geometry = " ".join(f"{k}={v}" for k, v in cfg.geometry.items())
+    click.echo(f"drive:    {cfg.drive}" + (f" ({geometry})" if geometry else ""))
+    if cfg.drive in PRESETS:
+        click.echo(f"follows:  {PRESETS[cfg.drive].summary}")
+    click.echo(
+        f"freedom:  mobility {mob.mobility}, steerability {mob.steerability}, "
+        f"maneuverability {mob.maneuverability}"
+    )
+    click.echo(f"slip tolerance: {model.slip_tolerance_m_s:g} m/s")
+    click.echo("wheels:")
+    header = (
+        f"  {'name':<12} {'type':<9} {'alpha':>7} {'l':>7} {'beta':>7} {'radius':>7} "
+        f"{'gamma':>7} {'d':>6}  {'steer':<15} motor"
+    )
+    click.echo(header)
+    for w, m in zip(model.wheels, cfg.motors, strict=True):
+        steer = f"[{w.steer_min:.3g}, {w.steer_max:.3g}]" if w.steered else "-"
+        motor = (
+            "passive"
+            if m is None
+            else f"{m.driver} node {m.node_id}, gear {m.gear_ratio:g}, "
+            f"max {m.max_rpm:g} rpm ({rad_s_to_rpm(m.max_wheel_rad_s):.4g} rpm at the wheel)"
+            + (", inverted" if m.invert else "")
+        )
+        click.echo(
+            f"  {w.name:<12} {w.type.value:<9} {w.alpha:>7.4f} {w.l:>7.4f} {w.beta:>7.4f} "
+            f"{w.radius:>7.4f} {w.gamma:>7.4f} {w.d:>6.3f}  {steer:<15} {motor}"
+        )
+    lim = cfg.limits
+    click.echo(
+        f"limits:   wheel accel {_num(lim.max_wheel_accel_rad_s2)} rad/s^2, "
+        f"linear {_num(lim.max_linear_m_s)} m/s, angular {_num(lim.max_angular_rad_s)} rad/s"
+    )
+    click.echo(f"bus:      {cfg.bus.interface}:{cfg.bus.channel} at {cfg.bus.bitrate} bit/s")
+    click.echo("ok")

@@ -1,0 +1,363 @@
+"""YAML configuration, validated once into frozen dataclasses.
+
+A file names a drive and its geometry, the motors and the limits::
+
+    drive: differential          # a preset, or "generic" for a wheel list as in seed 000
+    geometry: {wheel_radius: 0.033, track: 0.160}
+    motor_defaults: {driver: odrive, max_rpm: 61}      # merged into every motor block
+    motors:
+      left:  {node_id: 1}
+      right: {node_id: 2, invert: true}
+    limits: {max_wheel_accel_rad_s2: 30.0}
+    kinematics: {slip_tolerance_m_s: 0.001}
+    bus: {interface: virtual, channel: wheelgate, bitrate: 500000}
+
+With ``drive: generic`` the ``wheels:`` list gives each wheel's ``name``, ``type``, ``alpha``,
+``l``, ``beta``, ``radius`` (and ``gamma``, ``d``, steering limits, ``steer_group``) and, for a
+driven wheel, its ``motor:`` block.  Angles are in radians, lengths in metres.
+
+Unknown keys are errors, and every error names the file, the key path, what was expected and
+what came.  Bus settings follow the precedence CLI flag > ``GATEWAY_INTERFACE`` /
+``GATEWAY_CHANNEL`` / ``GATEWAY_BITRATE`` environment variables > file > defaults.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+from types import MappingProxyType
+from typing import TYPE_CHECKING
+
+import yaml
+
+from gateway.errors import ConfigError, DriverNotFoundError, KinematicsError
+from gateway.kinematics import PRESETS, Limits, RobotModel, Wheel, WheelType
+from gateway.kinematics.model import validate_wheel
+from gateway.options import OptionSpec, validate_block
+from gateway.registry import get_driver_class
+from gateway.types import MotorConfig
+
+if TYPE_CHECKING:
+    from collections.abc import Mapping
+
+#: Name shown for the configuration embedded in the package.
+DEFAULT_NAME = "<embedded default>"
+
+_TOP = frozenset(
+    {"name", "drive", "geometry", "wheels", "motors", "motor_defaults", "limits",
+     "kinematics", "bus"}
+)
+_MOTOR_COMMON = {
+    "driver": OptionSpec(str, help="driver name, e.g. odrive"),
+    "node_id": OptionSpec(int, help="the controller's node ID"),
+    "gear_ratio": OptionSpec(float, 1.0, minimum=1e-9, help="motor turns per wheel turn"),
+    "invert": OptionSpec(bool, False),
+    "max_rpm": OptionSpec(float, minimum=1e-9, help="motor speed limit in RPM at the motor"),
+}
+_WHEEL_KEYS = {
+    "name": OptionSpec(str),
+    "type": OptionSpec(str, choices=tuple(t.value for t in WheelType)),
+    "alpha": OptionSpec(float, help="polar angle of the mounting point, rad"),
+    "l": OptionSpec(float, minimum=0.0, help="distance from the body origin, m"),
+    "beta": OptionSpec(float, help="plane angle, rad"),
+    "radius": OptionSpec(float, minimum=1e-9, help="wheel radius, m"),
+    "gamma": OptionSpec(float, 0.0),
+    "d": OptionSpec(float, 0.0, minimum=0.0),
+    "steer_min": OptionSpec(float, -math.pi),
+    "steer_max": OptionSpec(float, math.pi),
+    "max_steer_rate": OptionSpec(float, math.inf, minimum=1e-9),
+    "steer_group": OptionSpec(str, ""),
+    "motor": OptionSpec(dict, {}),
+}
+_LIMIT_KEYS = {
+    "max_wheel_accel_rad_s2": OptionSpec(float, math.inf, minimum=1e-9),
+    "max_linear_m_s": OptionSpec(float, math.inf, minimum=0.0),
+    "max_angular_rad_s": OptionSpec(float, math.inf, minimum=0.0),
+}
+_KIN_KEYS = {"slip_tolerance_m_s": OptionSpec(float, 1e-3, minimum=0.0)}
+_BUS_KEYS = {
+    "interface": OptionSpec(str, "virtual"),
+    "channel": OptionSpec(str, "wheelgate"),
+    "bitrate": OptionSpec(int, 500_000, minimum=10_000, maximum=1_000_000),
+}
+
+
+@dataclass(frozen=True, slots=True)
+class BusConfig:
+    """Where the motor controllers are.
+
+    :param interface: python-can interface name (``socketcan``, ``virtual``, ...).
+    :param channel: channel name (``can0``, ...).
+    :param bitrate: nominal bitrate in bit/s (for bus-load figures; set the link outside).
+    """
+
+    interface: str = "virtual"
+    channel: str = "wheelgate"
+    bitrate: int = 500_000
+
+
+@dataclass(frozen=True, slots=True)
+class GatewayConfig:
+    """A validated configuration.
+
+    :param source: the file it came from (or :data:`DEFAULT_NAME`).
+    :param name: robot name.
+    :param drive: preset name or ``"generic"``.
+    :param geometry: the preset's geometry keys with defaults filled in (empty for generic).
+    :param model: the wheel-constraint model.
+    :param motors: per wheel (model order), its motor, ``None`` for passive wheels.
+    :param limits: speed and acceleration limits.
+    :param bus: bus settings.
+    """
+
+    source: str
+    name: str
+    drive: str
+    geometry: Mapping[str, object]
+    model: RobotModel
+    motors: tuple[MotorConfig | None, ...]
+    limits: Limits
+    bus: BusConfig
+
+    @property
+    def wheels(self) -> tuple[Wheel, ...]:
+        """The wheels, in model order."""
+        return self.model.wheels
+
+
+def load_config(
+    path: str | Path | None = None, overrides: Mapping[str, object] | None = None
+) -> GatewayConfig:
+    """Read and validate a configuration file.
+
+    :param path: the YAML file; the embedded default when ``None``.
+    :param overrides: bus keys from the command line (``interface``, ``channel``, ``bitrate``),
+        ``None`` values ignored.
+    :raises ConfigError: naming the file and key path of the first problem.
+    """
+    if path is None:
+        source = DEFAULT_NAME
+        text = resources.files("gateway").joinpath("data/default.yaml").read_text("utf-8")
+    else:
+        source = str(path)
+        try:
+            text = Path(path).read_text("utf-8")
+        except OSError as err:
+            raise ConfigError(f"{source}: cannot read the file: {err.strerror}") from err
+    try:
+        raw = yaml.safe_load(text)
+    except yaml.YAMLError as err:
+        raise ConfigError(f"{source}: not valid YAML: {err}") from err
+    return parse_config(raw, source, overrides)
+
+
+def parse_config(
+    raw: object, source: str, overrides: Mapping[str, object] | None = None
+) -> GatewayConfig:
+    """Validate an already-loaded YAML document (see :func:`load_config`)."""
+    if not isinstance(raw, dict):
+        raise ConfigError(f"{source}: expected a mapping at the top level, got {raw!r}")
+    for key in raw:
+        if key not in _TOP:
+            raise ConfigError(
+                f"{source}: {key}: unknown key (known keys: {', '.join(sorted(_TOP))})"
+            )
+    drive = raw.get("drive")
+    choices = [*sorted(PRESETS), "generic"]
+    if drive not in choices:
+        raise ConfigError(f"{source}: drive: expected one of {', '.join(choices)}, got {drive!r}")
+    config_dir = "" if source == DEFAULT_NAME else str(Path(source).resolve().parent)
+    defaults = raw.get("motor_defaults", {})
+    if not isinstance(defaults, dict):
+        raise ConfigError(f"{source}: motor_defaults: expected a mapping, got {defaults!r}")
+    if drive == "generic":
+        for key in ("geometry", "motors"):
+            if key in raw:
+                raise ConfigError(
+                    f"{source}: {key}: not used with drive: generic (motors go in wheels[i].motor)"
+                )
+        geometry: dict[str, object] = {}
+        wheels, motor_raw = _generic_wheels(raw.get("wheels"), source)
+    else:
+        if "wheels" in raw:
+            raise ConfigError(
+                f"{source}: wheels: only used with drive: generic; a {drive} drive takes "
+                f"geometry: and motors:"
+            )
+        geometry, wheels = _preset_wheels(str(drive), raw.get("geometry"), source)
+        motor_raw = _preset_motors(raw.get("motors"), wheels, source)
+    motors = tuple(
+        None if block is None
+        else _motor(
+            block, defaults, w.name, f"{source}: {_motor_path(drive, i, w.name)}", config_dir
+        )
+        for i, (w, block) in enumerate(zip(wheels, motor_raw, strict=True))
+    )
+    _check_nodes(motors, source)
+    kin = validate_block(raw.get("kinematics", {}), _KIN_KEYS, f"{source}: kinematics")
+    try:
+        model = RobotModel(wheels, slip_tolerance_m_s=float(kin["slip_tolerance_m_s"]))  # type: ignore[arg-type]
+    except KinematicsError as err:
+        raise ConfigError(f"{source}: {err}") from err
+    lim = validate_block(raw.get("limits", {}), _LIMIT_KEYS, f"{source}: limits")
+    limits = Limits(
+        max_wheel_rad_s=tuple(math.inf if m is None else m.max_wheel_rad_s for m in motors),
+        max_wheel_accel_rad_s2=float(lim["max_wheel_accel_rad_s2"]),  # type: ignore[arg-type]
+        max_linear_m_s=float(lim["max_linear_m_s"]),  # type: ignore[arg-type]
+        max_angular_rad_s=float(lim["max_angular_rad_s"]),  # type: ignore[arg-type]
+    )
+    bus = _bus(raw.get("bus", {}), source, overrides or {})
+    name = raw.get("name", Path(source).stem if source != DEFAULT_NAME else "default")
+    if not isinstance(name, str):
+        raise ConfigError(f"{source}: name: expected str, got {name!r}")
+    return GatewayConfig(
+        source, name, str(drive), MappingProxyType(geometry), model, motors, limits, bus
+    )
+
+
+def _motor_path(drive: object, index: int, name: str) -> str:
+    return f"wheels[{index}].motor" if drive == "generic" else f"motors.{name}"
+
+
+def _preset_wheels(drive: str, raw: object, source: str) -> tuple[dict[str, object], list[Wheel]]:
+    preset = PRESETS[drive]
+    specs = {
+        key: OptionSpec(
+            str if key in preset.choices else type(default) if default is not None else float,
+            default,
+            choices=tuple(preset.choices.get(key, ())),
+            minimum=None if key in preset.choices or key == "first_wheel_angle" else 0.0,
+        )
+        for key, default in preset.params.items()
+    }
+    for key in ("wheel_count",):
+        if key in specs:
+            specs[key] = OptionSpec(int, specs[key].default, minimum=3 if drive == "omni" else 2)
+    params = validate_block(
+        raw if raw is not None else {}, specs, f"{source}: geometry", f"{drive} geometry keys"
+    )
+    for key, value in params.items():
+        if key in ("wheel_radius", "track", "wheelbase", "wheel_distance") and value == 0.0:
+            raise ConfigError(f"{source}: geometry.{key}: expected a length > 0 m, got 0")
+    return params, preset.build(params)  # type: ignore[arg-type]
+
+
+def _preset_motors(
+    raw: object, wheels: list[Wheel], source: str
+) -> list[dict[str, object] | None]:
+    if not isinstance(raw, dict):
+        raise ConfigError(f"{source}: motors: expected a mapping of wheel name to motor block, "
+                          f"got {raw!r}")
+    names = [w.name for w in wheels]
+    for key in raw:
+        if key not in names:
+            raise ConfigError(
+                f"{source}: motors.{key}: unknown wheel (wheels of this drive: {', '.join(names)})"
+            )
+    out: list[dict[str, object] | None] = []
+    for w in wheels:
+        block = raw.get(w.name)
+        if w.driven and block is None:
+            raise ConfigError(f"{source}: motors.{w.name}: driven wheel needs a motor block")
+        if not w.driven and block is not None:
+            raise ConfigError(f"{source}: motors.{w.name}: this wheel is passive in this drive")
+        if block is not None and not isinstance(block, dict):
+            raise ConfigError(f"{source}: motors.{w.name}: expected a mapping, got {block!r}")
+        out.append(block)
+    return out
+
+
+def _generic_wheels(
+    raw: object, source: str
+) -> tuple[list[Wheel], list[dict[str, object] | None]]:
+    if not isinstance(raw, list) or not raw:
+        raise ConfigError(f"{source}: wheels: expected a non-empty list of wheels, got {raw!r}")
+    wheels: list[Wheel] = []
+    motors: list[dict[str, object] | None] = []
+    for i, item in enumerate(raw):
+        v = validate_block(item, _WHEEL_KEYS, f"{source}: wheels[{i}]", "wheel keys")
+        motor = v.pop("motor")
+        group = v.pop("steer_group")
+        try:
+            wheel = Wheel(
+                name=str(v["name"]),
+                type=WheelType(v["type"]),
+                steer_group=str(group) or None,
+                driven=bool(motor),
+                **{k: float(x) for k, x in v.items() if k not in ("name", "type")},  # type: ignore[arg-type]
+            )
+            validate_wheel(wheel)
+        except (KinematicsError, ValueError) as err:
+            raise ConfigError(f"{source}: wheels[{i}]: {err}") from err
+        wheels.append(wheel)
+        motors.append(motor or None)  # type: ignore[arg-type]
+    return wheels, motors
+
+
+def _motor(
+    raw: Mapping[str, object],
+    defaults: Mapping[str, object],
+    wheel: str,
+    where: str,
+    config_dir: str,
+) -> MotorConfig:
+    merged = {**defaults, **raw}
+    common = {k: merged[k] for k in _MOTOR_COMMON if k in merged}
+    v = validate_block(common, _MOTOR_COMMON, where, "motor keys")
+    driver = str(v["driver"])
+    try:
+        cls = get_driver_class(driver)
+    except DriverNotFoundError as err:
+        raise ConfigError(f"{where}.driver: {err}") from err
+    node_id = int(v["node_id"])  # type: ignore[call-overload]
+    cls.validate_node_id(node_id, f"{where}.node_id")
+    protocol = {k: x for k, x in merged.items() if k not in _MOTOR_COMMON}
+    if "config_dir" in cls.OPTIONS and "config_dir" not in protocol:
+        # Relative paths in protocol keys (a DBC file) are relative to the config file.
+        protocol["config_dir"] = config_dir
+    options = cls.validate_options(protocol, where)
+    return MotorConfig(
+        wheel=wheel,
+        driver=driver,
+        node_id=node_id,
+        gear_ratio=float(v["gear_ratio"]),  # type: ignore[arg-type]
+        invert=bool(v["invert"]),
+        max_rpm=float(v["max_rpm"]),  # type: ignore[arg-type]
+        options=MappingProxyType(options),
+    )
+
+
+def _check_nodes(motors: tuple[MotorConfig | None, ...], source: str) -> None:
+    seen: dict[tuple[str, int], str] = {}
+    for m in motors:
+        if m is None:
+            continue
+        key = (m.driver, m.node_id)
+        if key in seen:
+            raise ConfigError(
+                f"{source}: motors of wheels {seen[key]!r} and {m.wheel!r} share "
+                f"{m.driver} node_id {m.node_id}; expected unique node IDs"
+            )
+        seen[key] = m.wheel
+
+
+def _bus(raw: object, source: str, overrides: Mapping[str, object]) -> BusConfig:
+    v = validate_block(raw, _BUS_KEYS, f"{source}: bus", "bus keys")
+    for key, spec in _BUS_KEYS.items():
+        env = os.environ.get(f"GATEWAY_{key.upper()}")
+        if env is not None:
+            value: object = env
+            if key == "bitrate":
+                try:
+                    value = int(env)
+                except ValueError:
+                    raise ConfigError(
+                        f"GATEWAY_BITRATE: expected an integer bit rate, got {env!r}"
+                    ) from None
+            v[key] = spec.validate(value, f"GATEWAY_{key.upper()}")
+        if overrides.get(key) is not None:
+            v[key] = spec.validate(overrides[key], f"--{key}")
+    return BusConfig(str(v["interface"]), str(v["channel"]), int(v["bitrate"]))  # type: ignore[call-overload]

@@ -1,0 +1,198 @@
+"""The :class:`MotorDriver` ABC: the stateful half of every protocol driver.
+
+One driver instance serves every motor of its protocol on one bus (DJI packs four ESCs into
+one frame; CANopen has one SYNC per bus).  The loop calls it with plain values and gets frames
+back; it never touches the bus itself, so it stays testable without threads or a clock (the
+caller passes ``now_s``, monotonic seconds).
+
+Per cycle the loop calls :meth:`MotorDriver.command` with every wheel's speed and sends all the
+frames of all drivers as one burst.  Received frames go to :meth:`MotorDriver.on_frame`.
+:meth:`MotorDriver.poll` returns housekeeping frames (RTR requests, enable-sequence steps, SYNC)
+and evaluates liveness.
+"""
+
+from __future__ import annotations
+
+import abc
+import collections
+from typing import TYPE_CHECKING, ClassVar
+
+from gateway.errors import ConfigError, DecodeError
+from gateway.options import OptionSpec, validate_block
+from gateway.types import DriveFault, DriveState, MotorConfig, MotorStatus, WheelFeedback
+
+__all__ = ["MotorDriver", "OptionSpec"]
+
+if TYPE_CHECKING:
+    from collections.abc import Mapping, Sequence
+
+    from gateway.sim import DeviceSimulator
+    from gateway.types import Frame
+
+
+class MotorDriver(abc.ABC):
+    """Stateful protocol driver for a group of motors on one bus.
+
+    Subclasses fill in the hooks; the base keeps feedback, liveness, fault flags and the
+    counters of rejected frames so every protocol reports them the same way.
+
+    :param motors: the motors this driver serves, in the order the loop passes speeds.
+    """
+
+    #: Protocol keys accepted in a motor block, with their specs.
+    OPTIONS: ClassVar[Mapping[str, OptionSpec]] = {}
+    #: Valid node IDs for this protocol (inclusive).
+    NODE_ID_RANGE: ClassVar[tuple[int, int]] = (0, 0x3F)
+    #: Feedback older than this marks a motor OFFLINE (s); overridable by the ``liveness_s`` key.
+    DEFAULT_LIVENESS_S: ClassVar[float] = 0.25
+
+    def __init__(self, motors: Sequence[MotorConfig]) -> None:
+        self.motors: tuple[MotorConfig, ...] = tuple(motors)
+        self._index = {m.node_id: i for i, m in enumerate(self.motors)}
+        n = len(self.motors)
+        self._feedback: list[WheelFeedback | None] = [None] * n
+        self._faults: list[DriveFault] = [DriveFault.NONE] * n
+        self._detail: list[str] = [""] * n
+        self._armed: list[bool] = [False] * n
+        #: Frames of this protocol that were rejected, by reason.
+        self.rejected: collections.Counter[str] = collections.Counter()
+        live = self.motors[0].options.get("liveness_s") if n else None
+        #: Feedback older than this (s) marks a motor OFFLINE.
+        self.liveness_s = (
+            float(live)
+            if isinstance(live, (int, float)) and not isinstance(live, bool)
+            else self.DEFAULT_LIVENESS_S
+        )
+
+    # ----------------------------------------------------------------- configuration
+
+    @classmethod
+    def validate_options(cls, raw: Mapping[str, object], where: str) -> dict[str, object]:
+        """Validate a motor block's protocol keys and fill in defaults.
+
+        :param raw: the keys of the motor block that are not common to every driver.
+        :param where: file and key path for messages, e.g. ``"robot.yaml: wheels[0].motor"``.
+        :raises ConfigError: for an unknown key, a missing required key or a bad value.
+        """
+        return validate_block(raw, cls.OPTIONS, where, "protocol keys for this driver")
+
+    @classmethod
+    def validate_node_id(cls, node_id: int, where: str) -> None:
+        """Check a node ID against :attr:`NODE_ID_RANGE`.
+
+        :raises ConfigError: if it is out of range.
+        """
+        lo, hi = cls.NODE_ID_RANGE
+        if not lo <= node_id <= hi:
+            raise ConfigError(f"{where}: expected int {lo}..{hi}, got {node_id!r}")
+
+    # ----------------------------------------------------------------- hooks
+
+    @abc.abstractmethod
+    def enable(self, now_s: float) -> list[Frame]:
+        """Start the enable sequence (clear errors, select velocity mode, arm).
+
+        Sequences that wait for answers go on through :meth:`poll` and :meth:`on_frame`.
+        """
+
+    @abc.abstractmethod
+    def disable(self, now_s: float) -> list[Frame]:
+        """Frames that command zero speed and disarm where the protocol can."""
+
+    @abc.abstractmethod
+    def command(self, wheel_rad_s: Sequence[float], now_s: float) -> list[Frame]:
+        """Velocity command frames for this cycle.
+
+        :param wheel_rad_s: one wheel speed per motor, in :attr:`motors` order, rad/s.
+        :raises EncodeError: if a speed cannot be encoded (the loop limits speeds first).
+        """
+
+    @abc.abstractmethod
+    def on_frame(self, frame: Frame) -> bool:
+        """Take one received frame.
+
+        :return: whether the frame belonged to this driver.  Malformed frames of this protocol
+            are counted in :attr:`rejected` and never raise.
+        """
+
+    def preview_command(self, wheel_rad_s: Sequence[float]) -> list[Frame]:
+        """The velocity frames :meth:`command` would send for these speeds from a freshly
+        enabled driver with no feedback (pure; for ``wheelgate frames`` and tests).
+
+        The default runs a fresh instance; drivers whose frames depend on feedback override it
+        and document what they assume.
+        """
+        fresh = type(self)(self.motors)
+        fresh.enable(0.0)
+        return fresh.command(wheel_rad_s, 0.0)
+
+    def poll(self, now_s: float) -> list[Frame]:
+        """Housekeeping frames due at ``now_s`` (requests, sequence steps, SYNC)."""
+        return []
+
+    @classmethod
+    @abc.abstractmethod
+    def make_simulator(cls, motor: MotorConfig) -> DeviceSimulator:
+        """A device simulator that speaks the device side of this protocol for ``motor``."""
+
+    # ----------------------------------------------------------------- shared state
+
+    def reject(self, reason: str, err: DecodeError | None = None) -> None:
+        """Count a rejected frame under ``reason``."""
+        self.rejected[reason if err is None else f"{reason}: {err}"] += 1
+
+    def index_of(self, node_id: int) -> int | None:
+        """The position of ``node_id`` in :attr:`motors`, or ``None``."""
+        return self._index.get(node_id)
+
+    def store_feedback(self, index: int, feedback: WheelFeedback) -> None:
+        """Record new feedback for motor ``index``."""
+        self._feedback[index] = feedback
+
+    def set_fault(self, index: int, faults: DriveFault, detail: str = "") -> None:
+        """Record the fault flags (``DriveFault.NONE`` clears) of motor ``index``."""
+        self._faults[index] = faults
+        self._detail[index] = detail
+
+    def set_armed(self, index: int, armed: bool) -> None:
+        """Record whether motor ``index`` is armed."""
+        self._armed[index] = armed
+
+    def is_armed(self, index: int) -> bool:
+        """Whether motor ``index`` is armed."""
+        return self._armed[index]
+
+    def faults(self, index: int) -> DriveFault:
+        """The fault flags of motor ``index``."""
+        return self._faults[index]
+
+    def feedback(self, index: int) -> WheelFeedback | None:
+        """Latest feedback of motor ``index``."""
+        return self._feedback[index]
+
+    def state(self, index: int, now_s: float) -> DriveState:
+        """What the driver believes of motor ``index`` at ``now_s``."""
+        fb = self._feedback[index]
+        if fb is None or now_s - fb.timestamp_s > self.liveness_s:
+            return DriveState.OFFLINE
+        if self._faults[index]:
+            return DriveState.FAULT
+        return DriveState.ENABLED if self._armed[index] else DriveState.DISABLED
+
+    def status(self, now_s: float) -> tuple[MotorStatus, ...]:
+        """A snapshot of every motor."""
+        out = []
+        for i, m in enumerate(self.motors):
+            fb = self._feedback[i]
+            out.append(
+                MotorStatus(
+                    name=m.wheel,
+                    node_id=m.node_id,
+                    state=self.state(i, now_s),
+                    faults=self._faults[i],
+                    detail=self._detail[i],
+                    feedback_age_s=None if fb is None else now_s - fb.timestamp_s,
+                    feedback=fb,
+                )
+            )
+        return tuple(out)

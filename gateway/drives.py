@@ -1,0 +1,93 @@
+"""The motors of one robot grouped by protocol: one driver instance per driver name.
+
+:class:`DriveSet` is what the loop and the CLI talk to: it takes every wheel's speed in model
+order, hands each driver the speeds of its own motors and returns all frames of the cycle in
+one list (moteus' "build all, then send once"), so no two wheels act on commands from different
+cycles.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from gateway.registry import get_driver_class
+
+if TYPE_CHECKING:
+    from collections.abc import Sequence
+
+    from gateway.config import GatewayConfig
+    from gateway.driver import MotorDriver
+    from gateway.sim import DeviceSimulator
+    from gateway.types import Frame, MotorStatus
+
+
+class DriveSet:
+    """Every driven wheel's driver.
+
+    :param config: the validated configuration.
+    :raises DriverNotFoundError: if a driver cannot be loaded.
+    """
+
+    def __init__(self, config: GatewayConfig) -> None:
+        self.config = config
+        groups: dict[str, list[int]] = {}
+        for i, motor in enumerate(config.motors):
+            if motor is not None:
+                groups.setdefault(motor.driver, []).append(i)
+        #: (driver, wheel indices in model order) pairs.
+        self.groups: tuple[tuple[MotorDriver, tuple[int, ...]], ...] = tuple(
+            (
+                get_driver_class(name)(
+                    [m for m in (config.motors[i] for i in idx) if m is not None]
+                ),
+                tuple(idx),
+            )
+            for name, idx in groups.items()
+        )
+
+    def _split(self, wheel_rad_s: Sequence[float]) -> list[list[float]]:
+        return [[wheel_rad_s[i] for i in idx] for _, idx in self.groups]
+
+    def enable(self, now_s: float) -> list[Frame]:
+        """Enable frames of every driver."""
+        return [f for drv, _ in self.groups for f in drv.enable(now_s)]
+
+    def disable(self, now_s: float) -> list[Frame]:
+        """Zero-speed and disarm frames of every driver."""
+        return [f for drv, _ in self.groups for f in drv.disable(now_s)]
+
+    def command(self, wheel_rad_s: Sequence[float], now_s: float) -> list[Frame]:
+        """This cycle's velocity frames for every wheel (model order, rad/s)."""
+        out: list[Frame] = []
+        for (drv, _), speeds in zip(self.groups, self._split(wheel_rad_s), strict=True):
+            out.extend(drv.command(speeds, now_s))
+        return out
+
+    def preview(self, wheel_rad_s: Sequence[float]) -> list[Frame]:
+        """The velocity frames for these speeds with every driver freshly enabled and no
+        feedback (what ``wheelgate frames`` prints)."""
+        out: list[Frame] = []
+        for (drv, _), speeds in zip(self.groups, self._split(wheel_rad_s), strict=True):
+            out.extend(drv.preview_command(speeds))
+        return out
+
+    def poll(self, now_s: float) -> list[Frame]:
+        """Housekeeping frames of every driver."""
+        return [f for drv, _ in self.groups for f in drv.poll(now_s)]
+
+    def on_frame(self, frame: Frame) -> bool:
+        """Give a received frame to the driver it belongs to."""
+        return any(drv.on_frame(frame) for drv, _ in self.groups)
+
+    def status(self, now_s: float) -> list[MotorStatus]:
+        """Every motor's status, in model order of their wheels."""
+        pairs = [
+            (i, st)
+            for drv, idx in self.groups
+            for i, st in zip(idx, drv.status(now_s), strict=True)
+        ]
+        return [st for _, st in sorted(pairs, key=lambda p: p[0])]
+
+    def simulators(self) -> list[DeviceSimulator]:
+        """A device simulator for every motor."""
+        return [drv.make_simulator(m) for drv, _ in self.groups for m in drv.motors]

@@ -1,0 +1,155 @@
+"""Device simulators: the controller side of each protocol, for tests and ``--sim``.
+
+A simulator is driven by two calls, both given the time explicitly so tests are deterministic:
+:meth:`DeviceSimulator.handle` for every frame the gateway sends, and
+:meth:`DeviceSimulator.tick` to advance the motor and emit periodic frames.  Protocol
+simulators fill in the ``_on_frame`` and ``_on_tick`` hooks; the base applies the injected
+faults (silence, dropped frames) to whatever they emit.  :mod:`gateway.simbus` puts them on a
+python-can bus.
+"""
+
+from __future__ import annotations
+
+import abc
+import enum
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from gateway.types import Frame, MotorConfig
+
+
+@dataclass(slots=True)
+class MotorModel:
+    """A motor with first-order velocity dynamics and an acceleration limit (motor side).
+
+    .. math::
+
+        \\dot v = \\operatorname{clip}\\left(\\frac{v_{target} - v}{\\tau},
+        -a_{max}, a_{max}\\right), \\qquad \\dot p = v
+
+    :param time_constant_s: velocity time constant tau (s).
+    :param max_accel_rad_s2: acceleration limit (rad/s^2, motor side).
+    """
+
+    time_constant_s: float = 0.01
+    max_accel_rad_s2: float = 2000.0
+    #: Commanded motor speed (rad/s).
+    target_rad_s: float = 0.0
+    #: Actual motor speed (rad/s).
+    velocity_rad_s: float = 0.0
+    #: Motor shaft angle (rad), the ground truth for odometry.
+    position_rad: float = 0.0
+    #: Whether the motor is driven; a disarmed motor coasts to a stop.
+    armed: bool = False
+
+    def step(self, dt_s: float) -> None:
+        """Advance the model by ``dt_s`` seconds (exact for the linear part)."""
+        if dt_s <= 0.0:
+            return
+        target = self.target_rad_s if self.armed else 0.0
+        v0 = self.velocity_rad_s
+        v1 = target + (v0 - target) * math.exp(-dt_s / self.time_constant_s)
+        limit = self.max_accel_rad_s2 * dt_s
+        v1 = min(max(v1, v0 - limit), v0 + limit)
+        self.position_rad += 0.5 * (v0 + v1) * dt_s
+        self.velocity_rad_s = v1
+
+
+class SimFault(enum.IntFlag):
+    """Faults a test can inject into a simulator."""
+
+    NONE = 0
+    #: The device stops sending anything.
+    SILENT = enum.auto()
+    #: The device reports a fault and disarms (protocol-specific error bits).
+    FAULT = enum.auto()
+    #: Every second frame the device sends is lost.
+    DROP = enum.auto()
+
+
+class DeviceSimulator(abc.ABC):
+    """The device side of one motor controller.
+
+    :param motor: the motor block this simulator answers for.
+    :param model: the motor physics; a default model when omitted.
+    """
+
+    def __init__(self, motor: MotorConfig, model: MotorModel | None = None) -> None:
+        self.motor = motor
+        self.model = model if model is not None else MotorModel()
+        self.faults = SimFault.NONE
+        self._last_tick_s: float | None = None
+        self._drop_toggle = False
+        #: Frames the simulator received, for assertions.
+        self.received = 0
+
+    # ----------------------------------------------------------------- public
+
+    def handle(self, frame: Frame, now_s: float) -> list[Frame]:
+        """Take a frame from the bus; return the frames the device answers with."""
+        self.received += 1
+        if self.faults & SimFault.SILENT:
+            return []
+        return self._filter(self._on_frame(frame, now_s))
+
+    def tick(self, now_s: float) -> list[Frame]:
+        """Advance the motor to ``now_s``; return the periodic frames due."""
+        if self._last_tick_s is not None:
+            self.model.step(now_s - self._last_tick_s)
+        self._last_tick_s = now_s
+        out = self._on_tick(now_s)
+        if self.faults & SimFault.SILENT:
+            return []
+        return self._filter(out)
+
+    def inject(self, fault: SimFault) -> None:
+        """Add ``fault`` to the active faults (FAULT also disarms the motor)."""
+        self.faults |= fault
+        if fault & SimFault.FAULT:
+            self.model.armed = False
+            self._on_fault()
+
+    def clear(self, fault: SimFault = ~SimFault.NONE) -> None:
+        """Remove ``fault`` (all by default) from the active faults.
+
+        A reported controller fault stays latched in the device until the protocol's clear
+        command arrives, as on the real controllers.
+        """
+        self.faults &= ~fault
+
+    @property
+    def wheel_position_rad(self) -> float:
+        """Ground truth: the wheel angle in rad (motor angle through gear ratio and sign)."""
+        return self.motor.motor_to_wheel_rad_s(self.model.position_rad)
+
+    @property
+    def wheel_velocity_rad_s(self) -> float:
+        """Ground truth: the wheel speed in rad/s."""
+        return self.motor.motor_to_wheel_rad_s(self.model.velocity_rad_s)
+
+    # ----------------------------------------------------------------- hooks
+
+    @abc.abstractmethod
+    def _on_frame(self, frame: Frame, now_s: float) -> list[Frame]:
+        """Protocol reaction to a received frame."""
+
+    @abc.abstractmethod
+    def _on_tick(self, now_s: float) -> list[Frame]:
+        """Protocol periodic output; also applies command timeouts."""
+
+    def _on_fault(self) -> None:  # noqa: B027 - optional hook
+        """Latch the protocol's fault state (override to set error bits)."""
+
+    # ----------------------------------------------------------------- internals
+
+    def _filter(self, frames: list[Frame]) -> list[Frame]:
+        if not frames or not self.faults & SimFault.DROP:
+            return frames
+        kept = []
+        for f in frames:
+            self._drop_toggle = not self._drop_toggle
+            if self._drop_toggle:
+                kept.append(f)
+        return kept

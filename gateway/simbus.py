@@ -1,0 +1,113 @@
+"""Puts device simulators on a python-can bus (the edge around :mod:`gateway.sim`).
+
+:class:`SimulatedControllers` opens its own connection to a (normally ``virtual``) channel,
+answers every frame the gateway sends through the matching simulators and emits their periodic
+frames.  It runs either in a background thread (``start()``, used by ``--sim`` and end-to-end
+tests) or stepped by hand (``step(now_s)``, for deterministic tests).
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from typing import TYPE_CHECKING, Any
+
+from gateway.bus import drain, open_bus, send_frames
+from gateway.errors import BusError
+
+if TYPE_CHECKING:
+    from collections.abc import Sequence
+    from types import TracebackType
+
+    from gateway.sim import DeviceSimulator
+
+log = logging.getLogger(__name__)
+
+
+class SimulatedControllers:
+    """Simulated motor controllers on one bus.
+
+    :param simulators: the device simulators, one per motor.
+    :param channel: the bus channel to join.
+    :param interface: python-can interface (``virtual`` unless testing something else).
+    :param rate_hz: how often the background thread steps the simulators.
+    """
+
+    def __init__(
+        self,
+        simulators: Sequence[DeviceSimulator],
+        channel: str,
+        interface: str = "virtual",
+        rate_hz: float = 1000.0,
+        **bus_kwargs: Any,
+    ) -> None:
+        self.simulators = tuple(simulators)
+        self.period_s = 1.0 / rate_hz
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+        self._lock = threading.Lock()
+        #: Errors the background thread met (it keeps running).
+        self.errors = 0
+        self.bus = open_bus(interface, channel, **bus_kwargs)
+        self._open = True
+
+    def step(self, now_s: float) -> int:
+        """Handle every waiting frame, tick every simulator, send what they emit.
+
+        :return: the number of frames sent.
+        """
+        with self._lock:
+            out = []
+            for frame in drain(self.bus):
+                for sim in self.simulators:
+                    out.extend(sim.handle(frame, now_s))
+            for sim in self.simulators:
+                out.extend(sim.tick(now_s))
+            return send_frames(self.bus, out)
+
+    def start(self) -> SimulatedControllers:
+        """Run :meth:`step` in a daemon thread until :meth:`shutdown`."""
+        if self._thread is None:
+            self._thread = threading.Thread(target=self._run, name="wheelgate-sim", daemon=True)
+            self._thread.start()
+        return self
+
+    def _run(self) -> None:
+        deadline = time.monotonic()
+        while not self._stop.is_set():
+            try:
+                self.step(time.monotonic())
+            except BusError as err:
+                self.errors += 1
+                log.warning("simulated controllers: %s", err)
+            deadline += self.period_s
+            delay = deadline - time.monotonic()
+            if delay < -10 * self.period_s:
+                deadline = time.monotonic()
+            self._stop.wait(max(delay, 0.0))
+
+    def shutdown(self) -> None:
+        """Stop the thread and close the bus (safe to call twice)."""
+        if not self._open:
+            return
+        self._open = False
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+        self.bus.shutdown()
+
+    def __enter__(self) -> SimulatedControllers:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.shutdown()
+
+    def __del__(self) -> None:
+        if getattr(self, "_open", False):
+            log.warning("SimulatedControllers was not shut down")

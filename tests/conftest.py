@@ -1,0 +1,43 @@
+"""Shared fixtures: unique virtual channels, a leak check on every test, the CLI runner."""
+
+from __future__ import annotations
+
+import itertools
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import pytest
+from can.interfaces import virtual
+from click.testing import CliRunner
+
+if TYPE_CHECKING:
+    from collections.abc import Iterator
+
+REPO = Path(__file__).resolve().parent.parent
+CONFIG_DIR = REPO / "config"
+DATA_DIR = Path(__file__).resolve().parent / "data"
+
+_counter = itertools.count()
+
+
+@pytest.fixture
+def channel(request: pytest.FixtureRequest) -> str:
+    """A virtual-bus channel name no other test uses."""
+    return f"wg-{request.node.name}-{next(_counter)}"
+
+
+@pytest.fixture(autouse=True)
+def _no_leaked_buses() -> Iterator[None]:
+    """Fail a test that leaves a virtual bus open (python-can's own conftest idea)."""
+    before = set(virtual.channels)
+    yield
+    leaked = set(virtual.channels) - before
+    for name in leaked:
+        virtual.channels.pop(name, None)
+    assert not leaked, f"virtual bus channels left open: {sorted(map(str, leaked))}"
+
+
+@pytest.fixture
+def runner() -> CliRunner:
+    """A click test runner."""
+    return CliRunner()

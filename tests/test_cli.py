@@ -1,0 +1,153 @@
+"""The CLI as a user types it: check, ik, fk; exit codes 0, 2, 3."""
+
+from __future__ import annotations
+
+import json
+import math
+from typing import TYPE_CHECKING
+
+import pytest
+
+from gateway.cli import main
+from tests.conftest import CONFIG_DIR
+
+if TYPE_CHECKING:
+    from pathlib import Path
+
+    from click.testing import CliRunner
+
+TB3 = str(CONFIG_DIR / "turtlebot3_burger.yaml")
+MECANUM = str(CONFIG_DIR / "mecanum.yaml")
+ACKERMANN = str(CONFIG_DIR / "ackermann.yaml")
+
+
+def test_check_summarises_the_robot(runner: CliRunner) -> None:
+    result = runner.invoke(main, ["check", "-c", TB3])
+    assert result.exit_code == 0, result.output
+    out = result.stdout
+    assert "drive:    differential (wheel_radius=0.033 track=0.16)" in out
+    assert "freedom:  mobility 2, steerability 0, maneuverability 2" in out
+    assert "left" in out and "right" in out
+    assert "odrive node 1" in out
+    assert out.rstrip().endswith("ok")
+
+
+def test_check_embedded_default(runner: CliRunner) -> None:
+    result = runner.invoke(main, ["check"])
+    assert result.exit_code == 0, result.output
+    assert "config:   <embedded default>" in result.stdout
+
+
+def test_ik_table_and_json(runner: CliRunner) -> None:
+    result = runner.invoke(main, ["ik", "-c", TB3, "--vx", "0.2", "--wz", "1.0"])
+    assert result.exit_code == 0, result.output
+    assert "left" in result.stdout
+    result = runner.invoke(main, ["ik", "-c", TB3, "--vx", "0.1", "--wz", "0.5", "--json"])
+    assert result.exit_code == 0, result.output
+    doc = json.loads(result.stdout)
+    wheels = {w["name"]: w for w in doc["wheels"]}
+    assert wheels["left"]["speed_rad_s"] == pytest.approx((0.1 - 0.08 * 0.5) / 0.033)
+    assert wheels["right"]["speed_rad_s"] == pytest.approx((0.1 + 0.08 * 0.5) / 0.033)
+    assert "steer_rad" not in wheels["left"]
+    assert wheels["right"]["motor_rpm"] == pytest.approx(
+        -wheels["right"]["speed_rad_s"] * 60 / (2 * math.pi)  # inverted motor
+    )
+
+
+def test_ik_steered_wheels_report_steer_rad(runner: CliRunner) -> None:
+    result = runner.invoke(main, ["ik", "-c", ACKERMANN, "--vx", "1", "--wz", "0.5", "--json"])
+    assert result.exit_code == 0, result.output
+    wheels = {w["name"]: w for w in json.loads(result.stdout)["wheels"]}
+    assert wheels["front_left"]["steer_rad"] > wheels["front_right"]["steer_rad"] > 0
+    assert wheels["front_left"]["motor_rpm"] is None  # passive front wheels
+
+
+def test_ik_infeasible_exits_3(runner: CliRunner) -> None:
+    result = runner.invoke(main, ["ik", "-c", TB3, "--vx", "0.1", "--vy", "0.1"])
+    assert result.exit_code == 3
+    assert result.stdout == ""
+    assert result.stderr.startswith(
+        "Error: Twist (vx=0.1 m/s, vy=0.1 m/s, wz=0 rad/s) is infeasible: wheel 'left' "
+        "breaks its sliding constraint by 0.1 m/s"
+    )
+    assert "nearest feasible twist is (vx=0.1 m/s" in result.stderr
+
+
+def test_ik_infeasible_json_error_object(runner: CliRunner) -> None:
+    result = runner.invoke(main, ["ik", "-c", ACKERMANN, "--wz", "1", "--json"])
+    assert result.exit_code == 3
+    err = json.loads(result.stdout)["error"]
+    assert err["type"] == "infeasible_twist"
+    assert err["constraint"] == "steering limit"
+    assert err["wheel"] in ("front_left", "front_right")
+    assert err["nearest"]["vx_m_s"] > 0
+
+
+def test_ik_speed_limit_note(runner: CliRunner) -> None:
+    result = runner.invoke(main, ["ik", "-c", TB3, "--vx", "1.0"])
+    assert result.exit_code == 0
+    assert "exceeds a speed limit; the gateway scales it by 0.21" in result.stdout
+
+
+def test_fk(runner: CliRunner) -> None:
+    result = runner.invoke(
+        main, ["fk", "-c", TB3, "--wheel", "left=3", "--wheel", "right=5", "--json"]
+    )
+    assert result.exit_code == 0, result.output
+    doc = json.loads(result.stdout)
+    assert doc["twist"]["vx_m_s"] == pytest.approx(0.033 * 4)
+    assert doc["twist"]["wz_rad_s"] == pytest.approx(0.033 * 2 / 0.16)
+    assert doc["residual_m_s"] == pytest.approx(0.0, abs=1e-12)
+    result = runner.invoke(main, ["fk", "-c", MECANUM, "--wheel", "front_left=1",
+                                  "--wheel", "front_right=1", "--wheel", "rear_left=1",
+                                  "--wheel", "rear_right=-1"])
+    assert result.exit_code == 0, result.output
+    assert "residual:" in result.stdout
+
+
+def test_fk_with_steering(runner: CliRunner) -> None:
+    ik = json.loads(runner.invoke(main, ["ik", "-c", str(CONFIG_DIR / "swerve.yaml"),
+                                         "--vx", "0.3", "--vy", "0.2", "--wz", "0.4",
+                                         "--json"]).stdout)
+    args = ["fk", "-c", str(CONFIG_DIR / "swerve.yaml"), "--json"]
+    for w in ik["wheels"]:
+        args += ["--wheel", f"{w['name']}={w['speed_rad_s']}",
+                 "--steer", f"{w['name']}={w['steer_rad']}"]
+    twist = json.loads(runner.invoke(main, args).stdout)["twist"]
+    assert (twist["vx_m_s"], twist["vy_m_s"], twist["wz_rad_s"]) == pytest.approx((0.3, 0.2, 0.4))
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["ik", "-c", TB3, "--vx", "fast"],
+         "Invalid value for '--vx': 'fast' is not a valid float"),
+        (["ik", "-c", TB3, "--vx", "nan"], "Invalid value for --vx: expected a finite number"),
+        (["fk", "-c", TB3, "--wheel", "left"], "Invalid value for --wheel: expected NAME=NUMBER"),
+        (["fk", "-c", TB3, "--wheel", "middle=1"], "Unknown wheel 'middle'; expected one of: "
+                                                  "left, right"),
+        (["fk", "-c", TB3, "--wheel", "left=1", "--steer", "left=1"],
+         "wheel 'left' is not steered"),
+        (["fk", "-c", TB3], "give at least one wheel speed"),
+        (["ik", "-c", "missing.yaml"], "Error: missing.yaml: cannot read the file"),
+        (["frobnicate"], "No such command 'frobnicate'"),
+    ],
+)
+def test_bad_usage_exits_2(runner: CliRunner, args: list[str], message: str) -> None:
+    result = runner.invoke(main, args)
+    assert result.exit_code == 2, result.output
+    assert message in result.stderr
+
+
+def test_bad_config_exits_2(runner: CliRunner, tmp_path: Path) -> None:
+    bad = tmp_path / "robot.yaml"
+    bad.write_text("drive: differential\ngeometry: {wheel_radius: 0.1}\n")
+    result = runner.invoke(main, ["check", "-c", str(bad)])
+    assert result.exit_code == 2
+    assert result.stderr == f"Error: {bad}: geometry.track: required key is missing\n"
+
+
+def test_debug_shows_traceback(runner: CliRunner) -> None:
+    result = runner.invoke(main, ["--debug", "ik", "-c", TB3, "--vy", "1"])
+    assert result.exit_code == 1
+    assert type(result.exception).__name__ == "InfeasibleTwistError"
