@@ -313,12 +313,12 @@ def _motor(
     except DriverNotFoundError as err:
         raise ConfigError(f"{where}.driver: {err}") from err
     node_id = int(v["node_id"])  # type: ignore[call-overload]
-    cls.validate_node_id(node_id, f"{where}.node_id")
     protocol = {k: x for k, x in merged.items() if k not in _MOTOR_COMMON}
     if "config_dir" in cls.OPTIONS and "config_dir" not in protocol:
         # Relative paths in protocol keys (a DBC file) are relative to the config file.
         protocol["config_dir"] = config_dir
     options = cls.validate_options(protocol, where)
+    cls.validate_node_id(node_id, f"{where}.node_id", options)
     return MotorConfig(
         wheel=wheel,
         driver=driver,

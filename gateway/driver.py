@@ -37,6 +37,7 @@ class MotorDriver(abc.ABC):
     counters of rejected frames so every protocol reports them the same way.
 
     :param motors: the motors this driver serves, in the order the loop passes speeds.
+    :raises ConfigError: if a node ID is out of range or used twice.
     """
 
     #: Protocol keys accepted in a motor block, with their specs.
@@ -48,6 +49,15 @@ class MotorDriver(abc.ABC):
 
     def __init__(self, motors: Sequence[MotorConfig]) -> None:
         self.motors: tuple[MotorConfig, ...] = tuple(motors)
+        owners: dict[int, str] = {}
+        for m in self.motors:
+            where = f"motor {m.wheel!r}.node_id"
+            self.validate_node_id(m.node_id, where, m.options)
+            if m.node_id in owners:
+                raise ConfigError(
+                    f"{where}: node {m.node_id} is already used by wheel {owners[m.node_id]!r}"
+                )
+            owners[m.node_id] = m.wheel
         self._index = {m.node_id: i for i, m in enumerate(self.motors)}
         n = len(self.motors)
         self._feedback: list[WheelFeedback | None] = [None] * n
@@ -77,12 +87,21 @@ class MotorDriver(abc.ABC):
         return validate_block(raw, cls.OPTIONS, where, "protocol keys for this driver")
 
     @classmethod
-    def validate_node_id(cls, node_id: int, where: str) -> None:
-        """Check a node ID against :attr:`NODE_ID_RANGE`.
+    def node_id_range(cls, options: Mapping[str, object] | None = None) -> tuple[int, int]:
+        """Valid node IDs (inclusive) for a motor block with these protocol keys."""
+        return cls.NODE_ID_RANGE
 
+    @classmethod
+    def validate_node_id(
+        cls, node_id: int, where: str, options: Mapping[str, object] | None = None
+    ) -> None:
+        """Check a node ID against :meth:`node_id_range`.
+
+        :param options: the motor block's validated protocol keys (some protocols widen the
+            range, e.g. ODrive with 29-bit identifiers).
         :raises ConfigError: if it is out of range.
         """
-        lo, hi = cls.NODE_ID_RANGE
+        lo, hi = cls.node_id_range(options)
         if not lo <= node_id <= hi:
             raise ConfigError(f"{where}: expected int {lo}..{hi}, got {node_id!r}")
 

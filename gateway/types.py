@@ -10,7 +10,7 @@ import enum
 import math
 from dataclasses import dataclass, field
 from types import MappingProxyType
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 if TYPE_CHECKING:
     from collections.abc import Mapping
@@ -20,31 +20,67 @@ MAX_STANDARD_ID = 0x7FF
 MAX_EXTENDED_ID = 0x1FFFFFFF
 
 
-@dataclass(frozen=True, slots=True)
-class Frame:
-    """One classical CAN frame as the pure core sees it.
+class _FrameFields(NamedTuple):
+    arbitration_id: int
+    data: bytes
+    is_extended_id: bool
+    is_remote_frame: bool
+    dlc: int
+    timestamp_s: float
+
+
+class Frame(_FrameFields):
+    """One classical CAN frame as the pure core sees it: immutable, compared by value.
 
     python-can's ``Message`` compares by identity and is mutable, so it is used only at the
-    edge (:mod:`gateway.bus`); this frame compares by value, which golden tests rely on.
+    edge (:mod:`gateway.bus`).  This is an immutable tuple rather than a frozen dataclass
+    because a frame is built on every command of every cycle: constructing it costs about a
+    third of a frozen dataclass (``tools/bench_codec.py`` prints both).  Equality and hashing
+    ignore the receive time, so golden tests compare frames with ``==``.
 
     :param arbitration_id: 11-bit or 29-bit identifier.
     :param data: payload, 0 to 8 bytes (empty for a remote frame).
     :param is_extended_id: 29-bit identifier when true.
     :param is_remote_frame: RTR frame; ``dlc`` then gives the requested length.
-    :param dlc: data length code; defaults to ``len(data)``.
+    :param dlc: data length code; ``len(data)`` when omitted.
     :param timestamp_s: receive time in seconds (monotonic at the edge); not compared.
     """
 
-    arbitration_id: int
-    data: bytes = b""
-    is_extended_id: bool = False
-    is_remote_frame: bool = False
-    dlc: int = -1
-    timestamp_s: float = field(default=0.0, compare=False)
+    __slots__ = ()
 
-    def __post_init__(self) -> None:
-        if self.dlc < 0:
-            object.__setattr__(self, "dlc", len(self.data))
+    def __new__(
+        cls,
+        arbitration_id: int,
+        data: bytes = b"",
+        is_extended_id: bool = False,
+        is_remote_frame: bool = False,
+        dlc: int = -1,
+        timestamp_s: float = 0.0,
+    ) -> Frame:
+        return tuple.__new__(
+            cls,
+            (
+                arbitration_id,
+                data,
+                is_extended_id,
+                is_remote_frame,
+                len(data) if dlc < 0 else dlc,
+                timestamp_s,
+            ),
+        )
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, Frame) and self[:5] == other[:5]
+
+    def __ne__(self, other: object) -> bool:
+        return not self == other
+
+    def __hash__(self) -> int:
+        return hash(self[:5])
+
+    def stamped(self, timestamp_s: float) -> Frame:
+        """The same frame with another receive time."""
+        return self._replace(timestamp_s=timestamp_s)
 
     def to_cansend(self) -> str:
         """The frame in can-utils ``cansend`` syntax.

@@ -8,7 +8,6 @@ the official ODrive DBC (``tests/data/odrive-cansimple-0.5.6.dbc``, a pinned cop
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 import hashlib
 import math
@@ -604,7 +603,7 @@ def test_relative_dbc_path_uses_config_dir(tmp_path: Path, monkeypatch: pytest.M
             "expected a frame ID of at most 0x7FF for message 'WD_Velocity_Command' (0x200) "
             "with node 2047, got 0x9FF",
         ),
-        ([motor(0x800)], "motor.node_id: expected int 0..2047, got 2048"),
+        ([motor(0x800)], ".node_id: expected int 0..2047, got 2048"),
         # 0x180 + 0x83 = 0x203, the command ID of node 3.
         ([motor(3), motor(0x83, "right")], "frame ID 0x203 of node 131 ('right') message"),
         (
@@ -678,7 +677,7 @@ def test_two_motors_share_one_command_and_one_extended_status_message() -> None:
     assert drv.disable(0.0) == [Frame(0x110, struct.pack("<hhBBxx", 0, 0, 0, 5))]
     status = Frame(0x18FF0120, struct.pack("<hhHH", 10, -20, 65535, 3), is_extended_id=True)
     assert drv.codec.decode(status) == (DbcReading(1, 10.0, 65535), DbcReading(2, -20.0, 3))
-    drv.on_frame(dataclasses.replace(status, timestamp_s=1.0))
+    drv.on_frame(status.stamped(1.0))
     drv.on_frame(
         Frame(
             0x18FF0120,
@@ -691,7 +690,7 @@ def test_two_motors_share_one_command_and_one_extended_status_message() -> None:
     assert left is not None and right is not None
     assert left.position_rad == pytest.approx(5 * TWO_PI / 100)  # 65535 -> 4 wraps: +5
     assert right.position_rad == pytest.approx(-6 * TWO_PI / 100)  # 3 -> 65533: -6
-    assert drv.on_frame(dataclasses.replace(status, is_extended_id=False))
+    assert drv.on_frame(status._replace(is_extended_id=False))
     assert any("Expected an extended ID" in key for key in drv.rejected)
 
 

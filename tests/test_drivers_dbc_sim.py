@@ -53,7 +53,7 @@ class Rig:
             self.ctl.step(self.t)
             got = False
             for frame in drain(self.gw):
-                got |= self.drv.on_frame(dataclasses.replace(frame, timestamp_s=self.t))
+                got |= self.drv.on_frame(frame.stamped(self.t))
             if got and check is not None:
                 check(self.t)
             if speeds is not None:

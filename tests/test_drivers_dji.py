@@ -6,7 +6,6 @@ examples" table), which were checked against DJI's ``CAN_receive.c``.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from typing import TYPE_CHECKING
 
@@ -73,7 +72,7 @@ def feedback_frame(
     esc_id: int, angle: int, rpm: int = 0, current: int = 0, temp: int = 35, t: float = 0.0
 ) -> Frame:
     frame = encode_feedback(DjiFeedback(esc_id, angle, rpm, current, temp))
-    return dataclasses.replace(frame, timestamp_s=t)
+    return frame.stamped(t)
 
 
 def currents_in(frames: Sequence[Frame]) -> dict[int, int]:
@@ -321,7 +320,7 @@ def test_registry_and_options() -> None:
         ([motor(1, esc="c630")], "esc: expected one of 'c620', 'c610', got 'c630'"),
         ([motor(1, esc="c610", max_current_a=15.0)], "at most 10 A for a C610, got 15"),
         ([motor(1, max_current_a=25.0)], "expected at most 20, got 25.0"),
-        ([motor(1), motor(1)], "expected distinct ESC IDs, got [1, 1]"),
+        ([motor(1), motor(1)], "node 1 is already used by wheel 'w1'"),
         ([motor(0)], "expected int 1..8, got 0"),
         ([motor(9)], "expected int 1..8, got 9"),
         ([motor(1), motor(2, liveness_s=0.2)], "one liveness_s for every motor"),
@@ -582,7 +581,7 @@ class Rig:
             self.t += 0.001
             self.ctl.step(self.t)
             for f in drain(self.gw):
-                self.drv.on_frame(dataclasses.replace(f, timestamp_s=self.t))
+                self.drv.on_frame(f.stamped(self.t))
             send_frames(self.gw, self.drv.poll(self.t) + self.drv.command(speeds, self.t))
 
 

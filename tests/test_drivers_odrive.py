@@ -7,7 +7,6 @@ against the official DBC and the firmware's struct formats).
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import itertools
 import logging
 import math
@@ -375,9 +374,14 @@ def test_registry_and_config() -> None:
     drv = OdriveDriver([motor(3), motor(4, "right", liveness_s=0.5)])
     assert (drv.codec.firmware, drv.codec.extended_id, drv.liveness_s) == (V06, False, 0.25)
     assert OdriveDriver([motor(0xFEDCBA, extended_id=True)]).codec.max_node_id == 0xFFFFFF
+    OdriveDriver.validate_node_id(0xFFFFFF, "x", {"extended_id": True})
+    with pytest.raises(ConfigError, match=r"^x: expected int 0..16777215, got 16777216$"):
+        OdriveDriver.validate_node_id(0x1000000, "x", {"extended_id": True})
     sim = OdriveDriver.make_simulator(motor(3, firmware="0.5"))
     assert isinstance(sim, OdriveSimulator)
     assert sim.codec.firmware is V05
+    with pytest.raises(ConfigError, match=r"firmware: expected one of '0.5', '0.6', got 5"):
+        OdriveSimulator(motor(3, firmware=5))
 
 
 @pytest.mark.parametrize(
@@ -387,9 +391,12 @@ def test_registry_and_config() -> None:
         ([motor(3, speed=1)], r"motor 'left'.speed: unknown key"),
         ([motor(3, input_mode=3)], r"input_mode: expected one of 1, 2, got 3"),
         ([motor(3), motor(4, "right", firmware="0.5")], r"'right'.firmware: expected '0.6'"),
-        ([motor(0x3F)], r"node_id: expected int 0..0x3e, got 63"),
-        ([motor(0xFEDCBA)], r"node_id: expected int 0..0x3e, got 16702650"),
-        ([motor(3), motor(3, "right")], r"'right'.node_id: expected a node ID used twice"),
+        ([motor(0x3F)], r"node_id: expected int 0..62, got 63"),
+        ([motor(0xFEDCBA)], r"node_id: expected int 0..62, got 16702650"),
+        (
+            [motor(3), motor(3, "right")],
+            r"'right'.node_id: node 3 is already used by wheel 'left'",
+        ),
     ],
 )
 def test_config_errors(motors: list[MotorConfig], message: str) -> None:
@@ -416,11 +423,11 @@ def test_command_conversion_and_limits() -> None:
 
 def _hb(codec: OdriveCodec, state: AxisState, error: int = 0, t: float = 0.0, **kw: Any) -> Frame:
     frame = codec.make_heartbeat(Heartbeat(3, error, state, **kw))
-    return dataclasses.replace(frame, timestamp_s=t)
+    return frame.stamped(t)
 
 
 def _est(codec: OdriveCodec, pos: float, t: float) -> Frame:
-    return dataclasses.replace(codec.make_encoder_estimates(3, pos, 0.0), timestamp_s=t)
+    return codec.make_encoder_estimates(3, pos, 0.0).stamped(t)
 
 
 def test_on_frame_ownership_and_rejects() -> None:
@@ -434,6 +441,10 @@ def test_on_frame_ownership_and_rejects() -> None:
     assert sum(drv.rejected.values()) == 2
     assert drv.rejected["remote frame where data expected"] == 1
     assert drv.state(0, 0.0) is DriveState.OFFLINE
+    rtr = OdriveDriver([motor(3, encoder_request="rtr")])
+    for cmd in (CmdId.GET_ENCODER_ESTIMATES, CmdId.GET_ERROR):  # echoes of its own requests
+        assert rtr.on_frame(C6.make_request(3, cmd)) is True
+    assert not rtr.rejected
 
 
 def test_state_liveness_and_enable_handshake() -> None:
@@ -553,7 +564,7 @@ class Rig:
             self.t = round(self.t + 0.001, 6)
             self.ctl.step(self.t)
             for f in drain(self.gw):
-                self.drv.on_frame(dataclasses.replace(f, timestamp_s=self.t))
+                self.drv.on_frame(f.stamped(self.t))
             if talk and k % cmd_period_steps == 0:
                 self.send(self.drv.poll(self.t) + self.drv.command(self.speeds, self.t))
 

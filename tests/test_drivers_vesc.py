@@ -364,8 +364,8 @@ def test_enable_disable_frames_and_keepalive() -> None:
 
 def status_pair(node_id: int, erpm: int, tacho: int, t: float) -> list[Frame]:
     return [
-        dataclasses.replace(make_status(node_id, erpm, 1.5, 0.1), timestamp_s=t),
-        dataclasses.replace(make_status5(node_id, tacho, 24.0), timestamp_s=t),
+        make_status(node_id, erpm, 1.5, 0.1).stamped(t),
+        make_status5(node_id, tacho, 24.0).stamped(t),
     ]
 
 
@@ -464,9 +464,9 @@ def test_state_derivation(
     if enabled_at is not None:
         drv.enable(enabled_at)
     if status_s is not None:
-        drv.on_frame(dataclasses.replace(make_status(23, 0, 0.0, 0.0), timestamp_s=status_s))
+        drv.on_frame(make_status(23, 0, 0.0, 0.0).stamped(status_s))
     if status5_s is not None:
-        drv.on_frame(dataclasses.replace(make_status5(23, 0, 24.0), timestamp_s=status5_s))
+        drv.on_frame(make_status5(23, 0, 24.0).stamped(status5_s))
     assert drv.state(0, 1.0) == expected
     assert drv.status(1.0)[0].state == expected
 
@@ -496,7 +496,7 @@ def test_missing_status_frames_log_a_hint_once(caplog: pytest.LogCaptureFixture)
     with caplog.at_level(logging.WARNING, logger="drivers.vesc.driver"):
         drv.poll(0.5)
         assert not caplog.records
-        drv.on_frame(dataclasses.replace(make_status(23, 0, 0.0, 0.0), timestamp_s=0.6))
+        drv.on_frame(make_status(23, 0, 0.0, 0.0).stamped(0.6))
         drv.poll(1.1)
         drv.poll(1.2)
     assert len(caplog.records) == 1
@@ -667,7 +667,7 @@ class Rig:
             t = self.t
             self.ctl.step(t)
             for f in drain(self.gw):
-                self.drv.on_frame(dataclasses.replace(f, timestamp_s=t))
+                self.drv.on_frame(f.stamped(t))
             out = self.drv.poll(t) if poll else []
             if speeds is not None:
                 out += self.drv.command(speeds, t)

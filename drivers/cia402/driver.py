@@ -51,7 +51,7 @@ from drivers.cia402.sequence import NodeSequencer, Phase
 from drivers.cia402.sim import Cia402Simulator
 from drivers.cia402.steps import configuration_steps
 from gateway.driver import MotorDriver, OptionSpec
-from gateway.errors import ConfigError, DecodeError, EncodeError
+from gateway.errors import DecodeError, EncodeError
 from gateway.types import DriveFault, DriveState, WheelFeedback
 
 if TYPE_CHECKING:
@@ -105,22 +105,13 @@ class Cia402Driver(MotorDriver):
 
     def __init__(self, motors: Sequence[MotorConfig]) -> None:
         super().__init__(motors)
-        seen: set[int] = set()
-        for m in self.motors:
-            self.validate_node_id(m.node_id, f"wheel {m.wheel!r}.node_id")
-            if m.node_id in seen:
-                raise ConfigError(
-                    f"wheel {m.wheel!r}.node_id: expected a node ID no other CiA 402 motor on "
-                    f"this bus uses, got {m.node_id}"
-                )
-            seen.add(m.node_id)
         opts = [NodeOptions.from_motor(m) for m in self.motors]
         pairs = list(zip(self.motors, opts, strict=True))
         self.codec = Cia402Codec({m.node_id: o.layout for m, o in pairs})
         #: Whether this driver produces SYNC (any motor with ``sync: true``).
         self.sync_enabled = any(o.sync for o in opts)
         self._nodes = [
-            _Node(o, NodeSequencer(m.node_id, f"node {m.node_id} ({m.wheel!r})", self.codec,
+            _Node(o, NodeSequencer(m.node_id, f'node {m.node_id} ("{m.wheel}")', self.codec,
                                    configuration_steps(m.node_id, o)))
             for m, o in pairs
         ]
@@ -165,7 +156,7 @@ class Cia402Driver(MotorDriver):
             limit = m.max_wheel_rad_s
             if not math.isfinite(w) or abs(w) > limit * (1.0 + 1e-9):
                 raise EncodeError(
-                    f"Expected velocity for node {m.node_id} ({m.wheel!r}) between "
+                    f'Expected velocity for node {m.node_id} ("{m.wheel}") between '
                     f"{-limit:.4g} and {limit:.4g} rad/s, but got {w!r}."
                 )
             units = node.opts.rad_s_to_units(m.wheel_to_motor_rad_s(w))

@@ -74,7 +74,7 @@ class NodeSequencer:
     :param node_id: the node.
     :param label: how messages name it, e.g. ``node 3 ("left")``.
     :param codec: builds the command RPDO for controlword steps.
-    :param steps: from :func:`configuration_steps`.
+    :param steps: from :func:`~drivers.cia402.steps.configuration_steps`.
     """
 
     #: Deadline for each SDO answer (s).

@@ -89,13 +89,13 @@ class Cia402Simulator(DeviceSimulator):
         self.node_id = motor.node_id
         self.initial_position = _wrap32(initial_position)
         self.command_timeout_s = command_timeout_s
-        self.supported_modes = supported_modes
         self.mode_switch_delay_s = mode_switch_delay_s
         self.fault_code, self.fault_register = fault_code, fault_register
         self.od = SimObjectDictionary(self.node_id, heartbeat_ms, supported_modes,
                                       missing_objects)
         #: Counters for assertions: SYNCs seen, RPDOs applied, SDO aborts sent, bad PDOs.
         self.syncs = self.rpdos = self.aborts = self.pdo_errors = 0
+        self._now = 0.0
         self._power_on()
 
     # ----------------------------------------------------------------- public
@@ -130,7 +130,6 @@ class Cia402Simulator(DeviceSimulator):
         self._last_rpdo_s: float | None = None
 
     def _reset_comm_state(self) -> None:
-        self._now = 0.0
         self._pending: dict[int, bytes] = {}
         self._emcy_out: list[Frame] = []
         self._last_hb_s: float | None = None
@@ -199,6 +198,7 @@ class Cia402Simulator(DeviceSimulator):
     def _raise_fault(self, code: int, register: int) -> None:
         if self.state in (State.FAULT, State.FAULT_REACTION_ACTIVE):
             return
+        log.info("simulated node %d: fault, EMCY 0x%04X", self.node_id, code)
         self.state = State.FAULT_REACTION_ACTIVE
         self._error_register = register
         self._emcy_out.append(make_emcy(self.node_id, code, register))
@@ -245,6 +245,7 @@ class Cia402Simulator(DeviceSimulator):
             command = NmtCommand(frame.data[0])
         except ValueError:
             return []
+        log.debug("simulated node %d: NMT %s", self.node_id, command.name)
         if command is NmtCommand.START:
             self.nmt = NmtState.OPERATIONAL
         elif command is NmtCommand.STOP:

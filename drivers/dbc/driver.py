@@ -42,7 +42,7 @@ from drivers.dbc.codec import DbcCodec, describe_fault
 from drivers.dbc.options import OPTIONS, UnitConversion, motor_where, parse_options
 from drivers.dbc.sim import DbcSimulator
 from gateway.driver import MotorDriver
-from gateway.errors import ConfigError, DecodeError, EncodeError
+from gateway.errors import DecodeError, EncodeError
 from gateway.types import WheelFeedback
 
 if TYPE_CHECKING:
@@ -72,15 +72,6 @@ class DbcDriver(MotorDriver):
 
     def __init__(self, motors: Sequence[MotorConfig]) -> None:
         super().__init__(motors)
-        seen: dict[int, str] = {}
-        for m in self.motors:
-            self.validate_node_id(m.node_id, f"{motor_where(m)}.node_id")
-            if m.node_id in seen:
-                raise ConfigError(
-                    f"{motor_where(m)}.node_id: node {m.node_id} is already used by wheel "
-                    f"{seen[m.node_id]!r}"
-                )
-            seen[m.node_id] = m.wheel
         cache = DatabaseCache()
         self._opts: tuple[DbcOptions, ...] = tuple(
             parse_options(m.options, motor_where(m)) for m in self.motors

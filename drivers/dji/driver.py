@@ -114,7 +114,6 @@ class DjiDriver(MotorDriver):
         liveness: set[float] = set()
         for m in self.motors:
             where = f"motor {m.wheel!r}"
-            self.validate_node_id(m.node_id, f"{where}.node_id")
             opts = self.validate_options(m.options, where)
             esc = ESC_MODELS[str(opts["esc"])]
             limit = _number(opts, "max_current_a") or esc.full_scale_a
@@ -131,9 +130,6 @@ class DjiDriver(MotorDriver):
                 log.warning(
                     "%s: gear_ratio is 1.0; an %s needs %.6g", where, esc.motor, esc.gear_ratio
                 )
-        if len(self._index) != len(self.motors):
-            ids = sorted(m.node_id for m in self.motors)
-            raise ConfigError(f"DJI motors: expected distinct ESC IDs, got {ids}")
         if len(liveness) > 1:
             raise ConfigError(
                 f"DJI motors: expected one liveness_s for every motor, got {sorted(liveness)}"

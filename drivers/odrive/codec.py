@@ -27,7 +27,7 @@ from typing import TYPE_CHECKING, TypeAlias
 
 from drivers.odrive.enums import AxisState, CmdId, ControlMode, Firmware, InputMode, ProcedureResult
 from gateway.codec import MotorCodec
-from gateway.errors import DecodeError, EncodeError, IllegalTransitionError
+from gateway.errors import ConfigError, DecodeError, EncodeError, IllegalTransitionError
 from gateway.types import Frame
 
 if TYPE_CHECKING:
@@ -296,8 +296,16 @@ class OdriveCodec(MotorCodec[Feedback]):
 
     @classmethod
     def from_options(cls, options: Mapping[str, object]) -> OdriveCodec:
-        """The codec for a motor block's ``firmware`` and ``extended_id`` keys."""
-        firmware = Firmware(str(options.get("firmware", DEFAULT_FIRMWARE.value)))
+        """The codec for a motor block's ``firmware`` and ``extended_id`` keys.
+
+        :raises ConfigError: for an unknown firmware family.
+        """
+        value = options.get("firmware", DEFAULT_FIRMWARE.value)
+        try:
+            firmware = Firmware(value)
+        except ValueError as err:
+            known = ", ".join(repr(f.value) for f in Firmware)
+            raise ConfigError(f"firmware: expected one of {known}, got {value!r}") from err
         return cls(firmware, bool(options.get("extended_id", DEFAULT_EXTENDED_ID)))
 
     # ------------------------------------------------------------------ identifiers

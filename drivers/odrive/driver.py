@@ -107,11 +107,10 @@ class OdriveDriver(MotorDriver):
             help="seconds without heartbeat or encoder estimates before a motor is OFFLINE",
         ),
     }
-    #: Config-time range: 29-bit mode allows up to 0xFFFFFF; ``__init__`` narrows 11-bit mode
-    #: to :attr:`STANDARD_NODE_ID_RANGE` once it knows ``extended_id``.
-    NODE_ID_RANGE: ClassVar[tuple[int, int]] = (0, MAX_EXTENDED_NODE_ID)
-    #: Node IDs with 11-bit identifiers; 0x3F is the 0.6 broadcast address.
-    STANDARD_NODE_ID_RANGE: ClassVar[tuple[int, int]] = (0, 0x3E)
+    #: Node IDs with 11-bit identifiers (0x3F is the 0.6 broadcast address).
+    NODE_ID_RANGE: ClassVar[tuple[int, int]] = (0, 0x3E)
+    #: Node IDs with 29-bit identifiers (``extended_id: true``).
+    EXTENDED_NODE_ID_RANGE: ClassVar[tuple[int, int]] = (0, MAX_EXTENDED_NODE_ID)
     #: Seconds between enable attempts that have not reached CLOSED_LOOP_CONTROL.
     ENABLE_RETRY_S: ClassVar[float] = 0.5
     #: Enable attempts (while the axis answers) before giving up.
@@ -131,13 +130,6 @@ class OdriveDriver(MotorDriver):
                         f"{self.motors[0].wheel!r} on the same ODrive bus, got {o[key]!r}"
                     )
         self.codec = OdriveCodec(Firmware(first["firmware"]), bool(first["extended_id"]))
-        lo, hi = self.NODE_ID_RANGE if self.codec.extended_id else self.STANDARD_NODE_ID_RANGE
-        seen: set[int] = set()
-        for m in self.motors:
-            if not lo <= m.node_id <= hi or m.node_id in seen:
-                problem = "a node ID used twice" if m.node_id in seen else f"int {lo}..{hi:#x}"
-                raise ConfigError(f"motor {m.wheel!r}.node_id: expected {problem}, got {m.node_id}")
-            seen.add(m.node_id)
         if opts:
             self.liveness_s = cast("float", opts[0]["liveness_s"])
         n = len(self.motors)
@@ -153,6 +145,12 @@ class OdriveDriver(MotorDriver):
         self._axis_detail = [""] * n
         self._error_detail = [""] * n
         self._error_request_due = [False] * n
+
+    @classmethod
+    def node_id_range(cls, options: Mapping[str, object] | None = None) -> tuple[int, int]:
+        """:attr:`EXTENDED_NODE_ID_RANGE` with ``extended_id: true``, else :attr:`NODE_ID_RANGE`."""
+        extended = bool(options and options.get("extended_id"))
+        return cls.EXTENDED_NODE_ID_RANGE if extended else cls.NODE_ID_RANGE
 
     @classmethod
     def make_simulator(cls, motor: MotorConfig) -> DeviceSimulator:
@@ -284,8 +282,8 @@ class OdriveDriver(MotorDriver):
         """Take a heartbeat, encoder estimate or error reply of one of our axes.
 
         Frames of the other ID type or of other nodes are not ours.  Of ours, malformed frames
-        and remote frames on reply IDs are counted in :attr:`rejected`; command frames (another
-        master talking to our axes) are ignored.
+        and remote frames other than the requests this driver sends itself are counted in
+        :attr:`rejected`; command frames (another master talking to our axes) are ignored.
         """
         ids = self.codec.split_id(frame)
         if ids is None:
@@ -304,9 +302,13 @@ class OdriveDriver(MotorDriver):
             self._on_heartbeat(i, msg, frame.timestamp_s)
         elif isinstance(msg, (ErrorStatus, MotorErrorStatus)):
             self._on_error_status(i, msg)
-        elif frame.is_remote_frame and ids[1] in (CmdId.HEARTBEAT, CmdId.GET_ENCODER_ESTIMATES):
+        elif frame.is_remote_frame and not self._own_request(i, ids[1]):
             self.reject("remote frame where data expected")
         return True
+
+    def _own_request(self, i: int, cmd: int) -> bool:
+        """Whether this driver itself sends RTR frames with ``cmd`` (their echo is no error)."""
+        return cmd == CmdId.GET_ERROR or (self._rtr[i] and cmd == CmdId.GET_ENCODER_ESTIMATES)
 
     # ----------------------------------------------------------------- receive helpers
 

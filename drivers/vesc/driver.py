@@ -132,17 +132,9 @@ class VescDriver(MotorDriver):
 
     def __init__(self, motors: Sequence[MotorConfig]) -> None:
         super().__init__(motors)
-        owners: dict[int, str] = {}
         opts: list[_Options] = []
         for m in self.motors:
             where = f"motor {m.wheel!r}"
-            self.validate_node_id(m.node_id, f"{where}.node_id")
-            if m.node_id in owners:
-                raise ConfigError(
-                    f"{where}.node_id: VESC ID {m.node_id} is already used by motor "
-                    f"{owners[m.node_id]!r}"
-                )
-            owners[m.node_id] = m.wheel
             raw = self.validate_options(m.options, where)
             opts.append(
                 _Options(
