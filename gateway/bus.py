@@ -74,10 +74,16 @@ def send_frames(bus: can.BusABC, frames: Iterable[Frame]) -> int:
     return sent
 
 
-def drain(bus: can.BusABC, limit: int = 10_000) -> list[Frame]:
-    """Every frame waiting in ``bus``'s receive queue, stamped with ``time.monotonic()``.
+def drain(
+    bus: can.BusABC, limit: int = 10_000, timestamp_s: float | None = None
+) -> list[Frame]:
+    """Every frame waiting in ``bus``'s receive queue.
 
     Error frames are skipped (they carry no data for the drivers).
+
+    :param timestamp_s: the receive time to stamp on every frame; ``time.monotonic()`` at
+        receipt when omitted.  (python-can's own stamps are wall-clock time on the virtual bus
+        and must not be mixed with the monotonic clock of the loop.)
 
     :raises BusError: if receiving fails.
     """
@@ -89,7 +95,7 @@ def drain(bus: can.BusABC, limit: int = 10_000) -> list[Frame]:
                 break
             if msg.is_error_frame:
                 continue
-            out.append(to_frame(msg, time.monotonic()))
+            out.append(to_frame(msg, time.monotonic() if timestamp_s is None else timestamp_s))
     except (can.CanError, OSError) as err:
         raise BusError(f"Receiving failed: {err}") from err
     return out

@@ -8,8 +8,9 @@ from __future__ import annotations
 
 import importlib
 import logging
+import os
 import sys
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import click
 
@@ -25,6 +26,9 @@ COMMANDS: dict[str, str] = {
     "ik": "ik",
     "fk": "fk",
     "frames": "frames",
+    "run": "run",
+    "twist": "twist",
+    "status": "status",
 }
 
 EXIT_ERROR = 1
@@ -42,6 +46,20 @@ class ConfigExit(click.ClickException):
     """A configuration error: message on stderr, exit code 2."""
 
     exit_code = EXIT_USAGE
+
+
+class JournalFormatter(logging.Formatter):
+    """Log lines for journald: a ``<N>`` syslog priority prefix (sd-daemon(3)) and no time
+    stamp (the journal adds its own)."""
+
+    _PRIORITY: ClassVar[dict[int, int]] = {
+        logging.CRITICAL: 2, logging.ERROR: 3, logging.WARNING: 4, logging.INFO: 6,
+        logging.DEBUG: 7,
+    }
+
+    def format(self, record: logging.LogRecord) -> str:
+        prio = self._PRIORITY.get(record.levelno, 6)
+        return f"<{prio}>{record.name}: {super().format(record)}"
 
 
 class LazyGroup(click.Group):
@@ -82,9 +100,10 @@ def main(
 ) -> None:
     """wheelgate: twist in, wheel frames out, odometry back, over CAN."""
     level = logging.WARNING - 10 * min(verbose, 2)
-    logging.basicConfig(
-        level=level, stream=sys.stderr, format="%(levelname)s %(name)s: %(message)s"
-    )
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(JournalFormatter() if os.environ.get("JOURNAL_STREAM") else
+                         logging.Formatter("%(levelname)s %(name)s: %(message)s"))
+    logging.basicConfig(level=level, handlers=[handler])
     ctx.obj = {"interface": interface, "channel": channel, "debug": debug}
 
 

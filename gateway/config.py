@@ -25,7 +25,8 @@ from __future__ import annotations
 
 import math
 import os
-from dataclasses import dataclass
+import tempfile
+from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 from types import MappingProxyType
@@ -39,6 +40,7 @@ from gateway.kinematics.model import validate_wheel
 from gateway.options import OptionSpec, validate_block
 from gateway.registry import get_driver_class
 from gateway.types import MotorConfig
+from gateway.wgproto import CanIds
 
 if TYPE_CHECKING:
     from collections.abc import Mapping
@@ -48,7 +50,7 @@ DEFAULT_NAME = "<embedded default>"
 
 _TOP = frozenset(
     {"name", "drive", "geometry", "wheels", "motors", "motor_defaults", "limits",
-     "kinematics", "bus"}
+     "kinematics", "bus", "gateway"}
 )
 _MOTOR_COMMON = {
     "driver": OptionSpec(str, help="driver name, e.g. odrive"),
@@ -78,6 +80,38 @@ _LIMIT_KEYS = {
     "max_angular_rad_s": OptionSpec(float, math.inf, minimum=0.0),
 }
 _KIN_KEYS = {"slip_tolerance_m_s": OptionSpec(float, 1e-3, minimum=0.0)}
+_GATEWAY_KEYS = {
+    "rate_hz": OptionSpec(float, 200.0, minimum=50.0, maximum=1000.0,
+                          help="control loop rate"),
+    "cmd_timeout_s": OptionSpec(float, 0.5, minimum=0.0,
+                                help="no valid twist for this long ramps the wheels to zero; 0 "
+                                     "disables"),
+    "infeasible_policy": OptionSpec(str, "reject", choices=("reject", "project")),
+    "feedback_recovery": OptionSpec(str, "auto", choices=("auto", "manual")),
+    "fault_action": OptionSpec(str, "zero", choices=("zero", "disarm")),
+    "enable_on_start": OptionSpec(bool, True),
+    "enable_timeout_s": OptionSpec(float, 5.0, minimum=0.1),
+    "odom_rate_hz": OptionSpec(float, 50.0, minimum=0.1, maximum=1000.0),
+    "status_rate_hz": OptionSpec(float, 10.0, minimum=0.1, maximum=1000.0),
+    "socket": OptionSpec(str, "", help="control socket path; empty: the default path"),
+    "socket_mode": OptionSpec(int, 0o660, minimum=0, maximum=0o777),
+    "socket_uids": OptionSpec(list, []),
+    "can_input": OptionSpec(bool, True),
+    "can_ids": OptionSpec(dict, {}),
+    "rt_priority": OptionSpec(int, 0, minimum=0, maximum=99,
+                              help="SCHED_FIFO priority of the loop thread; 0: normal"),
+    "rt_cpu": OptionSpec(int, -1, minimum=-1, help="CPU to pin the loop to; -1: any"),
+    "lock_memory": OptionSpec(bool, False),
+    "spin_us": OptionSpec(float, 200.0, minimum=0.0, maximum=5000.0),
+}
+_CAN_ID_KEYS = {
+    "twist": OptionSpec(int, 0x100, minimum=0),
+    "odom_pose": OptionSpec(int, 0x101, minimum=0),
+    "odom_velocity": OptionSpec(int, 0x102, minimum=0),
+    "status": OptionSpec(int, 0x103, minimum=0),
+    "error": OptionSpec(int, 0x104, minimum=0),
+    "extended": OptionSpec(bool, False),
+}
 _BUS_KEYS = {
     "interface": OptionSpec(str, "virtual"),
     "channel": OptionSpec(str, "wheelgate"),
@@ -100,6 +134,53 @@ class BusConfig:
 
 
 @dataclass(frozen=True, slots=True)
+class LoopConfig:
+    """The daemon's settings (``gateway:`` block).
+
+    :param rate_hz: control loop rate, 50 to 1000 Hz.
+    :param cmd_timeout_s: no valid twist for this long ramps the wheels to zero (0: never).
+    :param infeasible_policy: ``"reject"`` (error to the sender, wheels ramp to zero) or
+        ``"project"`` (follow the nearest feasible twist, count a warning).
+    :param feedback_recovery: after a motor fault or lost feedback, ``"auto"`` re-enables when
+        every motor is healthy again, ``"manual"`` waits for an explicit enable.
+    :param fault_action: on a fault, ``"zero"`` commands zero speed, ``"disarm"`` also disarms.
+    :param enable_on_start: enable the drives when the daemon starts.
+    :param enable_timeout_s: how long the drives may take to enable.
+    :param odom_rate_hz: odometry publishing rate (CAN and socket).
+    :param status_rate_hz: status publishing rate.
+    :param socket: control socket path (empty: the default path).
+    :param socket_mode: file mode of the control socket.
+    :param socket_uids: user IDs allowed besides the daemon's own (empty: file mode decides).
+    :param can_input: accept twist frames from the CAN bus.
+    :param can_ids: the gateway's own CAN IDs (``twist``, ``odom_pose``, ``odom_velocity``,
+        ``status``, ``error``, ``extended``; defaults in ``config/wheelgate.dbc``).
+    :param rt_priority: SCHED_FIFO priority of the loop thread (0: normal scheduling).
+    :param rt_cpu: CPU to pin the loop thread to (-1: any).
+    :param lock_memory: ``mlockall`` after start-up.
+    :param spin_us: how long before each deadline the loop spins instead of sleeping.
+    """
+
+    rate_hz: float = 200.0
+    cmd_timeout_s: float = 0.5
+    infeasible_policy: str = "reject"
+    feedback_recovery: str = "auto"
+    fault_action: str = "zero"
+    enable_on_start: bool = True
+    enable_timeout_s: float = 5.0
+    odom_rate_hz: float = 50.0
+    status_rate_hz: float = 10.0
+    socket: str = ""
+    socket_mode: int = 0o660
+    socket_uids: tuple[int, ...] = ()
+    can_input: bool = True
+    can_ids: CanIds = field(default_factory=CanIds)
+    rt_priority: int = 0
+    rt_cpu: int = -1
+    lock_memory: bool = False
+    spin_us: float = 200.0
+
+
+@dataclass(frozen=True, slots=True)
 class GatewayConfig:
     """A validated configuration.
 
@@ -111,6 +192,7 @@ class GatewayConfig:
     :param motors: per wheel (model order), its motor, ``None`` for passive wheels.
     :param limits: speed and acceleration limits.
     :param bus: bus settings.
+    :param loop: the daemon's settings.
     """
 
     source: str
@@ -121,11 +203,28 @@ class GatewayConfig:
     motors: tuple[MotorConfig | None, ...]
     limits: Limits
     bus: BusConfig
+    loop: LoopConfig = field(default_factory=LoopConfig)
 
     @property
     def wheels(self) -> tuple[Wheel, ...]:
         """The wheels, in model order."""
         return self.model.wheels
+
+
+def default_socket_path() -> str:
+    """``$WHEELGATE_SOCKET``, else ``/run/wheelgate/wheelgate.sock`` when that directory is
+    writable (systemd's RuntimeDirectory), else ``$XDG_RUNTIME_DIR/wheelgate.sock``, else a
+    per-user path in the temporary directory."""
+    env = os.environ.get("WHEELGATE_SOCKET")
+    if env:
+        return env
+    run = Path("/run/wheelgate")
+    if run.is_dir() and os.access(run, os.W_OK):
+        return str(run / "wheelgate.sock")
+    xdg = os.environ.get("XDG_RUNTIME_DIR")
+    if xdg and Path(xdg).is_dir():
+        return str(Path(xdg) / "wheelgate.sock")
+    return str(Path(tempfile.gettempdir()) / f"wheelgate-{os.getuid()}.sock")
 
 
 def load_config(
@@ -210,11 +309,12 @@ def parse_config(
         max_angular_rad_s=float(lim["max_angular_rad_s"]),  # type: ignore[arg-type]
     )
     bus = _bus(raw.get("bus", {}), source, overrides or {})
+    loop = _loop(raw.get("gateway", {}), source)
     name = raw.get("name", Path(source).stem if source != DEFAULT_NAME else "default")
     if not isinstance(name, str):
         raise ConfigError(f"{source}: name: expected str, got {name!r}")
     return GatewayConfig(
-        source, name, str(drive), MappingProxyType(geometry), model, motors, limits, bus
+        source, name, str(drive), MappingProxyType(geometry), model, motors, limits, bus, loop
     )
 
 
@@ -361,3 +461,30 @@ def _bus(raw: object, source: str, overrides: Mapping[str, object]) -> BusConfig
         if overrides.get(key) is not None:
             v[key] = spec.validate(overrides[key], f"--{key}")
     return BusConfig(str(v["interface"]), str(v["channel"]), int(v["bitrate"]))  # type: ignore[call-overload]
+
+
+def _loop(raw: object, source: str) -> LoopConfig:
+    v = validate_block(raw, _GATEWAY_KEYS, f"{source}: gateway", "gateway keys")
+    ids = validate_block(v["can_ids"], _CAN_ID_KEYS, f"{source}: gateway.can_ids", "CAN ID keys")
+    try:
+        can_ids = CanIds.from_mapping(ids)
+    except ConfigError as err:
+        raise ConfigError(f"{source}: {err}") from err
+    uids = v["socket_uids"]
+    if not isinstance(uids, list) or not all(
+        isinstance(u, int) and not isinstance(u, bool) and u >= 0 for u in uids
+    ):
+        raise ConfigError(
+            f"{source}: gateway.socket_uids: expected a list of user IDs, got {uids!r}"
+        )
+    if float(v["odom_rate_hz"]) > float(v["rate_hz"]):  # type: ignore[arg-type]
+        raise ConfigError(
+            f"{source}: gateway.odom_rate_hz: expected at most rate_hz ({v['rate_hz']}), "
+            f"got {v['odom_rate_hz']}"
+        )
+    fields = {k: x for k, x in v.items() if k not in ("can_ids", "socket_uids")}
+    return LoopConfig(
+        **fields,  # type: ignore[arg-type]
+        socket_uids=tuple(uids),
+        can_ids=can_ids,
+    )

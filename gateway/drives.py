@@ -18,7 +18,7 @@ if TYPE_CHECKING:
     from gateway.config import GatewayConfig
     from gateway.driver import MotorDriver
     from gateway.sim import DeviceSimulator
-    from gateway.types import Frame, MotorStatus
+    from gateway.types import Frame, MotorStatus, WheelFeedback
 
 
 class DriveSet:
@@ -87,6 +87,14 @@ class DriveSet:
             for i, st in zip(idx, drv.status(now_s), strict=True)
         ]
         return [st for _, st in sorted(pairs, key=lambda p: p[0])]
+
+    def feedback_by_wheel(self) -> list[WheelFeedback | None]:
+        """The latest feedback of every wheel in model order (``None``: passive or none yet)."""
+        out: list[WheelFeedback | None] = [None] * len(self.config.motors)
+        for drv, idx in self.groups:
+            for k, i in enumerate(idx):
+                out[i] = drv.feedback(k)
+        return out
 
     def simulators(self) -> list[DeviceSimulator]:
         """A device simulator for every motor."""

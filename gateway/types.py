@@ -253,3 +253,52 @@ class MotorConfig:
     def max_wheel_rad_s(self) -> float:
         """The wheel speed limit in rad/s that ``max_rpm`` at the motor allows."""
         return self.max_rpm * 2.0 * math.pi / 60.0 / self.gear_ratio
+
+
+class GatewayState(enum.IntEnum):
+    """What the gateway as a whole is doing (on the wire in the status frame and replies)."""
+
+    #: Drives disarmed; twists are refused until an enable.
+    DISABLED = 0
+    #: The drives' enable sequences are under way.
+    ENABLING = 1
+    #: Following twists.
+    RUNNING = 2
+    #: A motor faulted or stopped answering; wheels commanded to zero.
+    FAULT = 3
+    #: Emergency stop latched: zero and disarm until an explicit enable.
+    ESTOP = 4
+    #: Shutting down.
+    STOPPING = 5
+
+
+class ErrorCode(enum.IntEnum):
+    """Error classes reported to twist senders (socket replies and the CAN error frame)."""
+
+    NONE = 0
+    INFEASIBLE_TWIST = 1
+    MOTOR_FAULT = 2
+    FEEDBACK_TIMEOUT = 3
+    ESTOP = 4
+    BUS_ERROR = 5
+    BAD_COMMAND = 6
+    COMMAND_TIMEOUT = 7
+    NOT_ENABLED = 8
+
+
+class ConstraintCode(enum.IntEnum):
+    """Which kinematic constraint an infeasible twist breaks."""
+
+    NONE = 0
+    SLIDING = 1
+    STEERING_LIMIT = 2
+    STEERING_COUPLING = 3
+
+    @classmethod
+    def from_name(cls, constraint: str) -> ConstraintCode:
+        """The code for an :class:`~gateway.errors.InfeasibleTwistError` constraint name."""
+        return {
+            "sliding": cls.SLIDING,
+            "steering limit": cls.STEERING_LIMIT,
+            "steering coupling": cls.STEERING_COUPLING,
+        }.get(constraint, cls.NONE)

@@ -85,7 +85,7 @@ def with_(path: str, value: object) -> dict[str, object]:
 @pytest.mark.parametrize(
     ("path", "value", "message"),
     [
-        ("colour", "red", "robot.yaml: colour: unknown key (known keys: bus, drive, geometry, "),
+        ("colour", "red", "robot.yaml: colour: unknown key (known keys: bus, drive, gateway, "),
         ("drive", "hovercraft", "robot.yaml: drive: expected one of ackermann, differential, "),
         ("geometry.track", "wide", "robot.yaml: geometry.track: expected float, got 'wide'"),
         ("geometry.track", -0.3, "robot.yaml: geometry.track: expected at least 0, got -0.3"),
@@ -165,3 +165,31 @@ def test_bus_precedence(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv("GATEWAY_BITRATE", "fast")
     with pytest.raises(ConfigError, match="GATEWAY_BITRATE: expected an integer bit rate"):
         parse_config(doc, "r")
+
+
+@pytest.mark.parametrize(
+    ("block", "message"),
+    [
+        ({"rate_hz": 5}, "robot.yaml: gateway.rate_hz: expected at least 50, got 5"),
+        ({"rate_hz": 2000}, "robot.yaml: gateway.rate_hz: expected at most 1000, got 2000"),
+        ({"infeasible_policy": "ignore"}, "robot.yaml: gateway.infeasible_policy: expected one of "
+                                          "'reject', 'project', got 'ignore'"),
+        ({"odom_rate_hz": 500}, "robot.yaml: gateway.odom_rate_hz: expected at most rate_hz"),
+        ({"can_ids": {"twist": 0x101}}, "robot.yaml: gateway.can_ids"),
+        ({"can_ids": {"status": 0x800}}, "robot.yaml: gateway.can_ids.status"),
+        ({"socket_uids": ["root"]}, "robot.yaml: gateway.socket_uids: expected a list of user IDs"),
+        ({"spin": 1}, "robot.yaml: gateway.spin: unknown key (known gateway keys: "),
+    ],
+)
+def test_bad_gateway_block(block: dict[str, object], message: str) -> None:
+    with pytest.raises(ConfigError) as info:
+        parse_config({**BASE, "gateway": block}, "robot.yaml")
+    assert message in str(info.value)
+
+
+def test_gateway_block_defaults_and_octal_mode() -> None:
+    cfg = parse_config(yaml.safe_load(yaml.safe_dump(BASE) + "gateway: {socket_mode: 0600}\n"),
+                       "r")
+    assert cfg.loop.socket_mode == 0o600
+    assert cfg.loop.rate_hz == 200.0
+    assert cfg.loop.can_ids.twist == 0x100

@@ -121,10 +121,11 @@ def test_fk_inverts_ik(model: RobotModel, t: Twist) -> None:
     except KinematicsError:
         return  # too few wheels to determine the twist (e.g. one spherical wheel)
     got = fk.twist
+    # Random layouts can be nearly degenerate (condition numbers ~1e8): 1e-6 absolute.
     assert (got.vx_m_s, got.vy_m_s, got.wz_rad_s) == pytest.approx(
-        (t.vx_m_s, t.vy_m_s, t.wz_rad_s), abs=1e-7
+        (t.vx_m_s, t.vy_m_s, t.wz_rad_s), abs=1e-6
     )
-    assert fk.residual_m_s == pytest.approx(0.0, abs=1e-7)
+    assert fk.residual_m_s == pytest.approx(0.0, abs=1e-6)
 
 
 @settings(max_examples=300, deadline=None)

@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING, Any
 
 import click
 
-from gateway.config import GatewayConfig, load_config
+from gateway.config import GatewayConfig, default_socket_path, load_config
 
 if TYPE_CHECKING:
     from gateway.errors import InfeasibleTwistError
@@ -19,6 +19,18 @@ def load(ctx: click.Context, path: str | None) -> GatewayConfig:
     """The configuration at ``path`` with the root group's bus overrides."""
     obj = ctx.find_root().obj or {}
     return load_config(path, {"interface": obj.get("interface"), "channel": obj.get("channel")})
+
+
+def socket_for(ctx: click.Context, config_path: str | None, socket_path: str | None) -> str:
+    """The daemon's socket: ``--socket``, else the config's ``gateway.socket`` (with ``-c``),
+    else the default path."""
+    if socket_path:
+        return socket_path
+    if config_path is not None:
+        cfg = load(ctx, config_path)
+        if cfg.loop.socket:
+            return cfg.loop.socket
+    return default_socket_path()
 
 
 def twist_options(func: Any) -> Any:

@@ -1,0 +1,52 @@
+"""``wheelgate status``: the running daemon's state, odometry, counters and timing."""
+
+from __future__ import annotations
+
+import json
+
+import click
+
+from gateway.cli import config_option, json_option
+from gateway.client import ControlClient
+from gateway.commands._common import socket_for
+
+
+@click.command()
+@config_option
+@click.option("--socket", "socket_path", type=click.Path(dir_okay=False), default=None,
+              help="Control socket of the daemon.")
+@json_option
+@click.pass_context
+def command(
+    ctx: click.Context, config_path: str | None, socket_path: str | None, as_json: bool
+) -> None:
+    """Print the running gateway's state, motors, odometry, counters and timing."""
+    with ControlClient(socket_for(ctx, config_path, socket_path)) as client:
+        reply = client.request({"op": "status"})
+    if not reply.get("ok"):
+        raise click.ClickException(str((reply.get("error") or {}).get("message", reply)))
+    reply.pop("ok", None)
+    reply.pop("id", None)
+    if as_json:
+        click.echo(json.dumps(reply))
+        return
+    click.echo(f"robot: {reply['robot']}  state: {reply['state']}"
+               + (f" ({reply['reason']})" if reply.get("reason") else ""))
+    odo = reply["odometry"]
+    click.echo(f"odometry: x={odo['x']:.4f} m y={odo['y']:.4f} m theta={odo['theta']:.4f} rad "
+               f"v=({odo['vx']:.3f}, {odo['vy']:.3f}, {odo['wz']:.3f}) slip={odo['slip']:.4f} m/s "
+               f"distance={odo['distance']:.3f} m")
+    for m in reply["motors"]:
+        age = m["feedback_age_s"]
+        click.echo(f"  {m['name']:<12} node {m['node_id']:<4} {m['state']:<9} "
+                   f"age {'-' if age is None else f'{age * 1000:.1f} ms':>9}  "
+                   f"{', '.join(m['faults']) or 'no faults'} {m['detail']}")
+    t = reply["timing"]
+    click.echo(f"timing: {t['cycles']} cycles, {t['missed']} missed; lateness p50/p99/max "
+               f"{t['lateness_p50_us']:.0f}/{t['lateness_p99_us']:.0f}/{t['lateness_max_us']:.0f} "
+               f"us; cost p50/p99/max {t['cost_p50_us']:.0f}/{t['cost_p99_us']:.0f}/"
+               f"{t['cost_max_us']:.0f} us")
+    counters = {k: v for k, v in reply["counters"].items() if v and k != "rejected_frames"}
+    click.echo("counters: " + ", ".join(f"{k}={v}" for k, v in sorted(counters.items())))
+    if reply.get("last_error"):
+        click.echo(f"last error: {reply['last_error']['message']}")

@@ -1,0 +1,274 @@
+"""The gateway's decisions, kept pure: which twist to follow, when to stop, when to disarm.
+
+:class:`Supervisor` takes events (twists from any source, stop, e-stop, enable, disable, the
+motors' states) with explicit times and answers, each cycle, with a :class:`Decision`: the
+twist to command, whether to ramp to it through the acceleration limits or jump (e-stop), and
+whether the drives should be armed.  The loop (:mod:`gateway.loop`) does the I/O around it.
+
+States (:class:`~gateway.types.GatewayState`)::
+
+    DISABLED --enable--> ENABLING --all motors ENABLED--> RUNNING
+    RUNNING  --motor FAULT/OFFLINE--> FAULT --healthy again, recovery "auto"--> ENABLING
+    FAULT    --enable (recovery "manual")--> ENABLING
+    any      --e-stop--> ESTOP --enable--> ENABLING
+    any      --disable--> DISABLED            ENABLING --timeout--> FAULT
+
+Safety rules:
+
+* no valid twist for ``cmd_timeout_s`` (when > 0): the target becomes zero, reached within the
+  deceleration limits;
+* an infeasible twist: ``reject`` answers with the error and ramps to zero; ``project``
+  follows the nearest feasible twist and counts a warning;
+* a motor that faults or stops answering: zero for every wheel (and disarm with
+  ``fault_action: disarm``); the error names the motor;
+* e-stop: zero at once, disarm, and stay there until an explicit enable.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+from gateway.errors import InfeasibleTwistError
+from gateway.types import DriveState, ErrorCode, GatewayState, Twist
+
+if TYPE_CHECKING:
+    from collections.abc import Sequence
+
+    from gateway.config import LoopConfig
+    from gateway.kinematics import RobotModel
+    from gateway.types import MotorStatus
+
+ZERO = Twist()
+
+
+class Source(enum.Enum):
+    """Where a command came from."""
+
+    SOCKET = "socket"
+    CAN = "can"
+    INTERNAL = "internal"
+
+
+@dataclass(frozen=True, slots=True)
+class Rejection:
+    """Why a command was refused.
+
+    :param code: the error class.
+    :param message: a sentence for people.
+    :param error: the kinematic error, for infeasible twists.
+    """
+
+    code: ErrorCode
+    message: str
+    error: InfeasibleTwistError | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class Accepted:
+    """A twist that will be followed.
+
+    :param twist: the twist the gateway follows (the nearest feasible one when projected).
+    :param projected: whether it was projected from an infeasible request.
+    :param error: the kinematic error of the request, when projected.
+    """
+
+    twist: Twist
+    projected: bool = False
+    error: InfeasibleTwistError | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class Decision:
+    """What to command this cycle.
+
+    :param twist: the target twist.
+    :param ramp: reach it through the acceleration limits (False: jump, for e-stop).
+    :param armed: whether the drives should be enabled.
+    :param cmd_timeout: whether the command timeout forced the zero target.
+    """
+
+    twist: Twist
+    ramp: bool
+    armed: bool
+    cmd_timeout: bool
+
+
+class Supervisor:
+    """The gateway's state machine.
+
+    :param model: the robot, to check twists.
+    :param loop: the daemon's settings.
+    """
+
+    def __init__(self, model: RobotModel, loop: LoopConfig) -> None:
+        self.model = model
+        self.cfg = loop
+        self.state = GatewayState.DISABLED
+        self.target = ZERO
+        self._last_twist_s: float | None = None
+        self._enable_started_s = 0.0
+        #: The reason for the current FAULT or ESTOP state, for status reports.
+        self.reason = ""
+        #: Names of the motors that caused the current fault.
+        self.faulted: tuple[str, ...] = ()
+        #: Counters of what happened, by kind.
+        self.counts = {"infeasible": 0, "projected": 0, "rejected": 0, "faults": 0,
+                       "cmd_timeouts": 0, "estops": 0}
+        self._timed_out = False
+        self._pending_enable = False
+
+    # ----------------------------------------------------------------- commands
+
+    def twist(self, twist: Twist, now_s: float, steer: Sequence[float | None] | None = None
+              ) -> Accepted | Rejection:
+        """A twist from a client.
+
+        :param steer: current steering angles, for the feasibility check.
+        """
+        if self.state is not GatewayState.RUNNING:
+            self.counts["rejected"] += 1
+            return Rejection(*self._not_running())
+        try:
+            self.model.ik(twist, steer)
+        except InfeasibleTwistError as err:
+            self.counts["infeasible"] += 1
+            self._last_twist_s = now_s
+            if self.cfg.infeasible_policy == "project":
+                self.counts["projected"] += 1
+                self.target = err.nearest
+                return Accepted(err.nearest, projected=True, error=err)
+            self.target = ZERO
+            return Rejection(ErrorCode.INFEASIBLE_TWIST, str(err), err)
+        self.target = twist
+        self._last_twist_s = now_s
+        self._timed_out = False
+        return Accepted(twist)
+
+    def stop(self, now_s: float) -> None:
+        """Zero twist, drives stay armed."""
+        self.target = ZERO
+        self._last_twist_s = now_s
+
+    def estop(self, reason: str = "e-stop requested") -> None:
+        """Zero at once and disarm until an explicit enable."""
+        if self.state is not GatewayState.ESTOP:
+            self.counts["estops"] += 1
+        self.state = GatewayState.ESTOP
+        self.reason = reason
+        self.target = ZERO
+
+    def enable(self, now_s: float) -> None:
+        """Start (or restart) the enable sequence; also the way out of ESTOP and FAULT."""
+        if self.state in (GatewayState.RUNNING, GatewayState.ENABLING, GatewayState.STOPPING):
+            return
+        self.state = GatewayState.ENABLING
+        self._enable_started_s = now_s
+        self._pending_enable = True
+        self.target = ZERO
+        self.reason = ""
+        self.faulted = ()
+
+    def disable(self) -> None:
+        """Ramp to zero and disarm."""
+        if self.state is not GatewayState.STOPPING:
+            self.state = GatewayState.DISABLED
+        self.target = ZERO
+
+    def shutdown(self) -> None:
+        """The process is stopping: zero and disarm for good."""
+        self.state = GatewayState.STOPPING
+        self.target = ZERO
+
+    @property
+    def cmd_timeout_active(self) -> bool:
+        """Whether the command timeout holds the target at zero."""
+        return self._timed_out
+
+    def take_enable_request(self) -> bool:
+        """Whether the loop should send the drives' enable frames now (once per enable)."""
+        pending, self._pending_enable = self._pending_enable, False
+        return pending
+
+    # ----------------------------------------------------------------- per cycle
+
+    def motors(self, statuses: Sequence[MotorStatus], now_s: float) -> str | None:
+        """Take the motors' states; return a fault message when a fault starts."""
+        bad = [s for s in statuses if s.state in (DriveState.FAULT, DriveState.OFFLINE)]
+        if self.state is GatewayState.ENABLING:
+            if statuses and all(s.state is DriveState.ENABLED for s in statuses):
+                self.state = GatewayState.RUNNING
+                self._last_twist_s = now_s
+                return None
+            if now_s - self._enable_started_s > self.cfg.enable_timeout_s:
+                late = [s for s in statuses if s.state is not DriveState.ENABLED]
+                return self._fault(late, "did not enable within "
+                                         f"{self.cfg.enable_timeout_s:g} s")
+            return None
+        if self.state is GatewayState.RUNNING and bad:
+            return self._fault(bad, "")
+        if (
+            self.state is GatewayState.FAULT
+            and self.cfg.feedback_recovery == "auto"
+            and statuses
+            and not bad
+        ):
+            self.enable(now_s)
+        return None
+
+    def _fault(self, motors: Sequence[MotorStatus], why: str) -> str:
+        self.counts["faults"] += 1
+        self.state = GatewayState.FAULT
+        self.target = ZERO
+        self.faulted = tuple(s.name for s in motors)
+        parts = []
+        for s in motors:
+            if why:
+                text = why
+            elif s.state is DriveState.OFFLINE:
+                age = "no feedback yet" if s.feedback_age_s is None else (
+                    f"no feedback for {s.feedback_age_s:.3f} s")
+                text = f"stopped answering ({age})"
+            else:
+                text = f"reports a fault: {s.detail or repr(s.faults)}"
+            parts.append(f"motor {s.name!r} (node {s.node_id}) {text}")
+        self.reason = "; ".join(parts)
+        return self.reason
+
+    def decide(self, now_s: float) -> Decision:
+        """The command for this cycle."""
+        state = self.state
+        if state is GatewayState.ESTOP:
+            return Decision(ZERO, ramp=False, armed=False, cmd_timeout=False)
+        if state in (GatewayState.DISABLED, GatewayState.STOPPING):
+            return Decision(ZERO, ramp=True, armed=False, cmd_timeout=False)
+        if state is GatewayState.FAULT:
+            # Zero at once: with a motor gone, no wheel should keep driving on its own.
+            return Decision(ZERO, ramp=False, armed=self.cfg.fault_action != "disarm",
+                            cmd_timeout=False)
+        if state is GatewayState.ENABLING:
+            return Decision(ZERO, ramp=True, armed=True, cmd_timeout=False)
+        timeout = self.cfg.cmd_timeout_s
+        if (
+            timeout > 0.0
+            and self.target != ZERO
+            and self._last_twist_s is not None
+            and now_s - self._last_twist_s > timeout
+        ):
+            self.target = ZERO
+            if not self._timed_out:
+                self.counts["cmd_timeouts"] += 1
+            self._timed_out = True
+        return Decision(self.target, ramp=True, armed=True, cmd_timeout=self._timed_out)
+
+    def _not_running(self) -> tuple[ErrorCode, str]:
+        if self.state is GatewayState.ESTOP:
+            return ErrorCode.ESTOP, f"e-stop is latched ({self.reason}); send enable first"
+        if self.state is GatewayState.FAULT:
+            return ErrorCode.MOTOR_FAULT, f"gateway is in FAULT: {self.reason}"
+        if self.state is GatewayState.ENABLING:
+            return ErrorCode.NOT_ENABLED, "drives are still enabling"
+        return ErrorCode.NOT_ENABLED, (
+            f"gateway is {self.state.name}; send enable first"
+        )

@@ -1,0 +1,274 @@
+"""The daemon: the real-time loop around :class:`~gateway.loop.Gateway`.
+
+It runs the cycle at absolute deadlines (sleep, then spin for the last ``spin_us``), waits for
+the control socket while it sleeps so a twist is applied at the next cycle, speaks sd_notify
+(READY=1 once the drives are enabled, WATCHDOG=1 from the loop while it is healthy, STATUS=
+on every state change, STOPPING=1), and on SIGTERM or SIGINT sends zero and disarm frames
+before it exits 0.  With ``--sim`` every motor gets its device simulator on the same virtual
+bus in the same process.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import signal
+import time
+from typing import TYPE_CHECKING, Any
+
+import can
+
+from gateway.config import default_socket_path
+from gateway.control import Accepted, Source
+from gateway.loop import Gateway
+from gateway.protocol import (
+    CommandRequest,
+    Op,
+    ProtocolError,
+    ResetOdometryRequest,
+    SubscribeRequest,
+    Topic,
+    TwistRequest,
+    event,
+    reply_error,
+    reply_ok,
+    reply_protocol_error,
+)
+from gateway.report import status_dict
+from gateway.sdnotify import SystemdNotifier
+from gateway.server import ControlServer
+from gateway.simbus import SimulatedControllers
+from gateway.timing import Scheduler, realtime_setup
+from gateway.types import Frame, GatewayState
+
+if TYPE_CHECKING:
+    from types import FrameType
+
+    from gateway.config import GatewayConfig
+    from gateway.protocol import Request
+
+log = logging.getLogger(__name__)
+
+#: How long the shutdown keeps polling so multi-step disarm sequences finish (s).
+SHUTDOWN_GRACE_S = 0.3
+
+
+class Daemon:
+    """The running gateway: bus, optional simulators, socket, recorder, notifier.
+
+    :param config: the configuration.
+    :param sim: run every motor's device simulator on a virtual bus in this process.
+    :param record: candump-format log of every frame sent and received.
+    :param socket_path: the control socket; the config's, or the default, when omitted.
+    :param notifier: sd_notify client; from the environment when omitted.
+    """
+
+    def __init__(
+        self,
+        config: GatewayConfig,
+        sim: bool = False,
+        record: str | None = None,
+        socket_path: str | None = None,
+        notifier: SystemdNotifier | None = None,
+    ) -> None:
+        if sim and config.bus.interface != "virtual":
+            log.info("--sim: using the virtual bus instead of %s", config.bus.interface)
+            config = dataclasses.replace(
+                config, bus=dataclasses.replace(config.bus, interface="virtual")
+            )
+        self.config = config
+        self.notifier = notifier if notifier is not None else SystemdNotifier.from_env()
+        self._stop = False
+        self._closers: list[Any] = []
+        self.writer: can.Listener | None = None
+        try:
+            if record:
+                self.writer = can.CanutilsLogWriter(record)
+                self._closers.append(self.writer.stop)
+            self.scheduler = Scheduler(config.loop.rate_hz, spin_s=config.loop.spin_us * 1e-6)
+            self.gateway = Gateway(config, record=self.writer, timer=self.scheduler.timer)
+            self._closers.append(self.gateway.close)
+            self.sim: SimulatedControllers | None = None
+            if sim:
+                self.sim = SimulatedControllers(self.gateway.drives.simulators(),
+                                                config.bus.channel).start()
+                self._closers.append(self.sim.shutdown)
+            path = socket_path or config.loop.socket or default_socket_path()
+            self.server = ControlServer(
+                path,
+                mode=config.loop.socket_mode,
+                allowed_uids=frozenset(config.loop.socket_uids) or None,
+            )
+            self._closers.append(self.server.close)
+        except BaseException:
+            self.close()
+            raise
+        self.socket_path = path
+        self._ready = False
+        self._state = GatewayState.DISABLED
+        self._pending_twists: list[float] = []
+        self._watchdog_s = self.notifier.watchdog_period_s
+        self._next_watchdog = 0.0
+        self.rt_notes: list[str] = []
+
+    # ----------------------------------------------------------------- requests
+
+    def handle(self, client: int, request: Request | ProtocolError, now_s: float) -> None:
+        """Answer one socket request."""
+        gw, server = self.gateway, self.server
+        if isinstance(request, ProtocolError):
+            server.reply(client, reply_protocol_error(request))
+            return
+        rid = request.id
+        if isinstance(request, TwistRequest):
+            result = gw.twist(request.twist, now_s, Source.SOCKET)
+            if isinstance(result, Accepted):
+                self._pending_twists.append(time.perf_counter())
+                server.reply(client, reply_ok(rid, {
+                    "twist": result.twist, "projected": result.projected,
+                    **({"warning": str(result.error)} if result.error else {}),
+                }))
+                return
+            details: dict[str, object] = {}
+            if result.error is not None:
+                err = result.error
+                details = {"wheel": err.wheel, "constraint": err.constraint,
+                           "residual_m_s": err.residual_m_s, "nearest": err.nearest}
+            out: list[Frame] = []
+            gw.report_error(result.code, result.message, out, result)
+            gw.send(out)
+            server.reply(client, reply_error(rid, result.code, result.message, **details))
+            return
+        if isinstance(request, ResetOdometryRequest):
+            gw.odometry.reset(request.pose)
+            server.reply(client, reply_ok(rid, {"odometry": gw.odometry_dict()}))
+            return
+        if isinstance(request, SubscribeRequest):
+            server.subscribe(client, request.topics)
+            server.reply(client, reply_ok(rid, {"topics": sorted(t.value for t in request.topics)}))
+            return
+        self._command(client, request, now_s)
+
+    def _command(self, client: int, request: CommandRequest, now_s: float) -> None:
+        sup, rid = self.gateway.supervisor, request.id
+        if request.op is Op.STATUS:
+            self.server.reply(client, reply_ok(rid, self.status()))
+            return
+        if request.op is Op.STOP:
+            sup.stop(now_s)
+        elif request.op is Op.ESTOP:
+            sup.estop("e-stop requested on the control socket")
+        elif request.op is Op.ENABLE:
+            sup.enable(now_s)
+        elif request.op is Op.DISABLE:
+            sup.disable()
+        elif request.op is Op.UNSUBSCRIBE:
+            self.server.unsubscribe(client)
+        self.server.reply(client, reply_ok(rid, {"state": sup.state.name}))
+
+    def status(self) -> dict[str, object]:
+        """Everything a ``status`` request returns."""
+        return status_dict(self, time.monotonic())
+
+    # ----------------------------------------------------------------- loop
+
+    def request_stop(self, signum: int = 0, frame: FrameType | None = None) -> None:
+        """Ask the loop to stop (signal handler)."""
+        self._stop = True
+
+    def run(self, max_cycles: int | None = None) -> int:
+        """Run until SIGTERM/SIGINT (or ``max_cycles``); return the exit status."""
+        old = {s: signal.signal(s, self.request_stop) for s in (signal.SIGTERM, signal.SIGINT)}
+        try:
+            self.rt_notes = realtime_setup(
+                self.config.loop.rt_priority or None,
+                None if self.config.loop.rt_cpu < 0 else self.config.loop.rt_cpu,
+                self.config.loop.lock_memory,
+            )
+            if self.config.loop.enable_on_start:
+                self.gateway.supervisor.enable(time.monotonic())
+            else:
+                self._mark_ready()
+            cycles = 0
+            while not self._stop and (max_cycles is None or cycles < max_cycles):
+                self.step(time.monotonic())
+                cycles += 1
+                self._wait()
+        finally:
+            self.shutdown()
+            for s, handler in old.items():
+                signal.signal(s, handler)
+        return 0
+
+    def step(self, now_s: float) -> None:
+        """One cycle plus its bookkeeping (also used by tests on simulated time)."""
+        gw = self.gateway
+        start = time.perf_counter()
+        gw.cycle(now_s)
+        sent = time.perf_counter()
+        for arrived in self._pending_twists:
+            self.scheduler.timer.record_latency(sent - arrived)
+        self._pending_twists.clear()
+        for topic, payload in gw.outbox:
+            self.server.publish(Topic(topic), event(topic, payload))
+        gw.outbox.clear()
+        if gw.state is not self._state:
+            self._state = gw.state
+            reason = gw.supervisor.reason
+            text = gw.state.name + (f": {reason}" if reason else "")
+            self.notifier.status(text)
+            log.info("state %s", text)
+        if gw.state is GatewayState.RUNNING and not self._ready:
+            self._mark_ready()
+        if self._watchdog_s is not None and now_s >= self._next_watchdog and self._healthy():
+            self.notifier.watchdog()
+            self._next_watchdog = now_s + self._watchdog_s
+        self.scheduler.timer.record_cost(time.perf_counter() - start)
+
+    def _healthy(self) -> bool:
+        """Whether to feed the systemd watchdog: the loop runs (we are in it) and the bus
+        takes frames; a wedged bus ends in a restart instead of a zombie daemon."""
+        return self.gateway.bus_healthy
+
+    def _mark_ready(self) -> None:
+        self._ready = True
+        self.notifier.ready(f"{self.gateway.state.name}; socket {self.socket_path}")
+
+    def _wait(self) -> None:
+        sched = self.scheduler
+        while True:
+            remaining = sched.remaining_s()
+            if remaining <= sched.spin_s:
+                break
+            events = self.server.poll(remaining - sched.spin_s)
+            now = time.monotonic()
+            for client, request in events:
+                self.handle(client, request, now)
+        sched.wait_next()
+
+    def shutdown(self) -> None:
+        """Zero and disarm every motor, then close everything (safe to call twice)."""
+        if not self._closers:
+            return
+        gw = self.gateway
+        self.notifier.stopping("sending zero and disarm")
+        gw.supervisor.shutdown()
+        now = time.monotonic()
+        gw.send(gw.drives.disable(now))
+        end = now + SHUTDOWN_GRACE_S
+        while time.monotonic() < end:
+            time.sleep(0.01)
+            t = time.monotonic()
+            for frame in gw.receive(t):
+                gw.drives.on_frame(frame)
+            gw.send(gw.drives.poll(t))
+        self.close()
+
+    def close(self) -> None:
+        """Release every resource (reverse order of creation)."""
+        while self._closers:
+            closer = self._closers.pop()
+            try:
+                closer()
+            except Exception as err:  # closing must go on whatever one part does
+                log.warning("closing %r failed: %s", closer, err)

@@ -1,0 +1,348 @@
+"""One control cycle of the gateway: receive, decide, solve, send one burst, integrate.
+
+:class:`Gateway` owns the bus, the drivers, the odometry and the supervisor.  Its
+:meth:`Gateway.cycle` is deterministic given the time it is called with, so tests run it on
+simulated time; :mod:`gateway.daemon` calls it from the real-time loop.
+
+Each cycle:
+
+1. drain the bus: CAN twist frames go to the supervisor, feedback frames to the drivers
+   (timestamped on receipt);
+2. the supervisor turns the motors' states and the newest valid twist into a target;
+3. inverse kinematics and limits (one scale factor, reported) give every wheel's speed;
+4. every wheel's frame is built, then all go out as one burst, so no two wheels act on
+   commands from different cycles;
+5. odometry integrates the encoder positions exactly (SE(2)); odometry and status go out on
+   CAN and to socket subscribers at their rates.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from typing import TYPE_CHECKING
+
+import can
+
+from gateway.bus import drain, open_bus, to_message
+from gateway.control import Accepted, Rejection, Source, Supervisor
+from gateway.drives import DriveSet
+from gateway.errors import BusError, DecodeError
+from gateway.kinematics import Odometry, apply_limits
+from gateway.timing import LoopTimer
+from gateway.types import ConstraintCode, ErrorCode, Frame, GatewayState, Twist
+from gateway.wgproto import (
+    NO_TWIST_COUNTER,
+    NO_WHEEL,
+    CounterKind,
+    CounterTracker,
+    ErrorReport,
+    StatusFlags,
+    StatusReport,
+    TwistFlags,
+    WgCodec,
+)
+
+if TYPE_CHECKING:
+    from gateway.config import GatewayConfig
+    from gateway.kinematics import IkResult, LimitReport
+
+log = logging.getLogger(__name__)
+
+#: Consecutive failed bursts after which the bus is reopened.
+REOPEN_AFTER = 20
+
+
+class Gateway:
+    """The gateway's state and its cycle.
+
+    :param config: the validated configuration.
+    :param bus: an open python-can bus; opened from the config when omitted.
+    :param record: a python-can writer that gets every frame sent and received.
+    :param timer: the loop's timing statistics (the daemon's scheduler keeps them).
+    """
+
+    def __init__(
+        self,
+        config: GatewayConfig,
+        bus: can.BusABC | None = None,
+        record: can.Listener | None = None,
+        timer: LoopTimer | None = None,
+    ) -> None:
+        self.config = config
+        self.model = config.model
+        self.drives = DriveSet(config)
+        self.supervisor = Supervisor(self.model, config.loop)
+        self.odometry = Odometry(self.model)
+        self.wg = WgCodec(config.loop.can_ids)
+        self.counter = CounterTracker()
+        self.timer = timer if timer is not None else LoopTimer(config.loop.rate_hz)
+        self.record = record
+        self._own_bus = bus is None
+        self.bus = bus if bus is not None else self._open()
+        self.period_s = 1.0 / config.loop.rate_hz
+        self.prev: IkResult = self.model.ik(Twist())
+        self.limit_report: LimitReport | None = None
+        self._armed = False
+        self._last_cycle_s: float | None = None
+        self._next_odom_s = 0.0
+        self._next_status_s = 0.0
+        self._odom_stamp = -1.0
+        self._status_counter = 0
+        self._error_count = 0
+        self._bus_failures = 0
+        #: Event counters for status reports.
+        self.counts = {
+            "cycles": 0, "frames_sent": 0, "frames_received": 0, "send_failures": 0,
+            "bus_reopens": 0, "can_twists": 0, "can_duplicates": 0, "can_lost": 0,
+            "bad_can_twists": 0, "errors_reported": 0,
+        }
+        #: (client, source) pairs that want to hear about errors: filled by the daemon.
+        self.outbox: list[tuple[str, dict[str, object]]] = []
+        self.last_error: dict[str, object] | None = None
+
+    # ----------------------------------------------------------------- bus
+
+    def _open(self) -> can.BusABC:
+        bus = self.config.bus
+        return open_bus(bus.interface, bus.channel)
+
+    def _reopen(self) -> None:
+        if not self._own_bus:
+            return
+        self.counts["bus_reopens"] += 1
+        log.warning("reopening the CAN bus after %d failed bursts", self._bus_failures)
+        try:
+            self.bus.shutdown()
+            self.bus = self._open()
+            self._bus_failures = 0
+        except BusError as err:
+            log.error("reopening the CAN bus failed: %s", err)
+
+    def send(self, frames: list[Frame]) -> bool:
+        """Send one burst; a failure is counted and the next cycle tries again."""
+        if not frames:
+            return True
+        msgs = [to_message(f) for f in frames]
+        try:
+            for msg in msgs:
+                self.bus.send(msg)
+        except (can.CanError, OSError) as err:
+            self.counts["send_failures"] += 1
+            self._bus_failures += 1
+            log.warning("CAN send failed (%d in a row): %s", self._bus_failures, err)
+            if self._bus_failures >= REOPEN_AFTER:
+                self._reopen()
+            return False
+        self._bus_failures = 0
+        self.counts["frames_sent"] += len(msgs)
+        if self.record is not None:
+            stamp = time.time()
+            for msg in msgs:
+                msg.timestamp = stamp
+                msg.channel = self.config.bus.channel
+                self.record.on_message_received(msg)
+        return True
+
+    def receive(self, now_s: float) -> list[Frame]:
+        """Everything waiting on the bus, stamped with the cycle's time."""
+        try:
+            frames = drain(self.bus, timestamp_s=now_s)
+        except BusError as err:
+            self.counts["send_failures"] += 1
+            log.warning("CAN receive failed: %s", err)
+            return []
+        self.counts["frames_received"] += len(frames)
+        if self.record is not None and frames:
+            stamp = time.time()
+            for f in frames:
+                msg = to_message(f)
+                msg.timestamp, msg.is_rx, msg.channel = stamp, True, self.config.bus.channel
+                self.record.on_message_received(msg)
+        return frames
+
+    # ----------------------------------------------------------------- inputs
+
+    def handle_can_twist(self, frame: Frame, now_s: float, out: list[Frame]) -> None:
+        """A WG_Twist_Cmd from the bus (counter checked; errors answered with WG_Error)."""
+        try:
+            cmd = self.wg.decode_twist(frame)
+        except DecodeError as err:
+            self.counts["bad_can_twists"] += 1
+            self.report_error(ErrorCode.BAD_COMMAND, str(err), out)
+            return
+        if cmd is None:
+            return
+        kind, lost = self.counter.feed(cmd.counter)
+        self.counts["can_lost"] += lost
+        if kind is CounterKind.DUPLICATE:
+            self.counts["can_duplicates"] += 1
+            return
+        self.counts["can_twists"] += 1
+        if cmd.flags & TwistFlags.ESTOP:
+            self.supervisor.estop("e-stop requested on CAN")
+            return
+        if cmd.flags & TwistFlags.ENABLE:
+            self.supervisor.enable(now_s)
+            return
+        if cmd.flags & TwistFlags.STOP:
+            self.supervisor.stop(now_s)
+            return
+        result = self.twist(cmd.twist, now_s, Source.CAN)
+        if isinstance(result, Rejection):
+            self.report_error(result.code, result.message, out, result, cmd.counter)
+
+    def twist(self, twist: Twist, now_s: float, source: Source) -> Accepted | Rejection:
+        """A twist from any source; infeasible or refused twists are counted and logged."""
+        result = self.supervisor.twist(twist, now_s, self.prev.steer_rad)
+        if isinstance(result, Accepted) and result.projected and result.error is not None:
+            log.warning("%s twist projected: %s", source.value, result.error)
+        elif isinstance(result, Rejection):
+            log.info("%s twist refused: %s", source.value, result.message)
+        return result
+
+    def report_error(
+        self,
+        code: ErrorCode,
+        message: str,
+        out: list[Frame],
+        rejection: Rejection | None = None,
+        twist_counter: int = NO_TWIST_COUNTER,
+    ) -> None:
+        """Put an error on CAN (WG_Error) and in the outbox for socket clients."""
+        self._error_count += 1
+        self.counts["errors_reported"] += 1
+        err = rejection.error if rejection is not None else None
+        wheel = self.model.index(err.wheel) if err is not None else NO_WHEEL
+        out.append(self.wg.encode_error(ErrorReport(
+            code=code,
+            wheel=wheel,
+            constraint=ConstraintCode.from_name(err.constraint) if err else ConstraintCode.NONE,
+            twist_counter=twist_counter,
+            residual_m_s=err.residual_m_s if err else 0.0,
+            count=self._error_count,
+        )))
+        self.last_error = {"code": code.name.lower(), "message": message}
+        self.outbox.append(("error", dict(self.last_error)))
+
+    # ----------------------------------------------------------------- the cycle
+
+    def cycle(self, now_s: float) -> None:
+        """One control cycle at time ``now_s`` (monotonic seconds)."""
+        self.counts["cycles"] += 1
+        out: list[Frame] = []
+        for frame in self.receive(now_s):
+            if self.config.loop.can_input and self._is_twist_id(frame):
+                self.handle_can_twist(frame, now_s, out)
+            else:
+                self.drives.on_frame(frame)
+        sup = self.supervisor
+        fault = sup.motors(self.drives.status(now_s), now_s)
+        if fault is not None:
+            log.error("fault: %s", fault)
+            code = ErrorCode.FEEDBACK_TIMEOUT if "answering" in fault else ErrorCode.MOTOR_FAULT
+            self.report_error(code, fault, out)
+        if sup.take_enable_request():
+            out.extend(self.drives.enable(now_s))
+        decision = sup.decide(now_s)
+        dt = now_s - self._last_cycle_s if self._last_cycle_s is not None else self.period_s
+        self._last_cycle_s = now_s
+        result = self.model.try_ik(decision.twist, self.prev.steer_rad) or self.model.ik(Twist())
+        if decision.ramp:
+            result, self.limit_report = apply_limits(
+                self.model, result, self.config.limits, self.prev, dt
+            )
+        if decision.armed:
+            self._armed = True
+            out.extend(self.drives.command(result.wheel_rad_s, now_s))
+        elif self._armed:
+            self._armed = False
+            out.extend(self.drives.disable(now_s))
+        out.extend(self.drives.poll(now_s))
+        self.prev = result
+        self.send(out)
+        self._integrate()
+        self._publish(now_s)
+
+    def _is_twist_id(self, frame: Frame) -> bool:
+        ids = self.wg.ids
+        return frame.arbitration_id == ids.twist and frame.is_extended_id == ids.extended
+
+    def _integrate(self) -> None:
+        feedback = self.drives.feedback_by_wheel()
+        stamps = [fb.timestamp_s for fb in feedback if fb is not None]
+        if not stamps or max(stamps) <= self._odom_stamp:
+            return
+        self._odom_stamp = max(stamps)
+        positions = [None if fb is None else fb.position_rad for fb in feedback]
+        if all(p is None for p in positions):
+            return
+        self.odometry.update(positions, self._odom_stamp, self.prev.steer_rad)
+
+    def _publish(self, now_s: float) -> None:
+        loop = self.config.loop
+        frames: list[Frame] = []
+        if now_s >= self._next_odom_s:
+            self._next_odom_s = now_s + 1.0 / loop.odom_rate_hz
+            st = self.odometry.state
+            frames.append(self.wg.encode_pose(st.pose))
+            frames.append(self.wg.encode_velocity(st.twist, st.slip_m_s))
+            self.outbox.append(("odometry", self.odometry_dict()))
+        if now_s >= self._next_status_s:
+            self._next_status_s = now_s + 1.0 / loop.status_rate_hz
+            frames.append(self.wg.encode_status(self.status_report()))
+            self.outbox.append(("status", {"state": self.supervisor.state.name,
+                                           "reason": self.supervisor.reason}))
+        self.send(frames)
+
+    # ----------------------------------------------------------------- reports
+
+    def status_report(self) -> StatusReport:
+        """The WG_Status content."""
+        sup = self.supervisor
+        mask = 0
+        for name in sup.faulted:
+            mask |= 1 << min(self.model.index(name), 7)  # wheels 8 and up share bit 7
+        flags = StatusFlags(0)
+        if sup.cmd_timeout_active:
+            flags |= StatusFlags.CMD_TIMEOUT_ACTIVE
+        if self.limit_report is not None and self.limit_report.speed_scale < 1.0:
+            flags |= StatusFlags.SPEED_LIMITED
+        if sup.counts["projected"]:
+            flags |= StatusFlags.PROJECTED
+        if self._bus_failures:
+            flags |= StatusFlags.BUS_ERRORS_RECENT
+        self._status_counter = (self._status_counter + 1) & 0xFF
+        return StatusReport(
+            state=sup.state,
+            faulted_motors=mask,
+            counter=self._status_counter,
+            flags=flags,
+            missed_cycles=self.timer.missed,
+            infeasible_count=sup.counts["infeasible"],
+        )
+
+    def odometry_dict(self) -> dict[str, object]:
+        """The odometry as a JSON-able mapping."""
+        st = self.odometry.state
+        return {
+            "x": st.pose.x_m, "y": st.pose.y_m, "theta": st.pose.theta_rad,
+            "vx": st.twist.vx_m_s, "vy": st.twist.vy_m_s, "wz": st.twist.wz_rad_s,
+            "slip": st.slip_m_s, "distance": st.distance_m, "t": st.timestamp_s,
+        }
+
+    @property
+    def bus_healthy(self) -> bool:
+        """Whether the last bursts went out (fewer failures in a row than reopen needs)."""
+        return self._bus_failures < REOPEN_AFTER
+
+    @property
+    def state(self) -> GatewayState:
+        """The supervisor's state."""
+        return self.supervisor.state
+
+    def close(self) -> None:
+        """Close the bus if this gateway opened it (safe to call twice)."""
+        if self._own_bus and self.bus is not None:
+            self.bus.shutdown()
+            self._own_bus = False

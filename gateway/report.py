@@ -1,0 +1,60 @@
+"""The gateway's status as a JSON-able mapping (socket ``status`` and ``wheelgate status``)."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from gateway.daemon import Daemon
+
+
+def _finite(value: float | None) -> float | None:
+    return None if value is None or not math.isfinite(value) else value
+
+
+def status_dict(daemon: Daemon, now_s: float) -> dict[str, object]:
+    """Everything a status request returns: state, motors, odometry, counters, timing."""
+    gw = daemon.gateway
+    sup = gw.supervisor
+    motors = []
+    for st in gw.drives.status(now_s):
+        fb = st.feedback
+        motors.append({
+            "name": st.name,
+            "node_id": st.node_id,
+            "state": st.state.name,
+            "faults": [f.name for f in type(st.faults) if f and f in st.faults],
+            "detail": st.detail,
+            "feedback_age_s": _finite(st.feedback_age_s),
+            "position_rad": None if fb is None else fb.position_rad,
+            "velocity_rad_s": None if fb is None else fb.velocity_rad_s,
+        })
+    rejected = {
+        type(drv).__name__: dict(drv.rejected) for drv, _ in gw.drives.groups if drv.rejected
+    }
+    limit = gw.limit_report
+    timing = dataclasses.asdict(daemon.scheduler.timer.snapshot())
+    return {
+        "robot": gw.config.name,
+        "state": sup.state.name,
+        "reason": sup.reason,
+        "command": {
+            "target": sup.target,
+            "applied": gw.prev.twist,
+            "cmd_timeout_active": sup.cmd_timeout_active,
+            "speed_scale": 1.0 if limit is None else limit.speed_scale,
+            "accel_scale": 1.0 if limit is None else limit.accel_scale,
+        },
+        "motors": motors,
+        "odometry": gw.odometry_dict(),
+        "counters": {**gw.counts, **sup.counts, "rejected_frames": rejected},
+        "socket": {"path": daemon.socket_path,
+                   **dataclasses.asdict(daemon.server.counters)},
+        "timing": timing,
+        "last_error": gw.last_error,
+        "realtime": daemon.rt_notes,
+        "bus": {"interface": gw.config.bus.interface, "channel": gw.config.bus.channel,
+                "healthy": gw.bus_healthy},
+    }

@@ -1,0 +1,139 @@
+"""Shared harness for end-to-end tests: the gateway and its simulators on simulated time."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import TYPE_CHECKING
+
+import can
+
+from gateway.bus import send_frames
+from gateway.config import GatewayConfig, load_config
+from gateway.kinematics import Odometry
+from gateway.kinematics.limits import speed_scale
+from gateway.loop import Gateway
+from gateway.simbus import SimulatedControllers
+from gateway.types import GatewayState, Twist
+from gateway.wgproto import TwistCommand, TwistFlags
+
+if TYPE_CHECKING:
+    from collections.abc import Callable
+    from pathlib import Path
+
+
+#: Simulator step (s).  DJI ESCs report the 13-bit rotor angle every millisecond; a slower
+#: step would let the rotor turn more than half a revolution between reports, which no
+#: unwrapping can recover (as on the real bus), so their simulators step at 1 kHz.
+DJI_STEP_S = 0.001
+
+
+def virtual_config(path: Path | None, channel: str, **loop: object) -> GatewayConfig:
+    """A shipped config moved onto a virtual channel."""
+    cfg = load_config(path, {"interface": "virtual", "channel": channel})
+    if loop:
+        cfg = dataclasses.replace(cfg, loop=dataclasses.replace(cfg.loop, **loop))  # type: ignore[arg-type]
+    return cfg
+
+
+class Rig:
+    """A gateway, its simulated controllers, and a CAN controller that sends twists.
+
+    Time is simulated: :meth:`advance` steps the simulators several times per gateway
+    cycle.  Ground truth: the simulators' exact wheel angles integrated by an independent
+    odometry every simulator step.
+    """
+
+    def __init__(self, config: GatewayConfig) -> None:
+        self.config = config
+        self.gw = Gateway(config)
+        self.sims = self.gw.drives.simulators()
+        self.ctl = SimulatedControllers(self.sims, config.bus.channel)
+        self.pilot = can.Bus(interface="virtual", channel=config.bus.channel)
+        self.t = 0.0
+        self.period = 1.0 / config.loop.rate_hz
+        self.truth = Odometry(config.model)
+        self._sim_index = self._map_sims()
+        self.counter = 0
+        dji = any(m is not None and m.driver == "dji" for m in config.motors)
+        self.sim_steps = max(2, math.ceil(self.period / DJI_STEP_S - 1e-9)) if dji else 2
+
+    def _map_sims(self) -> list[int | None]:
+        """Which simulator turns which wheel (model order)."""
+        index = {s.motor.wheel: k for k, s in enumerate(self.sims)}
+        return [index.get(w.name) for w in self.config.model.wheels]
+
+    def close(self) -> None:
+        self.pilot.shutdown()
+        self.ctl.shutdown()
+        self.gw.close()
+
+    def __enter__(self) -> Rig:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def truth_positions(self) -> list[float | None]:
+        return [None if k is None else self.sims[k].wheel_position_rad for k in self._sim_index]
+
+    def advance(self, seconds: float, each: Callable[[Rig], None] | None = None) -> None:
+        """Run ``seconds`` of simulated time."""
+        for _ in range(max(1, round(seconds / self.period))):
+            if each is not None:
+                each(self)
+            self.gw.cycle(self.t)
+            for k in range(self.sim_steps):
+                ts = self.t + (k + 1) * self.period / self.sim_steps
+                self.ctl.step(ts)
+                self.truth.update(self.truth_positions(), ts, self.gw.prev.steer_rad)
+            self.t += self.period
+
+    def enable(self, timeout_s: float = 5.0) -> None:
+        self.gw.supervisor.enable(self.t)
+        waited = 0.0
+        while self.gw.state is not GatewayState.RUNNING and waited < timeout_s:
+            self.advance(self.period)
+            waited += self.period
+        if self.gw.state is not GatewayState.RUNNING:
+            raise AssertionError(f"did not enable: {self.gw.supervisor.reason}")
+        self.truth.update(self.truth_positions(), self.t, self.gw.prev.steer_rad)
+        self.gw.odometry.reset()
+        self.truth.reset()
+
+    def send_can_twist(self, twist: Twist, flags: TwistFlags = TwistFlags.NONE) -> None:
+        frame = self.gw.wg.encode_twist(TwistCommand(twist, self.counter & 0xFF, flags))
+        self.counter += 1
+        send_frames(self.pilot, [frame])
+
+
+def path_legs(config: GatewayConfig, shape: str, speed: float = 0.4
+              ) -> list[tuple[Twist, float]]:
+    """Twist legs that drive a 1 m square or a circle (radius 1 m, or the smallest the robot
+    can follow), as the robot can, at a speed within its limits."""
+    model = config.model
+    for probe in (Twist(1.0, 0.0, 1.0), Twist(0.0, 0.0, 1.0), Twist(1.0, 0.0, 0.0)):
+        res = model.try_ik(probe)
+        if res is not None:
+            speed = min(speed, 0.8 * speed_scale(model, res, config.limits))
+    radii = [r for r in (1.0, 1.5, 2.0, 3.0) if model.feasible(Twist(speed, 0.0, speed / r))]
+    if shape == "circle":
+        if not radii:
+            # The base cannot turn (synchro drive): translate around a 72-gon of radius 1 m.
+            n = 72
+            leg = 2 * math.pi / n / speed
+            return [(Twist(speed * math.cos(2 * math.pi * k / n),
+                           speed * math.sin(2 * math.pi * k / n), 0.0), leg) for k in range(n)]
+        return [(Twist(speed, 0.0, speed / radii[0]), 2 * math.pi * radii[0] / speed)]
+    side = 1.0 / speed
+    turn_rate = speed / 0.4
+    if model.feasible(Twist(0.0, 0.0, turn_rate)):
+        leg: list[tuple[Twist, float]] = [(Twist(speed, 0.0, 0.0), side),
+                                          (Twist(0.0, 0.0, turn_rate), math.pi / 2 / turn_rate)]
+        return leg * 4
+    if model.feasible(Twist(0.0, speed, 0.0)):
+        return [(Twist(speed, 0.0, 0.0), side), (Twist(0.0, speed, 0.0), side),
+                (Twist(-speed, 0.0, 0.0), side), (Twist(0.0, -speed, 0.0), side)]
+    # Car-like: straight sides joined by quarter arcs.
+    arc = (Twist(speed, 0.0, speed / radii[0]), math.pi / 2 * radii[0] / speed)
+    return [(Twist(speed, 0.0, 0.0), side), arc] * 4
