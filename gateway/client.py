@@ -92,6 +92,7 @@ class ControlClient:
         :return: the reply object, ``{"ok": true, ...}`` or ``{"ok": false, "error": {...}}``.
         :raises ClientError: if the connection fails or closes, or the gateway sends garbage.
         :raises ClientTimeoutError: if no reply comes within ``timeout_s``.
+        :raises EncodeError: if ``payload`` has a value with no JSON form.
         """
         self._check_open()
         message = dict(payload)
@@ -111,7 +112,9 @@ class ControlClient:
             obj = self._read_message(deadline, f"the reply to request {message['id']!r}")
             if "event" in obj:
                 self._events.append(obj)
-            elif obj.get("id") == message["id"] and "ok" in obj:
+            elif "ok" in obj and (
+                obj.get("id") == message["id"] or (obj.get("id") is None and not obj["ok"])
+            ):  # an error without id answers a request whose id the gateway could not read
                 return obj
             else:
                 log.debug("skipping a message for another request: %r", obj)

@@ -8,7 +8,7 @@ whether the drives should be armed.  The loop (:mod:`gateway.loop`) does the I/O
 States (:class:`~gateway.types.GatewayState`)::
 
     DISABLED --enable--> ENABLING --all motors ENABLED--> RUNNING
-    RUNNING  --motor FAULT/OFFLINE--> FAULT --healthy again, recovery "auto"--> ENABLING
+    RUNNING  --motor FAULT/OFFLINE--> FAULT --all answer again, recovery "auto"--> ENABLING
     FAULT    --enable (recovery "manual")--> ENABLING
     any      --e-stop--> ESTOP --enable--> ENABLING
     any      --disable--> DISABLED            ENABLING --timeout--> FAULT
@@ -41,6 +41,10 @@ if TYPE_CHECKING:
     from gateway.types import MotorStatus
 
 ZERO = Twist()
+#: Automatic re-enable attempts after a fault, once every motor answers again.
+AUTO_RETRIES = 3
+#: Delay before the first automatic re-enable; the n-th waits n times as long (s).
+AUTO_RETRY_DELAY_S = 0.5
 
 
 class Source(enum.Enum):
@@ -118,6 +122,9 @@ class Supervisor:
                        "cmd_timeouts": 0, "estops": 0}
         self._timed_out = False
         self._pending_enable = False
+        self._fault_s = 0.0
+        self._now_hint = 0.0
+        self._auto_attempts = 0
 
     # ----------------------------------------------------------------- commands
 
@@ -161,6 +168,10 @@ class Supervisor:
 
     def enable(self, now_s: float) -> None:
         """Start (or restart) the enable sequence; also the way out of ESTOP and FAULT."""
+        self._auto_attempts = 0
+        self._start_enable(now_s)
+
+    def _start_enable(self, now_s: float) -> None:
         if self.state in (GatewayState.RUNNING, GatewayState.ENABLING, GatewayState.STOPPING):
             return
         self.state = GatewayState.ENABLING
@@ -195,10 +206,12 @@ class Supervisor:
 
     def motors(self, statuses: Sequence[MotorStatus], now_s: float) -> str | None:
         """Take the motors' states; return a fault message when a fault starts."""
+        self._now_hint = now_s
         bad = [s for s in statuses if s.state in (DriveState.FAULT, DriveState.OFFLINE)]
         if self.state is GatewayState.ENABLING:
             if statuses and all(s.state is DriveState.ENABLED for s in statuses):
                 self.state = GatewayState.RUNNING
+                self._auto_attempts = 0
                 self._last_twist_s = now_s
                 return None
             if now_s - self._enable_started_s > self.cfg.enable_timeout_s:
@@ -212,13 +225,20 @@ class Supervisor:
             self.state is GatewayState.FAULT
             and self.cfg.feedback_recovery == "auto"
             and statuses
-            and not bad
+            and not any(s.state is DriveState.OFFLINE for s in statuses)
+            and self._auto_attempts < AUTO_RETRIES
+            and now_s - self._fault_s >= AUTO_RETRY_DELAY_S * (self._auto_attempts + 1)
         ):
-            self.enable(now_s)
+            # Every motor answers again: re-run the enable sequence, which clears the errors
+            # that the outage latched (an expired watchdog).  A fault that persists comes back
+            # and, after AUTO_RETRIES tries, waits for an explicit enable.
+            self._auto_attempts += 1
+            self._start_enable(now_s)
         return None
 
     def _fault(self, motors: Sequence[MotorStatus], why: str) -> str:
         self.counts["faults"] += 1
+        self._fault_s = self._now_hint
         self.state = GatewayState.FAULT
         self.target = ZERO
         self.faulted = tuple(s.name for s in motors)

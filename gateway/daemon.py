@@ -164,7 +164,7 @@ class Daemon:
             sup.disable()
         elif request.op is Op.UNSUBSCRIBE:
             self.server.unsubscribe(client)
-        self.server.reply(client, reply_ok(rid, {"state": sup.state.name}))
+        self.server.reply(client, reply_ok(rid, {"state": sup.state}))
 
     def status(self) -> dict[str, object]:
         """Everything a ``status`` request returns."""
@@ -210,7 +210,8 @@ class Daemon:
             self.scheduler.timer.record_latency(sent - arrived)
         self._pending_twists.clear()
         for topic, payload in gw.outbox:
-            self.server.publish(Topic(topic), event(topic, payload))
+            if self.server.has_subscribers(Topic(topic)):
+                self.server.publish(Topic(topic), event(topic, payload))
         gw.outbox.clear()
         if gw.state is not self._state:
             self._state = gw.state

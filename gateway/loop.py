@@ -139,8 +139,7 @@ class Gateway:
         if self.record is not None:
             stamp = time.time()
             for msg in msgs:
-                msg.timestamp = stamp
-                msg.channel = self.config.bus.channel
+                msg.timestamp, msg.is_rx, msg.channel = stamp, False, self.config.bus.channel
                 self.record.on_message_received(msg)
         return True
 
@@ -291,7 +290,7 @@ class Gateway:
         if now_s >= self._next_status_s:
             self._next_status_s = now_s + 1.0 / loop.status_rate_hz
             frames.append(self.wg.encode_status(self.status_report()))
-            self.outbox.append(("status", {"state": self.supervisor.state.name,
+            self.outbox.append(("status", {"state": self.supervisor.state,
                                            "reason": self.supervisor.reason}))
         self.send(frames)
 

@@ -72,6 +72,8 @@ class Topic(str, enum.Enum):
 
     ODOMETRY = "odometry"
     STATUS = "status"
+    #: Faults and refused commands, as they happen.
+    ERROR = "error"
 
 
 class ProtocolError(GatewayError, ValueError):

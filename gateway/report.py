@@ -24,8 +24,8 @@ def status_dict(daemon: Daemon, now_s: float) -> dict[str, object]:
         motors.append({
             "name": st.name,
             "node_id": st.node_id,
-            "state": st.state.name,
-            "faults": [f.name for f in type(st.faults) if f and f in st.faults],
+            "state": st.state,
+            "faults": st.faults,
             "detail": st.detail,
             "feedback_age_s": _finite(st.feedback_age_s),
             "position_rad": None if fb is None else fb.position_rad,
@@ -38,7 +38,7 @@ def status_dict(daemon: Daemon, now_s: float) -> dict[str, object]:
     timing = dataclasses.asdict(daemon.scheduler.timer.snapshot())
     return {
         "robot": gw.config.name,
-        "state": sup.state.name,
+        "state": sup.state,
         "reason": sup.reason,
         "command": {
             "target": sup.target,

@@ -41,3 +41,14 @@ def _no_leaked_buses() -> Iterator[None]:
 def runner() -> CliRunner:
     """A click test runner."""
     return CliRunner()
+
+
+@pytest.fixture
+def sock_path() -> Iterator[str]:
+    """A short path for a control socket (AF_UNIX paths are limited to 107 bytes)."""
+    import shutil
+    import tempfile
+
+    folder = tempfile.mkdtemp(prefix="wg", dir="/tmp")
+    yield f"{folder}/s.sock"
+    shutil.rmtree(folder, ignore_errors=True)

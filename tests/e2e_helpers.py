@@ -10,9 +10,11 @@ import can
 
 from gateway.bus import send_frames
 from gateway.config import GatewayConfig, load_config
+from gateway.daemon import Daemon
 from gateway.kinematics import Odometry
 from gateway.kinematics.limits import speed_scale
 from gateway.loop import Gateway
+from gateway.sdnotify import SystemdNotifier
 from gateway.simbus import SimulatedControllers
 from gateway.types import GatewayState, Twist
 from gateway.wgproto import TwistCommand, TwistFlags
@@ -44,9 +46,14 @@ class Rig:
     odometry every simulator step.
     """
 
-    def __init__(self, config: GatewayConfig) -> None:
+    def __init__(self, config: GatewayConfig, socket_path: str | None = None) -> None:
         self.config = config
-        self.gw = Gateway(config)
+        self.daemon: Daemon | None = None
+        if socket_path is not None:
+            self.daemon = Daemon(config, socket_path=socket_path, notifier=SystemdNotifier(None))
+            self.gw = self.daemon.gateway
+        else:
+            self.gw = Gateway(config)
         self.sims = self.gw.drives.simulators()
         self.ctl = SimulatedControllers(self.sims, config.bus.channel)
         self.pilot = can.Bus(interface="virtual", channel=config.bus.channel)
@@ -66,7 +73,10 @@ class Rig:
     def close(self) -> None:
         self.pilot.shutdown()
         self.ctl.shutdown()
-        self.gw.close()
+        if self.daemon is not None:
+            self.daemon.close()
+        else:
+            self.gw.close()
 
     def __enter__(self) -> Rig:
         return self
@@ -82,7 +92,12 @@ class Rig:
         for _ in range(max(1, round(seconds / self.period))):
             if each is not None:
                 each(self)
-            self.gw.cycle(self.t)
+            if self.daemon is not None:
+                for client, request in self.daemon.server.poll(0.0):
+                    self.daemon.handle(client, request, self.t)
+                self.daemon.step(self.t)
+            else:
+                self.gw.cycle(self.t)
             for k in range(self.sim_steps):
                 ts = self.t + (k + 1) * self.period / self.sim_steps
                 self.ctl.step(ts)
@@ -121,9 +136,9 @@ def path_legs(config: GatewayConfig, shape: str, speed: float = 0.4
         if not radii:
             # The base cannot turn (synchro drive): translate around a 72-gon of radius 1 m.
             n = 72
-            leg = 2 * math.pi / n / speed
+            step = 2 * math.pi / n / speed
             return [(Twist(speed * math.cos(2 * math.pi * k / n),
-                           speed * math.sin(2 * math.pi * k / n), 0.0), leg) for k in range(n)]
+                           speed * math.sin(2 * math.pi * k / n), 0.0), step) for k in range(n)]
         return [(Twist(speed, 0.0, speed / radii[0]), 2 * math.pi * radii[0] / speed)]
     side = 1.0 / speed
     turn_rate = speed / 0.4
@@ -137,3 +152,38 @@ def path_legs(config: GatewayConfig, shape: str, speed: float = 0.4
     # Car-like: straight sides joined by quarter arcs.
     arc = (Twist(speed, 0.0, speed / radii[0]), math.pi / 2 * radii[0] / speed)
     return [(Twist(speed, 0.0, 0.0), side), arc] * 4
+
+
+class SocketPilot:
+    """A raw client of the control socket that never blocks the single-threaded test."""
+
+    def __init__(self, path: str) -> None:
+        import socket
+
+        self.sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+        self.sock.connect(path)
+        self.sock.setblocking(False)
+        self.buf = b""
+
+    def send(self, **request: object) -> None:
+        import json
+
+        self.sock.sendall(json.dumps(request).encode() + b"\n")
+
+    def messages(self) -> list[dict[str, object]]:
+        """Every complete message received so far."""
+        import json
+
+        try:
+            while True:
+                chunk = self.sock.recv(65536)
+                if not chunk:
+                    break
+                self.buf += chunk
+        except BlockingIOError:
+            pass
+        *lines, self.buf = self.buf.split(b"\n")
+        return [json.loads(line) for line in lines if line]
+
+    def close(self) -> None:
+        self.sock.close()

@@ -7,7 +7,7 @@ import dataclasses
 import pytest
 
 from gateway.config import LoopConfig
-from gateway.control import Accepted, Rejection, Supervisor
+from gateway.control import AUTO_RETRY_DELAY_S, Accepted, Rejection, Supervisor
 from gateway.kinematics import PRESETS, RobotModel
 from gateway.types import DriveFault, DriveState, ErrorCode, GatewayState, MotorStatus, Twist
 
@@ -85,9 +85,11 @@ def test_motor_fault_zeroes_names_motor_and_recovers_automatically() -> None:
     assert d.twist == Twist() and not d.ramp and d.armed
     assert isinstance(sup.twist(Twist(0.1, 0.0, 0.0), 1.2), Rejection)
     sup.motors(motors(DriveState.ENABLED, DriveState.DISABLED), 1.3)  # feedback is back
+    assert state_of(sup) is GatewayState.FAULT  # waits AUTO_RETRY_DELAY_S first
+    sup.motors(motors(DriveState.ENABLED, DriveState.DISABLED), 1.1 + AUTO_RETRY_DELAY_S)
     assert state_of(sup) is GatewayState.ENABLING
     assert sup.take_enable_request()
-    sup.motors(motors(DriveState.ENABLED, DriveState.ENABLED), 1.4)
+    sup.motors(motors(DriveState.ENABLED, DriveState.ENABLED), 1.8)
     assert state_of(sup) is GatewayState.RUNNING
 
 

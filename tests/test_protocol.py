@@ -159,27 +159,28 @@ ID_ERROR = "request.id: expected an integer (64-bit) or a string of at most 64 c
         (f'{{"op": "stop", "id": "{LONG_ID}"}}'.encode(), ID_ERROR + '"' + "x" * 36 + "...", None),
         (
             b'{"op": "subscribe"}',
-            'subscribe.topics: expected an array of "odometry", "status", got nothing',
+            'subscribe.topics: expected an array of "odometry", "status", "error", got nothing',
             None,
         ),
         (
             b'{"op": "subscribe", "topics": "status"}',
-            'subscribe.topics: expected a non-empty array of "odometry", "status", got "status"',
+            'subscribe.topics: expected a non-empty array of "odometry", "status", "error", '
+            'got "status"',
             None,
         ),
         (
             b'{"op": "subscribe", "topics": []}',
-            'subscribe.topics: expected a non-empty array of "odometry", "status", got []',
+            'subscribe.topics: expected a non-empty array of "odometry", "status", "error", got []',
             None,
         ),
         (
             b'{"op": "subscribe", "topics": ["status", "gps"], "id": "s"}',
-            'subscribe.topics[1]: expected one of "odometry", "status", got "gps"',
+            'subscribe.topics[1]: expected one of "odometry", "status", "error", got "gps"',
             "s",
         ),
         (
             b'{"op": "subscribe", "topics": [{}]}',
-            'subscribe.topics[0]: expected one of "odometry", "status", got {}',
+            'subscribe.topics[0]: expected one of "odometry", "status", "error", got {}',
             None,
         ),
         (b"[1, 2]", "request: expected a JSON object, got an array", None),

@@ -201,8 +201,17 @@ def test_twist_round_trip(server: ControlServer, sock_path: Path) -> None:
                 "message": 'twist.vx: expected a finite number, got "fast"',
             },
         }
+        assert client.request({"op": "stop", "id": 1.5}) == {  # unreadable id: answered anyway
+            "ok": False,
+            "id": None,
+            "error": {
+                "code": "bad_command",
+                "message": "request.id: expected an integer (64-bit) or a string of at most 64 "
+                "characters, got 1.5",
+            },
+        }
     counters = server.counters
-    assert (counters.accepted, counters.malformed, counters.refused) == (1, 1, 0)
+    assert (counters.accepted, counters.malformed, counters.refused) == (1, 2, 0)
 
 
 def test_poll_splits_lines_and_skips_blank_ones(server: ControlServer, sock_path: Path) -> None:

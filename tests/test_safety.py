@@ -1,0 +1,250 @@
+"""Every safety behaviour of the daemon, on simulated time with the device simulators.
+
+Command timeout, infeasible-twist policies, feedback timeout, motor faults, bus trouble and
+e-stop; SIGTERM and sd_notify are in ``test_daemon_process.py``.
+"""
+
+from __future__ import annotations
+
+import itertools
+from typing import TYPE_CHECKING
+
+import can
+import pytest
+
+from gateway.bus import drain
+from gateway.control import AUTO_RETRIES
+from gateway.loop import REOPEN_AFTER
+from gateway.sim import SimFault
+from gateway.types import ConstraintCode, ErrorCode, GatewayState, Twist
+from gateway.wgproto import ErrorReport, TwistFlags
+from tests.conftest import CONFIG_DIR
+from tests.e2e_helpers import Rig, SocketPilot, virtual_config
+
+if TYPE_CHECKING:
+    from collections.abc import Iterator
+
+TB3 = CONFIG_DIR / "turtlebot3_burger.yaml"
+MECANUM = CONFIG_DIR / "mecanum.yaml"
+
+
+@pytest.fixture
+def rig(channel: str, sock_path: str, request: pytest.FixtureRequest) -> Iterator[Rig]:
+    loop = getattr(request, "param", {})
+    cfg = virtual_config(TB3, channel, rate_hz=100.0, **loop)
+    with Rig(cfg, sock_path) as r:
+        r.enable()
+        yield r
+
+
+@pytest.fixture
+def pilot(rig: Rig, sock_path: str) -> Iterator[SocketPilot]:
+    p = SocketPilot(sock_path)
+    yield p
+    p.close()
+
+
+def state(rig: Rig) -> GatewayState:
+    """The gateway state, read through a call so mypy does not narrow it across cycles."""
+    return rig.gw.state
+
+
+def speeds(rig: Rig) -> tuple[float, ...]:
+    return rig.gw.prev.wheel_rad_s
+
+
+def errors_on_can(rig: Rig) -> list[ErrorReport]:
+    out = []
+    for frame in drain(rig.pilot):
+        report = rig.gw.wg.decode_error(frame)
+        if report is not None:
+            out.append(report)
+    return out
+
+
+def test_command_timeout_ramps_to_zero_within_deceleration(rig: Rig, pilot: SocketPilot) -> None:
+    pilot.send(op="twist", vx=0.2, wz=0.0)
+    rig.advance(0.45)  # cmd_timeout_s is 0.5
+    moving = speeds(rig)
+    assert min(moving) > 5.0
+    assert not rig.gw.supervisor.cmd_timeout_active
+    history = []
+    rig.advance(1.5, lambda r: history.append(speeds(r)))
+    assert rig.gw.supervisor.cmd_timeout_active
+    assert speeds(rig) == (0.0, 0.0)
+    step = rig.config.limits.max_wheel_accel_rad_s2 * rig.period
+    for before, after in itertools.pairwise(history):
+        assert all(abs(a - b) <= step * (1 + 1e-9) for a, b in zip(after, before, strict=True))
+    assert rig.gw.supervisor.counts["cmd_timeouts"] == 1
+
+
+@pytest.mark.parametrize("rig", [{"cmd_timeout_s": 0.0}], indirect=True)
+def test_zero_command_timeout_keeps_the_last_twist(rig: Rig, pilot: SocketPilot) -> None:
+    pilot.send(op="twist", vx=0.2)
+    rig.advance(3.0)
+    assert min(speeds(rig)) > 5.0
+    assert not rig.gw.supervisor.cmd_timeout_active
+
+
+def test_infeasible_twist_rejected_on_socket_and_can(rig: Rig, pilot: SocketPilot) -> None:
+    pilot.send(op="twist", vx=0.2, id=1)
+    rig.advance(0.3)
+    pilot.send(op="twist", vx=0.2, vy=0.1, id=2)
+    rig.advance(0.01)
+    reply = next(m for m in pilot.messages() if m.get("id") == 2)
+    assert reply["ok"] is False
+    error = reply["error"]
+    assert isinstance(error, dict)
+    assert error["code"] == "infeasible_twist"
+    assert error["constraint"] == "sliding"
+    assert error["wheel"] in ("left", "right")
+    assert error["residual_m_s"] == pytest.approx(0.1)
+    assert error["nearest"] == {"vx_m_s": pytest.approx(0.2),
+                                "vy_m_s": pytest.approx(0.0, abs=1e-9),
+                                "wz_rad_s": pytest.approx(0.0, abs=1e-9)}
+    reports = errors_on_can(rig)
+    assert reports and reports[-1].code is ErrorCode.INFEASIBLE_TWIST
+    assert reports[-1].constraint is ConstraintCode.SLIDING
+    # The robot ramps to zero.
+    rig.advance(1.0)
+    assert speeds(rig) == (0.0, 0.0)
+    # The same from a CAN twist frame: the WG_Error carries the frame's counter.
+    rig.send_can_twist(Twist(0.2, 0.1, 0.0))
+    counter = (rig.counter - 1) & 0xFF
+    rig.advance(0.02)
+    reports = errors_on_can(rig)
+    assert reports[-1].code is ErrorCode.INFEASIBLE_TWIST
+    assert reports[-1].twist_counter == counter
+    assert rig.gw.supervisor.counts["infeasible"] == 2
+
+
+@pytest.mark.parametrize("rig", [{"infeasible_policy": "project"}], indirect=True)
+def test_infeasible_twist_projected(rig: Rig, pilot: SocketPilot) -> None:
+    pilot.send(op="twist", vx=0.15, vy=0.1, id=7)
+    rig.advance(0.4)  # within the command timeout
+    reply = next(m for m in pilot.messages() if m.get("id") == 7)
+    assert reply["ok"] is True and reply["projected"] is True
+    assert "sliding" in str(reply["warning"])
+    assert rig.gw.prev.twist.vx_m_s == pytest.approx(0.15)
+    assert rig.gw.supervisor.counts["projected"] == 1
+
+
+@pytest.mark.parametrize("rig", [{}, {"feedback_recovery": "manual"}], indirect=True)
+def test_feedback_timeout_faults_names_motor_and_recovers(rig: Rig, pilot: SocketPilot) -> None:
+    pilot.send(op="subscribe", topics=["error"])
+    pilot.send(op="twist", vx=0.2)
+    rig.advance(0.3)
+    right = next(s for s in rig.sims if s.motor.wheel == "right")
+    right.inject(SimFault.SILENT)
+    rig.advance(0.5)
+    assert state(rig) is GatewayState.FAULT
+    assert "motor 'right' (node 2) stopped answering" in rig.gw.supervisor.reason
+    assert speeds(rig) == (0.0, 0.0)  # every wheel commanded to zero at once
+    events = [m for m in pilot.messages() if m.get("event") == "error"]
+    assert events and "motor 'right'" in str(events[-1]["message"])
+    assert errors_on_can(rig)[-1].code is ErrorCode.FEEDBACK_TIMEOUT
+    pilot.send(op="twist", vx=0.2, id=9)
+    rig.advance(0.02)
+    refused = next(m for m in pilot.messages() if m.get("id") == 9)
+    assert refused["ok"] is False
+    right.clear(SimFault.SILENT)
+    rig.advance(1.0)
+    if rig.config.loop.feedback_recovery == "auto":
+        assert state(rig) is GatewayState.RUNNING
+    else:
+        assert state(rig) is GatewayState.FAULT
+        pilot.send(op="enable")
+        rig.advance(1.0)
+        assert state(rig) is GatewayState.RUNNING
+
+
+def test_motor_fault_zeroes_retries_then_waits_for_enable(rig: Rig, pilot: SocketPilot) -> None:
+    pilot.send(op="twist", vx=0.2)
+    rig.advance(0.3)
+    left = next(s for s in rig.sims if s.motor.wheel == "left")
+    left.inject(SimFault.FAULT)
+    rig.advance(0.3)
+    assert state(rig) is GatewayState.FAULT
+    assert "motor 'left' (node 1) reports a fault: axis error" in rig.gw.supervisor.reason
+    assert speeds(rig) == (0.0, 0.0)
+    assert errors_on_can(rig)[-1].code is ErrorCode.MOTOR_FAULT
+    # The fault persists: the automatic re-enables (which clear the ODrive's error) fail,
+    # and after AUTO_RETRIES the gateway waits for an explicit enable (each attempt may take
+    # up to enable_timeout_s, 5 s).
+    rig.advance(25.0)
+    assert state(rig) is GatewayState.FAULT
+    assert rig.gw.supervisor.counts["faults"] == 1 + AUTO_RETRIES
+    left.clear(SimFault.FAULT)
+    rig.advance(2.0)
+    assert state(rig) is GatewayState.FAULT
+    pilot.send(op="enable")
+    rig.advance(1.5)
+    assert state(rig) is GatewayState.RUNNING
+
+
+def test_transient_motor_fault_recovers_automatically(rig: Rig) -> None:
+    left = next(s for s in rig.sims if s.motor.wheel == "left")
+    left.inject(SimFault.FAULT)
+    rig.advance(0.1)
+    assert state(rig) is GatewayState.FAULT
+    left.clear(SimFault.FAULT)
+    rig.advance(2.0)
+    assert state(rig) is GatewayState.RUNNING
+
+
+def test_estop_from_socket_and_can_zeroes_at_once_and_latches(rig: Rig, pilot: SocketPilot
+                                                             ) -> None:
+    for source in ("socket", "can"):
+        pilot.send(op="twist", vx=0.2)
+        rig.advance(0.5)
+        assert min(speeds(rig)) > 5.0
+        drain(rig.pilot)
+        if source == "socket":
+            pilot.send(op="estop")
+        else:
+            rig.send_can_twist(Twist(), TwistFlags.ESTOP)
+        rig.advance(rig.period)
+        assert state(rig) is GatewayState.ESTOP
+        assert speeds(rig) == (0.0, 0.0)  # no ramp
+        sent = drain(rig.pilot)
+        # ODrive disarm: Set_Axis_State IDLE (0x07 with state 1) to both nodes.
+        idle = {f.arbitration_id for f in sent if f.arbitration_id & 0x1F == 0x07
+                and f.data[:4] == b"\x01\x00\x00\x00"}
+        assert idle == {0x027, 0x047}
+        pilot.send(op="twist", vx=0.2, id=source)
+        rig.advance(0.3)
+        refused = next(m for m in pilot.messages() if m.get("id") == source)
+        assert refused["ok"] is False
+        assert refused["error"]["code"] == "estop"  # type: ignore[index]
+        assert state(rig) is GatewayState.ESTOP
+        pilot.send(op="enable")
+        rig.advance(1.0)
+        assert state(rig) is GatewayState.RUNNING
+    assert rig.gw.supervisor.counts["estops"] == 2
+
+
+def test_bus_trouble_is_retried_counted_and_reopens(rig: Rig, pilot: SocketPilot,
+                                                    monkeypatch: pytest.MonkeyPatch) -> None:
+    pilot.send(op="twist", vx=0.1)
+    rig.advance(0.2)
+    calls = {"n": 0}
+    real_send = rig.gw.bus.send
+
+    def failing(msg: can.Message, timeout: float | None = None) -> None:
+        calls["n"] += 1
+        raise can.CanOperationError("Transmit buffer full")
+
+    monkeypatch.setattr(rig.gw.bus, "send", failing)
+    rig.advance(5 * rig.period)  # a few failed bursts: counted, the loop goes on
+    assert rig.gw.counts["send_failures"] >= 5
+    monkeypatch.setattr(rig.gw.bus, "send", real_send)
+    rig.advance(0.1)
+    assert rig.gw.bus_healthy
+    assert state(rig) is GatewayState.RUNNING
+    # Many failures in a row: the bus is reopened and the gateway carries on.
+    monkeypatch.setattr(rig.gw.bus, "send", failing)
+    rig.advance((REOPEN_AFTER + 2) * rig.period)
+    assert rig.gw.counts["bus_reopens"] >= 1
+    rig.advance(1.0)
+    assert state(rig) is GatewayState.RUNNING
+    assert rig.gw.bus_healthy
