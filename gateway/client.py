@@ -20,11 +20,11 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from gateway.errors import GatewayError, GatewayTimeoutError
+from gateway.lifecycle import Closing
 from gateway.protocol import ProtocolError, encode_line, parse_message
 
 if TYPE_CHECKING:
     from collections.abc import Iterator, Mapping
-    from types import TracebackType
 
 log = logging.getLogger(__name__)
 
@@ -42,7 +42,7 @@ class ClientTimeoutError(ClientError, GatewayTimeoutError):
     """The gateway did not answer in time."""
 
 
-class ControlClient:
+class ControlClient(Closing):
     """A connection to the gateway's control socket.
 
     :param path: the socket file.
@@ -140,17 +140,6 @@ class ControlClient:
         if not self._closed:
             self._closed = True
             self._sock.close()
-
-    def __enter__(self) -> ControlClient:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
 
     def _check_open(self) -> None:
         if self._closed:

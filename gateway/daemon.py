@@ -13,6 +13,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import signal
+import threading
 import time
 from typing import TYPE_CHECKING, Any
 
@@ -178,7 +179,9 @@ class Daemon:
 
     def run(self, max_cycles: int | None = None) -> int:
         """Run until SIGTERM/SIGINT (or ``max_cycles``); return the exit status."""
-        old = {s: signal.signal(s, self.request_stop) for s in (signal.SIGTERM, signal.SIGINT)}
+        main_thread = threading.current_thread() is threading.main_thread()
+        signals = (signal.SIGTERM, signal.SIGINT) if main_thread else ()
+        old = {s: signal.signal(s, self.request_stop) for s in signals}
         try:
             self.rt_notes = realtime_setup(
                 self.config.loop.rt_priority or None,

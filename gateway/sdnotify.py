@@ -41,10 +41,10 @@ import socket
 from typing import TYPE_CHECKING
 
 from gateway.errors import EncodeError
+from gateway.lifecycle import Closing
 
 if TYPE_CHECKING:
     from collections.abc import Mapping, MutableMapping
-    from types import TracebackType
 
 log = logging.getLogger(__name__)
 
@@ -110,7 +110,7 @@ def watchdog_period_s(
     return usec / 2e6
 
 
-class SystemdNotifier:
+class SystemdNotifier(Closing):
     """Sends ``sd_notify`` messages to systemd without ever blocking or raising on I/O errors.
 
     Use :meth:`from_env` in the daemon; the constructor is for tests and special set-ups.
@@ -245,17 +245,6 @@ class SystemdNotifier:
         sock, self._sock = self._sock, None
         if sock is not None:
             sock.close()
-
-    def __enter__(self) -> SystemdNotifier:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
 
     def _failed(self, err: OSError, what: str) -> None:
         self.errors += 1

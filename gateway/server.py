@@ -40,6 +40,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, TypeAlias
 
 from gateway.errors import ConfigError, GatewayError
+from gateway.lifecycle import Closing
 from gateway.protocol import (
     MAX_MESSAGE_BYTES,
     LineFramer,
@@ -51,7 +52,6 @@ from gateway.protocol import (
 
 if TYPE_CHECKING:
     from collections.abc import Iterable
-    from types import TracebackType
 
 log = logging.getLogger(__name__)
 
@@ -140,7 +140,7 @@ class _Tally:
 Events: TypeAlias = list[tuple[int, Request | ProtocolError]]
 
 
-class ControlServer:
+class ControlServer(Closing):
     """The control socket server.
 
     :param path: the socket file (at most 107 bytes encoded).
@@ -336,17 +336,6 @@ class ControlServer:
         except OSError:
             pass
         log.info("control socket %s closed", self.path)
-
-    def __enter__(self) -> ControlServer:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
 
     def __del__(self) -> None:
         if not getattr(self, "_closed", True):

@@ -15,17 +15,17 @@ from typing import TYPE_CHECKING, Any
 
 from gateway.bus import drain, open_bus, send_frames
 from gateway.errors import BusError
+from gateway.lifecycle import Closing
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
-    from types import TracebackType
 
     from gateway.sim import DeviceSimulator
 
 log = logging.getLogger(__name__)
 
 
-class SimulatedControllers:
+class SimulatedControllers(Closing):
     """Simulated motor controllers on one bus.
 
     :param simulators: the device simulators, one per motor.
@@ -87,6 +87,10 @@ class SimulatedControllers:
                 deadline = time.monotonic()
             self._stop.wait(max(delay, 0.0))
 
+    def close(self) -> None:
+        """The same as :meth:`shutdown`."""
+        self.shutdown()
+
     def shutdown(self) -> None:
         """Stop the thread and close the bus (safe to call twice)."""
         if not self._open:
@@ -96,17 +100,6 @@ class SimulatedControllers:
         if self._thread is not None:
             self._thread.join(timeout=2.0)
         self.bus.shutdown()
-
-    def __enter__(self) -> SimulatedControllers:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.shutdown()
 
     def __del__(self) -> None:
         if getattr(self, "_open", False):
