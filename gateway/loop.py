@@ -18,6 +18,7 @@ Each cycle:
 
 from __future__ import annotations
 
+import collections
 import logging
 import time
 from typing import TYPE_CHECKING
@@ -25,6 +26,7 @@ from typing import TYPE_CHECKING
 import can
 
 from gateway.bus import drain, open_bus, to_message
+from gateway.busload import frame_bits
 from gateway.control import Accepted, Rejection, Source, Supervisor
 from gateway.drives import DriveSet
 from gateway.errors import BusError, DecodeError
@@ -97,6 +99,10 @@ class Gateway:
             "bus_reopens": 0, "can_twists": 0, "can_duplicates": 0, "can_lost": 0,
             "bad_can_twists": 0, "errors_reported": 0,
         }
+        #: Frames seen per (arbitration ID, extended, transmitted), for monitors.
+        self.id_counts: collections.Counter[tuple[int, bool, bool]] = collections.Counter()
+        #: Nominal bits of every frame sent and received (bus load = rate / bitrate).
+        self.bits = 0
         #: (client, source) pairs that want to hear about errors: filled by the daemon.
         self.outbox: list[tuple[str, dict[str, object]]] = []
         self.last_error: dict[str, object] | None = None
@@ -136,6 +142,7 @@ class Gateway:
             return False
         self._bus_failures = 0
         self.counts["frames_sent"] += len(msgs)
+        self._tally(frames, True)
         if self.record is not None:
             stamp = time.time()
             for msg in msgs:
@@ -152,6 +159,7 @@ class Gateway:
             log.warning("CAN receive failed: %s", err)
             return []
         self.counts["frames_received"] += len(frames)
+        self._tally(frames, False)
         if self.record is not None and frames:
             stamp = time.time()
             for f in frames:
@@ -159,6 +167,12 @@ class Gateway:
                 msg.timestamp, msg.is_rx, msg.channel = stamp, True, self.config.bus.channel
                 self.record.on_message_received(msg)
         return frames
+
+    def _tally(self, frames: list[Frame], sent: bool) -> None:
+        counts = self.id_counts
+        for f in frames:
+            counts[(f.arbitration_id, f.is_extended_id, sent)] += 1
+            self.bits += frame_bits(0 if f.is_remote_frame else f.dlc, f.is_extended_id)
 
     # ----------------------------------------------------------------- inputs
 

@@ -55,6 +55,16 @@ def status_dict(daemon: Daemon, now_s: float) -> dict[str, object]:
         "timing": timing,
         "last_error": gw.last_error,
         "realtime": daemon.rt_notes,
-        "bus": {"interface": gw.config.bus.interface, "channel": gw.config.bus.channel,
-                "healthy": gw.bus_healthy},
+        "bus": {
+            "interface": gw.config.bus.interface,
+            "channel": gw.config.bus.channel,
+            "bitrate": gw.config.bus.bitrate,
+            "healthy": gw.bus_healthy,
+            "bits": gw.bits,
+            "time_s": now_s,
+            "frames": [
+                {"id": can_id, "extended": ext, "direction": "tx" if sent else "rx", "count": n}
+                for (can_id, ext, sent), n in sorted(gw.id_counts.items())
+            ],
+        },
     }
