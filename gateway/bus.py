@@ -74,6 +74,10 @@ def send_frames(bus: can.BusABC, frames: Iterable[Frame]) -> int:
     return sent
 
 
+#: A message stamp further than this from the wall clock is not trusted (s).
+_PLAUSIBLE_S = 1.0
+
+
 def drain(
     bus: can.BusABC, limit: int = 10_000, timestamp_s: float | None = None
 ) -> list[Frame]:
@@ -81,13 +85,17 @@ def drain(
 
     Error frames are skipped (they carry no data for the drivers).
 
-    :param timestamp_s: the receive time to stamp on every frame; ``time.monotonic()`` at
-        receipt when omitted.  (python-can's own stamps are wall-clock time on the virtual bus
-        and must not be mixed with the monotonic clock of the loop.)
+    :param timestamp_s: the receive time to stamp on every frame (simulated time in tests).
+        When omitted, each frame keeps the time python-can stamped on it (the kernel's receive
+        time on socketcan), moved from the wall clock onto ``time.monotonic()`` so it compares
+        with the loop's clock; a stamp more than a second away from the wall clock (an
+        interface with its own epoch) is replaced by the time of receipt.
 
     :raises BusError: if receiving fails.
     """
     out: list[Frame] = []
+    wall, mono = time.time(), time.monotonic()
+    offset = mono - wall
     try:
         for _ in range(limit):
             msg = bus.recv(0.0)
@@ -95,7 +103,13 @@ def drain(
                 break
             if msg.is_error_frame:
                 continue
-            out.append(to_frame(msg, time.monotonic() if timestamp_s is None else timestamp_s))
+            if timestamp_s is not None:
+                stamp = timestamp_s
+            elif abs(msg.timestamp - wall) <= _PLAUSIBLE_S:
+                stamp = msg.timestamp + offset
+            else:
+                stamp = time.monotonic()
+            out.append(to_frame(msg, stamp))
     except (can.CanError, OSError) as err:
         raise BusError(f"Receiving failed: {err}") from err
     return out

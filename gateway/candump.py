@@ -6,8 +6,9 @@ one, ``R`` for a remote frame) and, as python-can writes it, ``R``/``T`` for rec
 transmitted.  This reader is pure and strict: a line it cannot read raises
 :class:`CandumpError` with the line number, so callers can report it and go on.
 
->>> parse_line("(12.5) can0 06D#0000204100000000 T", 1)
-LogEntry(timestamp_s=12.5, channel='can0', frame=Frame(arbitration_id=109, data=b'\\x00\\x00 A\\x00\\x00\\x00\\x00', is_extended_id=False, is_remote_frame=False, dlc=8, timestamp_s=12.5), is_rx=False)
+>>> entry = parse_line("(12.5) can0 06D#0000204100000000 T", 1)
+>>> entry.timestamp_s, entry.channel, entry.is_rx, entry.frame.to_cansend()
+(12.5, 'can0', False, '06D#0000204100000000')
 """
 
 from __future__ import annotations

@@ -62,6 +62,8 @@ class Gateway:
     :param bus: an open python-can bus; opened from the config when omitted.
     :param record: a python-can writer that gets every frame sent and received.
     :param timer: the loop's timing statistics (the daemon's scheduler keeps them).
+    :param stamp_with_cycle_time: stamp received frames with the time ``cycle`` is called with
+        (simulated time in tests) instead of their own receive time.
     """
 
     def __init__(
@@ -70,6 +72,7 @@ class Gateway:
         bus: can.BusABC | None = None,
         record: can.Listener | None = None,
         timer: LoopTimer | None = None,
+        stamp_with_cycle_time: bool = False,
     ) -> None:
         self.config = config
         self.model = config.model
@@ -80,6 +83,7 @@ class Gateway:
         self.counter = CounterTracker()
         self.timer = timer if timer is not None else LoopTimer(config.loop.rate_hz)
         self.record = record
+        self.stamp_with_cycle_time = stamp_with_cycle_time
         self._own_bus = bus is None
         self.bus = bus if bus is not None else self._open()
         self.period_s = 1.0 / config.loop.rate_hz
@@ -151,9 +155,9 @@ class Gateway:
         return True
 
     def receive(self, now_s: float) -> list[Frame]:
-        """Everything waiting on the bus, stamped with the cycle's time."""
+        """Everything waiting on the bus, stamped with its receive time (monotonic)."""
         try:
-            frames = drain(self.bus, timestamp_s=now_s)
+            frames = drain(self.bus, timestamp_s=now_s if self.stamp_with_cycle_time else None)
         except BusError as err:
             self.counts["send_failures"] += 1
             log.warning("CAN receive failed: %s", err)

@@ -52,8 +52,9 @@ class Rig:
         if socket_path is not None:
             self.daemon = Daemon(config, socket_path=socket_path, notifier=SystemdNotifier(None))
             self.gw = self.daemon.gateway
+            self.gw.stamp_with_cycle_time = True
         else:
-            self.gw = Gateway(config)
+            self.gw = Gateway(config, stamp_with_cycle_time=True)
         self.sims = self.gw.drives.simulators()
         self.ctl = SimulatedControllers(self.sims, config.bus.channel)
         self.pilot = can.Bus(interface="virtual", channel=config.bus.channel)
