@@ -29,6 +29,7 @@ COMMANDS: dict[str, str] = {
     "run": "run",
     "twist": "twist",
     "status": "status",
+    "jog": "jog",
 }
 
 EXIT_ERROR = 1
