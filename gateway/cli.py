@@ -30,6 +30,7 @@ COMMANDS: dict[str, str] = {
     "twist": "twist",
     "status": "status",
     "jog": "jog",
+    "monitor": "monitor",
 }
 
 EXIT_ERROR = 1
