@@ -31,6 +31,7 @@ COMMANDS: dict[str, str] = {
     "status": "status",
     "jog": "jog",
     "monitor": "monitor",
+    "odom": "odom",
 }
 
 EXIT_ERROR = 1

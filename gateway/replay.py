@@ -1,0 +1,423 @@
+"""Replaying a candump log through the drivers and the odometry, as the gateway would have.
+
+:class:`Replay` is the core of ``wheelgate odom``: every :class:`~gateway.candump.LogEntry`
+goes, stamped with its recorded time, to a :class:`~gateway.drives.DriveSet` built from the
+configuration (drivers ignore frames that are not theirs, so a gateway ``--record`` log with
+both directions is fed whole), and the odometry integrates every wheel's latest position the
+way :meth:`gateway.loop.Gateway._integrate` does: at the newest feedback time stamp, with
+``None`` for wheels without feedback.  It reads no clock and touches no file or bus.
+
+When the odometry is updated
+    At the end of a group of entries that share one time stamp (the gateway stamps all frames
+    of a cycle alike, so a ``--record`` log replays at the gateway's cadence), once every
+    driven wheel has a new sample since the last update (``candump`` stamps each frame on its
+    own: updating after each would mix new and old positions of different wheels and turn
+    their stagger into zig-zag and false distance), and at most once per ``min_interval_s`` of
+    log time (by default the configured control period, as the gateway).  A wheel that falls
+    silent delays an update by at most ``max_interval_s``.  Positions are absolute, so fewer
+    updates lose no motion: the SE(2) step is exact while the twist is constant, and a twist
+    that changes within an interval costs a second-order error (``tools/bench_replay.py``
+    measures it).  Whatever is pending is integrated at the end of the log.
+
+Steering angles are not in the log: the gateway commands steering without CAN frames of its
+own.  Robots with steered wheels are replayed with the first of these that applies:
+
+* :attr:`SteeringSource.FIXED_WHEELS`: the wheels that are not steered determine the twist on
+  their own (Ackermann with driven rear wheels, the differential drive with a castor): the
+  steered wheels are left out of the odometry, which is then exact again; their angles are
+  reconstructed from that twist by inverse kinematics, for the plot.
+* :attr:`SteeringSource.GATEWAY_TWIST`: the log holds the gateway's own ``WG_Odom_Velocity``
+  frames (a ``--record`` log does): each steered wheel is turned parallel to its contact
+  point's velocity under the last twist the gateway reported, the half turn chosen by the sign
+  of the wheel's measured speed (:func:`reconstruct_steer`).  It lags by up to one odometry
+  period (1/``odom_rate_hz``), carries that frame's resolution (1 mm/s) and is only as right
+  as the gateway's own estimate; while wheels are being turned it can be off by their turn.
+* :attr:`SteeringSource.NEUTRAL`: neither: steered wheels are taken at their neutral angle,
+  which is wrong whenever they were turned.  The summary says so.
+"""
+
+from __future__ import annotations
+
+import enum
+import logging
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+from gateway.candump import read_lines
+from gateway.drives import DriveSet
+from gateway.errors import DecodeError, KinematicsError
+from gateway.kinematics import Odometry, Pose, RobotModel, WheelType, wrap_angle
+from gateway.wgproto import WgCodec
+
+if TYPE_CHECKING:
+    from collections.abc import Iterable, Iterator, Sequence
+
+    from gateway.candump import CandumpError, LogEntry
+    from gateway.config import GatewayConfig
+    from gateway.kinematics import OdometryState
+    from gateway.types import Frame, Twist, WheelFeedback
+
+log = logging.getLogger(__name__)
+
+#: Default log time after which a pending update waits no longer for every wheel, s.
+DEFAULT_MAX_INTERVAL_S = 0.1
+#: Contact-point speed (m/s) below which a steered wheel keeps its angle.
+_STILL_M_S = 1e-6
+#: Rim speed (m/s) above which a wheel's measured direction decides its half turn.
+_STILL_M_S_MEASURED = 1e-3
+#: Slack for float rounding of time stamps (microseconds in the log; float64 epoch times
+#: resolve 0.24 us), s.
+_STAMP_SLACK_S = 1e-6
+#: Slack on steering limits, rad.
+_SLACK = 1e-9
+
+
+class SteeringSource(enum.Enum):
+    """Where a replay takes the steering angles from (see the module docstring)."""
+
+    NONE = "none (no steered wheels)"
+    FIXED_WHEELS = "left out: the wheels that are not steered fix the twist"
+    GATEWAY_TWIST = "inverse kinematics of the gateway's WG_Odom_Velocity frames"
+    NEUTRAL = "neutral angles (the log has no steering information)"
+
+
+@dataclass(frozen=True, slots=True)
+class Sample:
+    """The odometry after one update.
+
+    :param time_s: log time of the newest feedback, s.
+    :param pose: integrated pose.
+    :param twist: body twist over the last interval.
+    :param slip_m_s: RMS residual of the forward kinematics over the last interval, m/s.
+    :param distance_m: path length so far, m.
+    :param wheel_rad_s: every wheel's latest reported speed (model order), rad/s, ``None``
+        for wheels without feedback.
+    :param steer_rad: the steering angles used (``None`` for wheels not steered).
+    """
+
+    time_s: float
+    pose: Pose
+    twist: Twist
+    slip_m_s: float
+    distance_m: float
+    wheel_rad_s: tuple[float | None, ...]
+    steer_rad: tuple[float | None, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class ReplaySummary:
+    """What a replay read and where it ended.
+
+    :param pose: final pose.
+    :param distance_m: path length, m.
+    :param entries: log entries read.
+    :param received: entries marked received (``R`` or no direction).
+    :param motor_frames: entries one of the drivers claimed (its motors' frames, in either
+        direction: a ``--record`` log holds the commands too).
+    :param updates: odometry updates.
+    :param corrupt_lines: lines that could not be read (skipped).
+    :param start_s: time stamp of the first entry, s (``None`` for an empty log).
+    :param end_s: time stamp of the last entry, s.
+    :param steering: where the steering angles came from.
+    :param skipped_updates: intervals the forward kinematics could not solve (too few wheels
+        with feedback); their motion is lost.
+    :param silent_wheels: driven wheels with no feedback in the log (the odometry starts once
+        every driven wheel has reported, so one silent wheel leaves it at the origin).
+    """
+
+    pose: Pose
+    distance_m: float
+    entries: int
+    received: int
+    motor_frames: int
+    updates: int
+    corrupt_lines: int
+    start_s: float | None
+    end_s: float | None
+    steering: SteeringSource
+    skipped_updates: int = 0
+    silent_wheels: tuple[str, ...] = ()
+
+    @property
+    def duration_s(self) -> float:
+        """Log time covered, s."""
+        if self.start_s is None or self.end_s is None:
+            return 0.0
+        return self.end_s - self.start_s
+
+
+def fixed_subset(config: GatewayConfig) -> tuple[tuple[int, ...], RobotModel] | None:
+    """The wheels that are not steered, as a model of their own, if the model has steered
+    wheels and the others (with their motors' feedback) determine the twist on their own.
+
+    :return: their indices (model order) and their model, or ``None``.
+    """
+    model = config.model
+    idx = tuple(i for i, w in enumerate(model.wheels) if not w.steered)
+    if len(idx) == model.n:
+        return None
+    probe = [1.0 if config.motors[i] is not None else None for i in idx]
+    if all(p is None for p in probe):
+        return None
+    try:
+        sub = RobotModel([model.wheels[i] for i in idx], model.slip_tolerance_m_s)
+        sub.fk(probe)
+    except KinematicsError:
+        return None
+    return idx, sub
+
+
+def reconstruct_steer(
+    model: RobotModel,
+    twist: Twist,
+    previous: Sequence[float | None],
+    wheel_rad_s: Sequence[float | None],
+) -> tuple[float | None, ...]:
+    """Steering angles of the steerable wheels that realise ``twist``.
+
+    A steerable wheel's plane must be parallel to its contact point's velocity, which fixes
+    its angle up to a half turn; the half turn decides the sign of the wheel's rolling speed.
+    Of the angles within the wheel's limits, the one whose rolling direction agrees with the
+    sign of the wheel's measured speed is taken (when it turns by more than 1 mm/s at the rim),
+    then the one nearest ``previous``.  A wheel whose contact point stands still, or that no
+    angle within its limits fits, keeps its previous angle; castor wheels keep theirs too.
+
+    :param model: the robot.
+    :param twist: the body twist.
+    :param previous: the current angles (model order, ``None`` for wheels not steered).
+    :param wheel_rad_s: the wheels' measured speeds (model order), ``None`` where unknown.
+    :return: the angles, model order (``None`` for wheels not steered).
+    """
+    vx, vy, wz = twist.vx_m_s, twist.vy_m_s, twist.wz_rad_s
+    out = list(previous)
+    for i, w in enumerate(model.wheels):
+        if w.type is not WheelType.STEERABLE:
+            continue
+        px, py = vx - wz * w.y, vy + wz * w.x
+        if math.hypot(px, py) <= _STILL_M_S:
+            continue
+        base = math.atan2(py, px) - w.heading()
+        kmin = math.ceil((w.steer_min - _SLACK - base) / math.pi)
+        kmax = math.floor((w.steer_max + _SLACK - base) / math.pi)
+        if kmin > kmax:
+            continue
+        measured = wheel_rad_s[i]
+        sign = 0
+        if measured is not None and abs(measured) * w.radius > _STILL_M_S_MEASURED:
+            sign = 1 if measured > 0 else -1
+        prev = previous[i] or 0.0
+        best: tuple[bool, float, float] | None = None
+        for k in range(kmin, kmax + 1):
+            sigma = base + k * math.pi
+            mismatch = sign != 0 and (1 if k % 2 == 0 else -1) != sign
+            key = (mismatch, abs(wrap_angle(sigma - prev)), sigma)
+            if best is None or key < best:
+                best = key
+        if best is not None:
+            out[i] = best[2]
+    return tuple(out)
+
+
+class Replay:
+    """Feeds log entries to the drivers and integrates the odometry.
+
+    :param config: the robot (its motors decide which frames are feedback).
+    :param min_interval_s: least log time between two odometry updates, s; by default the
+        control period of the configuration (``gateway.rate_hz``), the gateway's own cadence.
+    :param max_interval_s: log time after which the odometry is updated even though some
+        driven wheel has no new sample (a wheel that fell silent), s.
+    :raises DriverNotFoundError: if a driver cannot be loaded.
+    :raises ValueError: if an interval is negative or not finite.
+    """
+
+    def __init__(
+        self,
+        config: GatewayConfig,
+        min_interval_s: float | None = None,
+        max_interval_s: float = DEFAULT_MAX_INTERVAL_S,
+    ) -> None:
+        if min_interval_s is None:
+            min_interval_s = 1.0 / config.loop.rate_hz
+        for name, value in (("min_interval_s", min_interval_s),
+                            ("max_interval_s", max_interval_s)):
+            if not 0.0 <= value < math.inf:
+                raise ValueError(f"Expected {name} >= 0 s and finite, but got {value!r}")
+        self.config = config
+        self.model = config.model
+        self.drives = DriveSet(config)
+        self.min_interval_s = min_interval_s
+        self.max_interval_s = max_interval_s
+        #: Lines that could not be read, in order (filled by :meth:`feed_lines`).
+        self.errors: list[CandumpError] = []
+        self._subset = fixed_subset(config)
+        steered = any(w.steered for w in self.model.wheels)
+        if not steered:
+            self.steering = SteeringSource.NONE
+        elif self._subset is not None:
+            self.steering = SteeringSource.FIXED_WHEELS
+        else:
+            self.steering = SteeringSource.NEUTRAL
+        self.odometry = Odometry(self._subset[1] if self._subset else self.model)
+        self._steer: tuple[float | None, ...] = self.model.neutral_steer
+        self._wg = WgCodec(config.loop.can_ids) if steered and self._subset is None else None
+        self._velocity_id = (config.loop.can_ids.odom_velocity, config.loop.can_ids.extended)
+        # Wheels whose feedback must be there before the first update (a later first sample
+        # would leave an interval with too few wheels to solve).
+        self._needed = tuple(i for i, m in enumerate(config.motors) if m is not None)
+        self._n_needed = len(self._needed)
+        self._last_feedback: list[WheelFeedback | None] = [None] * self.model.n
+        # Frames the drivers took since the last update: every driven wheel having a new
+        # sample needs at least one each, so fewer spares the look at every wheel.
+        self._taken = 0
+        groups = self.drives.groups
+        self._on_frame = groups[0][0].on_frame if len(groups) == 1 else self.drives.on_frame
+        self._pending = False
+        self._group_s: float | None = None
+        self._last_update_s = float("-inf")
+        self._odom_stamp = float("-inf")
+        self._start_s: float | None = None
+        self._entries = 0
+        self._received = 0
+        self._motor_frames = 0
+        self._updates = 0
+        self._skipped = 0
+
+    # ----------------------------------------------------------------- input
+
+    def feed_lines(self, lines: Iterable[str]) -> Iterator[Sample]:
+        """Every update from the lines of a candump log (unreadable lines are appended to
+        :attr:`errors` and skipped), the final one included."""
+        feed = self.feed
+        for entry in read_lines(lines, self.errors):
+            sample = feed(entry)
+            if sample is not None:
+                yield sample
+        last = self.finish()
+        if last is not None:
+            yield last
+
+    def feed(self, entry: LogEntry) -> Sample | None:
+        """Take one entry.
+
+        :return: the update that the start of a new time stamp group triggered, if any.
+        """
+        t = entry.timestamp_s
+        out = None
+        if t != self._group_s:
+            # Cheap tests first: every driven wheel needs a frame of its own to be new.
+            if self._pending and (
+                self._taken >= self._n_needed
+                or (self._group_s or 0.0) - self._last_update_s + _STAMP_SLACK_S
+                >= self.max_interval_s
+            ):
+                out = self._update(final=False)
+            self._group_s = t
+            if self._start_s is None:
+                self._start_s = t
+        self._entries += 1
+        if entry.is_rx:
+            self._received += 1
+        frame = entry.frame
+        if self._on_frame(frame):
+            self._motor_frames += 1
+            self._taken += 1
+            self._pending = True
+        elif (
+            self._wg is not None
+            and frame.arbitration_id == self._velocity_id[0]
+            and frame.is_extended_id == self._velocity_id[1]
+        ):
+            self._take_gateway_twist(self._wg, frame)
+        return out
+
+    def finish(self) -> Sample | None:
+        """Integrate whatever is still pending (at the end of the log)."""
+        return self._update(final=True) if self._pending else None
+
+    # ----------------------------------------------------------------- odometry
+
+    def _update(self, final: bool) -> Sample | None:
+        group = self._group_s if self._group_s is not None else 0.0
+        elapsed = group - self._last_update_s
+        if not final and elapsed + _STAMP_SLACK_S < self.min_interval_s:
+            return None
+        waiting = not final and elapsed + _STAMP_SLACK_S < self.max_interval_s
+        if waiting and self._taken < self._n_needed:
+            return None
+        feedback = self.drives.feedback_by_wheel()
+        last = self._last_feedback
+        if waiting and any(feedback[i] is last[i] for i in self._needed):
+            return None  # wait until every driven wheel has a new sample
+        if any(feedback[i] is None for i in self._needed):
+            return None  # not started: some driven wheel has not reported yet
+        self._pending = False
+        self._taken = 0
+        self._last_update_s = group
+        self._last_feedback = feedback
+        stamp = max(fb.timestamp_s for fb in feedback if fb is not None)
+        if stamp <= self._odom_stamp:
+            return None
+        self._odom_stamp = stamp
+        positions = [None if fb is None else fb.position_rad for fb in feedback]
+        try:
+            state = self._integrate(positions, stamp)
+        except KinematicsError as err:
+            self._skipped += 1
+            log.warning("odometry at %.6f s skipped: %s", stamp, err)
+            return None
+        self._updates += 1
+        return Sample(
+            stamp,
+            state.pose,
+            state.twist,
+            state.slip_m_s,
+            state.distance_m,
+            tuple(None if fb is None else fb.velocity_rad_s for fb in feedback),
+            self._steer,
+        )
+
+    def _integrate(self, positions: Sequence[float | None], stamp: float) -> OdometryState:
+        if self._subset is None:
+            return self.odometry.update(positions, stamp, self._steer)
+        state = self.odometry.update([positions[i] for i in self._subset[0]], stamp)
+        self._steer = self._steer_for(state.twist)
+        return state
+
+    def _steer_for(self, twist: Twist) -> tuple[float | None, ...]:
+        feedback = self.drives.feedback_by_wheel()
+        speeds = [None if fb is None else fb.velocity_rad_s for fb in feedback]
+        return reconstruct_steer(self.model, twist, self._steer, speeds)
+
+    def _take_gateway_twist(self, wg: WgCodec, frame: Frame) -> None:
+        try:
+            velocity = wg.decode_velocity(frame)
+        except DecodeError as err:
+            log.warning("unreadable WG_Odom_Velocity frame: %s", err)
+            return
+        if velocity is None:
+            return
+        self.steering = SteeringSource.GATEWAY_TWIST
+        if velocity.twist.is_finite():
+            self._steer = self._steer_for(velocity.twist)
+
+    # ----------------------------------------------------------------- result
+
+    def summary(self) -> ReplaySummary:
+        """What was read so far and where the odometry stands."""
+        st = self.odometry.state
+        feedback = self.drives.feedback_by_wheel()
+        return ReplaySummary(
+            pose=st.pose,
+            distance_m=st.distance_m,
+            entries=self._entries,
+            received=self._received,
+            motor_frames=self._motor_frames,
+            updates=self._updates,
+            corrupt_lines=len(self.errors),
+            start_s=self._start_s,
+            end_s=self._group_s,
+            steering=self.steering,
+            skipped_updates=self._skipped,
+            silent_wheels=tuple(self.model.names[i] for i in self._needed if feedback[i] is None),
+        )
