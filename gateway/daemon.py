@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import math
+import select
 import signal
 import threading
 import time
@@ -91,8 +93,9 @@ class Daemon:
             self._closers.append(self.gateway.close)
             self.sim: SimulatedControllers | None = None
             if sim:
+                # Started by run(), after realtime_setup (see there).
                 self.sim = SimulatedControllers(self.gateway.drives.simulators(),
-                                                config.bus.channel).start()
+                                                config.bus.channel)
                 self._closers.append(self.sim.shutdown)
             path = socket_path or config.loop.socket or default_socket_path()
             self.server = ControlServer(
@@ -111,6 +114,10 @@ class Daemon:
         self._watchdog_s = self.notifier.watchdog_period_s
         self._next_watchdog = 0.0
         self.rt_notes: list[str] = []
+        # The server's selector descriptor, readable when a request or a connection waits:
+        # lets the loop wait for requests with microsecond resolution (see _wait).
+        fileno = getattr(self.server, "fileno", None)
+        self._server_fd: int | None = fileno() if callable(fileno) else None
 
     # ----------------------------------------------------------------- requests
 
@@ -188,6 +195,11 @@ class Daemon:
                 None if self.config.loop.rt_cpu < 0 else self.config.loop.rt_cpu,
                 self.config.loop.lock_memory,
             )
+            if self.sim is not None:
+                # Started after realtime_setup, the simulators' thread inherits SCHED_FIFO when
+                # the loop has it: a SCHED_OTHER thread preempted while it holds the GIL would
+                # stall the FIFO loop thread for as long as the scheduler keeps it waiting.
+                self.sim.start()
             if self.config.loop.enable_on_start:
                 self.gateway.supervisor.enable(time.monotonic())
             else:
@@ -239,16 +251,46 @@ class Daemon:
         self.notifier.ready(f"{self.gateway.state.name}; socket {self.socket_path}")
 
     def _wait(self) -> None:
+        """Serve the socket until the next deadline: poll while whole milliseconds remain
+        before the spin phase, wait out the rest, spin, then serve once more.
+
+        The socket poll (epoll) waits in whole milliseconds, rounded up: asked for 0.7 ms it
+        sleeps 1 ms.  So it is asked only for the whole milliseconds that end before the spin
+        phase (``k - 0.5`` ms, which rounds up to ``k``); otherwise every cycle could start up
+        to a millisecond late.  The sub-millisecond rest (all of the wait at 1 kHz) is a
+        ``select`` on the server's descriptor, which wakes for a request at once, where the
+        server offers one (``fileno()``), else a plain sleep.  The last pass, at the deadline,
+        hands this cycle every request that arrived meanwhile.
+        """
         sched = self.scheduler
+        spin = sched.spin_s
         while True:
-            remaining = sched.remaining_s()
-            if remaining <= sched.spin_s:
+            whole_ms = math.floor((sched.remaining_s() - spin) * 1000.0)
+            if whole_ms < 1:
                 break
-            events = self.server.poll(remaining - sched.spin_s)
+            self._serve(self.server.poll((whole_ms - 0.5) * 1e-3))
+        sched.wait_next(self._wait_fine)
+        self._serve(self.server.poll(0.0))
+
+    def _wait_fine(self, timeout_s: float) -> None:
+        """Wait up to ``timeout_s`` (under a millisecond), serving requests as they come."""
+        fd = self._server_fd
+        if fd is not None:
+            try:
+                ready, _, _ = select.select([fd], [], [], timeout_s)
+            except (OSError, ValueError):  # closed, or beyond FD_SETSIZE: sleep instead
+                self._server_fd = None
+            else:
+                if ready:
+                    self._serve(self.server.poll(0.0))
+                return
+        time.sleep(timeout_s)
+
+    def _serve(self, events: list[tuple[int, Request | ProtocolError]]) -> None:
+        if events:
             now = time.monotonic()
             for client, request in events:
                 self.handle(client, request, now)
-        sched.wait_next()
 
     def shutdown(self) -> None:
         """Zero and disarm every motor, then close everything (safe to call twice)."""

@@ -200,18 +200,20 @@ class MotorDriver(abc.ABC):
 
     def status(self, now_s: float) -> tuple[MotorStatus, ...]:
         """A snapshot of every motor."""
+        # Called every cycle: locals and positional construction (no per-field keywords).
+        state, feedback, faults, detail = self.state, self._feedback, self._faults, self._detail
         out = []
         for i, m in enumerate(self.motors):
-            fb = self._feedback[i]
+            fb = feedback[i]
             out.append(
                 MotorStatus(
-                    name=m.wheel,
-                    node_id=m.node_id,
-                    state=self.state(i, now_s),
-                    faults=self._faults[i],
-                    detail=self._detail[i],
-                    feedback_age_s=None if fb is None else now_s - fb.timestamp_s,
-                    feedback=fb,
+                    m.wheel,
+                    m.node_id,
+                    state(i, now_s),
+                    faults[i],
+                    detail[i],
+                    None if fb is None else now_s - fb.timestamp_s,
+                    fb,
                 )
             )
         return tuple(out)

@@ -44,8 +44,17 @@ class DriveSet:
             )
             for name, idx in groups.items()
         )
+        flat = [i for _, idx in self.groups for i in idx]
+        self._whole = len(self.groups) == 1 and flat == list(range(len(config.motors)))
+        #: Positions in the drivers' concatenated status that give model order (``None``:
+        #: already in model order), so :meth:`status` needs no sort per cycle.
+        self._status_order: tuple[int, ...] | None = (
+            None if flat == sorted(flat) else tuple(sorted(range(len(flat)), key=flat.__getitem__))
+        )
 
-    def _split(self, wheel_rad_s: Sequence[float]) -> list[list[float]]:
+    def _split(self, wheel_rad_s: Sequence[float]) -> list[Sequence[float]]:
+        if self._whole and len(wheel_rad_s) == len(self.config.motors):
+            return [wheel_rad_s]  # one driver for every wheel, in model order: nothing to split
         return [[wheel_rad_s[i] for i in idx] for _, idx in self.groups]
 
     def enable(self, now_s: float) -> list[Frame]:
@@ -77,16 +86,24 @@ class DriveSet:
 
     def on_frame(self, frame: Frame) -> bool:
         """Give a received frame to the driver it belongs to."""
-        return any(drv.on_frame(frame) for drv, _ in self.groups)
+        for drv, _ in self.groups:
+            if drv.on_frame(frame):
+                return True
+        return False
 
     def status(self, now_s: float) -> list[MotorStatus]:
         """Every motor's status, in model order of their wheels."""
-        pairs = [
-            (i, st)
-            for drv, idx in self.groups
-            for i, st in zip(idx, drv.status(now_s), strict=True)
-        ]
-        return [st for _, st in sorted(pairs, key=lambda p: p[0])]
+        out: list[MotorStatus] = []
+        for drv, idx in self.groups:
+            statuses = drv.status(now_s)
+            if len(statuses) != len(idx):
+                raise ValueError(
+                    f"{type(drv).__name__}.status returned {len(statuses)} motors, "
+                    f"expected {len(idx)}"
+                )
+            out.extend(statuses)
+        order = self._status_order
+        return out if order is None else [out[k] for k in order]
 
     def feedback_by_wheel(self) -> list[WheelFeedback | None]:
         """The latest feedback of every wheel in model order (``None``: passive or none yet)."""

@@ -29,7 +29,7 @@ from gateway.bus import drain, open_bus, to_message
 from gateway.busload import frame_bits
 from gateway.control import Accepted, Rejection, Source, Supervisor
 from gateway.drives import DriveSet
-from gateway.errors import BusError, DecodeError
+from gateway.errors import BusError, DecodeError, KinematicsError
 from gateway.kinematics import Odometry, apply_limits
 from gateway.timing import LoopTimer
 from gateway.types import ConstraintCode, ErrorCode, Frame, GatewayState, Twist
@@ -53,6 +53,9 @@ log = logging.getLogger(__name__)
 
 #: Consecutive failed bursts after which the bus is reopened.
 REOPEN_AFTER = 20
+#: Nominal bits of a standard / extended frame by data length 0..8 (busload.frame_bits).
+_STD_BITS = tuple(frame_bits(n, False) for n in range(9))
+_EXT_BITS = tuple(frame_bits(n, True) for n in range(9))
 
 
 class Gateway:
@@ -88,6 +91,11 @@ class Gateway:
         self.bus = bus if bus is not None else self._open()
         self.period_s = 1.0 / config.loop.rate_hz
         self.prev: IkResult = self.model.ik(Twist())
+        self._driven = tuple(i for i, m in enumerate(config.motors) if m is not None)
+        # The last inverse-kinematics solve of the cycle (see _solve).
+        self._ik_key: tuple[Twist, tuple[float | None, ...]] | None = None
+        self._ik_result: IkResult = self.prev
+        self._ik_static = not any(w.steered for w in self.model.wheels)
         self.limit_report: LimitReport | None = None
         self._armed = False
         self._last_cycle_s: float | None = None
@@ -101,7 +109,7 @@ class Gateway:
         self.counts = {
             "cycles": 0, "frames_sent": 0, "frames_received": 0, "send_failures": 0,
             "bus_reopens": 0, "can_twists": 0, "can_duplicates": 0, "can_lost": 0,
-            "bad_can_twists": 0, "errors_reported": 0,
+            "bad_can_twists": 0, "errors_reported": 0, "odometry_errors": 0,
         }
         #: Frames seen per (arbitration ID, extended, transmitted), for monitors.
         self.id_counts: collections.Counter[tuple[int, bool, bool]] = collections.Counter()
@@ -134,9 +142,10 @@ class Gateway:
         if not frames:
             return True
         msgs = [to_message(f) for f in frames]
+        send = self.bus.send
         try:
             for msg in msgs:
-                self.bus.send(msg)
+                send(msg)
         except (can.CanError, OSError) as err:
             self.counts["send_failures"] += 1
             self._bus_failures += 1
@@ -162,9 +171,11 @@ class Gateway:
             self.counts["send_failures"] += 1
             log.warning("CAN receive failed: %s", err)
             return []
+        if not frames:
+            return frames
         self.counts["frames_received"] += len(frames)
         self._tally(frames, False)
-        if self.record is not None and frames:
+        if self.record is not None:
             stamp = time.time()
             for f in frames:
                 msg = to_message(f)
@@ -174,9 +185,14 @@ class Gateway:
 
     def _tally(self, frames: list[Frame], sent: bool) -> None:
         counts = self.id_counts
+        bits = self.bits
         for f in frames:
-            counts[(f.arbitration_id, f.is_extended_id, sent)] += 1
-            self.bits += frame_bits(0 if f.is_remote_frame else f.dlc, f.is_extended_id)
+            key = (f.arbitration_id, f.is_extended_id, sent)
+            counts[key] += 1
+            dlc = 0 if f.is_remote_frame else f.dlc
+            table = _EXT_BITS if f.is_extended_id else _STD_BITS
+            bits += table[dlc] if 0 <= dlc <= 8 else frame_bits(dlc, f.is_extended_id)
+        self.bits = bits
 
     # ----------------------------------------------------------------- inputs
 
@@ -248,11 +264,17 @@ class Gateway:
         """One control cycle at time ``now_s`` (monotonic seconds)."""
         self.counts["cycles"] += 1
         out: list[Frame] = []
-        for frame in self.receive(now_s):
-            if self.config.loop.can_input and self._is_twist_id(frame):
-                self.handle_can_twist(frame, now_s, out)
-            else:
-                self.drives.on_frame(frame)
+        frames = self.receive(now_s)
+        if frames:
+            drives = self.drives
+            ids = self.wg.ids
+            twist_id = ids.twist if self.config.loop.can_input else -1
+            twist_ext = ids.extended
+            for frame in frames:
+                if frame.arbitration_id == twist_id and frame.is_extended_id == twist_ext:
+                    self.handle_can_twist(frame, now_s, out)
+                else:
+                    drives.on_frame(frame)
         sup = self.supervisor
         fault = sup.motors(self.drives.status(now_s), now_s)
         if fault is not None:
@@ -264,7 +286,7 @@ class Gateway:
         decision = sup.decide(now_s)
         dt = now_s - self._last_cycle_s if self._last_cycle_s is not None else self.period_s
         self._last_cycle_s = now_s
-        result = self.model.try_ik(decision.twist, self.prev.steer_rad) or self.model.ik(Twist())
+        result = self._solve(decision.twist)
         if decision.ramp:
             result, self.limit_report = apply_limits(
                 self.model, result, self.config.limits, self.prev, dt
@@ -281,20 +303,37 @@ class Gateway:
         self._integrate()
         self._publish(now_s)
 
-    def _is_twist_id(self, frame: Frame) -> bool:
-        ids = self.wg.ids
-        return frame.arbitration_id == ids.twist and frame.is_extended_id == ids.extended
+    def _solve(self, twist: Twist) -> IkResult:
+        """Inverse kinematics of the target (zero if infeasible), remembered while the target
+        and the steering angles it starts from are the same objects: the supervisor keeps
+        its target object until it changes, and the solve is a pure function of both."""
+        steer = self.prev.steer_rad
+        key = self._ik_key
+        if key is not None and key[0] is twist and (self._ik_static or key[1] is steer):
+            return self._ik_result
+        result = self.model.try_ik(twist, steer) or self.model.ik(Twist())
+        self._ik_key = (twist, steer)
+        self._ik_result = result
+        return result
 
     def _integrate(self) -> None:
         feedback = self.drives.feedback_by_wheel()
-        stamps = [fb.timestamp_s for fb in feedback if fb is not None]
-        if not stamps or max(stamps) <= self._odom_stamp:
+        newest = self._odom_stamp
+        for fb in feedback:
+            if fb is not None and fb.timestamp_s > newest:
+                newest = fb.timestamp_s
+        if newest <= self._odom_stamp:
             return
-        self._odom_stamp = max(stamps)
+        self._odom_stamp = newest
         positions = [None if fb is None else fb.position_rad for fb in feedback]
-        if all(p is None for p in positions):
-            return
-        self.odometry.update(positions, self._odom_stamp, self.prev.steer_rad)
+        for i in self._driven:
+            if positions[i] is None:
+                return  # integrate once every driven wheel has reported
+        try:
+            self.odometry.update(positions, newest, self.prev.steer_rad)
+        except KinematicsError as err:
+            self.counts["odometry_errors"] += 1
+            log.warning("odometry update skipped: %s", err)
 
     def _publish(self, now_s: float) -> None:
         loop = self.config.loop

@@ -4,15 +4,17 @@ A simulator is driven by two calls, both given the time explicitly so tests are 
 :meth:`DeviceSimulator.handle` for every frame the gateway sends, and
 :meth:`DeviceSimulator.tick` to advance the motor and emit periodic frames.  Protocol
 simulators fill in the ``_on_frame`` and ``_on_tick`` hooks; the base applies the injected
-faults (silence, dropped frames) to whatever they emit.  :mod:`gateway.simbus` puts them on a
-python-can bus.
+faults (silence, garbage, dropped frames, latency) to whatever they emit.
+:mod:`gateway.simbus` puts them on a python-can bus.
 """
 
 from __future__ import annotations
 
 import abc
+import collections
 import enum
 import math
+import random
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -67,6 +69,11 @@ class SimFault(enum.IntFlag):
     FAULT = enum.auto()
     #: Every second frame the device sends is lost.
     DROP = enum.auto()
+    #: Every frame the device sends is held for ``latency_s`` before it goes out (in order).
+    LATE = enum.auto()
+    #: Every frame the device sends is replaced by random bytes of random length (0 to 8)
+    #: on the same identifier, from the simulator's seeded ``garbage_rng``.
+    GARBAGE = enum.auto()
 
 
 class DeviceSimulator(abc.ABC):
@@ -84,6 +91,13 @@ class DeviceSimulator(abc.ABC):
         self._drop_toggle = False
         #: Frames the simulator received, for assertions.
         self.received = 0
+        #: How long ``SimFault.LATE`` holds every frame the device sends (s).
+        self.latency_s = 0.02
+        #: The random source of ``SimFault.GARBAGE``, seeded with the node ID so runs repeat.
+        self.garbage_rng = random.Random(motor.node_id)
+        #: Garbage frames sent (``SimFault.GARBAGE``), for assertions.
+        self.garbage_sent = 0
+        self._held: collections.deque[tuple[float, Frame]] = collections.deque()
 
     # ----------------------------------------------------------------- public
 
@@ -91,8 +105,9 @@ class DeviceSimulator(abc.ABC):
         """Take a frame from the bus; return the frames the device answers with."""
         self.received += 1
         if self.faults & SimFault.SILENT:
+            self._held.clear()
             return []
-        return self._filter(self._on_frame(frame, now_s))
+        return self._emit(self._on_frame(frame, now_s), now_s)
 
     def tick(self, now_s: float) -> list[Frame]:
         """Advance the motor to ``now_s``; return the periodic frames due."""
@@ -101,8 +116,9 @@ class DeviceSimulator(abc.ABC):
         self._last_tick_s = now_s
         out = self._on_tick(now_s)
         if self.faults & SimFault.SILENT:
+            self._held.clear()
             return []
-        return self._filter(out)
+        return self._emit(out, now_s)
 
     def inject(self, fault: SimFault) -> None:
         """Add ``fault`` to the active faults (FAULT also disarms the motor)."""
@@ -115,7 +131,8 @@ class DeviceSimulator(abc.ABC):
         """Remove ``fault`` (all by default) from the active faults.
 
         A reported controller fault stays latched in the device until the protocol's clear
-        command arrives, as on the real controllers.
+        command arrives, as on the real controllers.  Frames held by ``LATE`` go out, in
+        order and ahead of newer ones, at the next :meth:`handle` or :meth:`tick`.
         """
         self.faults &= ~fault
 
@@ -142,7 +159,41 @@ class DeviceSimulator(abc.ABC):
     def _on_fault(self) -> None:  # noqa: B027 - optional hook
         """Latch the protocol's fault state (override to set error bits)."""
 
+    @property
+    def held(self) -> int:
+        """Frames ``SimFault.LATE`` holds back now."""
+        return len(self._held)
+
     # ----------------------------------------------------------------- internals
+
+    def _emit(self, frames: list[Frame], now_s: float) -> list[Frame]:
+        """Apply GARBAGE, DROP and LATE (in that order) to what the device emits now."""
+        faults = self.faults
+        if not faults and not self._held:
+            return frames
+        if faults & SimFault.GARBAGE:
+            frames = [self._garble(f) for f in frames]
+        frames = self._filter(frames)
+        held = self._held
+        if faults & SimFault.LATE:
+            due = now_s + self.latency_s
+            held.extend((due, f) for f in frames)
+            out = []
+            while held and held[0][0] <= now_s + 1e-12:
+                out.append(held.popleft()[1])
+            return out
+        if not held:
+            return frames
+        # LATE was cleared: what it still holds goes out first, then the new frames.
+        out = [f for _, f in held]
+        held.clear()
+        return out + frames
+
+    def _garble(self, frame: Frame) -> Frame:
+        rng = self.garbage_rng
+        self.garbage_sent += 1
+        data = rng.randbytes(rng.randint(0, 8))
+        return type(frame)(frame.arbitration_id, data, frame.is_extended_id)
 
     def _filter(self, frames: list[Frame]) -> list[Frame]:
         if not frames or not self.faults & SimFault.DROP:

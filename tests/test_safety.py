@@ -248,3 +248,20 @@ def test_bus_trouble_is_retried_counted_and_reopens(rig: Rig, pilot: SocketPilot
     rig.advance(1.0)
     assert state(rig) is GatewayState.RUNNING
     assert rig.gw.bus_healthy
+
+
+def test_first_feedback_of_one_wheel_arriving_late_does_not_break_the_loop(
+    channel: str,
+) -> None:
+    cfg = virtual_config(TB3, channel, rate_hz=100.0)
+    with Rig(cfg) as rig:
+        right = next(s for s in rig.sims if s.motor.wheel == "right")
+        right.inject(SimFault.SILENT)
+        rig.gw.supervisor.enable(rig.t)
+        rig.advance(0.3)  # left reports, right does not: odometry waits, nothing raises
+        assert rig.gw.counts["odometry_errors"] == 0
+        right.clear(SimFault.SILENT)
+        rig.advance(1.0)
+        rig.gw.supervisor.enable(rig.t)
+        rig.advance(1.0)
+        assert state(rig) is GatewayState.RUNNING

@@ -1,45 +1,61 @@
 """Benchmark: the whole daemon loop at 1 kHz with four wheels and their simulators.
 
-Method: the embedded default robot (4-wheel mecanum, four ODrive controllers) runs in one
-process exactly as ``wheelgate run --sim`` does: the control loop at 1 kHz in the main thread
-(absolute deadlines, sleep on the control socket, spin for the last 200 us), the four device
-simulators in a background thread at 1 kHz on the same virtual bus, and a client thread that
-sends a twist over the control socket every 20 ms.  The daemon's own timing statistics are
-read at the end:
+Method: the embedded default robot (4-wheel mecanum, four ODrive controllers) runs as
+``wheelgate run --sim`` does: the control loop at 1 kHz in the main thread (absolute
+deadlines, sleep on the control socket, spin for the last 200 us), the four device simulators
+on the same virtual bus, and a twist client in a separate process that sends a twist over the
+control socket about every 20 ms (15 to 25 ms apart, at random).  Where the simulators run
+is chosen with ``--sims``: ``thread``
+(default, exactly as ``--sim``: a background thread at 1 kHz in the daemon's process, which
+competes with the loop for the GIL) or ``inline`` (stepped by the loop thread right after each
+cycle, outside the measured cost: the closest in-process stand-in for controllers that sit on
+the other end of a real bus).  The daemon's own timing statistics, over the whole run, are read
+at the end:
 
 * cycle cost: the work of one cycle (receive, decide, IK and limits, encode, send, odometry);
-* lateness: when a cycle started minus its deadline (p50/p99/max over the last 4096 cycles);
+* lateness: when a cycle started minus its deadline (p50/p99/max);
 * missed cycles: deadlines skipped after an overrun (skipped, not burst);
-* twist-to-frame latency: from the twist request being read off the socket to the end of the
-  send of the cycle that applied it.
+* twist-to-frame latency: from the twist being sent to the daemon's socket (the client's
+  ``perf_counter`` just before ``sendall``; CLOCK_MONOTONIC, the same clock in both
+  processes) to the end of the send of the cycle that applied it; beside it the daemon's own
+  figure, which starts when the request is read.
 
 Beside them, the same-run cost of python-can alone: one cycle's worth of the same frames (4
 velocity commands sent, everything waiting drained) on the same virtual bus with the same
 simulators, in a loop of its own, gives the ratio "gateway cycle / bare python-can cycle".
 
-Run: ``python tools/bench_loop.py [seconds]`` (default 10).  Without SCHED_FIFO (root or
-LimitRTPRIO) and on a shared machine, tails are dominated by the scheduler; the p50 figures
-and the ratio are the comparable ones.
+Run: ``python tools/bench_loop.py [seconds] [--rt PRIORITY] [--cpu N] [--lock]
+[--sims thread|inline]`` (default 10 s, normal scheduling).  ``--rt`` runs the loop thread
+with SCHED_FIFO (root or LimitRTPRIO), as ``gateway.rt_priority`` does.  Without SCHED_FIFO
+and on a shared machine, tails are dominated by the scheduler; the p50 figures and the ratio
+are the comparable ones.
 """
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
+import math
+import os
+import random
+import socket
 import statistics
+import subprocess
 import sys
 import tempfile
 import threading
 import time
+from typing import Any
 
 import can
 
 from gateway.bus import drain
-from gateway.client import ControlClient
 from gateway.config import load_config
 from gateway.daemon import Daemon
-from gateway.errors import GatewayError
+from gateway.protocol import ProtocolError, Request, TwistRequest, encode_line
 from gateway.sdnotify import SystemdNotifier
 from gateway.simbus import SimulatedControllers
+from gateway.timing import LoopTimer
 from gateway.types import Frame
 
 
@@ -62,53 +78,174 @@ def bare_python_can_cycle_us(channel: str, cycles: int = 5000) -> float:
     return statistics.median(samples) * 1e6
 
 
-def client(path: str, stop: threading.Event) -> None:
-    try:
-        with ControlClient(path) as c:
+def client(path: str) -> None:
+    """Send a twist about every 20 ms until the daemon closes the socket (in its own process);
+    at the end print ``request id, perf_counter_ns when sent`` per twist on stdout.
+
+    The sends follow their own schedule, 15 to 25 ms apart at random (seeded), not "20 ms after
+    the last reply": replies leave the daemon at its deadlines, so that would lock the client's
+    phase to the loop's and every twist would arrive at the same point of the cycle.  The time
+    is taken just before ``sendall``, which puts the bytes in the daemon's socket within
+    microseconds; after it would be too late, because the daemon, woken by the bytes, may run
+    before the client reads the clock.
+    """
+    deadline = time.monotonic() + 5.0
+    while not os.path.exists(path) and time.monotonic() < deadline:
+        time.sleep(0.01)
+    rng = random.Random(6)
+    sent: list[tuple[int, int]] = []
+    with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as sock:
+        try:
+            sock.connect(path)
+            reader = sock.makefile("rb")
             k = 0
-            while not stop.is_set():
-                c.request({"op": "twist", "vx": 0.3 + 0.1 * (k % 3), "vy": 0.1, "wz": 0.2})
+            due = time.monotonic()
+            while True:
+                line = encode_line({"op": "twist", "vx": 0.3 + 0.1 * (k % 3), "vy": 0.1,
+                                    "wz": 0.2, "id": k})
+                sent.append((k, time.perf_counter_ns()))
+                sock.sendall(line)
+                if not reader.readline():
+                    break  # the daemon closed the socket at the end of the run
                 k += 1
-                stop.wait(0.02)
-    except GatewayError:
-        pass  # the daemon closed the socket at the end of the run
+                due += rng.uniform(0.015, 0.025)
+                time.sleep(max(0.0, due - time.monotonic()))
+        except OSError:
+            pass  # the daemon closed the socket at the end of the run
+    print("\n".join(f"{k} {t}" for k, t in sent), flush=True)
+
+
+class BenchDaemon(Daemon):
+    """The daemon, noting when the frames of each twist (by request id) went out, and
+    optionally stepping its simulators in the loop thread after each cycle."""
+
+    sims: SimulatedControllers | None = None
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.frames_sent_ns: dict[int, int] = {}
+        self._ids: list[int] = []
+        cycle = self.gateway.cycle
+
+        def timed_cycle(now_s: float) -> None:
+            cycle(now_s)
+            if self._ids:  # the same instant as the daemon's own "sent"
+                t = time.perf_counter_ns()
+                for i in self._ids:
+                    self.frames_sent_ns[i] = t
+                self._ids.clear()
+
+        self.gateway.cycle = timed_cycle  # type: ignore[method-assign]
+
+    def handle(self, client: int, request: Request | ProtocolError, now_s: float) -> None:
+        pending = len(self._pending_twists)
+        super().handle(client, request, now_s)
+        if (isinstance(request, TwistRequest) and isinstance(request.id, int)
+                and len(self._pending_twists) > pending):
+            self._ids.append(request.id)
+
+    def step(self, now_s: float) -> None:
+        super().step(now_s)  # records the cycle's cost before the simulators run
+        if self.sims is not None:
+            self.sims.step(time.monotonic())
+
+
+def _percentiles_us(values_ns: list[int]) -> tuple[float, float, float]:
+    ordered = sorted(values_ns)
+    if not ordered:
+        return 0.0, 0.0, 0.0
+    n = len(ordered)
+    return (ordered[max(0, math.ceil(0.5 * n) - 1)] / 1e3,
+            ordered[max(0, math.ceil(0.99 * n) - 1)] / 1e3, ordered[-1] / 1e3)
 
 
 def main() -> None:
-    seconds = float(sys.argv[1]) if len(sys.argv) > 1 else 10.0
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("seconds", nargs="?", type=float, default=10.0)
+    parser.add_argument("--rt", type=int, default=0, metavar="PRIORITY",
+                        help="SCHED_FIFO priority of the loop thread (0: normal scheduling)")
+    parser.add_argument("--cpu", type=int, default=-1, help="pin the loop thread to this CPU")
+    parser.add_argument("--lock", action="store_true", help="mlockall after start-up")
+    parser.add_argument("--sims", choices=("thread", "inline"), default="thread",
+                        help="simulators in a background thread (as --sim) or stepped inline")
+    parser.add_argument("--client", metavar="SOCKET", help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.client:
+        client(args.client)
+        return
     print(__doc__.split("\n\n")[1].replace("\n", " "))
     cfg = load_config(None)
-    cfg = dataclasses.replace(cfg, loop=dataclasses.replace(cfg.loop, rate_hz=1000.0,
-                                                            odom_rate_hz=50.0))
+    cfg = dataclasses.replace(cfg, loop=dataclasses.replace(
+        cfg.loop, rate_hz=1000.0, odom_rate_hz=50.0, rt_priority=args.rt, rt_cpu=args.cpu,
+        lock_memory=args.lock))
     folder = tempfile.mkdtemp(prefix="wgb", dir="/tmp")
     path = f"{folder}/b.sock"
-    daemon = Daemon(cfg, sim=True, socket_path=path, notifier=SystemdNotifier(None))
-    stop = threading.Event()
-    sender = threading.Thread(target=client, args=(path, stop), daemon=True)
-    threading.Timer(0.5, sender.start).start()
-    threading.Timer(seconds, daemon.request_stop).start()
+    inline = args.sims == "inline"
+    if "CLOCK_MONOTONIC" not in time.get_clock_info("perf_counter").implementation:
+        sys.exit("perf_counter is not CLOCK_MONOTONIC here: cross-process latency impossible")
+    daemon = BenchDaemon(cfg, sim=not inline, socket_path=path, notifier=SystemdNotifier(None))
+    if inline:
+        daemon.sims = SimulatedControllers(daemon.gateway.drives.simulators(), cfg.bus.channel)
+    # Keep every sample of the run (the daemon's own ring holds the last 4096).
+    timer = LoopTimer(cfg.loop.rate_hz, capacity=int(args.seconds * cfg.loop.rate_hz) + 2000)
+    daemon.scheduler.timer = daemon.gateway.timer = timer
+    sender = subprocess.Popen([sys.executable, __file__, "--client", path],
+                              stdout=subprocess.PIPE, text=True)
+    stopper = threading.Timer(args.seconds, daemon.request_stop)
+    stopper.start()
+    load = os.getloadavg()[0]
     try:
         daemon.run()
     finally:
-        stop.set()
-    stats = daemon.scheduler.timer.snapshot()
+        stopper.cancel()
+        if daemon.sims is not None:
+            daemon.sims.shutdown()
+        try:
+            out, _ = sender.communicate(timeout=5.0)
+        except subprocess.TimeoutExpired:
+            sender.kill()
+            out, _ = sender.communicate()
+    stats = timer.snapshot()
+    sent_ns: dict[int, int] = {}
+    for line in out.splitlines():
+        if line.strip():
+            k, t = line.split()
+            sent_ns[int(k)] = int(t)
+    e2e = [daemon.frames_sent_ns[k] - t for k, t in sent_ns.items() if k in daemon.frames_sent_ns]
+    e2e_p50, e2e_p99, e2e_max = _percentiles_us(e2e)
     # Same simulators, same bus, python-can alone.
     sims = SimulatedControllers(daemon.gateway.drives.simulators(), "wgb-bare").start()
     try:
         bare = bare_python_can_cycle_us("wgb-bare")
     finally:
         sims.shutdown()
-    print(f"\nrun: {seconds:g} s at {stats.rate_hz:g} Hz, achieved {stats.achieved_hz:.1f} Hz, "
-          f"{stats.cycles} cycles, {stats.missed} missed")
+    print(f"\nrun: {args.seconds:g} s at {stats.rate_hz:g} Hz, achieved {stats.achieved_hz:.1f} Hz,"
+          f" {stats.cycles} cycles, {stats.missed} missed; simulators: {args.sims}; "
+          f"load average at start {load:.2f}")
     print(f"cycle cost    p50 {stats.cost_p50_us:8.1f} us  p99 {stats.cost_p99_us:8.1f} us  "
           f"max {stats.cost_max_us:8.1f} us")
     print(f"lateness      p50 {stats.lateness_p50_us:8.1f} us  p99 {stats.lateness_p99_us:8.1f} us"
           f"  max {stats.lateness_max_us:8.1f} us")
-    print(f"twist->frames p50 {stats.latency_p50_us:8.1f} us  p99 {stats.latency_p99_us:8.1f} us"
-          f"  max {stats.latency_max_us:8.1f} us  ({stats.latency_samples} twists)")
+    print(f"twist->frames p50 {e2e_p50:8.1f} us  p99 {e2e_p99:8.1f} us  max {e2e_max:8.1f} us  "
+          f"({len(e2e)} of {len(sent_ns)} twists; from the client's send)")
+    print(f"read->frames  p50 {stats.latency_p50_us:8.1f} us  p99 {stats.latency_p99_us:8.1f} us"
+          f"  max {stats.latency_max_us:8.1f} us  (the daemon's own figure: from reading "
+          f"the request)")
     print(f"python-can alone, same frames per cycle: p50 {bare:.1f} us")
     print(f"ratio gateway cycle / python-can alone (p50): {stats.cost_p50_us / bare:.2f}x")
     print(f"realtime: {'; '.join(daemon.rt_notes) or 'normal scheduling'}")
+    fine = getattr(daemon, "_server_fd", None) is not None
+    print("socket wait under 1 ms: " + (
+        "select on the server's descriptor (requests served on arrival)" if fine else
+        "sleep (the server has no fileno(); requests wait for the pass at the deadline)"))
+    period_us = 1e6 / stats.rate_hz
+    verdict = [
+        ("p99 lateness <= 200 us", stats.lateness_p99_us <= 200.0),
+        ("no missed cycles", stats.missed == 0),
+        ("cycle cost p50 <= 100 us", stats.cost_p50_us <= 100.0),
+        (f"twist->frames p99 <= {period_us + 200:.0f} us", e2e_p99 <= period_us + 200),
+    ]
+    print("targets: " + "; ".join(f"{name}: {'yes' if ok else 'NO'}" for name, ok in verdict))
 
 
 if __name__ == "__main__":

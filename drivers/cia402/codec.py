@@ -56,7 +56,8 @@ TPDO_VELOCITY_MAP: tuple[tuple[int, int, int], ...] = (
 #: Packed form of each of the three PDOs above.
 PDO_STRUCT = struct.Struct("<Hi")
 _EMCY = struct.Struct("<HB5s")
-_INT32 = DataType.INTEGER32.bounds
+#: The int32 range of the target velocity (0x60FF).
+INT32_RANGE = DataType.INTEGER32.bounds
 
 
 def mapping_entry(index: int, subindex: int, bits: int) -> int:
@@ -91,7 +92,7 @@ def velocity_to_raw(value: float, what: str) -> int:
 
     :raises EncodeError: if it is not finite or out of the int32 range.
     """
-    lo, hi = _INT32
+    lo, hi = INT32_RANGE
     if not math.isfinite(value) or not lo <= round(value) <= hi:
         raise EncodeError(
             f"Expected {what} between {lo} and {hi} device units, but got {value!r}."
@@ -245,10 +246,14 @@ class Cia402Codec(MotorCodec[Cia402Message]):
         :param commands: node ID -> target velocity in device units (0x60FF).
         :raises EncodeError: if a value is not finite or out of the int32 range.
         """
-        return tuple(
-            self.rpdo(node_id, 0x000F, velocity_to_raw(v, f"target velocity for node {node_id}"))
-            for node_id, v in commands.items()
-        )
+        lo, hi = INT32_RANGE
+        out = []
+        for node_id, v in commands.items():
+            raw = round(v) if math.isfinite(v) else None
+            if raw is None or not lo <= raw <= hi:  # raises; the message is built only here
+                raw = velocity_to_raw(v, f"target velocity for node {node_id}")
+            out.append(self.rpdo(node_id, 0x000F, raw))
+        return tuple(out)
 
     def decode(self, frame: Frame) -> Cia402Message | None:
         """Decode a frame from one of our nodes; ``None`` for any other frame.

@@ -35,6 +35,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, ClassVar
 
 from drivers.cia402.codec import (
+    INT32_RANGE,
     Cia402Codec,
     Emergency,
     FeedbackKind,
@@ -152,6 +153,7 @@ class Cia402Driver(MotorDriver):
                 f"Expected {len(self.motors)} wheel speeds, but got {len(wheel_rad_s)}."
             )
         raws: list[int] = []
+        lo, hi = INT32_RANGE
         for m, node, w in zip(self.motors, self._nodes, wheel_rad_s, strict=True):
             limit = m.max_wheel_rad_s
             if not math.isfinite(w) or abs(w) > limit * (1.0 + 1e-9):
@@ -160,7 +162,11 @@ class Cia402Driver(MotorDriver):
                     f"{-limit:.4g} and {limit:.4g} rad/s, but got {w!r}."
                 )
             units = node.opts.rad_s_to_units(m.wheel_to_motor_rad_s(w))
-            raws.append(velocity_to_raw(units, f"target velocity for node {m.node_id}"))
+            raw = round(units) if math.isfinite(units) else None
+            if raw is None or not lo <= raw <= hi:
+                # velocity_to_raw raises; its message is only built on this path.
+                raw = velocity_to_raw(units, f"target velocity for node {m.node_id}")
+            raws.append(raw)
         out = [
             self.codec.rpdo(m.node_id, Controlword.ENABLE_OPERATION, raw)
             for m, node, raw in zip(self.motors, self._nodes, raws, strict=True)

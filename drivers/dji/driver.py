@@ -145,6 +145,10 @@ class DjiDriver(MotorDriver):
         self._count_sum = [0] * n
         self._raw: list[DjiFeedback | None] = [None] * n
         self._last_command_s: float | None = None
+        #: (speed bound in rad/s, gear ratio, sign) per motor, for the per-cycle paths.
+        self._scale = tuple(
+            (m.max_wheel_rad_s * (1.0 + 1e-9), m.gear_ratio, m.sign) for m in self.motors
+        )
 
     # ----------------------------------------------------------------- hooks
 
@@ -249,15 +253,18 @@ class DjiDriver(MotorDriver):
                 f"Expected {len(self.motors)} wheel speeds for the DJI motors, "
                 f"but got {len(wheel_rad_s)}."
             )
-        out = []
-        for m, w in zip(self.motors, wheel_rad_s, strict=True):
-            lim = m.max_wheel_rad_s
-            if not (math.isfinite(w) and abs(w) <= lim * (1.0 + 1e-9)):
+        out: list[float] = []
+        # Per-motor constants from __init__; the same arithmetic as m.max_wheel_rad_s and
+        # m.wheel_to_motor_rad_s(w) (w * gear * sign).
+        for (bound, gear, sign), w in zip(self._scale, wheel_rad_s, strict=True):
+            if not (math.isfinite(w) and abs(w) <= bound):
+                m = self.motors[len(out)]
+                lim = m.max_wheel_rad_s
                 raise EncodeError(
                     f'Expected velocity for node {m.node_id} ("{m.wheel}") between '
                     f"{-lim:.4g} and {lim:.4g} rad/s, but got {w}."
                 )
-            out.append(m.wheel_to_motor_rad_s(w))
+            out.append(w * gear * sign)
         return out
 
     def _raw_currents(self, currents_a: Sequence[float]) -> dict[int, int]:
@@ -283,15 +290,12 @@ class DjiDriver(MotorDriver):
             self._count_sum[i] += unwrap_delta(last, fb.angle_count)
         self._last_count[i] = fb.angle_count
         self._raw[i] = fb
-        self._rotor_rad_s[i] = fb.speed_rpm * RAD_S_PER_RPM
+        rotor_rad_s = self._rotor_rad_s[i] = fb.speed_rpm * RAD_S_PER_RPM
         rotor_rad = self._count_sum[i] * 2.0 * math.pi / COUNTS_PER_REV
+        _, gear, sign = self._scale[i]
+        # Wheel side as m.motor_to_wheel_rad_s: x * sign / gear.
         self.store_feedback(
-            i,
-            WheelFeedback(
-                position_rad=m.motor_to_wheel_rad_s(rotor_rad),
-                velocity_rad_s=m.motor_to_wheel_rad_s(self._rotor_rad_s[i]),
-                timestamp_s=t,
-            ),
+            i, WheelFeedback(rotor_rad * sign / gear, rotor_rad_s * sign / gear, t)
         )
         self._check_temperature(i, fb)
 

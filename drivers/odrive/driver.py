@@ -145,6 +145,11 @@ class OdriveDriver(MotorDriver):
         self._axis_detail = [""] * n
         self._error_detail = [""] * n
         self._error_request_due = [False] * n
+        #: (node ID, gear ratio, sign, speed bound in rad/s) per motor, for :meth:`command`.
+        self._cmd = tuple(
+            (m.node_id, m.gear_ratio, m.sign, m.max_wheel_rad_s * (1.0 + 1e-12))
+            for m in self.motors
+        )
 
     @classmethod
     def node_id_range(cls, options: Mapping[str, object] | None = None) -> tuple[int, int]:
@@ -232,16 +237,20 @@ class OdriveDriver(MotorDriver):
                 f"Expected {len(self.motors)} wheel speeds for the ODrive axes, "
                 f"but got {len(wheel_rad_s)}."
             )
-        commands: dict[int, float] = {}
-        for m, w in zip(self.motors, wheel_rad_s, strict=True):
-            limit = m.max_wheel_rad_s
-            if not (math.isfinite(w) and abs(w) <= limit * (1.0 + 1e-12)):
+        # Per-motor constants come from __init__; the arithmetic is the same as
+        # m.wheel_to_motor_rad_s(w) / TAU against m.max_wheel_rad_s.
+        make = self.codec.make_set_input_vel
+        out: list[Frame] = []
+        for (node_id, gear, sign, bound), w in zip(self._cmd, wheel_rad_s, strict=True):
+            if not (math.isfinite(w) and abs(w) <= bound):
+                m = self.motors[len(out)]
+                limit = m.max_wheel_rad_s
                 raise EncodeError(
                     f'Expected velocity for node {m.node_id} ("{m.wheel}") between '
                     f"{-limit:.3g} and {limit:.3g} rad/s, but got {w}."
                 )
-            commands[m.node_id] = m.wheel_to_motor_rad_s(w) / TAU
-        return list(self.codec.encode_command(commands))
+            out.append(make(node_id, w * gear * sign / TAU))
+        return out
 
     def poll(self, now_s: float) -> list[Frame]:
         """RTR encoder requests (``encoder_request: rtr``), error queries and enable retries."""
@@ -313,13 +322,14 @@ class OdriveDriver(MotorDriver):
     # ----------------------------------------------------------------- receive helpers
 
     def _on_estimates(self, i: int, msg: EncoderEstimates, t: float) -> None:
-        m = self.motors[i]
+        _, gear, sign, _ = self._cmd[i]
         pos0 = self._pos0_turns[i]
         if pos0 is None:
             pos0 = self._pos0_turns[i] = msg.pos_turns
         # float32 - float32 is exact in float64; the wheel angle is relative to the first sample.
-        position = m.motor_to_wheel_rad_s((msg.pos_turns - pos0) * TAU)
-        velocity = m.motor_to_wheel_rad_s(msg.vel_turns_s * TAU)
+        # Motor to wheel side as MotorConfig.motor_to_wheel_rad_s: x * sign / gear.
+        position = (msg.pos_turns - pos0) * TAU * sign / gear
+        velocity = msg.vel_turns_s * TAU * sign / gear
         self._encoder_s[i] = t
         self.store_feedback(i, WheelFeedback(position, velocity, t))
 

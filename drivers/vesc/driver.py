@@ -145,6 +145,11 @@ class VescDriver(MotorDriver):
                 )
             )
         self._opts: tuple[_Options, ...] = tuple(opts)
+        #: (speed limit in rad/s, gear ratio, sign, pole pairs) per motor, for erpm_for.
+        self._scale = tuple(
+            (m.max_wheel_rad_s, m.gear_ratio, m.sign, o.pole_pairs)
+            for m, o in zip(self.motors, self._opts, strict=True)
+        )
         self._track = [_Track() for _ in self.motors]
         self._enabled = False
         self._enabled_at_s: float | None = None
@@ -185,15 +190,16 @@ class VescDriver(MotorDriver):
         :param wheel_rad_s: wheel speed in rad/s, within the motor's ``max_rpm``.
         :raises EncodeError: if the speed is not finite or beyond ``max_rpm``.
         """
-        m = self.motors[index]
-        limit = m.max_wheel_rad_s
+        # Per-motor constants from __init__; the same arithmetic as m.max_wheel_rad_s and
+        # m.wheel_to_motor_rad_s (w * gear * sign).
+        limit, gear, sign, pole_pairs = self._scale[index]
         if not (math.isfinite(wheel_rad_s) and -limit <= wheel_rad_s <= limit):
+            m = self.motors[index]
             raise EncodeError(
                 f'Expected velocity for node {m.node_id} ("{m.wheel}") between {-limit:.1f} and '
                 f"{limit:.1f} rad/s, but got {wheel_rad_s!r}."
             )
-        motor_rad_s = m.wheel_to_motor_rad_s(wheel_rad_s)
-        return round(motor_rad_s * RPM_PER_RAD_S * self._opts[index].pole_pairs)
+        return round(wheel_rad_s * gear * sign * RPM_PER_RAD_S * pole_pairs)
 
     def wheel_rad_s_for(self, index: int, erpm: float) -> float:
         """The wheel speed in rad/s for an eRPM reading of motor ``index``."""

@@ -143,11 +143,14 @@ def _limit_steering(
     model: RobotModel, result: IkResult, prev: IkResult, dt_s: float
 ) -> tuple[IkResult, list[str]]:
     names: list[str] = []
+    limited = model.rate_limited_wheels
+    if not limited:
+        return result, names
     speeds = list(result.wheel_rad_s)
     angles = list(result.steer_rad)
-    for i, w in enumerate(model.wheels):
+    for i, w in limited:
         target, before = result.steer_rad[i], prev.steer_rad[i]
-        if target is None or before is None or math.isinf(w.max_steer_rate):
+        if target is None or before is None:
             continue
         step = w.max_steer_rate * dt_s
         if abs(target - before) > step:

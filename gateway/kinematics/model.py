@@ -32,6 +32,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from gateway.errors import InfeasibleTwistError, KinematicsError
+from gateway.kinematics.lsq import FkPlan
 from gateway.kinematics.wheels import CONSTRAINING, Wheel, WheelType
 from gateway.types import Twist
 
@@ -146,10 +147,17 @@ class RobotModel:
             if w.steered and w.steer_group is not None:
                 groups.setdefault(w.steer_group, []).append(i)
         self._groups = {g: tuple(ix) for g, ix in groups.items() if len(ix) > 1}
+        #: ``(index, wheel)`` of the wheels with a finite steering rate limit.
+        self.rate_limited_wheels: tuple[tuple[int, Wheel], ...] = tuple(
+            (i, w) for i, w in enumerate(wheels) if not math.isinf(w.max_steer_rate)
+        )
         self.neutral_steer: tuple[float | None, ...] = tuple(
             0.0 if w.steered else None for w in wheels
         )
         self._fk_static = self._build_static_fk()
+        #: Pure-Python least-squares plans of a model without steered wheels, by the pattern
+        #: of unmeasured wheels (``None`` when that pattern leaves the twist undetermined).
+        self._fk_plans: dict[tuple[bool, ...], FkPlan | None] = {}
         self.mobility = self._mobility()
 
     # ----------------------------------------------------------------- matrices
@@ -387,6 +395,37 @@ class RobotModel:
         pinv: NDArray[np.float64] = np.asarray(np.linalg.pinv(a), dtype=np.float64)
         return pinv
 
+    def _fk_plan(self, wheel_rad_s: Sequence[float | None]) -> FkPlan | None:
+        """The precomputed least squares for the neutral angles and these measured wheels
+        (built on first use of each pattern); ``None`` if the model has steered wheels or
+        the pattern leaves the twist undetermined."""
+        if self._steered:
+            return None
+        key = tuple(v is None for v in wheel_rad_s)
+        try:
+            return self._fk_plans[key]
+        except KeyError:
+            pass
+        speeds = [None if missing else 1.0 for missing in key]
+        a, _ = self._fk_system(speeds, self.neutral_steer)
+        plan = None
+        if int(np.linalg.matrix_rank(a)) >= 3:
+            pinv = np.asarray(np.linalg.pinv(a), dtype=np.float64)
+            measured = tuple((i, w.radius) for i, w in enumerate(self.wheels)
+                             if not key[i])
+            m = len(measured)
+            rows = [(float(r[0]), float(r[1]), float(r[2])) for r in a]
+            plan = FkPlan(
+                measured=measured,
+                pinv_x=tuple(float(v) for v in pinv[0, :m]),
+                pinv_y=tuple(float(v) for v in pinv[1, :m]),
+                pinv_w=tuple(float(v) for v in pinv[2, :m]),
+                rolling=tuple(rows[:m]),
+                sliding=tuple(rows[m:]),
+            )
+        self._fk_plans[key] = plan
+        return plan
+
     def _fk_system(
         self, speeds: Sequence[float | None], steer: Sequence[float | None]
     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -414,11 +453,48 @@ class RobotModel:
         :param steer: steering angle of every wheel (``None`` for wheels not steered).
         :raises KinematicsError: for wrong lengths, non-finite values, or too few measurements.
         """
+        st, plan = self._fk_checked(wheel_rad_s, steer)
+        if plan is not None:
+            vx, vy, wz, rms, per_wheel = plan.solve(self.n, wheel_rad_s, per_wheel=True)
+            return FkResult(Twist(vx, vy, wz), tuple(per_wheel or ()), rms)
+        return self._fk_numpy(wheel_rad_s, st)
+
+    def fk_twist(
+        self,
+        wheel_rad_s: Sequence[float | None],
+        steer: Sequence[float | None] | None = None,
+    ) -> tuple[float, float, float, float]:
+        """:meth:`fk` as plain numbers ``(vx, vy, wz, residual_m_s)``, without the result
+        objects and the per-wheel residuals (odometry's per-sample path).
+
+        :raises KinematicsError: as :meth:`fk`.
+        """
+        st, plan = self._fk_checked(wheel_rad_s, steer)
+        if plan is not None:
+            vx, vy, wz, rms, _ = plan.solve(self.n, wheel_rad_s, per_wheel=False)
+            return vx, vy, wz, rms
+        r = self._fk_numpy(wheel_rad_s, st)
+        return r.twist.vx_m_s, r.twist.vy_m_s, r.twist.wz_rad_s, r.residual_m_s
+
+    def _fk_checked(
+        self, wheel_rad_s: Sequence[float | None], steer: Sequence[float | None] | None
+    ) -> tuple[Sequence[float | None], FkPlan | None]:
+        """Validate fk's arguments; the steering angles and, at the neutral angles of a
+        model without steered wheels, the precomputed plan."""
         if len(wheel_rad_s) != self.n:
             raise KinematicsError(f"Expected {self.n} wheel speeds, but got {len(wheel_rad_s)}")
-        if any(v is not None and not math.isfinite(v) for v in wheel_rad_s):
-            raise KinematicsError(f"Expected finite wheel speeds, but got {list(wheel_rad_s)}")
+        for v in wheel_rad_s:
+            if v is not None and not math.isfinite(v):
+                raise KinematicsError(
+                    f"Expected finite wheel speeds, but got {list(wheel_rad_s)}"
+                )
         st = self._steer_or_neutral(steer)
+        # Neutral angles (None or 0 everywhere): the rows are the precomputed ones.
+        return st, (None if any(st) else self._fk_plan(wheel_rad_s))
+
+    def _fk_numpy(
+        self, wheel_rad_s: Sequence[float | None], st: Sequence[float | None]
+    ) -> FkResult:
         a, b = self._fk_system(wheel_rad_s, st)
         if self._fk_static is not None and all(v is not None for v in wheel_rad_s):
             xi = self._fk_static @ b

@@ -145,23 +145,43 @@ class Odometry:
             for p, q in zip(positions_rad, last, strict=True)
         ]
         mid = steer
-        if last_steer is not None:
+        if last_steer is not None and steer != last_steer:
+            # Equal angles need no midpoint (0.5 * (a + a) == a exactly).
             mid = [
                 None if a is None or b is None else 0.5 * (a + b)
                 for a, b in zip(steer, last_steer, strict=True)
             ]
-        fk = self.model.fk(deltas, mid)
-        d = fk.twist
-        pose = compose(self.state.pose, se2_exp(d.vx_m_s, d.vy_m_s, d.wz_rad_s))
-        dt = timestamp_s - self.state.timestamp_s
-        twist = d.scaled(1.0 / dt) if dt > 0 else Twist()
-        slip = fk.residual_m_s / dt if dt > 0 else 0.0
-        dist = self.state.distance_m + _arc_length(d)
+        dx, dy, dtheta, residual = self.model.fk_twist(deltas, mid)
+        state = self.state
+        pose = _advance(state.pose, dx, dy, dtheta)
+        dt = timestamp_s - state.timestamp_s
+        if dt > 0:
+            inv = 1.0 / dt
+            twist = Twist(dx * inv, dy * inv, dtheta * inv)
+            slip = residual / dt
+        else:
+            twist, slip = Twist(), 0.0
+        # The displacement is the twist times the interval, so the norm of its linear part
+        # is the arc length, not the chord.
+        dist = state.distance_m + math.hypot(dx, dy)
         self.state = OdometryState(pose, twist, slip, dist, timestamp_s)
         return self.state
 
 
-def _arc_length(d: Twist) -> float:
-    """Path length of a constant-twist displacement, m: the displacement is the twist times
-    the interval, so its linear part's norm is the arc length, not the chord."""
-    return math.hypot(d.vx_m_s, d.vy_m_s)
+def _advance(pose: Pose, dx: float, dy: float, dtheta: float) -> Pose:
+    """``compose(pose, se2_exp(dx, dy, dtheta))`` with one allocation (same arithmetic)."""
+    t2 = dtheta * dtheta
+    if abs(dtheta) < 1e-4:
+        a = 1.0 - t2 / 6.0 + t2 * t2 / 120.0
+        b = dtheta / 2.0 - dtheta * t2 / 24.0
+    else:
+        a = math.sin(dtheta) / dtheta
+        b = (1.0 - math.cos(dtheta)) / dtheta
+    ex, ey = a * dx - b * dy, b * dx + a * dy
+    theta0 = pose.theta_rad
+    c, s = math.cos(theta0), math.sin(theta0)
+    return Pose(
+        pose.x_m + c * ex - s * ey,
+        pose.y_m + s * ex + c * ey,
+        (theta0 + dtheta + math.pi) % (2 * math.pi) - math.pi,
+    )
