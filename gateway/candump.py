@@ -13,6 +13,7 @@ transmitted.  This reader is pure and strict: a line it cannot read raises
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -21,6 +22,9 @@ from gateway.types import Frame
 
 if TYPE_CHECKING:
     from collections.abc import Iterable, Iterator
+
+
+_HEX = frozenset("0123456789abcdefABCDEF")
 
 
 class CandumpError(DecodeError):
@@ -66,16 +70,17 @@ def parse_line(line: str, line_number: int) -> LogEntry:
     try:
         ts = float(stamp[1:-1])
     except ValueError:
-        raise CandumpError(f"expected a number in the time stamp, got {stamp[:30]!r}",
-                           line_number) from None
+        ts = math.nan
+    if not math.isfinite(ts):
+        raise CandumpError(f"expected a finite number in the time stamp, got {stamp[:30]!r}",
+                           line_number)
     ident, sep, payload = body.partition("#")
     if not sep or len(ident) not in (3, 8):
         raise CandumpError(f"expected ID#DATA with a 3- or 8-digit ID, got {body[:40]!r}",
                            line_number)
-    try:
-        can_id = int(ident, 16)
-    except ValueError:
-        raise CandumpError(f"expected a hexadecimal ID, got {ident!r}", line_number) from None
+    if not all(c in _HEX for c in ident):
+        raise CandumpError(f"expected a hexadecimal ID, got {ident!r}", line_number)
+    can_id = int(ident, 16)
     extended = len(ident) == 8
     if can_id > (0x1FFFFFFF if extended else 0x7FF):
         raise CandumpError(f"ID {ident} is out of range", line_number)

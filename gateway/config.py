@@ -45,6 +45,8 @@ from gateway.wgproto import CanIds
 if TYPE_CHECKING:
     from collections.abc import Mapping
 
+#: The most wheels a robot may have (a bound on what a config can make the loader build).
+MAX_WHEELS = 64
 #: Name shown for the configuration embedded in the package.
 DEFAULT_NAME = "<embedded default>"
 
@@ -246,10 +248,19 @@ def load_config(
             text = Path(path).read_text("utf-8")
         except OSError as err:
             raise ConfigError(f"{source}: cannot read the file: {err.strerror}") from err
+        except UnicodeDecodeError as err:
+            raise ConfigError(
+                f"{source}: expected UTF-8 text, got byte {err.object[err.start]:#04x} at "
+                f"offset {err.start}"
+            ) from err
     try:
         raw = yaml.safe_load(text)
     except yaml.YAMLError as err:
         raise ConfigError(f"{source}: not valid YAML: {err}") from err
+    except RecursionError as err:
+        raise ConfigError(
+            f"{source}: expected YAML of modest depth, got nesting too deep"
+        ) from err
     return parse_config(raw, source, overrides)
 
 
@@ -335,7 +346,8 @@ def _preset_wheels(drive: str, raw: object, source: str) -> tuple[dict[str, obje
     }
     for key in ("wheel_count",):
         if key in specs:
-            specs[key] = OptionSpec(int, specs[key].default, minimum=3 if drive == "omni" else 2)
+            specs[key] = OptionSpec(int, specs[key].default, minimum=3 if drive == "omni" else 2,
+                                    maximum=MAX_WHEELS)
     params = validate_block(
         raw if raw is not None else {}, specs, f"{source}: geometry", f"{drive} geometry keys"
     )
@@ -373,8 +385,11 @@ def _preset_motors(
 def _generic_wheels(
     raw: object, source: str
 ) -> tuple[list[Wheel], list[dict[str, object] | None]]:
-    if not isinstance(raw, list) or not raw:
-        raise ConfigError(f"{source}: wheels: expected a non-empty list of wheels, got {raw!r}")
+    if not isinstance(raw, list) or not raw or len(raw) > MAX_WHEELS:
+        shown = f"a list of {len(raw)}" if isinstance(raw, list) and raw else repr(raw)[:80]
+        raise ConfigError(
+            f"{source}: wheels: expected a list of 1 to {MAX_WHEELS} wheels, got {shown}"
+        )
     wheels: list[Wheel] = []
     motors: list[dict[str, object] | None] = []
     for i, item in enumerate(raw):

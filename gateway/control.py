@@ -192,6 +192,15 @@ class Supervisor:
         self.state = GatewayState.STOPPING
         self.target = ZERO
 
+    def enable_failed(self, why: str) -> str:
+        """The drives refused the enable sequence: FAULT with ``why`` as the reason."""
+        self.counts["faults"] += 1
+        self.state = GatewayState.FAULT
+        self.target = ZERO
+        self._fault_s = self._now_hint
+        self.reason = f"enable refused: {why}"
+        return self.reason
+
     @property
     def cmd_timeout_active(self) -> bool:
         """Whether the command timeout holds the target at zero."""

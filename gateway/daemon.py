@@ -23,6 +23,7 @@ import can
 
 from gateway.config import default_socket_path
 from gateway.control import Accepted, Source
+from gateway.errors import GatewayError
 from gateway.loop import Gateway
 from gateway.protocol import (
     CommandRequest,
@@ -42,7 +43,7 @@ from gateway.sdnotify import SystemdNotifier
 from gateway.server import ControlServer
 from gateway.simbus import SimulatedControllers
 from gateway.timing import Scheduler, realtime_setup
-from gateway.types import Frame, GatewayState
+from gateway.types import ErrorCode, Frame, GatewayState
 
 if TYPE_CHECKING:
     from types import FrameType
@@ -156,6 +157,19 @@ class Daemon:
             server.reply(client, reply_ok(rid, {"topics": sorted(t.value for t in request.topics)}))
             return
         self._command(client, request, now_s)
+
+    def handle_safely(self, client: int, request: Request | ProtocolError, now_s: float) -> None:
+        """:meth:`handle`, but a reply that cannot be built becomes an error reply: no client
+        message may stop the loop."""
+        try:
+            self.handle(client, request, now_s)
+        except (GatewayError, ValueError, UnicodeError) as err:
+            log.warning("request from client %d failed: %s", client, err)
+            try:
+                self.server.reply(client, reply_error(
+                    None, ErrorCode.BAD_COMMAND, f"request failed: {err}"))
+            except (GatewayError, ValueError, UnicodeError):
+                log.warning("client %d: no error reply possible", client)
 
     def _command(self, client: int, request: CommandRequest, now_s: float) -> None:
         sup, rid = self.gateway.supervisor, request.id
@@ -290,7 +304,7 @@ class Daemon:
         if events:
             now = time.monotonic()
             for client, request in events:
-                self.handle(client, request, now)
+                self.handle_safely(client, request, now)
 
     def shutdown(self) -> None:
         """Zero and disarm every motor, then close everything (safe to call twice)."""

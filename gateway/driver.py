@@ -66,6 +66,9 @@ class MotorDriver(abc.ABC):
         self._armed: list[bool] = [False] * n
         #: Frames of this protocol that were rejected, by reason.
         self.rejected: collections.Counter[str] = collections.Counter()
+        #: The detail of the last rejection of each reason (the counter's keys are a fixed
+        #: set, so garbage traffic cannot grow it).
+        self.last_rejection: dict[str, str] = {}
         live = self.motors[0].options.get("liveness_s") if n else None
         #: Feedback older than this (s) marks a motor OFFLINE.
         self.liveness_s = (
@@ -158,7 +161,9 @@ class MotorDriver(abc.ABC):
 
     def reject(self, reason: str, err: DecodeError | None = None) -> None:
         """Count a rejected frame under ``reason``."""
-        self.rejected[reason if err is None else f"{reason}: {err}"] += 1
+        self.rejected[reason] += 1
+        if err is not None:
+            self.last_rejection[reason] = str(err)
 
     def index_of(self, node_id: int) -> int | None:
         """The position of ``node_id`` in :attr:`motors`, or ``None``."""

@@ -29,7 +29,7 @@ from gateway.bus import drain, open_bus, to_message
 from gateway.busload import frame_bits
 from gateway.control import Accepted, Rejection, Source, Supervisor
 from gateway.drives import DriveSet
-from gateway.errors import BusError, DecodeError, KinematicsError
+from gateway.errors import BusError, DecodeError, GatewayError, KinematicsError
 from gateway.kinematics import Odometry, apply_limits
 from gateway.timing import LoopTimer
 from gateway.types import ConstraintCode, ErrorCode, Frame, GatewayState, Twist
@@ -105,6 +105,7 @@ class Gateway:
         self._status_counter = 0
         self._error_count = 0
         self._bus_failures = 0
+        self._since_reopen = 0
         #: Event counters for status reports.
         self.counts = {
             "cycles": 0, "frames_sent": 0, "frames_received": 0, "send_failures": 0,
@@ -133,7 +134,7 @@ class Gateway:
         try:
             self.bus.shutdown()
             self.bus = self._open()
-            self._bus_failures = 0
+            self._since_reopen = 0  # the failure streak itself ends only when a burst goes out
         except BusError as err:
             log.error("reopening the CAN bus failed: %s", err)
 
@@ -149,11 +150,13 @@ class Gateway:
         except (can.CanError, OSError) as err:
             self.counts["send_failures"] += 1
             self._bus_failures += 1
+            self._since_reopen += 1
             log.warning("CAN send failed (%d in a row): %s", self._bus_failures, err)
-            if self._bus_failures >= REOPEN_AFTER:
+            if self._since_reopen >= REOPEN_AFTER:
                 self._reopen()
             return False
         self._bus_failures = 0
+        self._since_reopen = 0
         self.counts["frames_sent"] += len(msgs)
         self._tally(frames, True)
         if self.record is not None:
@@ -282,7 +285,14 @@ class Gateway:
             code = ErrorCode.FEEDBACK_TIMEOUT if "answering" in fault else ErrorCode.MOTOR_FAULT
             self.report_error(code, fault, out)
         if sup.take_enable_request():
-            out.extend(self.drives.enable(now_s))
+            try:
+                out.extend(self.drives.enable(now_s))
+            except GatewayError as err:
+                # A drive refuses to be enabled now (e.g. an axis calibrating): a fault that
+                # names it, never an exception out of the cycle.
+                message = sup.enable_failed(str(err))
+                log.error("fault: %s", message)
+                self.report_error(ErrorCode.MOTOR_FAULT, message, out)
         decision = sup.decide(now_s)
         dt = now_s - self._last_cycle_s if self._last_cycle_s is not None else self.period_s
         self._last_cycle_s = now_s

@@ -429,8 +429,14 @@ def encode_line(obj: Mapping[str, object]) -> bytes:
 
     :raises EncodeError: for a value with no JSON form.
     """
-    text = json.dumps(to_json(obj), ensure_ascii=False, allow_nan=False, separators=(",", ":"))
-    return text.encode("utf-8") + b"\n"
+    value = to_json(obj)
+    text = json.dumps(value, ensure_ascii=False, allow_nan=False, separators=(",", ":"))
+    try:
+        return text.encode("utf-8") + b"\n"
+    except UnicodeEncodeError:
+        # A lone surrogate (JSON "\ud800") has no UTF-8 form: escape everything instead.
+        text = json.dumps(value, ensure_ascii=True, allow_nan=False, separators=(",", ":"))
+        return text.encode("ascii") + b"\n"
 
 
 def _merge(head: dict[str, object], payload: Mapping[str, object], what: str) -> bytes:

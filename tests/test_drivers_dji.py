@@ -417,11 +417,11 @@ def test_on_frame_counts_malformed_and_ignores_others() -> None:
     assert not drv.on_frame(Frame(0x203, bytes(8)))  # ESC 3 is not ours (e.g. a GM6020)
     assert not drv.on_frame(Frame(0x200, bytes(8)))
     assert drv.on_frame(Frame(0x201, bytes(7)))
-    assert drv.on_frame(Frame(0x202, bytes(8), is_extended_id=True))
+    assert not drv.on_frame(Frame(0x202, bytes(8), is_extended_id=True))  # another device's
     assert drv.on_frame(Frame(0x202, is_remote_frame=True, dlc=8))
     assert drv.on_frame(Frame(0x201, bytes.fromhex("FFFF000000000000")))
-    assert sum(drv.rejected.values()) == 4
-    assert all(k.startswith("malformed feedback: Expected") for k in drv.rejected)
+    assert drv.rejected == {"malformed feedback": 3}
+    assert drv.last_rejection["malformed feedback"].startswith("Expected")
     assert drv.feedback(0) is None and drv.feedback(1) is None
 
 

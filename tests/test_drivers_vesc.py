@@ -426,9 +426,9 @@ def test_tachometer_unwrap_is_exact(start: int, deltas: list[int]) -> None:
 def test_on_frame_claims_only_own_frames_and_counts_malformed() -> None:
     drv = VescDriver([motor(23)])
     assert drv.on_frame(ext(0x917, "000002BC007B01")) is True  # own, malformed
+    assert "for STATUS of VESC 23, but got 7" in drv.last_rejection["malformed"]
     assert drv.on_frame(Frame(0x1B17, is_extended_id=True, is_remote_frame=True, dlc=8))
     assert sum(drv.rejected.values()) == 2
-    assert any("for STATUS of VESC 23, but got 7" in k for k in drv.rejected)
     assert drv.on_frame(ext(0x918, "000002BC007B01")) is False  # malformed, not ours
     assert drv.on_frame(ext(0x918, "000002BC007B01F4")) is False  # another VESC
     assert drv.on_frame(Frame(0x917, bytes(8))) is False  # standard ID

@@ -76,7 +76,6 @@ from drivers.odrive.enums import AxisState, CmdId
 from gateway.bus import send_frames
 from gateway.config import load_config
 from gateway.control import AUTO_RETRIES
-from gateway.errors import IllegalTransitionError
 from gateway.sim import DeviceSimulator, SimFault
 from gateway.types import Frame, GatewayState
 from tests.conftest import CONFIG_DIR
@@ -421,9 +420,6 @@ def test_dji_wheel_not_following_on_late_feedback_is_detected(run: Run) -> None:
     assert worst < 0.5, f"RUNNING while the wheel is off its command by up to {worst:.1f} rad/s"
 
 
-@pytest.mark.xfail(strict=True, raises=IllegalTransitionError, reason="an enable while an "
-                   "ODrive axis reports a calibration raises out of Gateway.cycle; wanted: the "
-                   "loop turns it into a FAULT naming the motor")
 @pytest.mark.parametrize("run", ["odrive"], indirect=True)
 def test_enable_while_an_odrive_axis_calibrates_keeps_the_loop_alive(run: Run) -> None:
     run.streaming = False
@@ -472,13 +468,7 @@ def test_garbage_faults_counts_rejects_and_recovers_on_enable(run: Run) -> None:
     assert run.following()
 
 
-@pytest.mark.parametrize("run", [
-    pytest.param("odrive", marks=pytest.mark.xfail(
-        strict=True, raises=IllegalTransitionError,
-        reason="an ODrive heartbeat in an odd axis state makes the automatic re-enable raise "
-               "out of Gateway.cycle; wanted: the loop turns it into a FAULT reason")),
-    *DRIVERS[1:],
-], indirect=True)
+@pytest.mark.parametrize("run", DRIVERS, indirect=True)
 def test_garbage_with_automatic_recovery_never_raises_nor_moves_when_not_running(
     run: Run,
 ) -> None:
@@ -498,12 +488,7 @@ def test_garbage_with_automatic_recovery_never_raises_nor_moves_when_not_running
 
 
 @pytest.mark.parametrize("run", [
-    pytest.param(("dji", {"feedback_recovery": "manual"}), id="dji", marks=pytest.mark.xfail(
-        strict=True, reason="MotorDriver.reject() keys its counter by the whole message, and "
-        "the DJI rotor-angle message holds the received value, so garbage adds a key per "
-        "distinct value (memory and the status reply grow); wanted: count by reason, keep the "
-        "last message apart")),
-    *(pytest.param((d, {"feedback_recovery": "manual"}), id=d) for d in DRIVERS if d != "dji"),
+    pytest.param((d, {"feedback_recovery": "manual"}), id=d) for d in DRIVERS
 ], indirect=True)
 def test_rejected_frame_counters_stay_bounded_under_garbage(run: Run) -> None:
     run.inject(SimFault.GARBAGE)
@@ -588,9 +573,6 @@ def test_bus_refusing_sends_loop_goes_on_drives_fall_back(
     assert gw.bus_healthy
 
 
-@pytest.mark.xfail(strict=True, reason="a reopen that succeeds resets the failure count, so a "
-                   "bus that keeps refusing never reads unhealthy and the systemd watchdog is "
-                   "still fed; wanted: count failures across reopens until a burst goes out")
 @pytest.mark.parametrize("run", ["odrive"], indirect=True)
 def test_bus_that_keeps_refusing_reads_unhealthy(run: Run, monkeypatch: pytest.MonkeyPatch
                                                  ) -> None:

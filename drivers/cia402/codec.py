@@ -260,11 +260,13 @@ class Cia402Codec(MotorCodec[Cia402Message]):
 
         :raises DecodeError: if a frame on one of our nodes' COB-IDs is malformed.
         """
+        if frame.is_extended_id:
+            return None  # CANopen uses 11-bit COB-IDs; a 29-bit frame is another device's
         hit = self._rx.get(frame.arbitration_id)
         if hit is None:
             return None
         node_id, kind = hit
-        if frame.is_extended_id or frame.is_remote_frame:
+        if frame.is_remote_frame:
             raise DecodeError(
                 f"Expected an 11-bit {kind.value} data frame from node {node_id}, but got "
                 f"{frame.to_cansend()}."

@@ -207,8 +207,8 @@ class DbcCodec(MotorCodec[tuple[DbcReading, ...]]):
             value that is not finite.
         """
         group = self._rx.get(frame.arbitration_id)
-        if group is None:
-            return None
+        if group is None or frame.is_extended_id != bool(group.message.is_extended_frame):
+            return None  # another ID, or the same number as the other ID type: not ours
         raw = _decode_raw(group, frame)
         per_node: dict[int, dict[str, Any]] = {}
         for m in group.members:
@@ -231,7 +231,7 @@ class DbcCodec(MotorCodec[tuple[DbcReading, ...]]):
         :raises DecodeError: as :meth:`decode`.
         """
         group = self._tx.get(frame.arbitration_id)
-        if group is None:
+        if group is None or frame.is_extended_id != bool(group.message.is_extended_frame):
             return None
         raw = _decode_raw(group, frame)
         return tuple(

@@ -212,6 +212,8 @@ class DjiDriver(MotorDriver):
         :return: whether it was the feedback ID of a configured ESC; malformed ones are
             counted in :attr:`rejected`.
         """
+        if frame.is_extended_id:
+            return False  # DJI ESCs use 11-bit IDs; a 29-bit frame is another device's
         index = self._feedback_index.get(frame.arbitration_id)
         if index is None:
             return False
