@@ -13,6 +13,8 @@ from click.testing import CliRunner
 if TYPE_CHECKING:
     from collections.abc import Iterator
 
+    from gateway.daemon import Daemon
+
 REPO = Path(__file__).resolve().parent.parent
 CONFIG_DIR = REPO / "config"
 DATA_DIR = Path(__file__).resolve().parent / "data"
@@ -52,3 +54,27 @@ def sock_path() -> Iterator[str]:
     folder = tempfile.mkdtemp(prefix="wg", dir="/tmp")
     yield f"{folder}/s.sock"
     shutil.rmtree(folder, ignore_errors=True)
+
+
+@pytest.fixture
+def daemon(sock_path: str, channel: str) -> Iterator[Daemon]:
+    """A gateway daemon for the TurtleBot3 config with simulated controllers, running in a
+    thread on ``sock_path``; stopped (zero and disarm) at the end."""
+    import threading
+    import time
+
+    from gateway.config import load_config
+    from gateway.daemon import Daemon
+    from gateway.sdnotify import SystemdNotifier
+    from gateway.types import GatewayState
+
+    cfg = load_config(CONFIG_DIR / "turtlebot3_burger.yaml", {"channel": channel})
+    d = Daemon(cfg, sim=True, socket_path=sock_path, notifier=SystemdNotifier(None))
+    thread = threading.Thread(target=d.run, daemon=True)
+    thread.start()
+    end = time.monotonic() + 10
+    while d.gateway.state is not GatewayState.RUNNING and time.monotonic() < end:
+        time.sleep(0.02)
+    yield d
+    d.request_stop()
+    thread.join(timeout=10)

@@ -3,37 +3,15 @@
 from __future__ import annotations
 
 import json
-import threading
-import time
 from typing import TYPE_CHECKING
 
-import pytest
-
 from gateway.cli import main
-from gateway.config import load_config
-from gateway.daemon import Daemon
-from gateway.sdnotify import SystemdNotifier
-from gateway.types import GatewayState
-from tests.conftest import CONFIG_DIR
 
 if TYPE_CHECKING:
-    from collections.abc import Iterator
 
     from click.testing import CliRunner
 
-
-@pytest.fixture
-def daemon(sock_path: str, channel: str) -> Iterator[Daemon]:
-    cfg = load_config(CONFIG_DIR / "turtlebot3_burger.yaml", {"channel": channel})
-    d = Daemon(cfg, sim=True, socket_path=sock_path, notifier=SystemdNotifier(None))
-    thread = threading.Thread(target=d.run, daemon=True)
-    thread.start()
-    end = time.monotonic() + 10
-    while d.gateway.state is not GatewayState.RUNNING and time.monotonic() < end:
-        time.sleep(0.02)
-    yield d
-    d.request_stop()
-    thread.join(timeout=10)
+    from gateway.daemon import Daemon
 
 
 def test_twist_and_status(runner: CliRunner, daemon: Daemon, sock_path: str) -> None:

@@ -4,27 +4,22 @@ in a thread, and bad arguments."""
 from __future__ import annotations
 
 import json
-import threading
-import time
 from typing import TYPE_CHECKING
 
 import pytest
 
 from gateway import cli
 from gateway.cli import main
-from gateway.config import load_config
-from gateway.daemon import Daemon
-from gateway.sdnotify import SystemdNotifier
 from gateway.simbus import SimulatedControllers
-from gateway.types import GatewayState
 from tests.conftest import CONFIG_DIR
 from tests.test_monitor import Session, default_config
 
 if TYPE_CHECKING:
-    from collections.abc import Iterator
     from pathlib import Path
 
     from click.testing import CliRunner, Result
+
+    from gateway.daemon import Daemon
 
 #: Wall-clock start of the generated log (python-can records time.time()).
 EPOCH = 1_700_000_000.0
@@ -165,20 +160,6 @@ def test_bus_live_view_stops_on_ctrl_c_and_closes_the_bus(
 
 
 # --------------------------------------------------------------------- daemon
-
-
-@pytest.fixture
-def daemon(sock_path: str, channel: str) -> Iterator[Daemon]:
-    cfg = load_config(CONFIG_DIR / "turtlebot3_burger.yaml", {"channel": channel})
-    d = Daemon(cfg, sim=True, socket_path=sock_path, notifier=SystemdNotifier(None))
-    thread = threading.Thread(target=d.run, daemon=True)
-    thread.start()
-    end = time.monotonic() + 10
-    while d.gateway.state is not GatewayState.RUNNING and time.monotonic() < end:
-        time.sleep(0.02)
-    yield d
-    d.request_stop()
-    thread.join(timeout=10)
 
 
 def test_daemon_once_json(runner: CliRunner, daemon: Daemon, sock_path: str) -> None:
