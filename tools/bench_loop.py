@@ -5,12 +5,11 @@ Method: the embedded default robot (4-wheel mecanum, four ODrive controllers) ru
 deadlines, sleep on the control socket, spin for the last 200 us), the four device simulators
 on the same virtual bus, and a twist client in a separate process that sends a twist over the
 control socket about every 20 ms (15 to 25 ms apart, at random).  Where the simulators run
-is chosen with ``--sims``: ``thread``
-(default, exactly as ``--sim``: a background thread at 1 kHz in the daemon's process, which
-competes with the loop for the GIL) or ``inline`` (stepped by the loop thread right after each
-cycle, outside the measured cost: the closest in-process stand-in for controllers that sit on
-the other end of a real bus).  The daemon's own timing statistics, over the whole run, are read
-at the end:
+is chosen with ``--sims``: ``thread`` (default, exactly as ``--sim``: a background thread at
+1 kHz in the daemon's process, which competes with the loop for the GIL) or ``inline``
+(stepped by the loop thread right after each cycle, outside the measured cost: the closest
+in-process stand-in for controllers that sit on the other end of a real bus).  The daemon's
+own timing statistics, over the whole run, are read at the end:
 
 * cycle cost: the work of one cycle (receive, decide, IK and limits, encode, send, odometry);
 * lateness: when a cycle started minus its deadline (p50/p99/max);
@@ -25,10 +24,12 @@ velocity commands sent, everything waiting drained) on the same virtual bus with
 simulators, in a loop of its own, gives the ratio "gateway cycle / bare python-can cycle".
 
 Run: ``python tools/bench_loop.py [seconds] [--rt PRIORITY] [--cpu N] [--lock]
-[--sims thread|inline]`` (default 10 s, normal scheduling).  ``--rt`` runs the loop thread
-with SCHED_FIFO (root or LimitRTPRIO), as ``gateway.rt_priority`` does.  Without SCHED_FIFO
-and on a shared machine, tails are dominated by the scheduler; the p50 figures and the ratio
-are the comparable ones.
+[--sims thread|inline] [--platform]`` (default 10 s, normal scheduling).  ``--platform`` then
+runs the same scheduler with no work for as long, in the same thread and policy: the misses
+and tails the machine causes by itself (on a VM, stalls of the virtual CPU).  ``--rt`` runs
+the loop thread with SCHED_FIFO (root or LimitRTPRIO), as ``gateway.rt_priority`` does.
+Without SCHED_FIFO and on a shared machine, tails are dominated by the scheduler; the p50
+figures and the ratio are the comparable ones.
 """
 
 from __future__ import annotations
@@ -55,7 +56,7 @@ from gateway.daemon import Daemon
 from gateway.protocol import ProtocolError, Request, TwistRequest, encode_line
 from gateway.sdnotify import SystemdNotifier
 from gateway.simbus import SimulatedControllers
-from gateway.timing import LoopTimer
+from gateway.timing import LoopTimer, Scheduler, TimingStats
 from gateway.types import Frame
 
 
@@ -150,6 +151,18 @@ class BenchDaemon(Daemon):
             self.sims.step(time.monotonic())
 
 
+def empty_loop(seconds: float, rate_hz: float, spin_s: float) -> TimingStats:
+    """The daemon's scheduler with no work at all, in this thread (same scheduling policy):
+    the misses and tails the machine itself causes."""
+    timer = LoopTimer(rate_hz, capacity=int(seconds * rate_hz) + 100)
+    sched = Scheduler(rate_hz, spin_s=spin_s, timer=timer)
+    end = time.perf_counter() + seconds
+    while time.perf_counter() < end:
+        sched.wait_next()
+        sched.end_cycle()
+    return timer.snapshot()
+
+
 def _percentiles_us(values_ns: list[int]) -> tuple[float, float, float]:
     ordered = sorted(values_ns)
     if not ordered:
@@ -168,6 +181,9 @@ def main() -> None:
     parser.add_argument("--lock", action="store_true", help="mlockall after start-up")
     parser.add_argument("--sims", choices=("thread", "inline"), default="thread",
                         help="simulators in a background thread (as --sim) or stepped inline")
+    parser.add_argument("--platform", action="store_true",
+                        help="then run the same scheduler with no work for as long (the "
+                             "machine's own misses and tails)")
     parser.add_argument("--client", metavar="SOCKET", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.client:
@@ -246,6 +262,11 @@ def main() -> None:
         (f"twist->frames p99 <= {period_us + 200:.0f} us", e2e_p99 <= period_us + 200),
     ]
     print("targets: " + "; ".join(f"{name}: {'yes' if ok else 'NO'}" for name, ok in verdict))
+    if args.platform:
+        base = empty_loop(args.seconds, cfg.loop.rate_hz, cfg.loop.spin_us * 1e-6)
+        print(f"platform floor, the same scheduler with no work for {args.seconds:g} s in this "
+              f"thread: {base.missed} missed; lateness p50 {base.lateness_p50_us:.1f} us, p99 "
+              f"{base.lateness_p99_us:.1f} us, max {base.lateness_max_us:.1f} us")
 
 
 if __name__ == "__main__":
