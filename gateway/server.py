@@ -305,6 +305,12 @@ class ControlServer(Closing):
         """
         return sum(self.reply(cid, data) for cid in tuple(self._subscribers[topic]))
 
+    def fileno(self) -> int:
+        """The selector's descriptor: readable while a connection, a request or a writable
+        client with queued output waits (for waits finer than epoll's milliseconds)."""
+        self._check_open()
+        return self._selector.fileno()
+
     @property
     def counters(self) -> ServerCounters:
         """A snapshot of the counters."""

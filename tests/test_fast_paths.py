@@ -1,0 +1,188 @@
+"""The per-cycle fast paths give the same results as the general code they shortcut.
+
+Covers the performance changes of issue 6: precomputed pure-Python forward kinematics (against
+numpy's least squares), odometry's one-allocation SE(2) step, the loop's inverse-kinematics
+memo, the drive set's status order, ``drain`` and ``to_message``, and the daemon's wait, which
+must never ask epoll (whole milliseconds, rounded up) for more time than is left.
+"""
+
+from __future__ import annotations
+
+import math
+import random
+from typing import TYPE_CHECKING
+
+import can
+import pytest
+
+from gateway.bus import drain, to_message
+from gateway.config import load_config, parse_config
+from gateway.daemon import Daemon
+from gateway.drives import DriveSet
+from gateway.errors import KinematicsError
+from gateway.kinematics.odometry import Pose, _advance, compose, se2_exp
+from gateway.loop import Gateway
+from gateway.sdnotify import SystemdNotifier
+from gateway.types import Frame, Twist
+from tests.conftest import CONFIG_DIR
+
+if TYPE_CHECKING:
+    from pathlib import Path
+
+CONFIGS = [None, *sorted(CONFIG_DIR.glob("*.yaml"))]
+
+
+def _close(a: float, b: float) -> bool:
+    return abs(a - b) <= 1e-12 * max(1.0, abs(a), abs(b))
+
+
+@pytest.mark.parametrize("path", CONFIGS, ids=lambda p: "default" if p is None else p.stem)
+def test_fk_fast_path_matches_numpy(path: Path | None) -> None:
+    model = load_config(path).model
+    rng = random.Random(1)
+    fast = 0
+    for trial in range(60):
+        speeds: list[float | None] = [rng.uniform(-30.0, 30.0) for _ in range(model.n)]
+        if trial % 3 == 0:
+            speeds[rng.randrange(model.n)] = None
+        steer = model.neutral_steer
+        try:
+            ref = model._fk_numpy(speeds, steer)
+        except KinematicsError:  # too few wheels measured: both paths refuse
+            with pytest.raises(KinematicsError):
+                model.fk(speeds, steer)
+            continue
+        got = model.fk(speeds, steer)
+        fast += model._fk_plan(speeds) is not None
+        assert _close(got.twist.vx_m_s, ref.twist.vx_m_s)
+        assert _close(got.twist.vy_m_s, ref.twist.vy_m_s)
+        assert _close(got.twist.wz_rad_s, ref.twist.wz_rad_s)
+        assert _close(got.residual_m_s, ref.residual_m_s)
+        assert all(_close(a, b) for a, b in zip(got.wheel_residual_m_s,
+                                                ref.wheel_residual_m_s, strict=True))
+        vx, vy, wz, rms = model.fk_twist(speeds, steer)
+        assert (vx, vy, wz, rms) == (got.twist.vx_m_s, got.twist.vy_m_s, got.twist.wz_rad_s,
+                                     got.residual_m_s)
+    steered = any(w.steered for w in model.wheels)
+    assert (fast == 0) == steered  # the fast path is taken exactly for unsteered robots
+
+
+def test_advance_is_compose_of_exp() -> None:
+    rng = random.Random(2)
+    for _ in range(500):
+        pose = Pose(rng.uniform(-5, 5), rng.uniform(-5, 5), rng.uniform(-math.pi, math.pi))
+        d = (rng.uniform(-0.1, 0.1), rng.uniform(-0.1, 0.1),
+             rng.choice([0.0, 1e-6, rng.uniform(-0.5, 0.5)]))
+        assert _advance(pose, *d) == compose(pose, se2_exp(*d))
+
+
+def test_ik_memo_follows_the_target_object(channel: str) -> None:
+    cfg = load_config(None, {"interface": "virtual", "channel": channel})
+    gw = Gateway(cfg)
+    try:
+        target = Twist(0.3, 0.1, 0.2)
+        first = gw._solve(target)
+        assert first == cfg.model.try_ik(target, gw.prev.steer_rad)
+        assert gw._solve(target) is first  # same object: no second solve
+        other = gw._solve(Twist(0.3, 0.1, 0.2))  # equal but new: solved again
+        assert other == first and other is not first
+    finally:
+        gw.close()
+    cfg = load_config(CONFIG_DIR / "differential_tub.yaml",
+                      {"interface": "virtual", "channel": channel})
+    gw = Gateway(cfg)
+    try:
+        assert gw._solve(Twist(0.0, 0.5, 0.0)) == cfg.model.ik(Twist())  # infeasible -> zero
+    finally:
+        gw.close()
+
+
+def test_drive_set_status_in_model_order_across_drivers() -> None:
+    raw = {
+        "name": "mixed", "drive": "mecanum",
+        "geometry": {"wheel_radius": 0.05, "wheelbase": 0.4, "track": 0.36},
+        "motor_defaults": {"gear_ratio": 10.0, "max_rpm": 3000},
+        "motors": {
+            "front_left": {"driver": "vesc", "node_id": 1, "pole_pairs": 7},
+            "front_right": {"driver": "odrive", "node_id": 2},
+            "rear_left": {"driver": "vesc", "node_id": 3, "pole_pairs": 7},
+            "rear_right": {"driver": "odrive", "node_id": 4},
+        },
+        "bus": {"interface": "virtual", "channel": "unused"},
+    }
+    cfg = parse_config(raw, "<mixed>")
+    drives = DriveSet(cfg)
+    names = [s.name for s in drives.status(0.0)]
+    assert names == [w.name for w in cfg.model.wheels]
+    speeds = [1.0, 2.0, 3.0, 4.0]
+    assert len(drives.preview(speeds)) == 4
+
+
+def test_drain_and_to_message(channel: str) -> None:
+    tx = can.Bus(interface="virtual", channel=channel)
+    rx = can.Bus(interface="virtual", channel=channel)
+    try:
+        assert drain(rx) == []
+        frames = [Frame(0x123, b"\x01\x02"), Frame(0x1ABCDEF, b"", True, True, 4)]
+        for f in frames:
+            msg = to_message(f)
+            assert (msg.arbitration_id, bytes(msg.data), msg.is_extended_id,
+                    msg.is_remote_frame, msg.dlc) == tuple(f[:5])
+            tx.send(msg)
+        assert drain(rx, limit=0) == []  # nothing taken
+        assert drain(rx, timestamp_s=7.0) == frames
+        assert drain(rx) == []
+    finally:
+        tx.shutdown()
+        rx.shutdown()
+
+
+class _FakeServer:
+    """Records poll timeouts and stands in for the control server."""
+
+    def __init__(self, clock: list[float]) -> None:
+        self.clock = clock
+        self.timeouts: list[float] = []
+
+    def poll(self, timeout_s: float) -> list[object]:
+        self.timeouts.append(timeout_s)
+        self.clock[0] += math.ceil(timeout_s * 1e3) * 1e-3  # what epoll does
+        return []
+
+
+def test_wait_never_oversleeps_the_deadline(channel: str, sock_path: str) -> None:
+    cfg = load_config(None, {"interface": "virtual", "channel": channel})
+    daemon = Daemon(cfg, socket_path=sock_path, notifier=SystemdNotifier(None))
+    real_server = daemon.server
+    try:
+        now = [100.0]
+        sched = daemon.scheduler
+
+        def clock() -> float:
+            now[0] += 1e-6  # every reading takes a microsecond, so the spin ends
+            return now[0]
+
+        sched._clock = clock
+
+        def sleep(seconds: float) -> None:
+            now[0] += seconds
+
+        sched._sleep = sleep
+        fake = _FakeServer(now)
+        daemon.server = fake  # type: ignore[assignment]
+        daemon._server_fd = None
+        sched.start(now[0])
+        for offset in (0.0, 0.0003, 0.0021, 0.0049):
+            now[0] = sched.next_deadline_s() - sched.period_s + offset
+            deadline = sched.next_deadline_s()
+            daemon._wait()
+            assert sched.timer.missed == 0
+            assert deadline <= now[0] <= deadline + 1e-5
+        assert fake.timeouts[-1] == 0.0  # the pass at the deadline
+        # Only whole milliseconds minus a half, which epoll rounds up to the whole ones.
+        assert all(t == 0.0 or abs(t * 1e3 - math.floor(t * 1e3) - 0.5) < 1e-6
+                   for t in fake.timeouts)
+        assert any(t > 0.0 for t in fake.timeouts)
+    finally:
+        daemon.server = real_server
+        daemon.close()
