@@ -54,14 +54,16 @@ def se2_exp(dx: float, dy: float, dtheta: float) -> Pose:
     >>> round(p.x_m, 9), round(p.y_m, 9), round(p.theta_rad, 9)
     (1.0, 1.0, 1.570796327)
     """
+    a, b = _exp_coefficients(dtheta)
+    return Pose(a * dx - b * dy, b * dx + a * dy, dtheta)
+
+
+def _exp_coefficients(dtheta: float) -> tuple[float, float]:
+    """``(sin(t)/t, (1 - cos(t))/t)``, by Taylor series near ``t = 0``."""
     t2 = dtheta * dtheta
     if abs(dtheta) < 1e-4:
-        a = 1.0 - t2 / 6.0 + t2 * t2 / 120.0
-        b = dtheta / 2.0 - dtheta * t2 / 24.0
-    else:
-        a = math.sin(dtheta) / dtheta
-        b = (1.0 - math.cos(dtheta)) / dtheta
-    return Pose(a * dx - b * dy, b * dx + a * dy, dtheta)
+        return 1.0 - t2 / 6.0 + t2 * t2 / 120.0, dtheta / 2.0 - dtheta * t2 / 24.0
+    return math.sin(dtheta) / dtheta, (1.0 - math.cos(dtheta)) / dtheta
 
 
 def compose(pose: Pose, delta: Pose) -> Pose:
@@ -170,13 +172,7 @@ class Odometry:
 
 def _advance(pose: Pose, dx: float, dy: float, dtheta: float) -> Pose:
     """``compose(pose, se2_exp(dx, dy, dtheta))`` with one allocation (same arithmetic)."""
-    t2 = dtheta * dtheta
-    if abs(dtheta) < 1e-4:
-        a = 1.0 - t2 / 6.0 + t2 * t2 / 120.0
-        b = dtheta / 2.0 - dtheta * t2 / 24.0
-    else:
-        a = math.sin(dtheta) / dtheta
-        b = (1.0 - math.cos(dtheta)) / dtheta
+    a, b = _exp_coefficients(dtheta)
     ex, ey = a * dx - b * dy, b * dx + a * dy
     theta0 = pose.theta_rad
     c, s = math.cos(theta0), math.sin(theta0)
