@@ -39,6 +39,7 @@ from gateway.kinematics import PRESETS, Limits, RobotModel, Wheel, WheelType
 from gateway.kinematics.model import validate_wheel
 from gateway.options import OptionSpec, validate_block
 from gateway.registry import get_driver_class
+from gateway.tracking import TrackingLimits
 from gateway.types import MotorConfig
 from gateway.wgproto import CanIds
 
@@ -105,6 +106,13 @@ _GATEWAY_KEYS = {
     "rt_cpu": OptionSpec(int, -1, minimum=-1, help="CPU to pin the loop to; -1: any"),
     "lock_memory": OptionSpec(bool, False),
     "spin_us": OptionSpec(float, 200.0, minimum=0.0, maximum=5000.0),
+    "tracking_tolerance_rad_s": OptionSpec(
+        float, 1.0, minimum=0.0, help="wheel speed error allowed at standstill (wheel rad/s)"),
+    "tracking_tolerance_ratio": OptionSpec(
+        float, 0.2, minimum=0.0, help="added error allowed per rad/s of command"),
+    "tracking_time_s": OptionSpec(
+        float, 0.5, minimum=0.0, help="how long a wheel may stay off its command before a "
+                                      "fault; 0 disables the check"),
 }
 _CAN_ID_KEYS = {
     "twist": OptionSpec(int, 0x100, minimum=0),
@@ -160,6 +168,10 @@ class LoopConfig:
     :param rt_cpu: CPU to pin the loop thread to (-1: any).
     :param lock_memory: ``mlockall`` after start-up.
     :param spin_us: how long before each deadline the loop spins instead of sleeping.
+    :param tracking_tolerance_rad_s: tracking-error window at standstill (wheel rad/s).
+    :param tracking_tolerance_ratio: how much the window widens per rad/s of command.
+    :param tracking_time_s: how long a wheel may stay outside its window before a FAULT
+        (0: no tracking-error check); see :mod:`gateway.tracking`.
     """
 
     rate_hz: float = 200.0
@@ -180,6 +192,15 @@ class LoopConfig:
     rt_cpu: int = -1
     lock_memory: bool = False
     spin_us: float = 200.0
+    tracking_tolerance_rad_s: float = 1.0
+    tracking_tolerance_ratio: float = 0.2
+    tracking_time_s: float = 0.5
+
+    @property
+    def tracking(self) -> TrackingLimits:
+        """The tracking-error check's limits."""
+        return TrackingLimits(self.tracking_tolerance_rad_s, self.tracking_tolerance_ratio,
+                              self.tracking_time_s)
 
 
 @dataclass(frozen=True, slots=True)

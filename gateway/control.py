@@ -8,7 +8,8 @@ whether the drives should be armed.  The loop (:mod:`gateway.loop`) does the I/O
 States (:class:`~gateway.types.GatewayState`)::
 
     DISABLED --enable--> ENABLING --all motors ENABLED--> RUNNING
-    RUNNING  --motor FAULT/OFFLINE--> FAULT --all answer again, recovery "auto"--> ENABLING
+    RUNNING  --motor FAULT/OFFLINE, or a wheel off its command--> FAULT
+    FAULT    --all answer again, recovery "auto"--> ENABLING
     FAULT    --enable (recovery "manual")--> ENABLING
     any      --e-stop--> ESTOP --enable--> ENABLING
     any      --disable--> DISABLED            ENABLING --timeout--> FAULT
@@ -19,7 +20,8 @@ Safety rules:
   deceleration limits;
 * an infeasible twist: ``reject`` answers with the error and ramps to zero; ``project``
   follows the nearest feasible twist and counts a warning;
-* a motor that faults or stops answering: zero for every wheel (and disarm with
+* a motor that faults or stops answering, or a wheel that stays off its command longer than
+  ``tracking_time_s`` (:mod:`gateway.tracking`): zero for every wheel (and disarm with
   ``fault_action: disarm``); the error names the motor;
 * e-stop: zero at once, disarm, and stay there until an explicit enable.
 """
@@ -31,6 +33,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from gateway.errors import InfeasibleTwistError
+from gateway.tracking import TrackingMonitor
 from gateway.types import DriveState, ErrorCode, GatewayState, Twist
 
 if TYPE_CHECKING:
@@ -84,6 +87,18 @@ class Accepted:
 
 
 @dataclass(frozen=True, slots=True)
+class Fault:
+    """Why the gateway went to FAULT just now.
+
+    :param code: the error class (``MOTOR_FAULT``, ``FEEDBACK_TIMEOUT``, ``TRACKING_ERROR``).
+    :param message: a sentence naming every motor involved.
+    """
+
+    code: ErrorCode
+    message: str
+
+
+@dataclass(frozen=True, slots=True)
 class Decision:
     """What to command this cycle.
 
@@ -117,6 +132,8 @@ class Supervisor:
         self.reason = ""
         #: Names of the motors that caused the current fault.
         self.faulted: tuple[str, ...] = ()
+        #: The error class of the current fault (twists refused in FAULT carry it).
+        self.fault_code = ErrorCode.MOTOR_FAULT
         #: Counters of what happened, by kind.
         self.counts = {"infeasible": 0, "projected": 0, "rejected": 0, "faults": 0,
                        "cmd_timeouts": 0, "estops": 0}
@@ -125,6 +142,8 @@ class Supervisor:
         self._fault_s = 0.0
         self._now_hint = 0.0
         self._auto_attempts = 0
+        #: The tracking-error check (active while RUNNING).
+        self.tracking = TrackingMonitor(loop.tracking)
 
     # ----------------------------------------------------------------- commands
 
@@ -198,6 +217,7 @@ class Supervisor:
         self.state = GatewayState.FAULT
         self.target = ZERO
         self._fault_s = self._now_hint
+        self.fault_code = ErrorCode.MOTOR_FAULT
         self.reason = f"enable refused: {why}"
         return self.reason
 
@@ -213,9 +233,20 @@ class Supervisor:
 
     # ----------------------------------------------------------------- per cycle
 
-    def motors(self, statuses: Sequence[MotorStatus], now_s: float) -> str | None:
-        """Take the motors' states; return a fault message when a fault starts."""
+    def motors(
+        self,
+        statuses: Sequence[MotorStatus],
+        now_s: float,
+        command_rad_s: Sequence[float] | None = None,
+    ) -> Fault | None:
+        """Take the motors' states; return the fault when one starts.
+
+        :param command_rad_s: each motor's wheel speed as commanded the cycle before (the
+            order of ``statuses``), for the tracking-error check; ``None`` skips it.
+        """
         self._now_hint = now_s
+        if self.state is not GatewayState.RUNNING:
+            self.tracking.reset()
         bad = [s for s in statuses if s.state in (DriveState.FAULT, DriveState.OFFLINE)]
         if self.state is GatewayState.ENABLING:
             if statuses and all(s.state is DriveState.ENABLED for s in statuses):
@@ -228,8 +259,15 @@ class Supervisor:
                 return self._fault(late, "did not enable within "
                                          f"{self.cfg.enable_timeout_s:g} s")
             return None
-        if self.state is GatewayState.RUNNING and bad:
-            return self._fault(bad, "")
+        if self.state is GatewayState.RUNNING:
+            if bad:
+                return self._fault(bad, "")
+            if command_rad_s is not None:
+                off = self.tracking.check(command_rad_s, [s.feedback for s in statuses], now_s)
+                if off is not None:
+                    return self._fault([statuses[off.index]], off.describe(),
+                                       ErrorCode.TRACKING_ERROR)
+            return None
         if (
             self.state is GatewayState.FAULT
             and self.cfg.feedback_recovery == "auto"
@@ -245,7 +283,8 @@ class Supervisor:
             self._start_enable(now_s)
         return None
 
-    def _fault(self, motors: Sequence[MotorStatus], why: str) -> str:
+    def _fault(self, motors: Sequence[MotorStatus], why: str,
+               code: ErrorCode = ErrorCode.MOTOR_FAULT) -> Fault:
         self.counts["faults"] += 1
         self._fault_s = self._now_hint
         self.state = GatewayState.FAULT
@@ -259,11 +298,13 @@ class Supervisor:
                 age = "no feedback yet" if s.feedback_age_s is None else (
                     f"no feedback for {s.feedback_age_s:.3f} s")
                 text = f"stopped answering ({age})"
+                code = ErrorCode.FEEDBACK_TIMEOUT
             else:
                 text = f"reports a fault: {s.detail or repr(s.faults)}"
             parts.append(f"motor {s.name!r} (node {s.node_id}) {text}")
         self.reason = "; ".join(parts)
-        return self.reason
+        self.fault_code = code
+        return Fault(code, self.reason)
 
     def decide(self, now_s: float) -> Decision:
         """The command for this cycle."""
@@ -295,7 +336,7 @@ class Supervisor:
         if self.state is GatewayState.ESTOP:
             return ErrorCode.ESTOP, f"e-stop is latched ({self.reason}); send enable first"
         if self.state is GatewayState.FAULT:
-            return ErrorCode.MOTOR_FAULT, f"gateway is in FAULT: {self.reason}"
+            return self.fault_code, f"gateway is in FAULT: {self.reason}"
         if self.state is GatewayState.ENABLING:
             return ErrorCode.NOT_ENABLED, "drives are still enabling"
         return ErrorCode.NOT_ENABLED, (

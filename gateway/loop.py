@@ -244,15 +244,20 @@ class Gateway:
         out: list[Frame],
         rejection: Rejection | None = None,
         twist_counter: int = NO_TWIST_COUNTER,
+        wheel: str | None = None,
     ) -> None:
-        """Put an error on CAN (WG_Error) and in the outbox for socket clients."""
+        """Put an error on CAN (WG_Error) and in the outbox for socket clients.
+
+        :param wheel: the wheel the error is about, when it is not the rejection's.
+        """
         self._error_count += 1
         self.counts["errors_reported"] += 1
         err = rejection.error if rejection is not None else None
-        wheel = self.model.index(err.wheel) if err is not None else NO_WHEEL
+        if err is not None:
+            wheel = err.wheel
         out.append(self.wg.encode_error(ErrorReport(
             code=code,
-            wheel=wheel,
+            wheel=NO_WHEEL if wheel is None else self.model.index(wheel),
             constraint=ConstraintCode.from_name(err.constraint) if err else ConstraintCode.NONE,
             twist_counter=twist_counter,
             residual_m_s=err.residual_m_s if err else 0.0,
@@ -279,11 +284,12 @@ class Gateway:
                 else:
                     drives.on_frame(frame)
         sup = self.supervisor
-        fault = sup.motors(self.drives.status(now_s), now_s)
+        speeds = self.prev.wheel_rad_s
+        fault = sup.motors(self.drives.status(now_s), now_s, [speeds[i] for i in self._driven])
         if fault is not None:
-            log.error("fault: %s", fault)
-            code = ErrorCode.FEEDBACK_TIMEOUT if "answering" in fault else ErrorCode.MOTOR_FAULT
-            self.report_error(code, fault, out)
+            log.error("fault: %s", fault.message)
+            self.report_error(fault.code, fault.message, out,
+                              wheel=sup.faulted[0] if sup.faulted else None)
         if sup.take_enable_request():
             try:
                 out.extend(self.drives.enable(now_s))

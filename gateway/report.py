@@ -48,6 +48,10 @@ def status_dict(daemon: Daemon, now_s: float) -> dict[str, object]:
             "accel_scale": 1.0 if limit is None else limit.accel_scale,
         },
         "motors": motors,
+        "tracking": {
+            **dataclasses.asdict(sup.tracking.limits),
+            "worst_ratio": sup.tracking.worst_ratio,
+        },
         "odometry": gw.odometry_dict(),
         "counters": {**gw.counts, **sup.counts, "rejected_frames": rejected},
         "socket": {"path": daemon.socket_path,

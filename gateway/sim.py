@@ -74,6 +74,9 @@ class SimFault(enum.IntFlag):
     #: Every frame the device sends is replaced by random bytes of random length (0 to 8)
     #: on the same identifier, from the simulator's seeded ``garbage_rng``.
     GARBAGE = enum.auto()
+    #: The wheel is blocked: the shaft stands still whatever the command, while the device
+    #: keeps reporting healthy (no fault code, still armed).
+    STALL = enum.auto()
 
 
 class DeviceSimulator(abc.ABC):
@@ -112,7 +115,10 @@ class DeviceSimulator(abc.ABC):
     def tick(self, now_s: float) -> list[Frame]:
         """Advance the motor to ``now_s``; return the periodic frames due."""
         if self._last_tick_s is not None:
-            self.model.step(now_s - self._last_tick_s)
+            if self.faults & SimFault.STALL:
+                self.model.velocity_rad_s = 0.0  # blocked: the shaft does not turn
+            else:
+                self.model.step(now_s - self._last_tick_s)
         self._last_tick_s = now_s
         out = self._on_tick(now_s)
         if self.faults & SimFault.SILENT:

@@ -284,6 +284,7 @@ class ErrorCode(enum.IntEnum):
     BAD_COMMAND = 6
     COMMAND_TIMEOUT = 7
     NOT_ENABLED = 8
+    TRACKING_ERROR = 9
 
 
 class ConstraintCode(enum.IntEnum):

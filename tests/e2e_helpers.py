@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 
 import can
 
-from gateway.bus import send_frames
+from gateway.bus import drain, send_frames
 from gateway.config import GatewayConfig, load_config
 from gateway.daemon import Daemon
 from gateway.kinematics import Odometry
@@ -17,7 +17,7 @@ from gateway.loop import Gateway
 from gateway.sdnotify import SystemdNotifier
 from gateway.simbus import SimulatedControllers
 from gateway.types import GatewayState, Twist
-from gateway.wgproto import TwistCommand, TwistFlags
+from gateway.wgproto import ErrorReport, TwistCommand, TwistFlags
 
 if TYPE_CHECKING:
     from collections.abc import Callable
@@ -188,3 +188,13 @@ class SocketPilot:
 
     def close(self) -> None:
         self.sock.close()
+
+
+def errors_on_can(rig: Rig) -> list[ErrorReport]:
+    """Every WG_Error the pilot's bus received since it was last drained."""
+    out = []
+    for frame in drain(rig.pilot):
+        report = rig.gw.wg.decode_error(frame)
+        if report is not None:
+            out.append(report)
+    return out

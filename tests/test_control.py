@@ -7,7 +7,7 @@ import dataclasses
 import pytest
 
 from gateway.config import LoopConfig
-from gateway.control import AUTO_RETRY_DELAY_S, Accepted, Rejection, Supervisor
+from gateway.control import AUTO_RETRY_DELAY_S, Accepted, Fault, Rejection, Supervisor
 from gateway.kinematics import PRESETS, RobotModel
 from gateway.types import DriveFault, DriveState, ErrorCode, GatewayState, MotorStatus, Twist
 
@@ -79,7 +79,8 @@ def test_motor_fault_zeroes_names_motor_and_recovers_automatically() -> None:
     sup = running()
     sup.twist(Twist(0.3, 0.0, 0.0), 1.0)
     msg = sup.motors(motors(DriveState.ENABLED, DriveState.OFFLINE, age=0.4), 1.1)
-    assert msg == "motor 'right' (node 2) stopped answering (no feedback for 0.400 s)"
+    assert msg == Fault(ErrorCode.FEEDBACK_TIMEOUT,
+                        "motor 'right' (node 2) stopped answering (no feedback for 0.400 s)")
     assert state_of(sup) is GatewayState.FAULT
     d = sup.decide(1.1)
     assert d.twist == Twist() and not d.ramp and d.armed
@@ -96,7 +97,7 @@ def test_motor_fault_zeroes_names_motor_and_recovers_automatically() -> None:
 def test_manual_recovery_waits_for_enable_and_disarm_action() -> None:
     sup = running(feedback_recovery="manual", fault_action="disarm")
     msg = sup.motors(motors(DriveState.FAULT, DriveState.ENABLED), 1.0)
-    assert msg == "motor 'left' (node 1) reports a fault: phase loss"
+    assert msg == Fault(ErrorCode.MOTOR_FAULT, "motor 'left' (node 1) reports a fault: phase loss")
     assert not sup.decide(1.0).armed
     sup.motors(motors(DriveState.DISABLED, DriveState.DISABLED), 1.1)
     assert state_of(sup) is GatewayState.FAULT
@@ -123,7 +124,7 @@ def test_enable_timeout_faults_with_the_late_motor() -> None:
     sup.enable(0.0)
     assert sup.motors(motors(DriveState.ENABLED, DriveState.ENABLING), 0.5) is None
     msg = sup.motors(motors(DriveState.ENABLED, DriveState.ENABLING), 1.5)
-    assert msg == "motor 'right' (node 2) did not enable within 1 s"
+    assert msg == Fault(ErrorCode.MOTOR_FAULT, "motor 'right' (node 2) did not enable within 1 s")
     assert state_of(sup) is GatewayState.FAULT
 
 

@@ -17,9 +17,9 @@ from gateway.control import AUTO_RETRIES
 from gateway.loop import REOPEN_AFTER
 from gateway.sim import SimFault
 from gateway.types import ConstraintCode, ErrorCode, GatewayState, Twist
-from gateway.wgproto import ErrorReport, TwistFlags
+from gateway.wgproto import TwistFlags
 from tests.conftest import CONFIG_DIR
-from tests.e2e_helpers import Rig, SocketPilot, virtual_config
+from tests.e2e_helpers import Rig, SocketPilot, errors_on_can, virtual_config
 
 if TYPE_CHECKING:
     from collections.abc import Iterator
@@ -51,15 +51,6 @@ def state(rig: Rig) -> GatewayState:
 
 def speeds(rig: Rig) -> tuple[float, ...]:
     return rig.gw.prev.wheel_rad_s
-
-
-def errors_on_can(rig: Rig) -> list[ErrorReport]:
-    out = []
-    for frame in drain(rig.pilot):
-        report = rig.gw.wg.decode_error(frame)
-        if report is not None:
-            out.append(report)
-    return out
 
 
 def test_command_timeout_ramps_to_zero_within_deceleration(rig: Rig, pilot: SocketPilot) -> None:

@@ -5,7 +5,9 @@ on the embedded default (four ODrive axes), marked ``slow``; a short variant of 
 (15 s each) is in the quick suite.  A seeded :class:`Planner` picks a feasible twist every
 0.2 s to 2 s (sent on the control socket every 0.1 s) and, after 1 s to 5 s of clean running,
 a fault on a random motor: silence, a controller fault, dropped frames, late answers (below or
-above ``liveness_s``) or garbage, each cleared after 0.5 s to 2 s; where the gateway waits for
+above ``liveness_s``), garbage, or a stalled wheel (the device reports healthy, the motor
+coasts; the robot is sent straight ahead meanwhile, so the wheel is well off its command), each
+cleared after 0.5 s to 2 s (a stall: ``tracking_time_s`` more); where the gateway waits for
 one, the runner sends ``enable``.  Asserted:
 
 * no exception escapes, and no FAULT while nothing is injected;
@@ -14,16 +16,13 @@ one, the runner sends ``enable``.  Asserted:
 * no missed safety reaction: every silence, controller fault or latency above ``liveness_s``
   is answered by FAULT with every wheel at zero within ``liveness_s`` + 2 cycles, and garbage
   within :data:`GARBAGE_BOUND_S` (a garbage frame of the right length can pass for fresh
-  feedback -- a DJI frame has no checksum -- so garbage is not held to the liveness bound);
-  the worst reaction time per kind is printed;
+  feedback -- a DJI frame has no checksum -- so garbage is not held to the liveness bound),
+  and a stall within ``tracking_time_s`` + :data:`STALL_MARGIN_S`; the worst reaction time per
+  kind is printed;
 * odometry: over every clean stretch (from 0.5 s after a recovery to the next fault), the
   gateway's displacement agrees with the simulators' ground truth; the summed error is below
   1 % of the distance travelled in those stretches.  While a fault blinds the gateway (a
   silent or garbling encoder) odometry cannot follow, so those stretches are not counted.
-
-ODrive gets no garbage here: a garbage heartbeat with an odd axis state makes the automatic
-re-enable raise out of the cycle (the strict xfail in ``test_faults.py``); add
-``SimFault.GARBAGE`` back to its kinds once that is fixed.
 """
 
 from __future__ import annotations
@@ -58,7 +57,13 @@ MEMORY_BOUND_BYTES = 5 * 1024 * 1024
 GARBAGE_BOUND_S = 0.5
 #: Largest summed odometry error, as a fraction of the distance travelled.
 ODOMETRY_BOUND = 0.01
-ALL_KINDS = (SimFault.SILENT, SimFault.FAULT, SimFault.DROP, SimFault.LATE, SimFault.GARBAGE)
+#: Longest time from a stall to FAULT beyond ``tracking_time_s`` (s): the twist sent at the
+#: stall ramps in through the acceleration limits and the coasting wheel slows down first.
+STALL_MARGIN_S = 0.3
+#: The twist held while a wheel is stalled: straight ahead, every wheel turning.
+STALL_TWIST = Twist(0.4, 0.0, 0.0)
+ALL_KINDS = (SimFault.SILENT, SimFault.FAULT, SimFault.DROP, SimFault.LATE, SimFault.GARBAGE,
+             SimFault.STALL)
 
 
 @dataclass(frozen=True, slots=True)
@@ -110,7 +115,7 @@ class Planner:
             rng.shuffle(self._round)
         kind = self._round.pop()
         latency = 0.0
-        must = kind in (SimFault.SILENT, SimFault.FAULT, SimFault.GARBAGE)
+        must = kind in (SimFault.SILENT, SimFault.FAULT, SimFault.GARBAGE, SimFault.STALL)
         if kind is SimFault.LATE:
             must = rng.random() < 0.5
             # Harmless: well below liveness (DJI's host loop is stable up to about 30 ms).
@@ -118,6 +123,8 @@ class Planner:
                        else rng.uniform(0.002, 0.03))
         motors = sum(m is not None for m in self.config.motors)
         duration = rng.uniform(max(0.5, GARBAGE_BOUND_S), 2.0)
+        if kind is SimFault.STALL:
+            duration += self.config.loop.tracking_time_s + STALL_MARGIN_S
         return Injection(kind, rng.randrange(motors), duration, latency, must)
 
 
@@ -204,6 +211,7 @@ class Soak:
     def run(self, duration_s: float, warmup_s: float) -> Report:
         rig, gw, plan, r = self.rig, self.gw, self.planner, self.report
         strict = plan.liveness_s + 2 * rig.period + 1e-9
+        cfg_tracking_s = plan.config.loop.tracking_time_s
         bound = strict
         twist, next_twist = Twist(), 0.0
         phase, fault_at, settle_until = "clean", plan.gap(), 0.0
@@ -238,6 +246,11 @@ class Soak:
                 r.injections[name] = r.injections.get(name, 0) + 1
                 phase, t_inj, clear_at, reaction = "faulted", t, t + inj.duration_s, None
                 bound = GARBAGE_BOUND_S if inj.kind is SimFault.GARBAGE else strict
+                if inj.kind is SimFault.STALL:
+                    bound = cfg_tracking_s + STALL_MARGIN_S
+                    twist, next_twist = STALL_TWIST, clear_at
+                    self.pilot.send(op="twist", vx=twist.vx_m_s, vy=twist.vy_m_s,
+                                    wz=twist.wz_rad_s)
             elif phase == "faulted" and inj is not None and t >= clear_at:
                 if inj.must_fault and reaction is None:
                     r.missed.append(f"{name} on motor {inj.motor} at {t_inj:.3f} s")
@@ -288,7 +301,7 @@ class Soak:
 #: (config, faults drawn) per robot.
 ROBOTS = {
     "mecanum_dji": (CONFIG_DIR / "mecanum.yaml", ALL_KINDS),
-    "default_odrive": (None, tuple(k for k in ALL_KINDS if k is not SimFault.GARBAGE)),
+    "default_odrive": (None, ALL_KINDS),
 }
 
 
@@ -338,4 +351,4 @@ def test_soak_ten_minutes(robot: str, channel: str, sock_path: str,
                           capsys: pytest.CaptureFixture[str]) -> None:
     report = soak(robot, channel, sock_path, duration_s=600.0, warmup_s=30.0, gap_s=(1.0, 5.0))
     check(report, capsys, robot, min_injections=60)
-    assert set(report.worst_reaction_s) >= {"SILENT", "FAULT", "LATE>liveness"}
+    assert set(report.worst_reaction_s) >= {"SILENT", "FAULT", "LATE>liveness", "STALL"}

@@ -1,0 +1,153 @@
+"""Tracking-error check: a wheel that answers but does not follow its command.
+
+A motor controller can keep reporting "enabled, no error" while its wheel does something else:
+a blocked wheel, a drive that released its motor without a fault code (VESC has none), a
+host-side speed loop made unstable by late feedback (DJI C620/C610).  Heartbeats and fault
+flags cannot see that; comparing the measured wheel speed with the command can.
+
+The rule is CiA 402's velocity window (objects 0x606D *velocity window* and 0x606E *velocity
+window time*), with a window that widens with speed: wheel ``i`` is off its command when
+
+.. math::
+
+    |\\omega_{meas,i} - \\omega_{cmd,i}| > tol_{abs} + tol_{rel} \\, |\\omega_{cmd,i}|
+
+The time a wheel spends outside its window counts up, the time inside counts down (to no less
+than zero): a fault when the count reaches ``time_s``.  This is the counter-based debouncing of
+automotive diagnostics (AUTOSAR DEM): a wheel that only passes through its window, as an
+oscillating speed loop does a few milliseconds per swing, is still caught, while a ramp through
+the acceleration limits or a motor's own lag leaves the window only briefly, which ``time_s``
+absorbs.  One check adds at most a tenth of ``time_s``, so a stalled loop's long gap between
+two checks cannot make a fault out of one sample.  The command is the one sent the cycle before
+(the one the feedback answers).
+
+Pure: no clock, no I/O; the loop calls :meth:`TrackingMonitor.check` once a cycle while the
+drives are running and :meth:`TrackingMonitor.reset` whenever they are not.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from collections.abc import Sequence
+
+    from gateway.types import WheelFeedback
+
+
+@dataclass(frozen=True, slots=True)
+class TrackingLimits:
+    """How far and how long a wheel may be off its command.
+
+    :param tolerance_rad_s: the window's half-width at standstill (wheel rad/s).
+    :param tolerance_ratio: how much the window widens per rad/s of command.
+    :param time_s: how long a wheel may stay outside the window; 0 disables the check.
+    """
+
+    tolerance_rad_s: float = 1.0
+    tolerance_ratio: float = 0.2
+    time_s: float = 0.5
+
+    @property
+    def enabled(self) -> bool:
+        """Whether the check runs at all."""
+        return self.time_s > 0.0
+
+    def window(self, command_rad_s: float) -> float:
+        """The largest allowed error for this command (rad/s)."""
+        return self.tolerance_rad_s + self.tolerance_ratio * abs(command_rad_s)
+
+
+@dataclass(frozen=True, slots=True)
+class TrackingFault:
+    """A wheel that stayed off its command for too long.
+
+    :param index: position of the wheel's motor in the checked sequence.
+    :param command_rad_s: the wheel speed commanded (rad/s).
+    :param measured_rad_s: the wheel speed the controller reports (rad/s).
+    :param window_rad_s: the allowed error for that command (rad/s).
+    :param duration_s: the wheel's count: time outside its window less time inside (s).
+    """
+
+    index: int
+    command_rad_s: float
+    measured_rad_s: float
+    window_rad_s: float
+    duration_s: float
+
+    def describe(self) -> str:
+        """The fault in words, without the wheel's name.
+
+        >>> TrackingFault(0, 10.0, 2.5, 4.5, 0.5).describe().split(" (")
+        ... # doctest: +NORMALIZE_WHITESPACE
+        ['does not follow its command: 2.50 rad/s measured, 10.00 rad/s commanded',
+         'error 7.50 rad/s, window 4.50 rad/s) for a net 0.500 s']
+        """
+        error = abs(self.measured_rad_s - self.command_rad_s)
+        return (
+            f"does not follow its command: {self.measured_rad_s + 0.0:.2f} rad/s measured, "
+            f"{self.command_rad_s:.2f} rad/s commanded (error {error:.2f} rad/s, "
+            f"window {self.window_rad_s:.2f} rad/s) for a net {self.duration_s:.3f} s"
+        )
+
+
+class TrackingMonitor:
+    """Watches every driven wheel's speed against its command.
+
+    :param limits: the window and the time.
+    """
+
+    def __init__(self, limits: TrackingLimits) -> None:
+        self.limits = limits
+        #: Each wheel's count (s): time outside its window less time inside, at least 0.
+        self._count: list[float] = []
+        self._last_s: float | None = None
+        #: The largest error / window ratio seen so far (above 1: a wheel left its window), to
+        #: tune the window against a real robot.
+        self.worst_ratio = 0.0
+
+    def reset(self) -> None:
+        """Forget every wheel's history (the drives stopped following commands)."""
+        self._count = [0.0] * len(self._count)
+        self._last_s = None
+
+    def check(
+        self,
+        command_rad_s: Sequence[float],
+        feedback: Sequence[WheelFeedback | None],
+        now_s: float,
+    ) -> TrackingFault | None:
+        """Compare each wheel's latest feedback with its command; the first fault, if any.
+
+        :param command_rad_s: every checked wheel's commanded speed.
+        :param feedback: every checked wheel's latest feedback (``None``: none yet, skipped).
+        :param now_s: the time of this check (s).
+        """
+        limits = self.limits
+        if not limits.enabled:
+            return None
+        count = self._count
+        if len(count) != len(command_rad_s):
+            count = self._count = [0.0] * len(command_rad_s)
+        hold = limits.time_s
+        last, self._last_s = self._last_s, now_s
+        dt = 0.0 if last is None else min(max(now_s - last, 0.0), 0.1 * hold)
+        abs_tol, ratio = limits.tolerance_rad_s, limits.tolerance_ratio
+        fault: TrackingFault | None = None
+        for i, (cmd, fb) in enumerate(zip(command_rad_s, feedback, strict=True)):
+            if fb is None:
+                count[i] = 0.0
+                continue
+            window = abs_tol + ratio * abs(cmd)
+            error = abs(fb.velocity_rad_s - cmd)
+            # ``not <=`` so that a NaN speed counts as outside the window.
+            if not error <= window:
+                if window > 0.0 and error / window > self.worst_ratio:
+                    self.worst_ratio = error / window
+                count[i] += dt
+                if fault is None and count[i] >= hold:
+                    fault = TrackingFault(i, cmd, fb.velocity_rad_s, window, count[i])
+            else:
+                count[i] = max(count[i] - dt, 0.0)
+        return fault
