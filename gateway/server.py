@@ -6,15 +6,8 @@ a twist that arrives mid-sleep is handled at once.  Nothing a client does makes 
 block: bad lines become :class:`~gateway.protocol.ProtocolError` events, and clients that stop
 reading are disconnected once :attr:`max_pending_bytes_per_client` of output is queued.
 
-Access control, in order:
-
-1. **File mode.**  The socket file is chmod-ed to ``mode`` (default ``0o660``: owner and group)
-   before ``listen()``, so no client can connect through a wider mode in between.  Put the
-   users allowed to drive the robot in the socket's group; this is the first line of defence
-   and the only one on systems without ``SO_PEERCRED``.
-2. **Peer credentials** (Linux ``SO_PEERCRED``), when ``allowed_uids`` is given: a client whose
-   uid is neither listed nor the server's own is closed at once and counted in ``refused``.
-   Root is not implicitly allowed; list uid 0 if it should be.
+Access control -- the socket file's mode and the peers' credentials -- is described in
+:mod:`gateway.access`.
 
 More than ``max_clients`` connections: a new connection is accepted and closed at once (the
 client sees end-of-file rather than a connect that hangs in the backlog), and counted in
@@ -29,17 +22,23 @@ from __future__ import annotations
 import errno
 import itertools
 import logging
-import os
 import selectors
 import socket
-import stat
-import struct
 import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, TypeAlias
 
-from gateway.errors import ConfigError, GatewayError
+from gateway.access import (
+    ControlSocketError,
+    admitted_uids,
+    check_socket_path,
+    listen,
+    peer_credentials,
+    remove_own_socket,
+    remove_stale_socket,
+)
+from gateway.errors import ConfigError
 from gateway.lifecycle import Closing
 from gateway.protocol import (
     MAX_MESSAGE_BYTES,
@@ -55,20 +54,8 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
-#: Longest socket path in bytes: ``sun_path`` is 108 bytes on Linux, NUL included.
-MAX_SOCKET_PATH_BYTES = 107
-
-_UCRED = struct.Struct("=iII")  # struct ucred: pid_t pid; uid_t uid; gid_t gid
 _SEND_FLAGS = getattr(socket, "MSG_NOSIGNAL", 0)
 _RESOURCE_ERRNOS = frozenset({errno.EMFILE, errno.ENFILE, errno.ENOBUFS, errno.ENOMEM})
-
-
-class ControlSocketError(GatewayError, OSError):
-    """The control socket cannot be created or used; the message names the path."""
-
-
-class SocketInUseError(ControlSocketError):
-    """Another process listens on the control socket path, or the path is not a socket."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -91,27 +78,6 @@ class ServerCounters:
     malformed: int = 0
     dropped_partial: int = 0
     slow_disconnects: int = 0
-
-
-@dataclass(frozen=True, slots=True)
-class PeerCredentials:
-    """The process at the other end of a Unix socket, as the kernel saw it at connect time."""
-
-    pid: int
-    uid: int
-    gid: int
-
-
-def peer_credentials(sock: socket.socket) -> PeerCredentials | None:
-    """The peer's credentials by ``SO_PEERCRED``; ``None`` where the platform lacks it."""
-    option = getattr(socket, "SO_PEERCRED", None)
-    if option is None:
-        return None
-    try:
-        raw = sock.getsockopt(socket.SOL_SOCKET, option, _UCRED.size)
-    except OSError:
-        return None
-    return PeerCredentials(*_UCRED.unpack(raw))
 
 
 class _Client:
@@ -181,27 +147,17 @@ class ControlServer(Closing):
         ):
             if value < 1:
                 raise ConfigError(f"control socket {name}: expected at least 1, got {value}")
-        if allowed_uids is not None and not hasattr(socket, "SO_PEERCRED"):
-            raise ConfigError(
-                "control socket allowed_uids: expected a platform with SO_PEERCRED (Linux), "
-                f"got {os.name}; rely on the socket's file mode instead"
-            )
+        self._allowed = admitted_uids(allowed_uids)
         self.path = Path(path)
         self.max_message_bytes = max_message_bytes
         self.max_clients = max_clients
         self.max_pending_bytes_per_client = max_pending_bytes_per_client
         self.allowed_uids = None if allowed_uids is None else frozenset(allowed_uids)
-        self._allowed = None if allowed_uids is None else frozenset(allowed_uids) | {os.getuid()}
-        size = len(os.fsencode(self.path))
-        if size > MAX_SOCKET_PATH_BYTES:
-            raise ControlSocketError(
-                f"control socket {self.path}: expected a path of at most "
-                f"{MAX_SOCKET_PATH_BYTES} bytes (the AF_UNIX limit), got {size}"
-            )
-        _remove_stale_socket(self.path)
+        check_socket_path(self.path)
+        remove_stale_socket(self.path)
         self._selector = selectors.DefaultSelector()
         try:
-            self._listener, self._identity = _listen(self.path, mode, self.BACKLOG)
+            self._listener, self._identity = listen(self.path, mode, self.BACKLOG)
         except BaseException:
             self._selector.close()
             raise
@@ -335,12 +291,7 @@ class ControlServer(Closing):
             self._drop(client, "server closing")
         self._selector.close()
         self._listener.close()
-        try:
-            st = os.lstat(self.path)
-            if (st.st_dev, st.st_ino) == self._identity:
-                self.path.unlink()
-        except OSError:
-            pass
+        remove_own_socket(self.path, self._identity)
         log.info("control socket %s closed", self.path)
 
     def __del__(self) -> None:
@@ -488,56 +439,3 @@ class ControlServer(Closing):
         self._full = False
         log.debug("control client %d closed: %s", client.cid, reason)
 
-
-def _remove_stale_socket(path: Path) -> None:
-    """Remove a socket file nobody listens on; refuse if somebody does or it is no socket."""
-    try:
-        st = os.lstat(path)
-    except FileNotFoundError:
-        return
-    except OSError as err:
-        raise ControlSocketError(f"control socket {path}: cannot inspect it: {err}") from err
-    if not stat.S_ISSOCK(st.st_mode):
-        raise SocketInUseError(
-            f"control socket {path}: expected a socket or nothing, got an existing "
-            "non-socket file; refusing to replace it"
-        )
-    probe = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-    try:
-        probe.setblocking(False)
-        probe.connect(str(path))
-    except ConnectionRefusedError:
-        log.info("control socket %s: removing a stale socket file", path)
-        path.unlink(missing_ok=True)
-        return
-    except FileNotFoundError:
-        return
-    except BlockingIOError:  # a listener whose backlog is full: alive
-        pass
-    except OSError as err:
-        raise ControlSocketError(f"control socket {path}: cannot probe it: {err}") from err
-    finally:
-        probe.close()
-    raise SocketInUseError(
-        f"control socket {path}: another process is listening on it "
-        "(is another `wheelgate run` running?)"
-    )
-
-
-def _listen(path: Path, mode: int, backlog: int) -> tuple[socket.socket, tuple[int, int]]:
-    """Bind, chmod, then listen -- so no connection can happen under a wider mode."""
-    sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-    bound = False
-    try:
-        sock.bind(str(path))
-        bound = True
-        st = os.lstat(path)
-        os.chmod(path, mode)
-        sock.listen(backlog)
-        sock.setblocking(False)
-    except OSError as err:
-        sock.close()
-        if bound:
-            path.unlink(missing_ok=True)
-        raise ControlSocketError(f"control socket {path}: cannot create it: {err}") from err
-    return sock, (st.st_dev, st.st_ino)

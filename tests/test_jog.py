@@ -17,19 +17,14 @@ from gateway.jog import (
     NO_LIMIT,
     SPEED_BINDINGS,
     STOP,
-    DaemonView,
     JogLimits,
     JogState,
-    MotorView,
     Request,
-    Screen,
-    daemon_view,
     jog_limits,
     key_name,
-    render,
-    reply_error,
     split_keys,
 )
+from gateway.jog_screen import DaemonView, MotorView, Screen, daemon_view, render, reply_error
 from gateway.types import Twist
 from tests.conftest import CONFIG_DIR
 

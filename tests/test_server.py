@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any
 
 import pytest
 
+from gateway.access import ControlSocketError, SocketInUseError, peer_credentials
 from gateway.client import ClientError, ClientTimeoutError, ControlClient
 from gateway.errors import ConfigError, GatewayError, GatewayTimeoutError
 from gateway.protocol import (
@@ -33,13 +34,7 @@ from gateway.protocol import (
     reply_ok,
     reply_protocol_error,
 )
-from gateway.server import (
-    ControlServer,
-    ControlSocketError,
-    ServerCounters,
-    SocketInUseError,
-    peer_credentials,
-)
+from gateway.server import ControlServer, ServerCounters
 from gateway.types import GatewayState, Twist
 
 if TYPE_CHECKING:

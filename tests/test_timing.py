@@ -17,9 +17,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from gateway import timing
 from gateway.errors import ConfigError
-from gateway.timing import LoopTimer, Scheduler, TimingStats, realtime_setup
+from gateway.timing import LoopTimer, Scheduler, TimingStats, realtime, realtime_setup
+from gateway.timing import stats as timing_stats
 
 if TYPE_CHECKING:
     from collections.abc import Iterator
@@ -329,7 +329,7 @@ def test_recording_does_not_grow_memory() -> None:
     grown = sum(
         stat.size_diff
         for stat in after.compare_to(before, "filename")
-        if stat.traceback[0].filename == timing.__file__
+        if stat.traceback[0].filename == timing_stats.__file__
     )
     assert grown < 1024  # a few counters at most, nothing per cycle
 
@@ -403,7 +403,7 @@ def test_fifo_permission_error_falls_back_with_warning(
         raise PermissionError(errno.EPERM, "Operation not permitted")
 
     monkeypatch.setattr(os, "sched_setscheduler", refuse)
-    with caplog.at_level(logging.WARNING, logger="gateway.timing"):
+    with caplog.at_level(logging.WARNING, logger="gateway.timing.realtime"):
         notes = realtime_setup(priority=50, cpu=None, lock_memory=False)
     assert len(notes) == 2
     assert notes[1].startswith("SCHED_FIFO 50 refused (Operation not permitted; RLIMIT_RTPRIO")
@@ -422,7 +422,7 @@ def test_priority_out_of_range_is_a_config_error(no_real_rt: list[tuple[object, 
 @pytest.mark.usefixtures("unfreeze")
 def test_unknown_cpu_is_refused_not_raised(caplog: pytest.LogCaptureFixture) -> None:
     before = os.sched_getaffinity(0)
-    with caplog.at_level(logging.WARNING, logger="gateway.timing"):
+    with caplog.at_level(logging.WARNING, logger="gateway.timing.realtime"):
         notes = realtime_setup(priority=None, cpu=100_000, lock_memory=False)
     assert os.sched_getaffinity(0) == before
     assert notes[1].startswith("pinning to CPU 100000 refused (Invalid argument; allowed CPUs")
@@ -447,7 +447,7 @@ class FakeLibc:
 @pytest.mark.usefixtures("unfreeze")
 def test_mlockall_success(monkeypatch: pytest.MonkeyPatch) -> None:
     libc = FakeLibc()
-    monkeypatch.setattr(timing, "_libc", lambda: libc)
+    monkeypatch.setattr(realtime, "_libc", lambda: libc)
     monkeypatch.setattr(platform, "machine", lambda: "aarch64")
     notes = realtime_setup(priority=None, cpu=None, lock_memory=True)
     assert libc.flags == [1 | 2]  # MCL_CURRENT | MCL_FUTURE
@@ -457,7 +457,7 @@ def test_mlockall_success(monkeypatch: pytest.MonkeyPatch) -> None:
 @pytest.mark.usefixtures("unfreeze")
 def test_mlockall_flags_differ_on_powerpc(monkeypatch: pytest.MonkeyPatch) -> None:
     libc = FakeLibc()
-    monkeypatch.setattr(timing, "_libc", lambda: libc)
+    monkeypatch.setattr(realtime, "_libc", lambda: libc)
     monkeypatch.setattr(platform, "machine", lambda: "ppc64le")
     realtime_setup(priority=None, cpu=None, lock_memory=True)
     assert libc.flags == [0x2000 | 0x4000]
@@ -467,8 +467,8 @@ def test_mlockall_flags_differ_on_powerpc(monkeypatch: pytest.MonkeyPatch) -> No
 def test_mlockall_refusal_is_a_warning(
     monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
 ) -> None:
-    monkeypatch.setattr(timing, "_libc", lambda: FakeLibc(errno.EPERM))
-    with caplog.at_level(logging.WARNING, logger="gateway.timing"):
+    monkeypatch.setattr(realtime, "_libc", lambda: FakeLibc(errno.EPERM))
+    with caplog.at_level(logging.WARNING, logger="gateway.timing.realtime"):
         notes = realtime_setup(priority=None, cpu=None, lock_memory=True)
     expected = ("mlockall refused (Operation not permitted; set LimitMEMLOCK= in the unit): "
                 "memory not locked")
@@ -486,7 +486,7 @@ def test_everything_refused_still_returns(monkeypatch: pytest.MonkeyPatch) -> No
 
     monkeypatch.setattr(os, "sched_setscheduler", refuse)
     monkeypatch.setattr(os, "sched_setaffinity", refuse)
-    monkeypatch.setattr(timing, "_libc", no_libc)
+    monkeypatch.setattr(realtime, "_libc", no_libc)
     notes = realtime_setup(priority=10, cpu=0, lock_memory=True)
     assert [n.split(" ")[0] for n in notes] == ["gc:", "SCHED_FIFO", "pinning", "mlockall"]
     assert all("refused" in n or "unavailable" in n for n in notes[1:])

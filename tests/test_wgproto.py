@@ -528,7 +528,8 @@ def test_twist_reserved_flag_bits_are_a_decode_error(bit: int) -> None:
     ("can_id", "data", "text"),
     [(0x103, bytes([6, 0, 0, 0, 0, 0, 0, 0]), '"State" in WG_Status to be one of 0 (DISABLED)'),
      (0x103, bytes([0, 0, 0, 0x10, 0, 0, 0, 0]), "WG_Status (ID 0x103) flags within 0x0f"),
-     (0x104, bytes([9, 0, 0, 0, 0, 0, 0, 0]), '"Code" in WG_Error to be one of 0 (NONE)'),
+     (0x104, bytes([max(ErrorCode) + 1, 0, 0, 0, 0, 0, 0, 0]),
+      '"Code" in WG_Error to be one of 0 (NONE)'),
      (0x104, bytes([0, 0, 4, 0, 0, 0, 0, 0]), "but got 4.")],
 )  # fmt: skip
 def test_bad_status_and_error_values_are_decode_errors(can_id: int, data: bytes, text: str) -> None:

@@ -1,9 +1,10 @@
 """``wheelgate jog``: drive the robot from the keyboard, on one terminal screen.
 
-The terminal edge around :mod:`gateway.jog`: raw mode (so Ctrl-C arrives as a key), one screen
-redrawn in place with ANSI escapes (alternate screen; no curses), ``select`` on stdin with the
-deadman's deadlines as timeouts, the daemon's status polled at 5 Hz.  With ``--standalone`` a
-:class:`~gateway.daemon.Daemon` runs in a thread of this process on a private socket.
+The terminal edge around :mod:`gateway.jog` and :mod:`gateway.jog_screen`: raw mode (so
+Ctrl-C arrives as a key), one screen redrawn in place with ANSI escapes (alternate screen; no
+curses), ``select`` on stdin with the deadman's deadlines as timeouts, the daemon's status
+polled at 5 Hz.  With ``--standalone`` a :class:`~gateway.daemon.Daemon` runs in a thread of
+this process on a private socket.
 
 Whatever ends the session -- Ctrl-C, Ctrl-D, Esc, end of input, a closed terminal, SIGHUP,
 SIGTERM or SIGINT -- sends stop before the terminal mode is restored.  Should this program die
@@ -34,25 +35,15 @@ from gateway.cli import config_option
 from gateway.client import ClientError, ControlClient
 from gateway.commands._common import check_finite, load, socket_for
 from gateway.daemon import Daemon
-from gateway.jog import (
-    DEFAULT_DEADMAN_S,
-    STOP,
-    JogState,
-    Request,
-    Screen,
-    daemon_view,
-    jog_limits,
-    render,
-    reply_error,
-    split_keys,
-)
+from gateway.jog import DEFAULT_DEADMAN_S, STOP, JogState, Request, jog_limits, split_keys
+from gateway.jog_screen import Screen, daemon_view, render, reply_error
 from gateway.sdnotify import SystemdNotifier
 
 if TYPE_CHECKING:
     from collections.abc import Iterator
 
     from gateway.config import GatewayConfig
-    from gateway.jog import DaemonView
+    from gateway.jog_screen import DaemonView
 
 #: How often the daemon's status is polled (s).
 STATUS_PERIOD_S = 0.2

@@ -1,27 +1,8 @@
-"""Pure codec of wheelgate's own CAN messages: no I/O, no clock.
+"""The ``struct`` codec of the five wheelgate messages: :class:`WgCodec`.  Pure: no I/O, no clock.
 
-The published description is ``config/wheelgate.dbc`` (cantools and other DBC tools read the
-traffic with it); ``tests/test_wgproto.py`` proves that this hand-written ``struct`` codec and
-cantools agree on every message, both ways.  Every payload is little endian with DLC 8:
-
-====================  =====  ===========================================================
-message               ID     payload (i: signed, u: unsigned, bits)
-====================  =====  ===========================================================
-``WG_Twist_Cmd``      0x100  vx, vy i16 mm/s; wz i16 mrad/s; counter u8; flags u8
-``WG_Odom_Pose``      0x101  x, y i24 mm (wrapping); theta i16 in 0.1 mrad
-``WG_Odom_Velocity``  0x102  vx, vy i16 mm/s; wz i16 mrad/s; slip u16 mm/s
-``WG_Status``         0x103  state, faulted motors, counter, flags u8; two u16 counts
-``WG_Error``          0x104  code, wheel, constraint, twist counter u8; residual, count u16
-====================  =====  ===========================================================
-
-Twist commands come from other devices, so :meth:`WgCodec.encode_twist` raises
-:class:`~gateway.errors.EncodeError` for a value it cannot send, and :meth:`WgCodec.decode_twist`
-raises :class:`~gateway.errors.DecodeError` for a malformed frame.  Everything the gateway
-sends (odometry, status, error) comes from the control loop, which must never fail on its
-output path: those encoders saturate instead of raising (NaN speeds encode as 0; a NaN or huge
-slip or residual as the maximum, "at least this much").  Pose x and y wrap modulo 2**24 mm
-(16777.216 m) on the wire; :func:`unwrap_position_m` undoes it on the receiving side.  The
-error ``count`` wraps modulo 65536 (a sequence number), the status counts saturate.
+Each payload layout is one precompiled :class:`struct.Struct` below; the DBC describes the same
+layouts and ``tests/test_wgproto.py`` checks that both agree.  The encoders of what the
+gateway sends saturate; the twist encoder and every decoder raise (see :mod:`gateway.wgproto`).
 """
 
 from __future__ import annotations
@@ -29,43 +10,41 @@ from __future__ import annotations
 import enum
 import math
 import struct
-from dataclasses import dataclass
-from typing import TYPE_CHECKING, TypeAlias, TypeVar
+from typing import TYPE_CHECKING, TypeVar
 
-from gateway.errors import ConfigError, DecodeError, EncodeError
+from gateway.errors import DecodeError, EncodeError
 from gateway.kinematics.odometry import Pose
-from gateway.types import (
-    MAX_EXTENDED_ID,
-    MAX_STANDARD_ID,
-    ConstraintCode,
-    ErrorCode,
-    Frame,
-    GatewayState,
-    Twist,
+from gateway.types import ConstraintCode, ErrorCode, Frame, GatewayState, Twist
+from gateway.wgproto.messages import (
+    ANGLE_SCALE,
+    DLC,
+    ERROR,
+    I16_MAX,
+    I16_MIN,
+    NO_TWIST_COUNTER,
+    NO_WHEEL,
+    ODOM_POSE,
+    ODOM_VELOCITY,
+    POSITION_SCALE,
+    POSITION_WRAP_M,
+    SPEED_SCALE,
+    STATUS,
+    TWIST_CMD,
+    U8_MAX,
+    U16_MAX,
+    CanIds,
+    ErrorReport,
+    OdomVelocity,
+    StatusFlags,
+    StatusReport,
+    TwistCommand,
+    TwistFlags,
 )
 
 if TYPE_CHECKING:
-    from collections.abc import Callable, Mapping
+    from collections.abc import Callable
 
-#: Scales (one LSB) of the physical signals, as in the DBC.
-SPEED_SCALE = 0.001
-POSITION_SCALE = 0.001
-ANGLE_SCALE = 0.0001
-I16_MIN, I16_MAX = -0x8000, 0x7FFF
-U16_MAX = 0xFFFF
-U8_MAX = 0xFF
-#: One turn of the wrapping pose x and y on the wire, m.
-POSITION_WRAP_M = (1 << 24) * POSITION_SCALE
-#: ``wheel`` and ``twist_counter`` of an error report that concerns no wheel / no CAN twist.
-NO_WHEEL = 0xFF
-NO_TWIST_COUNTER = 0xFF
-DLC = 8
-
-TWIST_CMD = "WG_Twist_Cmd"
-ODOM_POSE = "WG_Odom_Pose"
-ODOM_VELOCITY = "WG_Odom_Velocity"
-STATUS = "WG_Status"
-ERROR = "WG_Error"
+    from gateway.wgproto.messages import WgMessage
 
 _TWIST = struct.Struct("<hhhBB")
 _POSE = struct.Struct("<3s3sh")
@@ -73,176 +52,9 @@ _VELOCITY = struct.Struct("<hhhH")
 _STATUS = struct.Struct("<BBBBHH")
 _ERROR = struct.Struct("<BBBBHH")
 
-
-class TwistFlags(enum.IntFlag):
-    """Request bits of ``WG_Twist_Cmd``; ``ESTOP`` takes precedence over the others."""
-
-    NONE = 0
-    #: Emergency stop: zero and disarm, latched until an ``ENABLE``.
-    ESTOP = 0x01
-    #: Arm the drives (also clears a latched emergency stop).
-    ENABLE = 0x02
-    #: Zero twist, drives stay armed.
-    STOP = 0x04
-
-
-class StatusFlags(enum.IntFlag):
-    """Condition bits of ``WG_Status``."""
-
-    NONE = 0
-    #: No valid twist within the command timeout; the wheels ramp to zero.
-    CMD_TIMEOUT_ACTIVE = 0x01
-    #: The twist being followed is scaled down by a speed or acceleration limit.
-    SPEED_LIMITED = 0x02
-    #: An infeasible twist was projected onto the nearest feasible one.
-    PROJECTED = 0x04
-    #: CAN bus errors were seen recently.
-    BUS_ERRORS_RECENT = 0x08
-
-
 _E = TypeVar("_E", bound=enum.IntEnum)
 _TWIST_FLAGS_MASK = sum(f.value for f in TwistFlags)
 _STATUS_FLAGS_MASK = sum(f.value for f in StatusFlags)
-#: The ID keys of :class:`CanIds` (and of the ``gateway.can_ids`` block), in wire order.
-ID_KEYS = ("twist", "odom_pose", "odom_velocity", "status", "error")
-
-
-@dataclass(frozen=True, slots=True)
-class CanIds:
-    """The arbitration IDs of the five messages; the defaults are the DBC's.
-
-    :param twist: ``WG_Twist_Cmd``.
-    :param odom_pose: ``WG_Odom_Pose``.
-    :param odom_velocity: ``WG_Odom_Velocity``.
-    :param status: ``WG_Status``.
-    :param error: ``WG_Error``.
-    :param extended: 29-bit identifiers instead of 11-bit ones.
-    :raises ConfigError: if an ID is not an int in range for its type, or two are equal.
-    """
-
-    twist: int = 0x100
-    odom_pose: int = 0x101
-    odom_velocity: int = 0x102
-    status: int = 0x103
-    error: int = 0x104
-    extended: bool = False
-
-    def __post_init__(self) -> None:
-        self.validate()
-
-    def validate(self) -> None:
-        """Check the IDs (the constructor calls this).
-
-        :raises ConfigError: naming the key, the expected range and the value.
-        """
-        if not isinstance(self.extended, bool):
-            raise ConfigError(f"gateway.can_ids.extended: expected a bool, got {self.extended!r}")
-        limit, kind = (MAX_EXTENDED_ID, "29-bit") if self.extended else (MAX_STANDARD_ID, "11-bit")
-        seen: dict[int, str] = {}
-        for name in ID_KEYS:
-            value = getattr(self, name)
-            if not isinstance(value, int) or isinstance(value, bool) or not 0 <= value <= limit:
-                raise ConfigError(
-                    f"gateway.can_ids.{name}: expected a {kind} CAN ID between 0x0 and "
-                    f"{limit:#x}, got {value!r}"
-                )
-            if value in seen:
-                raise ConfigError(
-                    f"gateway.can_ids.{name}: expected an ID no other message uses, got "
-                    f"{value:#x} (also {seen[value]})"
-                )
-            seen[value] = name
-
-    @classmethod
-    def from_mapping(cls, block: Mapping[str, object]) -> CanIds:
-        """The IDs of a ``gateway.can_ids`` block (missing keys take their defaults).
-
-        :param block: key to value, as :attr:`gateway.config.LoopConfig.can_ids` holds it.
-        :raises ConfigError: for an unknown key or a bad value.
-        """
-        known = [*ID_KEYS, "extended"]
-        for key in block:
-            if key not in known:
-                raise ConfigError(f"gateway.can_ids: expected keys {', '.join(known)}, got {key!r}")
-        return cls(**block)  # type: ignore[arg-type]
-
-
-@dataclass(frozen=True, slots=True)
-class TwistCommand:
-    """A decoded ``WG_Twist_Cmd``.
-
-    :param twist: commanded body twist (ignored by the gateway under ``ESTOP`` or ``STOP``).
-    :param counter: rolling counter 0..255, +1 per message.
-    :param flags: request bits.
-    """
-
-    twist: Twist
-    counter: int
-    flags: TwistFlags = TwistFlags.NONE
-
-
-@dataclass(frozen=True, slots=True)
-class OdomVelocity:
-    """A decoded ``WG_Odom_Velocity``.
-
-    :param twist: measured body twist.
-    :param slip_m_s: slip estimate, m/s (the maximum means "at least this much").
-    """
-
-    twist: Twist
-    slip_m_s: float
-
-
-@dataclass(frozen=True, slots=True)
-class StatusReport:
-    """``WG_Status``.
-
-    :param state: what the gateway is doing.
-    :param faulted_motors: bit i set when the motor of wheel i is faulted; wheels 8 and
-        beyond are folded into bit 7 on the wire.
-    :param counter: rolling counter (taken modulo 256 when encoded).
-    :param flags: condition bits.
-    :param missed_cycles: control cycles that missed their deadline (saturates at 65535).
-    :param infeasible_count: infeasible twists received (saturates at 65535).
-    """
-
-    state: GatewayState
-    faulted_motors: int = 0
-    counter: int = 0
-    flags: StatusFlags = StatusFlags.NONE
-    missed_cycles: int = 0
-    infeasible_count: int = 0
-
-    def faulted_wheels(self) -> tuple[int, ...]:
-        """Indices of the wheels whose bit is set in :attr:`faulted_motors`."""
-        mask = self.faulted_motors
-        return tuple(i for i in range(mask.bit_length()) if mask >> i & 1)
-
-
-@dataclass(frozen=True, slots=True)
-class ErrorReport:
-    """``WG_Error``.
-
-    :param code: error class.
-    :param wheel: index of the wheel concerned, :data:`NO_WHEEL` for none (an index outside
-        0..254 is sent as :data:`NO_WHEEL`).
-    :param constraint: constraint an infeasible twist breaks.
-    :param twist_counter: counter of the rejected ``WG_Twist_Cmd``, :data:`NO_TWIST_COUNTER`
-        when the error did not come from a CAN twist (255 is also a valid counter).
-    :param residual_m_s: constraint violation as a sliding speed, m/s (saturates at 65.535).
-    :param count: errors so far; sent modulo 65536, a sequence number.
-    """
-
-    code: ErrorCode
-    wheel: int = NO_WHEEL
-    constraint: ConstraintCode = ConstraintCode.NONE
-    twist_counter: int = NO_TWIST_COUNTER
-    residual_m_s: float = 0.0
-    count: int = 0
-
-
-#: What :meth:`WgCodec.decode` returns for a frame of one of the five messages.
-WgMessage: TypeAlias = "TwistCommand | Pose | OdomVelocity | StatusReport | ErrorReport"
 
 
 def unwrap_position_m(previous_m: float, received_m: float) -> float:
@@ -533,64 +345,3 @@ def _check_flags(flags: int, mask: int, name: str, frame: Frame) -> None:
             f"but got {flags:#04x} (reserved bits {flags & ~mask:#04x} set)."
         )
 
-
-class CounterKind(enum.Enum):
-    """How a ``WG_Twist_Cmd`` counter relates to the previous one."""
-
-    #: The previous counter + 1 (mod 256), or the first counter seen.
-    NEW = "new"
-    #: Equal to the previous counter: a repeated frame; it must not refresh the timeout.
-    DUPLICATE = "duplicate"
-    #: Anything else: accepted, the frames in between are counted as lost.
-    JUMP = "jump"
-
-
-def classify_counter(last: int | None, counter: int) -> tuple[CounterKind, int]:
-    """The kind of ``counter`` after ``last`` (``None``: none yet) and the frames lost.
-
-    >>> classify_counter(254, 1)
-    (<CounterKind.JUMP: 'jump'>, 2)
-    """
-    if last is None or counter == (last + 1) & U8_MAX:
-        return CounterKind.NEW, 0
-    if counter == last:
-        return CounterKind.DUPLICATE, 0
-    return CounterKind.JUMP, (counter - last - 1) & U8_MAX
-
-
-class CounterTracker:
-    """Classifies the counters of successive ``WG_Twist_Cmd`` frames (pure, no clock).
-
-    Call :meth:`reset` when the sender is considered gone (e.g. on a command timeout), so
-    that its next frame counts as the first one.
-    """
-
-    def __init__(self) -> None:
-        #: The last counter fed, ``None`` before the first or after :meth:`reset`.
-        self.last: int | None = None
-        #: Frames counted as lost by jumps so far.
-        self.lost_frames = 0
-        #: Duplicates seen so far.
-        self.duplicates = 0
-
-    def feed(self, counter: int) -> tuple[CounterKind, int]:
-        """Classify the next counter and remember it.
-
-        :param counter: 0..255.
-        :return: the kind and the frames lost before this one (non-zero for a jump only).
-        :raises DecodeError: for a counter outside 0..255.
-        """
-        if not 0 <= counter <= U8_MAX:
-            raise DecodeError(
-                f'Expected "Counter" in {TWIST_CMD} between 0 and 255, but got {counter!r}.'
-            )
-        kind, lost = classify_counter(self.last, counter)
-        self.lost_frames += lost
-        if kind is CounterKind.DUPLICATE:
-            self.duplicates += 1
-        self.last = counter
-        return kind, lost
-
-    def reset(self) -> None:
-        """Forget the last counter (the totals stay)."""
-        self.last = None
