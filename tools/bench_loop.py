@@ -24,9 +24,10 @@ velocity commands sent, everything waiting drained) on the same virtual bus with
 simulators, in a loop of its own, gives the ratio "gateway cycle / bare python-can cycle".
 
 Run: ``python tools/bench_loop.py [seconds] [--rt PRIORITY] [--cpu N] [--lock]
-[--sims thread|inline] [--platform]`` (default 10 s, normal scheduling).  ``--platform`` then
-runs the same scheduler with no work for as long, in the same thread and policy: the misses
-and tails the machine causes by itself (on a VM, stalls of the virtual CPU).  ``--rt`` runs
+[--sims thread|inline] [--spin-us US] [--platform]`` (default 10 s, normal scheduling).
+``--platform`` then runs the same scheduler with no work for as long, in the same thread and
+policy: the misses and tails the machine causes by itself (on a VM, stalls of the virtual
+CPU).  ``--rt`` runs
 the loop thread with SCHED_FIFO (root or LimitRTPRIO), as ``gateway.rt_priority`` does.
 Without SCHED_FIFO and on a shared machine, tails are dominated by the scheduler; the p50
 figures and the ratio are the comparable ones.
@@ -184,6 +185,9 @@ def main() -> None:
     parser.add_argument("--platform", action="store_true",
                         help="then run the same scheduler with no work for as long (the "
                              "machine's own misses and tails)")
+    parser.add_argument("--spin-us", type=float, default=None, metavar="US",
+                        help="spin this long before each deadline instead of sleeping "
+                             "(gateway.spin_us; default: the config's, 200 us)")
     parser.add_argument("--client", metavar="SOCKET", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.client:
@@ -193,7 +197,8 @@ def main() -> None:
     cfg = load_config(None)
     cfg = dataclasses.replace(cfg, loop=dataclasses.replace(
         cfg.loop, rate_hz=1000.0, odom_rate_hz=50.0, rt_priority=args.rt, rt_cpu=args.cpu,
-        lock_memory=args.lock))
+        lock_memory=args.lock,
+        spin_us=cfg.loop.spin_us if args.spin_us is None else args.spin_us))
     folder = tempfile.mkdtemp(prefix="wgb", dir="/tmp")
     path = f"{folder}/b.sock"
     inline = args.sims == "inline"
@@ -237,7 +242,7 @@ def main() -> None:
         sims.shutdown()
     print(f"\nrun: {args.seconds:g} s at {stats.rate_hz:g} Hz, achieved {stats.achieved_hz:.1f} Hz,"
           f" {stats.cycles} cycles, {stats.missed} missed; simulators: {args.sims}; "
-          f"load average at start {load:.2f}")
+          f"spin {cfg.loop.spin_us:g} us; load average at start {load:.2f}")
     print(f"cycle cost    p50 {stats.cost_p50_us:8.1f} us  p99 {stats.cost_p99_us:8.1f} us  "
           f"max {stats.cost_max_us:8.1f} us")
     print(f"lateness      p50 {stats.lateness_p50_us:8.1f} us  p99 {stats.lateness_p99_us:8.1f} us"
