@@ -19,6 +19,10 @@ driven wheel, its ``motor:`` block.  Angles are in radians, lengths in metres.
 Unknown keys are errors, and every error names the file, the key path, what was expected and
 what came.  Bus settings follow the precedence CLI flag > ``GATEWAY_INTERFACE`` /
 ``GATEWAY_CHANNEL`` / ``GATEWAY_BITRATE`` environment variables > file > defaults.
+
+The keys of every block are described once in :mod:`gateway.config_keys`; the frozen
+dataclasses that come out are defined in :mod:`gateway.config_types` and exported here, with
+the loaders, as this module's public names.
 """
 
 from __future__ import annotations
@@ -26,7 +30,6 @@ from __future__ import annotations
 import math
 import os
 import tempfile
-from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 from types import MappingProxyType
@@ -34,204 +37,43 @@ from typing import TYPE_CHECKING
 
 import yaml
 
+from gateway.config_keys import (
+    BUS_KEYS,
+    CAN_ID_KEYS,
+    GATEWAY_KEYS,
+    KINEMATICS_KEYS,
+    LIMIT_KEYS,
+    MOTOR_KEYS,
+    TOP_KEYS,
+    WHEEL_KEYS,
+)
+from gateway.config_types import BusConfig, GatewayConfig, LoopConfig
 from gateway.errors import ConfigError, DriverNotFoundError, KinematicsError
 from gateway.kinematics import PRESETS, Limits, RobotModel, Wheel, WheelType
 from gateway.kinematics.model import validate_wheel
 from gateway.options import OptionSpec, validate_block
 from gateway.registry import get_driver_class
-from gateway.tracking import TrackingLimits
 from gateway.types import MotorConfig
 from gateway.wgproto import CanIds
 
 if TYPE_CHECKING:
     from collections.abc import Mapping
 
+__all__ = [
+    "DEFAULT_NAME",
+    "MAX_WHEELS",
+    "BusConfig",
+    "GatewayConfig",
+    "LoopConfig",
+    "default_socket_path",
+    "load_config",
+    "parse_config",
+]
+
 #: The most wheels a robot may have (a bound on what a config can make the loader build).
 MAX_WHEELS = 64
 #: Name shown for the configuration embedded in the package.
 DEFAULT_NAME = "<embedded default>"
-
-_TOP = frozenset(
-    {"name", "drive", "geometry", "wheels", "motors", "motor_defaults", "limits",
-     "kinematics", "bus", "gateway"}
-)
-_MOTOR_COMMON = {
-    "driver": OptionSpec(str, help="driver name, e.g. odrive"),
-    "node_id": OptionSpec(int, help="the controller's node ID"),
-    "gear_ratio": OptionSpec(float, 1.0, minimum=1e-9, help="motor turns per wheel turn"),
-    "invert": OptionSpec(bool, False),
-    "max_rpm": OptionSpec(float, minimum=1e-9, help="motor speed limit in RPM at the motor"),
-}
-_WHEEL_KEYS = {
-    "name": OptionSpec(str),
-    "type": OptionSpec(str, choices=tuple(t.value for t in WheelType)),
-    "alpha": OptionSpec(float, help="polar angle of the mounting point, rad"),
-    "l": OptionSpec(float, minimum=0.0, help="distance from the body origin, m"),
-    "beta": OptionSpec(float, help="plane angle, rad"),
-    "radius": OptionSpec(float, minimum=1e-9, help="wheel radius, m"),
-    "gamma": OptionSpec(float, 0.0),
-    "d": OptionSpec(float, 0.0, minimum=0.0),
-    "steer_min": OptionSpec(float, -math.pi),
-    "steer_max": OptionSpec(float, math.pi),
-    "max_steer_rate": OptionSpec(float, math.inf, minimum=1e-9),
-    "steer_group": OptionSpec(str, ""),
-    "motor": OptionSpec(dict, {}),
-}
-_LIMIT_KEYS = {
-    "max_wheel_accel_rad_s2": OptionSpec(float, math.inf, minimum=1e-9),
-    "max_linear_m_s": OptionSpec(float, math.inf, minimum=0.0),
-    "max_angular_rad_s": OptionSpec(float, math.inf, minimum=0.0),
-}
-_KIN_KEYS = {"slip_tolerance_m_s": OptionSpec(float, 1e-3, minimum=0.0)}
-_GATEWAY_KEYS = {
-    "rate_hz": OptionSpec(float, 200.0, minimum=50.0, maximum=1000.0,
-                          help="control loop rate"),
-    "cmd_timeout_s": OptionSpec(float, 0.5, minimum=0.0,
-                                help="no valid twist for this long ramps the wheels to zero; 0 "
-                                     "disables"),
-    "infeasible_policy": OptionSpec(str, "reject", choices=("reject", "project")),
-    "feedback_recovery": OptionSpec(str, "auto", choices=("auto", "manual")),
-    "fault_action": OptionSpec(str, "zero", choices=("zero", "disarm")),
-    "enable_on_start": OptionSpec(bool, True),
-    "enable_timeout_s": OptionSpec(float, 5.0, minimum=0.1),
-    "odom_rate_hz": OptionSpec(float, 50.0, minimum=0.1, maximum=1000.0),
-    "status_rate_hz": OptionSpec(float, 10.0, minimum=0.1, maximum=1000.0),
-    "socket": OptionSpec(str, "", help="control socket path; empty: the default path"),
-    "socket_mode": OptionSpec(int, 0o660, minimum=0, maximum=0o777),
-    "socket_uids": OptionSpec(list, []),
-    "can_input": OptionSpec(bool, True),
-    "can_ids": OptionSpec(dict, {}),
-    "rt_priority": OptionSpec(int, 0, minimum=0, maximum=99,
-                              help="SCHED_FIFO priority of the loop thread; 0: normal"),
-    "rt_cpu": OptionSpec(int, -1, minimum=-1, help="CPU to pin the loop to; -1: any"),
-    "lock_memory": OptionSpec(bool, False),
-    "spin_us": OptionSpec(float, 200.0, minimum=0.0, maximum=5000.0),
-    "tracking_tolerance_rad_s": OptionSpec(
-        float, 1.0, minimum=0.0, help="wheel speed error allowed at standstill (wheel rad/s)"),
-    "tracking_tolerance_ratio": OptionSpec(
-        float, 0.2, minimum=0.0, help="added error allowed per rad/s of command"),
-    "tracking_time_s": OptionSpec(
-        float, 0.5, minimum=0.0, help="how long a wheel may stay off its command before a "
-                                      "fault; 0 disables the check"),
-}
-_CAN_ID_KEYS = {
-    "twist": OptionSpec(int, 0x100, minimum=0),
-    "odom_pose": OptionSpec(int, 0x101, minimum=0),
-    "odom_velocity": OptionSpec(int, 0x102, minimum=0),
-    "status": OptionSpec(int, 0x103, minimum=0),
-    "error": OptionSpec(int, 0x104, minimum=0),
-    "extended": OptionSpec(bool, False),
-}
-_BUS_KEYS = {
-    "interface": OptionSpec(str, "virtual"),
-    "channel": OptionSpec(str, "wheelgate"),
-    "bitrate": OptionSpec(int, 500_000, minimum=10_000, maximum=1_000_000),
-}
-
-
-@dataclass(frozen=True, slots=True)
-class BusConfig:
-    """Where the motor controllers are.
-
-    :param interface: python-can interface name (``socketcan``, ``virtual``, ...).
-    :param channel: channel name (``can0``, ...).
-    :param bitrate: nominal bitrate in bit/s (for bus-load figures; set the link outside).
-    """
-
-    interface: str = "virtual"
-    channel: str = "wheelgate"
-    bitrate: int = 500_000
-
-
-@dataclass(frozen=True, slots=True)
-class LoopConfig:
-    """The daemon's settings (``gateway:`` block).
-
-    :param rate_hz: control loop rate, 50 to 1000 Hz.
-    :param cmd_timeout_s: no valid twist for this long ramps the wheels to zero (0: never).
-    :param infeasible_policy: ``"reject"`` (error to the sender, wheels ramp to zero) or
-        ``"project"`` (follow the nearest feasible twist, count a warning).
-    :param feedback_recovery: after a motor fault or lost feedback, ``"auto"`` re-enables when
-        every motor is healthy again, ``"manual"`` waits for an explicit enable.
-    :param fault_action: on a fault, ``"zero"`` commands zero speed, ``"disarm"`` also disarms.
-    :param enable_on_start: enable the drives when the daemon starts.
-    :param enable_timeout_s: how long the drives may take to enable.
-    :param odom_rate_hz: odometry publishing rate (CAN and socket).
-    :param status_rate_hz: status publishing rate.
-    :param socket: control socket path (empty: the default path).
-    :param socket_mode: file mode of the control socket.
-    :param socket_uids: user IDs allowed besides the daemon's own (empty: file mode decides).
-    :param can_input: accept twist frames from the CAN bus.
-    :param can_ids: the gateway's own CAN IDs (``twist``, ``odom_pose``, ``odom_velocity``,
-        ``status``, ``error``, ``extended``; defaults in ``config/wheelgate.dbc``).
-    :param rt_priority: SCHED_FIFO priority of the loop thread (0: normal scheduling).
-    :param rt_cpu: CPU to pin the loop thread to (-1: any).
-    :param lock_memory: ``mlockall`` after start-up.
-    :param spin_us: how long before each deadline the loop spins instead of sleeping.
-    :param tracking_tolerance_rad_s: tracking-error window at standstill (wheel rad/s).
-    :param tracking_tolerance_ratio: how much the window widens per rad/s of command.
-    :param tracking_time_s: how long a wheel may stay outside its window before a FAULT
-        (0: no tracking-error check); see :mod:`gateway.tracking`.
-    """
-
-    rate_hz: float = 200.0
-    cmd_timeout_s: float = 0.5
-    infeasible_policy: str = "reject"
-    feedback_recovery: str = "auto"
-    fault_action: str = "zero"
-    enable_on_start: bool = True
-    enable_timeout_s: float = 5.0
-    odom_rate_hz: float = 50.0
-    status_rate_hz: float = 10.0
-    socket: str = ""
-    socket_mode: int = 0o660
-    socket_uids: tuple[int, ...] = ()
-    can_input: bool = True
-    can_ids: CanIds = field(default_factory=CanIds)
-    rt_priority: int = 0
-    rt_cpu: int = -1
-    lock_memory: bool = False
-    spin_us: float = 200.0
-    tracking_tolerance_rad_s: float = 1.0
-    tracking_tolerance_ratio: float = 0.2
-    tracking_time_s: float = 0.5
-
-    @property
-    def tracking(self) -> TrackingLimits:
-        """The tracking-error check's limits."""
-        return TrackingLimits(self.tracking_tolerance_rad_s, self.tracking_tolerance_ratio,
-                              self.tracking_time_s)
-
-
-@dataclass(frozen=True, slots=True)
-class GatewayConfig:
-    """A validated configuration.
-
-    :param source: the file it came from (or :data:`DEFAULT_NAME`).
-    :param name: robot name.
-    :param drive: preset name or ``"generic"``.
-    :param geometry: the preset's geometry keys with defaults filled in (empty for generic).
-    :param model: the wheel-constraint model.
-    :param motors: per wheel (model order), its motor, ``None`` for passive wheels.
-    :param limits: speed and acceleration limits.
-    :param bus: bus settings.
-    :param loop: the daemon's settings.
-    """
-
-    source: str
-    name: str
-    drive: str
-    geometry: Mapping[str, object]
-    model: RobotModel
-    motors: tuple[MotorConfig | None, ...]
-    limits: Limits
-    bus: BusConfig
-    loop: LoopConfig = field(default_factory=LoopConfig)
-
-    @property
-    def wheels(self) -> tuple[Wheel, ...]:
-        """The wheels, in model order."""
-        return self.model.wheels
 
 
 def default_socket_path() -> str:
@@ -292,9 +134,9 @@ def parse_config(
     if not isinstance(raw, dict):
         raise ConfigError(f"{source}: expected a mapping at the top level, got {raw!r}")
     for key in raw:
-        if key not in _TOP:
+        if key not in TOP_KEYS:
             raise ConfigError(
-                f"{source}: {key}: unknown key (known keys: {', '.join(sorted(_TOP))})"
+                f"{source}: {key}: unknown key (known keys: {', '.join(sorted(TOP_KEYS))})"
             )
     drive = raw.get("drive")
     choices = [*sorted(PRESETS), "generic"]
@@ -328,12 +170,12 @@ def parse_config(
         for i, (w, block) in enumerate(zip(wheels, motor_raw, strict=True))
     )
     _check_nodes(motors, source)
-    kin = validate_block(raw.get("kinematics", {}), _KIN_KEYS, f"{source}: kinematics")
+    kin = validate_block(raw.get("kinematics", {}), KINEMATICS_KEYS, f"{source}: kinematics")
     try:
         model = RobotModel(wheels, slip_tolerance_m_s=float(kin["slip_tolerance_m_s"]))  # type: ignore[arg-type]
     except KinematicsError as err:
         raise ConfigError(f"{source}: {err}") from err
-    lim = validate_block(raw.get("limits", {}), _LIMIT_KEYS, f"{source}: limits")
+    lim = validate_block(raw.get("limits", {}), LIMIT_KEYS, f"{source}: limits")
     limits = Limits(
         max_wheel_rad_s=tuple(math.inf if m is None else m.max_wheel_rad_s for m in motors),
         max_wheel_accel_rad_s2=float(lim["max_wheel_accel_rad_s2"]),  # type: ignore[arg-type]
@@ -414,7 +256,7 @@ def _generic_wheels(
     wheels: list[Wheel] = []
     motors: list[dict[str, object] | None] = []
     for i, item in enumerate(raw):
-        v = validate_block(item, _WHEEL_KEYS, f"{source}: wheels[{i}]", "wheel keys")
+        v = validate_block(item, WHEEL_KEYS, f"{source}: wheels[{i}]", "wheel keys")
         motor = v.pop("motor")
         group = v.pop("steer_group")
         try:
@@ -441,15 +283,15 @@ def _motor(
     config_dir: str,
 ) -> MotorConfig:
     merged = {**defaults, **raw}
-    common = {k: merged[k] for k in _MOTOR_COMMON if k in merged}
-    v = validate_block(common, _MOTOR_COMMON, where, "motor keys")
+    common = {k: merged[k] for k in MOTOR_KEYS if k in merged}
+    v = validate_block(common, MOTOR_KEYS, where, "motor keys")
     driver = str(v["driver"])
     try:
         cls = get_driver_class(driver)
     except DriverNotFoundError as err:
         raise ConfigError(f"{where}.driver: {err}") from err
     node_id = int(v["node_id"])  # type: ignore[call-overload]
-    protocol = {k: x for k, x in merged.items() if k not in _MOTOR_COMMON}
+    protocol = {k: x for k, x in merged.items() if k not in MOTOR_KEYS}
     if "config_dir" in cls.OPTIONS and "config_dir" not in protocol:
         # Relative paths in protocol keys (a DBC file) are relative to the config file.
         protocol["config_dir"] = config_dir
@@ -481,8 +323,8 @@ def _check_nodes(motors: tuple[MotorConfig | None, ...], source: str) -> None:
 
 
 def _bus(raw: object, source: str, overrides: Mapping[str, object]) -> BusConfig:
-    v = validate_block(raw, _BUS_KEYS, f"{source}: bus", "bus keys")
-    for key, spec in _BUS_KEYS.items():
+    v = validate_block(raw, BUS_KEYS, f"{source}: bus", "bus keys")
+    for key, spec in BUS_KEYS.items():
         env = os.environ.get(f"GATEWAY_{key.upper()}")
         if env is not None:
             value: object = env
@@ -500,8 +342,8 @@ def _bus(raw: object, source: str, overrides: Mapping[str, object]) -> BusConfig
 
 
 def _loop(raw: object, source: str) -> LoopConfig:
-    v = validate_block(raw, _GATEWAY_KEYS, f"{source}: gateway", "gateway keys")
-    ids = validate_block(v["can_ids"], _CAN_ID_KEYS, f"{source}: gateway.can_ids", "CAN ID keys")
+    v = validate_block(raw, GATEWAY_KEYS, f"{source}: gateway", "gateway keys")
+    ids = validate_block(v["can_ids"], CAN_ID_KEYS, f"{source}: gateway.can_ids", "CAN ID keys")
     try:
         can_ids = CanIds.from_mapping(ids)
     except ConfigError as err:

@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 import pytest
 import yaml
 
-from gateway.config import DEFAULT_NAME, load_config, parse_config
+from gateway.config import DEFAULT_NAME, BusConfig, LoopConfig, load_config, parse_config
 from gateway.errors import ConfigError
 from tests.conftest import CONFIG_DIR
 
@@ -193,3 +193,12 @@ def test_gateway_block_defaults_and_octal_mode() -> None:
     assert cfg.loop.socket_mode == 0o600
     assert cfg.loop.rate_hz == 200.0
     assert cfg.loop.can_ids.twist == 0x100
+
+
+def test_dataclass_defaults_are_those_of_empty_blocks(monkeypatch: pytest.MonkeyPatch) -> None:
+    # The key tables and the dataclasses both carry the defaults: they must agree.
+    for key in ("INTERFACE", "CHANNEL", "BITRATE"):
+        monkeypatch.delenv(f"GATEWAY_{key}", raising=False)
+    cfg = parse_config(BASE, "r")
+    assert cfg.loop == LoopConfig()
+    assert cfg.bus == BusConfig()
