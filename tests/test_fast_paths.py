@@ -3,7 +3,9 @@
 Covers the performance changes of issue 6: precomputed pure-Python forward kinematics (against
 numpy's least squares), odometry's one-allocation SE(2) step, the loop's inverse-kinematics
 memo, the drive set's status order, ``drain`` and ``to_message``, and the daemon's wait, which
-must never ask epoll (whole milliseconds, rounded up) for more time than is left.
+must never ask epoll (whole milliseconds, rounded up) for more time than is left.  Also the
+drivers' per-frame shortcuts: received frames built past ``Frame.__new__``, the CiA 402
+statusword table and the ODrive error-word mapping on plain ints.
 """
 
 from __future__ import annotations
@@ -15,7 +17,9 @@ from typing import TYPE_CHECKING
 import can
 import pytest
 
-from gateway.bus import drain, to_message
+from drivers.cia402.enums import STATUSWORD_MASK, state_from_statusword
+from drivers.odrive.enums import AXIS_ERROR_05_FAULTS, AXIS_ERROR_FAULTS, Firmware, error_faults
+from gateway.bus import drain, to_frame, to_message
 from gateway.config import load_config, parse_config
 from gateway.daemon import Daemon
 from gateway.drives import DriveSet
@@ -23,7 +27,7 @@ from gateway.errors import KinematicsError
 from gateway.kinematics.odometry import Pose, _advance, compose, se2_exp
 from gateway.loop import Gateway
 from gateway.sdnotify import SystemdNotifier
-from gateway.types import Frame, Twist
+from gateway.types import DriveFault, Frame, Twist
 from tests.conftest import CONFIG_DIR
 
 if TYPE_CHECKING:
@@ -137,6 +141,31 @@ def test_drain_and_to_message(channel: str) -> None:
         rx.shutdown()
 
 
+def test_received_frames_equal_frame_field_for_field(channel: str) -> None:
+    # drain and to_frame build frames with tuple.__new__, past Frame.__new__: every field,
+    # receive time included, must be what Frame(...) gives.
+    tx = can.Bus(interface="virtual", channel=channel)
+    rx = can.Bus(interface="virtual", channel=channel)
+    try:
+        frames = [Frame(0x123, b"\x01\x02"), Frame(0x1ABCDEF, b"", True, True, 4),
+                  Frame(0x7FF, bytes(range(8)), False, False, 8)]
+        for f in frames:
+            tx.send(to_message(f))
+        got = drain(rx, timestamp_s=7.0)
+        assert [type(g) for g in got] == [Frame] * 3
+        assert [tuple(g) for g in got] == [tuple(f.stamped(7.0)) for f in frames]
+        msg = to_message(frames[2])
+        msg.timestamp = 3.5
+        assert tuple(to_frame(msg)) == tuple(frames[2].stamped(3.5))
+        assert tuple(to_frame(msg, 1.25)) == tuple(frames[2].stamped(1.25))
+        remote = to_message(frames[1])
+        remote.data = bytearray(b"\x09")  # a remote frame's payload is never taken
+        assert tuple(to_frame(remote, 0.0)) == tuple(frames[1])
+    finally:
+        tx.shutdown()
+        rx.shutdown()
+
+
 class _FakeServer:
     """Records poll timeouts and stands in for the control server."""
 
@@ -186,3 +215,33 @@ def test_wait_never_oversleeps_the_deadline(channel: str, sock_path: str) -> Non
     finally:
         daemon.server = real_server
         daemon.close()
+
+
+def test_statusword_table_matches_the_mask_scan() -> None:
+    # state_from_statusword indexes a table over statusword & 0x6F: the same answer as
+    # scanning STATUSWORD_MASK for every 16-bit statusword.
+    for word in range(1 << 16):
+        expected = next(
+            (s for s, mask in STATUSWORD_MASK.items() if word & mask == s), None
+        )
+        assert state_from_statusword(word) is expected
+
+
+@pytest.mark.parametrize("firmware", list(Firmware))
+def test_odrive_error_faults_match_the_flag_tables(firmware: Firmware) -> None:
+    # error_faults tests plain int masks: the same flags as testing the IntFlag members.
+    table = AXIS_ERROR_FAULTS if firmware is Firmware.V0_6 else AXIS_ERROR_05_FAULTS
+    rng = random.Random(6)
+    words = [0, 0xFFFFFFFF, *(1 << b for b in range(32)),
+             *(rng.getrandbits(32) for _ in range(300))]
+    for bits in words:
+        expected = DriveFault.NONE
+        rest = bits
+        for flag, fault in table.items():
+            if bits & flag:
+                expected |= fault
+                rest &= ~int(flag)
+        if rest:
+            expected |= DriveFault.OTHER
+        got = error_faults(firmware, bits)
+        assert got is expected or (got == expected and type(got) is DriveFault)

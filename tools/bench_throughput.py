@@ -335,13 +335,15 @@ def main(argv: list[str] | None = None) -> None:
                              "perf_counter wall time (for an otherwise idle machine)")
     parser.add_argument("--profile", choices=sorted(PROTOCOLS),
                         help="cProfile the saturated gateway cycles of one protocol")
+    parser.add_argument("--sort", default="tottime",
+                        help="pstats sort key of --profile (tottime, cumulative, ncalls)")
     args = parser.parse_args(argv)
     print(__doc__.split("\n\n", 2)[2].split("\n\nRun:")[0])
     print(f"\nPython {platform.python_version()} on {platform.machine()}, "
           f"{args.cycles} cycles x {args.repeats} repeats, clock {args.clock}, "
           f"load average {os.getloadavg()[0]:.2f}\n")
     if args.profile:
-        profile_one(args.profile, args.cycles * args.repeats)
+        profile_one(args.profile, args.cycles * args.repeats, args.sort)
         return
     print("protocol mix        sent  recv  gw us/c    best    gw fr/s  pcan us/c  pcan fr/s "
           " ratio  vs 9k")
@@ -385,6 +387,8 @@ def profile_one(protocol: str, cycles: int, sort: str = "tottime") -> None:
         bench.close()
     stats = pstats.Stats(prof)
     stats.sort_stats(sort).print_stats(30)
+    if sort == "tottime":
+        stats.print_callers(r"enum\.py")
 
 
 if __name__ == "__main__":

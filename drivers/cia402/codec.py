@@ -56,8 +56,13 @@ TPDO_VELOCITY_MAP: tuple[tuple[int, int, int], ...] = (
 #: Packed form of each of the three PDOs above.
 PDO_STRUCT = struct.Struct("<Hi")
 _EMCY = struct.Struct("<HB5s")
+_PDO_UNPACK = PDO_STRUCT.unpack
+_PDO_PACK = PDO_STRUCT.pack
+_PDO_SIZE = PDO_STRUCT.size
 #: The int32 range of the target velocity (0x60FF).
 INT32_RANGE = DataType.INTEGER32.bounds
+_I32_MIN, _I32_MAX = INT32_RANGE
+_U16_MAX = DataType.UNSIGNED16.bounds[1]
 
 
 def mapping_entry(index: int, subindex: int, bits: int) -> int:
@@ -141,9 +146,13 @@ def make_rpdo(cob_id: int, controlword: int, target_velocity: int) -> Frame:
 
     :raises EncodeError: if a value does not fit its field.
     """
-    DataType.UNSIGNED16.check(controlword, "a controlword")
-    DataType.INTEGER32.check(target_velocity, "a target velocity")
-    return Frame(cob_id, PDO_STRUCT.pack(controlword, target_velocity))
+    # Every cycle sends one per node: plain ints in range pass with one test each (check()
+    # also takes int subclasses such as Controlword members, and raises).
+    if not (type(controlword) is int and 0 <= controlword <= _U16_MAX):
+        DataType.UNSIGNED16.check(controlword, "a controlword")
+    if not (type(target_velocity) is int and _I32_MIN <= target_velocity <= _I32_MAX):
+        DataType.INTEGER32.check(target_velocity, "a target velocity")
+    return Frame(cob_id, _PDO_PACK(controlword, target_velocity))
 
 
 def make_tpdo(cob_id: int, statusword: int, value: int) -> Frame:
@@ -234,11 +243,14 @@ class Cia402Codec(MotorCodec[Cia402Message]):
             self._rx[CobBase.EMCY + node_id] = (node_id, _Kind.EMCY)
             self._rx[CobBase.SDO_TX + node_id] = (node_id, _Kind.SDO)
             self._rx[CobBase.HEARTBEAT + node_id] = (node_id, _Kind.HEARTBEAT)
+        #: node ID -> command RPDO COB-ID (every cycle sends one per node).
+        self._rpdo_ids = {
+            node_id: rpdo_cob_id(layout.rpdo, node_id) for node_id, layout in self.nodes.items()
+        }
 
     def rpdo(self, node_id: int, controlword: int, target_velocity: int) -> Frame:
         """The command RPDO of ``node_id`` (its configured RPDO number)."""
-        return make_rpdo(rpdo_cob_id(self.nodes[node_id].rpdo, node_id), controlword,
-                         target_velocity)
+        return make_rpdo(self._rpdo_ids[node_id], controlword, target_velocity)
 
     def encode_command(self, commands: Mapping[int, float]) -> tuple[Frame, ...]:
         """RPDOs with controlword ENABLE OPERATION (0x000F) and the rounded target velocity.
@@ -283,7 +295,12 @@ class Cia402Codec(MotorCodec[Cia402Message]):
                 )
             code, register, data = _EMCY.unpack(frame.data)
             return Emergency(node_id, code, register, data)
-        word, value = unpack_pdo(frame, f"{kind.value} of node {node_id}")
+        # A TPDO (most of the traffic; remote and 29-bit frames are out already): the length
+        # check inline, unpack_pdo called only to raise, with its message built only then.
+        data = frame.data
+        if len(data) != _PDO_SIZE:
+            unpack_pdo(frame, f"{kind.value} of node {node_id}")
+        word, value = _PDO_UNPACK(data)
         fb = FeedbackKind.POSITION if kind is _Kind.POSITION else FeedbackKind.VELOCITY
         return PdoFeedback(node_id, fb, word, value)
 

@@ -64,6 +64,8 @@ log = logging.getLogger(__name__)
 
 _ENABLING = frozenset({Phase.CONFIGURING, Phase.AWAIT_STATUS, Phase.WALKING})
 _INT32_SPAN = 1 << 32
+#: The controlword of every command RPDO, as a plain int (make_rpdo's quick check).
+_ENABLE_OPERATION = int(Controlword.ENABLE_OPERATION)
 
 
 def wrap_delta(previous: int, current: int) -> int:
@@ -117,6 +119,10 @@ class Cia402Driver(MotorDriver):
             for m, o in pairs
         ]
         self._last_sync_s: float | None = None
+        #: Each motor's ``max_wheel_rad_s`` (a computed property), for :meth:`command`.
+        self._limits = tuple(m.max_wheel_rad_s for m in self.motors)
+        #: Each motor's (sign, gear ratio), for the feedback's motor-to-wheel conversion.
+        self._wheel_side = tuple((m.sign, m.gear_ratio) for m in self.motors)
 
     # ----------------------------------------------------------------- hooks
 
@@ -154,8 +160,8 @@ class Cia402Driver(MotorDriver):
             )
         raws: list[int] = []
         lo, hi = INT32_RANGE
-        for m, node, w in zip(self.motors, self._nodes, wheel_rad_s, strict=True):
-            limit = m.max_wheel_rad_s
+        for m, node, limit, w in zip(self.motors, self._nodes, self._limits, wheel_rad_s,
+                                     strict=True):
             if not math.isfinite(w) or abs(w) > limit * (1.0 + 1e-9):
                 raise EncodeError(
                     f'Expected velocity for node {m.node_id} ("{m.wheel}") between '
@@ -168,7 +174,7 @@ class Cia402Driver(MotorDriver):
                 raw = velocity_to_raw(units, f"target velocity for node {m.node_id}")
             raws.append(raw)
         out = [
-            self.codec.rpdo(m.node_id, Controlword.ENABLE_OPERATION, raw)
+            self.codec.rpdo(m.node_id, _ENABLE_OPERATION, raw)
             for m, node, raw in zip(self.motors, self._nodes, raws, strict=True)
             if node.seq.phase is Phase.ARMED
         ]
@@ -209,7 +215,7 @@ class Cia402Driver(MotorDriver):
             return True
         if msg is None:
             return False
-        i = self.index_of(msg.node_id)
+        i = self._index.get(msg.node_id)  # index_of, inlined (every frame)
         if i is None:  # not reached: the codec only knows our nodes
             return False
         node = self._nodes[i]
@@ -262,25 +268,30 @@ class Cia402Driver(MotorDriver):
         return make_sync()
 
     def _on_feedback(self, i: int, msg: PdoFeedback, now_s: float) -> None:
-        node, motor = self._nodes[i], self.motors[i]
-        node.seq.on_status(msg.statusword)
+        node = self._nodes[i]
+        seq = node.seq
+        seq.on_status(msg.statusword)
+        # Every TPDO: motor to wheel side as MotorConfig.motor_to_wheel_rad_s (x * sign / gear)
+        # with the per-motor constants from __init__.
+        sign, gear = self._wheel_side[i]
         if msg.kind is FeedbackKind.POSITION:
             if node.last_raw is not None:
                 node.counts += wrap_delta(node.last_raw, msg.value)
             node.last_raw = msg.value
         else:
-            node.velocity_rad_s = motor.motor_to_wheel_rad_s(
-                node.opts.units_to_rad_s(msg.value))
+            node.velocity_rad_s = node.opts.units_to_rad_s(msg.value) * sign / gear
         if node.last_raw is not None:
-            position = motor.motor_to_wheel_rad_s(node.opts.counts_to_rad(node.counts))
-            self.store_feedback(i, WheelFeedback(position, node.velocity_rad_s, now_s))
-        state = node.seq.state
-        if node.seq.phase is Phase.ARMED and state not in (State.OPERATION_ENABLED, None):
+            position = node.opts.counts_to_rad(node.counts) * sign / gear
+            self._feedback[i] = WheelFeedback(position, node.velocity_rad_s, now_s)
+        state = seq.state
+        if state is State.OPERATION_ENABLED:
+            return  # the steady state: nothing to check below
+        if seq.phase is Phase.ARMED and state is not None:
             text = f"statusword 0x{msg.statusword:04X} reports {state.label}"
             if state in (State.FAULT, State.FAULT_REACTION_ACTIVE):
-                node.seq.fail(text, DriveFault.CONTROLLER)
+                seq.fail(text, DriveFault.CONTROLLER)
             else:
-                node.seq.fail(f"drive left OPERATION ENABLED: {text}", DriveFault.CONTROLLER)
+                seq.fail(f"drive left OPERATION ENABLED: {text}", DriveFault.CONTROLLER)
 
     def _on_heartbeat(self, i: int, msg: Heartbeat) -> None:
         node = self._nodes[i]
@@ -319,6 +330,13 @@ class Cia402Driver(MotorDriver):
         """Publish node ``i``'s fault flags, detail and armed flag to the base."""
         node = self._nodes[i]
         seq, emcy = node.seq, node.emcy
+        if emcy is None and seq.phase is Phase.ARMED and seq.state is State.OPERATION_ENABLED:
+            # A running drive, after nearly every TPDO: what the general path below gives for
+            # it (no fault, armed), without walking its cases.
+            self._faults[i] = DriveFault.NONE
+            self._detail[i] = ""
+            self._armed[i] = True
+            return
         flags, detail = DriveFault.NONE, ""
         emcy_text = "" if emcy is None else describe_emcy(emcy.code, emcy.register, emcy.data)
         if seq.phase is Phase.FAILED:

@@ -133,17 +133,14 @@ class DataType(enum.IntEnum):
     @property
     def bounds(self) -> tuple[int, int]:
         """Smallest and largest value."""
-        bits = 8 * self.size
-        if self in (DataType.INTEGER8, DataType.INTEGER16, DataType.INTEGER32):
-            return -(1 << (bits - 1)), (1 << (bits - 1)) - 1
-        return 0, (1 << bits) - 1
+        return _DATATYPE_BOUNDS[self]
 
     def check(self, value: int, what: str) -> int:
         """Return ``value`` if it is an int in this type's range.
 
         :raises EncodeError: naming ``what``, the range and the value.
         """
-        lo, hi = self.bounds
+        lo, hi = _DATATYPE_BOUNDS[self]  # every command RPDO checks two fields
         if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
             raise EncodeError(f"Expected {what} between {lo} and {hi}, but got {value!r}.")
         return value
@@ -167,6 +164,17 @@ _DATATYPE_STRUCT = {
     DataType.UNSIGNED16: struct.Struct("<H"),
     DataType.UNSIGNED32: struct.Struct("<I"),
 }
+
+
+def _bounds(dtype: DataType) -> tuple[int, int]:
+    bits = 8 * _DATATYPE_STRUCT[dtype].size
+    if dtype in (DataType.INTEGER8, DataType.INTEGER16, DataType.INTEGER32):
+        return -(1 << (bits - 1)), (1 << (bits - 1)) - 1
+    return 0, (1 << bits) - 1
+
+
+#: Smallest and largest value of each type, computed once (:meth:`DataType.check`).
+_DATATYPE_BOUNDS = {dtype: _bounds(dtype) for dtype in DataType}
 
 
 class ObjectIndex(enum.IntEnum):
@@ -292,15 +300,27 @@ STATUSWORD_MASK: dict[State, int] = {
 }
 
 
+def _scan_statusword(statusword: int) -> State | None:
+    for state, mask in STATUSWORD_MASK.items():
+        if statusword & mask == state:
+            return state
+    return None
+
+
+#: Every mask is a subset of 0x6F, so ``statusword & 0x6F`` decides the state: the table of
+#: :func:`_scan_statusword` over those bits turns the per-TPDO scan into one index.
+_STATUSWORD_BITS = 0x6F
+_STATE_BY_BITS: tuple[State | None, ...] = tuple(
+    _scan_statusword(bits) for bits in range(_STATUSWORD_BITS + 1)
+)
+
+
 def state_from_statusword(statusword: int) -> State | None:
     """The drive state a statusword reports, or ``None`` for a pattern no state has.
 
     :param statusword: the 16-bit statusword (0x6041).
     """
-    for state, mask in STATUSWORD_MASK.items():
-        if statusword & mask == state:
-            return state
-    return None
+    return _STATE_BY_BITS[statusword & _STATUSWORD_BITS]
 
 
 class Controlword(enum.IntEnum):

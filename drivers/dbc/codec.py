@@ -20,7 +20,7 @@ from __future__ import annotations
 import enum
 import logging
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 import cantools
@@ -89,6 +89,12 @@ class _Member:
     role: Role
     ref: SignalRef
     label: str
+    #: ``ref.name``, read once: the property builds a str on every call, and every received
+    #: frame looks up each member's signal by name.
+    name: str = field(init=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "name", self.ref.name)
 
 
 class _Group:
@@ -212,11 +218,12 @@ class DbcCodec(MotorCodec[tuple[DbcReading, ...]]):
         raw = _decode_raw(group, frame)
         per_node: dict[int, dict[str, Any]] = {}
         for m in group.members:
-            value = raw[m.ref.name]
+            value = raw[m.name]
             slot = per_node.setdefault(m.node_id, {})
-            if m.role == Role.VELOCITY:
+            role = m.role
+            if role == Role.VELOCITY:
                 slot["velocity"] = _finite(m.ref.to_physical(value), m.ref, group)
-            elif m.role == Role.POSITION:
+            elif role == Role.POSITION:
                 slot["position_raw"] = _finite(value, m.ref, group)
             else:
                 slot["fault"] = int(value)
@@ -278,7 +285,7 @@ class DbcCodec(MotorCodec[tuple[DbcReading, ...]]):
                 if m.role in (Role.POSITION, Role.FAULT):
                     value = m.ref.to_physical(value)
                 _check_range(value, m, group)
-                data[m.ref.name] = value
+                data[m.name] = value
             try:
                 payload = group.message.encode(data, scaling=True, padding=False, strict=True)
             except (cantools.database.EncodeError, OverflowError, ValueError) as err:

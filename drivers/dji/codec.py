@@ -120,6 +120,8 @@ COMMAND_STRUCT = struct.Struct(">hhhh")
 #: angle u16, speed i16, current i16, temperature u8, reserved u8, big endian.
 FEEDBACK_STRUCT = struct.Struct(">HhhBB")
 _INT16_MIN, _INT16_MAX = -0x8000, 0x7FFF
+_FEEDBACK_UNPACK = FEEDBACK_STRUCT.unpack
+_FEEDBACK_SIZE = FEEDBACK_STRUCT.size
 
 
 def group_id(esc_id: int) -> DjiFrameId:
@@ -210,8 +212,11 @@ def decode_feedback(frame: Frame) -> DjiFeedback | None:
     esc_id = frame.arbitration_id - FEEDBACK_ID_BASE
     if not ESC_ID_MIN <= esc_id <= ESC_ID_MAX:
         return None
-    _check_shape(frame, "feedback")
-    angle, speed, current, temp, _reserved = FEEDBACK_STRUCT.unpack(frame.data)
+    data = frame.data
+    # Every feedback frame: _check_shape's three tests inline, the call only to raise.
+    if frame.is_extended_id or frame.is_remote_frame or len(data) != _FEEDBACK_SIZE:
+        _check_shape(frame, "feedback")
+    angle, speed, current, temp, _reserved = _FEEDBACK_UNPACK(data)
     if angle >= COUNTS_PER_REV:
         raise DecodeError(
             f"Expected rotor angle for ESC {esc_id} between 0 and {COUNTS_PER_REV - 1}, "
@@ -238,6 +243,10 @@ def decode_command(frame: Frame) -> dict[int, int] | None:
     return {first + k: v for k, v in enumerate(values)}
 
 
+#: The two command frames' IDs as plain ints, in sending order.
+_COMMAND_IDS = (int(DjiFrameId.COMMAND_ESC_1_4), int(DjiFrameId.COMMAND_ESC_5_8))
+
+
 class DjiCodec(MotorCodec[DjiFeedback]):
     """Current commands and feedback of C620 / C610 ESCs.
 
@@ -262,9 +271,13 @@ class DjiCodec(MotorCodec[DjiFeedback]):
         """
         slots = [0] * (2 * ESCS_PER_GROUP)
         used = [False, False]
+        models = self._models
         for esc_id, value in commands.items():
-            _check_esc_id(esc_id)
-            fs = self.model(esc_id).full_scale_raw
+            # Runs every cycle: a plain int ID in range passes with one test.
+            if not (type(esc_id) is int and ESC_ID_MIN <= esc_id <= ESC_ID_MAX):
+                _check_esc_id(esc_id)
+            model = models.get(esc_id, C620)
+            fs = model.full_scale_raw
             if not math.isfinite(value):
                 raise EncodeError(
                     f"Expected current for ESC {esc_id} between {-fs} and {fs}, but got {value}."
@@ -273,15 +286,15 @@ class DjiCodec(MotorCodec[DjiFeedback]):
             if not -fs <= raw <= fs:
                 raise EncodeError(
                     f"Expected current for ESC {esc_id} between {-fs} and {fs} "
-                    f"({self.model(esc_id).name.upper()} raw), but got {value}."
+                    f"({model.name.upper()} raw), but got {value}."
                 )
             slots[esc_id - 1] = raw
             used[(esc_id - 1) // ESCS_PER_GROUP] = True
         frames = []
-        for g, ident in enumerate((DjiFrameId.COMMAND_ESC_1_4, DjiFrameId.COMMAND_ESC_5_8)):
+        for g, ident in enumerate(_COMMAND_IDS):
             if used[g]:
                 part = slots[g * ESCS_PER_GROUP : (g + 1) * ESCS_PER_GROUP]
-                frames.append(Frame(int(ident), COMMAND_STRUCT.pack(*part)))
+                frames.append(Frame(ident, COMMAND_STRUCT.pack(*part)))
         return tuple(frames)
 
     def decode(self, frame: Frame) -> DjiFeedback | None:

@@ -23,7 +23,7 @@ import math
 import struct
 from dataclasses import dataclass, field
 from types import MappingProxyType
-from typing import TYPE_CHECKING, TypeAlias
+from typing import TYPE_CHECKING, Any, TypeAlias
 
 from drivers.odrive.enums import AxisState, CmdId, ControlMode, Firmware, InputMode, ProcedureResult
 from gateway.codec import MotorCodec
@@ -116,6 +116,7 @@ GET_MOTOR_ERROR_05 = Layout(
     CmdId.GET_ERROR, "Get_Motor_Error", struct.Struct("<Q"), ("Motor_Error",)
 )
 
+_ESTIMATES_UNPACK = ENCODER_ESTIMATES.packer.unpack
 _TRAJ_DONE_05 = 0x80
 _CONTROLLER_ERROR_05 = 0x01
 
@@ -266,11 +267,12 @@ def _transitions() -> Mapping[tuple[AxisState, AxisState], Step]:
 TRANSITIONS: Mapping[tuple[AxisState, AxisState], Step] = _transitions()
 
 
-def _enum_or_int(cls: type[enum.IntEnum], value: int) -> int:
-    try:
-        return cls(value)
-    except ValueError:
-        return value
+#: Value -> member of the enums a heartbeat carries: a dict lookup per heartbeat instead of
+#: an enum call (and a caught ``ValueError`` for values this firmware's enum lacks).
+_AXIS_STATES: Mapping[int, AxisState] = MappingProxyType({int(s): s for s in AxisState})
+_PROCEDURE_RESULTS: Mapping[int, ProcedureResult] = MappingProxyType(
+    {int(r): r for r in ProcedureResult}
+)
 
 
 class OdriveCodec(MotorCodec[Feedback]):
@@ -466,42 +468,65 @@ class OdriveCodec(MotorCodec[Feedback]):
             (RTR frames, and 0.5's DLC 0 data frames), which are not replies.
         :raises DecodeError: for a wrong DLC or a non-finite encoder estimate.
         """
-        ids = self.split_id(frame)
-        if ids is None or frame.is_remote_frame:
-            return None
-        node, cmd = ids
+        if frame.is_extended_id != self.extended_id or frame.is_remote_frame:
+            return None  # the other ID type (split_id's test), or a request
+        arb = frame.arbitration_id
+        return self.decode_reply(arb >> CMD_BITS, arb & CMD_MASK, frame)
+
+    def decode_reply(self, node: int, cmd: int, frame: Frame) -> Feedback | None:
+        """:meth:`decode` of a data frame whose identifier is already split (and of this ID
+        mode): the driver splits every received identifier once, to find the axis.
+
+        :raises DecodeError: as :meth:`decode`.
+        """
         layout = self._feedback.get(cmd)
         if layout is None or (frame.dlc == 0 and self.firmware is Firmware.V0_5):
             return None
-        values = _unpack(layout, node, frame)
         if layout is ENCODER_ESTIMATES:
-            pos, vel = values
-            if not (math.isfinite(pos) and math.isfinite(vel)):
-                raise DecodeError(
-                    f"Expected finite encoder estimates from ODrive node {node}, "
-                    f"but got position {pos} turns, velocity {vel} turns/s."
-                )
-            return EncoderEstimates(node, pos, vel)
+            return EncoderEstimates(node, *self.unpack_estimates(node, frame))
+        values = _unpack(layout, node, frame)
         if layout is HEARTBEAT:
             return self._heartbeat(node, values)
         if layout is GET_ERROR_06:
             return ErrorStatus(node, int(values[0]), int(values[1]))
         return MotorErrorStatus(node, int(values[0]))
 
-    def _heartbeat(self, node: int, values: tuple[float, ...]) -> Heartbeat:
-        error, state, b5, b6, b7 = (int(v) for v in values)
-        axis_state = _enum_or_int(AxisState, state)
+    @staticmethod
+    def unpack_estimates(node: int, frame: Frame) -> tuple[float, float]:
+        """``(position turns, velocity turns/s)`` of a Get_Encoder_Estimates data frame.
+
+        The driver's per-frame path: most of the feedback traffic, so it gives the two floats
+        without building an :class:`EncoderEstimates`.
+
+        :raises DecodeError: for a wrong DLC or a non-finite estimate.
+        """
+        data = frame.data
+        if frame.dlc != 8 or len(data) != 8:
+            _unpack(ENCODER_ESTIMATES, node, frame)  # raises, naming the message
+        pos, vel = _ESTIMATES_UNPACK(data)
+        if not (math.isfinite(pos) and math.isfinite(vel)):
+            raise DecodeError(
+                f"Expected finite encoder estimates from ODrive node {node}, "
+                f"but got position {pos} turns, velocity {vel} turns/s."
+            )
+        return pos, vel
+
+    def _heartbeat(self, node: int, values: tuple[int, ...]) -> Heartbeat:
+        # Every field of the heartbeat's struct is an integer ("<IBBBB"): no int() needed.
+        error, state, b5, b6, b7 = values
+        axis_state = _AXIS_STATES.get(state, state)
         if self.firmware is Firmware.V0_6:
-            result = _enum_or_int(ProcedureResult, b5)
-            return Heartbeat(node, error, axis_state, bool(b6 & 1), procedure_result=result)
+            result = _PROCEDURE_RESULTS.get(b5, b5)
+            return Heartbeat(node, error, axis_state, bool(b6 & 1), result)
         return Heartbeat(
             node,
             error,
             axis_state,
-            trajectory_done=bool(b7 & _TRAJ_DONE_05),
-            motor_error=bool(b5 & 1),
-            encoder_error=bool(b6 & 1),
-            controller_error=bool(b7 & _CONTROLLER_ERROR_05),
+            bool(b7 & _TRAJ_DONE_05),
+            ProcedureResult.SUCCESS,
+            bool(b5 & 1),
+            bool(b6 & 1),
+            bool(b7 & _CONTROLLER_ERROR_05),
         )
 
     def decode_command(self, frame: Frame) -> Command | None:
@@ -523,7 +548,8 @@ class OdriveCodec(MotorCodec[Feedback]):
             return SetInputVel(node, vel, torque)
         if cmd == CmdId.SET_AXIS_STATE:
             (state,) = _unpack(SET_AXIS_STATE, node, frame)
-            return SetAxisState(node, _enum_or_int(AxisState, int(state)))
+            state = int(state)
+            return SetAxisState(node, _AXIS_STATES.get(state, state))
         if cmd == CmdId.SET_CONTROLLER_MODE:
             control, inp = _unpack(SET_CONTROLLER_MODE, node, frame)
             return SetControllerMode(node, int(control), int(inp))
@@ -536,7 +562,7 @@ class OdriveCodec(MotorCodec[Feedback]):
         return None
 
 
-def _unpack(layout: Layout, node: int, frame: Frame) -> tuple[float, ...]:
+def _unpack(layout: Layout, node: int, frame: Frame) -> tuple[Any, ...]:
     if frame.dlc not in layout.dlcs or len(frame.data) != frame.dlc:
         expected = " or ".join(str(d) for d in layout.dlcs)
         raise DecodeError(

@@ -34,6 +34,8 @@ import math
 from typing import TYPE_CHECKING, ClassVar, cast
 
 from drivers.odrive.codec import (
+    CMD_BITS,
+    CMD_MASK,
     DEFAULT_EXTENDED_ID,
     DEFAULT_FIRMWARE,
     MAX_EXTENDED_NODE_ID,
@@ -130,6 +132,7 @@ class OdriveDriver(MotorDriver):
                         f"{self.motors[0].wheel!r} on the same ODrive bus, got {o[key]!r}"
                     )
         self.codec = OdriveCodec(Firmware(first["firmware"]), bool(first["extended_id"]))
+        self._extended_id = self.codec.extended_id
         if opts:
             self.liveness_s = cast("float", opts[0]["liveness_s"])
         n = len(self.motors)
@@ -175,7 +178,9 @@ class OdriveDriver(MotorDriver):
 
     def state(self, index: int, now_s: float) -> DriveState:
         """OFFLINE, FAULT, ENABLED (heartbeat shows CLOSED_LOOP_CONTROL), ENABLING or DISABLED."""
-        if not self._alive(index, now_s):
+        # _alive, inlined: this runs for every motor on every cycle.
+        hb, enc, live = self._heartbeat_s[index], self._encoder_s[index], self.liveness_s
+        if hb is None or enc is None or now_s - hb > live or now_s - enc > live:
             return DriveState.OFFLINE
         if self._faults[index]:
             return DriveState.FAULT
@@ -294,24 +299,36 @@ class OdriveDriver(MotorDriver):
         and remote frames other than the requests this driver sends itself are counted in
         :attr:`rejected`; command frames (another master talking to our axes) are ignored.
         """
-        ids = self.codec.split_id(frame)
-        if ids is None:
+        # Every received frame of the bus comes here: the identifier is split once (the
+        # codec's decode_reply takes the parts), and encoder estimates, most of the traffic,
+        # go from the payload to the wheel feedback without an EncoderEstimates object.
+        if frame.is_extended_id != self._extended_id:
             return False
-        i = self.index_of(ids[0])
+        arb = frame.arbitration_id
+        node = arb >> CMD_BITS
+        i = self._index.get(node)
         if i is None:
             return False
+        cmd = arb & CMD_MASK
         try:
-            msg = self.codec.decode(frame)
+            if frame.is_remote_frame:
+                msg = None
+            elif cmd == CmdId.GET_ENCODER_ESTIMATES and frame.dlc == 8:
+                pos, vel = self.codec.unpack_estimates(node, frame)
+                self._on_estimates(i, pos, vel, frame.timestamp_s)
+                return True
+            else:
+                msg = self.codec.decode_reply(node, cmd, frame)
         except DecodeError as err:
             self.reject("malformed", err)
             return True
         if isinstance(msg, EncoderEstimates):
-            self._on_estimates(i, msg, frame.timestamp_s)
+            self._on_estimates(i, msg.pos_turns, msg.vel_turns_s, frame.timestamp_s)
         elif isinstance(msg, Heartbeat):
             self._on_heartbeat(i, msg, frame.timestamp_s)
         elif isinstance(msg, (ErrorStatus, MotorErrorStatus)):
             self._on_error_status(i, msg)
-        elif frame.is_remote_frame and not self._own_request(i, ids[1]):
+        elif frame.is_remote_frame and not self._own_request(i, cmd):
             self.reject("remote frame where data expected")
         return True
 
@@ -321,22 +338,31 @@ class OdriveDriver(MotorDriver):
 
     # ----------------------------------------------------------------- receive helpers
 
-    def _on_estimates(self, i: int, msg: EncoderEstimates, t: float) -> None:
+    def _on_estimates(self, i: int, pos_turns: float, vel_turns_s: float, t: float) -> None:
         _, gear, sign, _ = self._cmd[i]
         pos0 = self._pos0_turns[i]
         if pos0 is None:
-            pos0 = self._pos0_turns[i] = msg.pos_turns
+            pos0 = self._pos0_turns[i] = pos_turns
         # float32 - float32 is exact in float64; the wheel angle is relative to the first sample.
         # Motor to wheel side as MotorConfig.motor_to_wheel_rad_s: x * sign / gear.
-        position = (msg.pos_turns - pos0) * TAU * sign / gear
-        velocity = msg.vel_turns_s * TAU * sign / gear
+        position = (pos_turns - pos0) * TAU * sign / gear
+        velocity = vel_turns_s * TAU * sign / gear
         self._encoder_s[i] = t
-        self.store_feedback(i, WheelFeedback(position, velocity, t))
+        self._feedback[i] = WheelFeedback(position, velocity, t)  # store_feedback, inlined
 
     def _on_heartbeat(self, i: int, hb: Heartbeat, t: float) -> None:
         fw = self.codec.firmware
         self._heartbeat_s[i] = t
         self._axis_state[i] = hb.axis_state
+        if not (hb.axis_error or hb.motor_error or hb.encoder_error or hb.controller_error):
+            # A healthy axis, nearly every heartbeat: the state the general path below ends in
+            # for no error, without its flag mapping and string work.
+            self._error_detail[i] = ""
+            self._error_request_due[i] = False
+            self._axis_detail[i] = ""
+            self.set_fault(i, DriveFault.NONE)
+            self._set_axis_state(i, hb.axis_state)
+            return
         faults = error_faults(fw, hb.axis_error)
         parts = []
         if hb.axis_error:
@@ -365,7 +391,10 @@ class OdriveDriver(MotorDriver):
             self._error_request_due[i] = False
         self._axis_detail[i] = "; ".join(parts)
         self._publish_fault(i, faults)
-        armed = hb.axis_state == AxisState.CLOSED_LOOP_CONTROL
+        self._set_axis_state(i, hb.axis_state)
+
+    def _set_axis_state(self, i: int, axis_state: AxisState | int) -> None:
+        armed = axis_state == AxisState.CLOSED_LOOP_CONTROL
         if armed:
             self._enabling[i] = False
         self.set_armed(i, armed)

@@ -250,6 +250,16 @@ def error_class(firmware: Firmware) -> type[AxisError] | type[AxisError05]:
     return AxisError if firmware is Firmware.V0_6 else AxisError05
 
 
+#: The two tables above as ``(plain int mask, fault)`` pairs: ``int & IntFlag`` builds a new
+#: flag object per test, and :func:`error_faults` runs on every heartbeat.
+_FAULT_MASKS: Mapping[Firmware, tuple[tuple[int, DriveFault], ...]] = MappingProxyType(
+    {
+        Firmware.V0_6: tuple((int(flag), fault) for flag, fault in AXIS_ERROR_FAULTS.items()),
+        Firmware.V0_5: tuple((int(flag), fault) for flag, fault in AXIS_ERROR_05_FAULTS.items()),
+    }
+)
+
+
 def error_faults(firmware: Firmware, bits: int) -> DriveFault:
     """Map an axis error word onto :class:`~gateway.types.DriveFault` flags.
 
@@ -258,15 +268,14 @@ def error_faults(firmware: Firmware, bits: int) -> DriveFault:
     :param firmware: which firmware's bit numbering ``bits`` follows.
     :param bits: the raw u32 axis error word.
     """
-    table: Mapping[AxisError, DriveFault] | Mapping[AxisError05, DriveFault] = (
-        AXIS_ERROR_FAULTS if firmware is Firmware.V0_6 else AXIS_ERROR_05_FAULTS
-    )
+    if not bits:
+        return DriveFault.NONE  # a healthy axis: every heartbeat takes this path
     out = DriveFault.NONE
     rest = bits
-    for flag, fault in table.items():
-        if bits & flag:
+    for mask, fault in _FAULT_MASKS[firmware]:
+        if bits & mask:
             out |= fault
-            rest &= ~int(flag)
+            rest &= ~mask
     if rest:
         out |= DriveFault.OTHER
     return out

@@ -22,7 +22,7 @@ from __future__ import annotations
 import enum
 import math
 import struct
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, TypeAlias
 
 from gateway.codec import MotorCodec
@@ -45,9 +45,11 @@ _I16_MIN = -(2**15)
 _I16_MAX = 2**15 - 1
 
 _I32 = struct.Struct(">i")
+_I32_PACK = _I32.pack
 #: STATUS and STATUS_5 share one layout: int32, int16, int16.
 _STATUS = struct.Struct(">ihh")
 _PONG = struct.Struct(">BB")
+_STATUS_UNPACK = _STATUS.unpack
 
 
 class CanPacketId(enum.IntEnum):
@@ -67,6 +69,10 @@ class CanPacketId(enum.IntEnum):
     STATUS_5 = 27
     SHUTDOWN = 31
     STATUS_6 = 58
+
+
+_STATUS_ID = int(CanPacketId.STATUS)
+_STATUS_5_ID = int(CanPacketId.STATUS_5)
 
 
 class HwType(enum.IntEnum):
@@ -89,16 +95,14 @@ class CommandField:
     name: str
     unit: str
     scale: float
+    #: Smallest encodable value in the field's unit (computed once: every command checks it).
+    minimum: float = field(init=False)
+    #: Largest encodable value in the field's unit.
+    maximum: float = field(init=False)
 
-    @property
-    def minimum(self) -> float:
-        """Smallest encodable value in the field's unit."""
-        return _I32_MIN / self.scale
-
-    @property
-    def maximum(self) -> float:
-        """Largest encodable value in the field's unit."""
-        return _I32_MAX / self.scale
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "minimum", _I32_MIN / self.scale)
+        object.__setattr__(self, "maximum", _I32_MAX / self.scale)
 
 
 #: The simple commands this codec speaks, described once (``decode_msg`` in ``comm_can.c``).
@@ -205,18 +209,21 @@ def make_command(packet: CanPacketId, node_id: int, value: float) -> Frame:
     :raises EncodeError: for an unknown packet, a bad ID, or a value that is not finite or does
         not fit the int32 field.
     """
-    field = COMMANDS.get(packet)
-    if field is None:
+    spec = COMMANDS.get(packet)
+    if spec is None:
         raise EncodeError(f"Expected one of {', '.join(p.name for p in COMMANDS)}, got {packet!r}.")
-    _check_id(node_id)
-    if not math.isfinite(value) or not field.minimum <= value <= field.maximum:
+    # Every cycle sends one of these per motor: a plain int ID in range passes with one test.
+    if not (type(node_id) is int and 0 <= node_id <= 0xFF):
+        _check_id(node_id)
+    if not math.isfinite(value) or not spec.minimum <= value <= spec.maximum:
         raise EncodeError(
-            f"Expected {field.name} for VESC {node_id} between {field.minimum:.10g} and "
-            f"{field.maximum:.10g} {field.unit}, but got {value!r}."
+            f"Expected {spec.name} for VESC {node_id} between {spec.minimum:.10g} and "
+            f"{spec.maximum:.10g} {spec.unit}, but got {value!r}."
         )
-    raw = round(value * field.scale)
-    raw = min(max(raw, _I32_MIN), _I32_MAX)  # value * scale may round just past the edge
-    return Frame(_eid(packet, node_id), _I32.pack(raw), is_extended_id=True)
+    raw = round(value * spec.scale)
+    if not _I32_MIN <= raw <= _I32_MAX:
+        raw = min(max(raw, _I32_MIN), _I32_MAX)  # value * scale may round just past the edge
+    return Frame(packet << 8 | node_id, _I32_PACK(raw), True)
 
 
 def make_set_rpm(node_id: int, erpm: float) -> Frame:
@@ -272,15 +279,19 @@ def decode(frame: Frame) -> VescMessage | None:
     :raises DecodeError: for a STATUS, STATUS_5 or PONG that is a remote frame or has the
         wrong length.
     """
-    split = _split(frame)
-    if split is None:
+    if not frame.is_extended_id:
         return None
-    packet, node_id = split
-    if packet in (CanPacketId.STATUS, CanPacketId.STATUS_5):
-        _check_data(frame, CanPacketId(packet), node_id, (8,))
-        first, second, _third = _STATUS.unpack(frame.data)
-        if packet == CanPacketId.STATUS:
-            return VescStatus(node_id, first, second / 10.0, _third / 1000.0)
+    arb = frame.arbitration_id
+    packet, node_id = arb >> 8, arb & 0xFF
+    if packet in (_STATUS_ID, _STATUS_5_ID):
+        # The per-frame path: the checks of _check_data inline, which builds the message (and
+        # the packet's enum member) only to raise.
+        data = frame.data
+        if frame.is_remote_frame or len(data) != 8:
+            _check_data(frame, CanPacketId(packet), node_id, (8,))
+        first, second, third = _STATUS_UNPACK(data)
+        if packet == _STATUS_ID:
+            return VescStatus(node_id, first, second / 10.0, third / 1000.0)
         return VescStatus5(node_id, first, second / 10.0)
     if packet == CanPacketId.PONG:
         _check_data(frame, CanPacketId.PONG, node_id, (1, 2))

@@ -150,6 +150,7 @@ class VescDriver(MotorDriver):
             (m.max_wheel_rad_s, m.gear_ratio, m.sign, o.pole_pairs)
             for m, o in zip(self.motors, self._opts, strict=True)
         )
+        self._node_ids = tuple(m.node_id for m in self.motors)
         self._track = [_Track() for _ in self.motors]
         self._enabled = False
         self._enabled_at_s: float | None = None
@@ -203,13 +204,16 @@ class VescDriver(MotorDriver):
 
     def wheel_rad_s_for(self, index: int, erpm: float) -> float:
         """The wheel speed in rad/s for an eRPM reading of motor ``index``."""
-        motor_rad_s = erpm / self._opts[index].pole_pairs / RPM_PER_RAD_S
-        return self.motors[index].motor_to_wheel_rad_s(motor_rad_s)
+        # Per-motor constants from __init__; the same arithmetic as
+        # m.motor_to_wheel_rad_s(erpm / pole_pairs / RPM_PER_RAD_S) (x * sign / gear).
+        _, gear, sign, pole_pairs = self._scale[index]
+        return erpm / pole_pairs / RPM_PER_RAD_S * sign / gear
 
     def wheel_rad_for(self, index: int, steps: int) -> float:
         """The wheel angle in rad for ``steps`` tachometer steps of motor ``index``."""
-        revs = steps / (TACHO_STEPS_PER_EREV * self._opts[index].pole_pairs)
-        return self.motors[index].motor_to_wheel_rad_s(revs * 2.0 * math.pi)
+        _, gear, sign, pole_pairs = self._scale[index]
+        revs = steps / (TACHO_STEPS_PER_EREV * pole_pairs)
+        return revs * 2.0 * math.pi * sign / gear
 
     # ----------------------------------------------------------------- hooks
 
@@ -248,14 +252,15 @@ class VescDriver(MotorDriver):
                 f"Expected {len(self.motors)} wheel speeds for the VESC driver, "
                 f"but got {len(wheel_rad_s)}."
             )
-        erpms = [self.erpm_for(i, w) for i, w in enumerate(wheel_rad_s)]
+        erpm_for = self.erpm_for
+        erpms = [erpm_for(i, w) for i, w in enumerate(wheel_rad_s)]
         if not self._enabled:
             return []
         out = []
-        for m, track, erpm in zip(self.motors, self._track, erpms, strict=True):
+        for node_id, track, erpm in zip(self._node_ids, self._track, erpms, strict=True):
             track.erpm = erpm
             track.sent_s = now_s
-            out.append(make_set_rpm(m.node_id, erpm))
+            out.append(make_set_rpm(node_id, erpm))
         return out
 
     def poll(self, now_s: float) -> list[Frame]:
@@ -267,7 +272,8 @@ class VescDriver(MotorDriver):
             if track.sent_s is None or now_s - track.sent_s >= self._opts[i].command_period_s:
                 track.sent_s = now_s
                 out.append(make_set_rpm(m.node_id, track.erpm))
-            self._hint(i, now_s)
+            if track.status_s is None or track.status5_s is None:
+                self._hint(i, now_s)  # (once both streams were seen, it has nothing to say)
         return out
 
     def on_frame(self, frame: Frame) -> bool:
@@ -290,15 +296,15 @@ class VescDriver(MotorDriver):
                 and frame.arbitration_id >> 8 in _UNUSED_STATUS
                 and self.index_of(frame.arbitration_id & 0xFF) is not None
             )
-        index = self.index_of(msg.node_id)
+        index = self._index.get(msg.node_id)  # index_of, inlined (every frame)
         if index is None:
             return False
         track = self._track[index]
-        if isinstance(msg, VescStatus):
+        if type(msg) is VescStatus:
             track.status = msg
             track.status_s = frame.timestamp_s
             track.velocity_rad_s = self.wheel_rad_s_for(index, msg.erpm)
-        elif isinstance(msg, VescStatus5):
+        elif type(msg) is VescStatus5:
             if track.tacho is not None:
                 track.steps += wrap_int32(msg.tachometer - track.tacho)
             track.tacho = msg.tachometer
@@ -310,7 +316,7 @@ class VescDriver(MotorDriver):
             # Stamped with the older of the two frames, so a stalled stream shows its age.
             stamp = min(track.status_s, track.status5_s)
             position = self.wheel_rad_for(index, track.steps)
-            self.store_feedback(index, WheelFeedback(position, track.velocity_rad_s, stamp))
+            self._feedback[index] = WheelFeedback(position, track.velocity_rad_s, stamp)
         return True
 
     # ----------------------------------------------------------------- state
