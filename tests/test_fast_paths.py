@@ -20,6 +20,7 @@ import pytest
 from drivers.cia402.enums import STATUSWORD_MASK, state_from_statusword
 from drivers.odrive.enums import AXIS_ERROR_05_FAULTS, AXIS_ERROR_FAULTS, Firmware, error_faults
 from gateway.bus import drain, to_frame, to_message
+from gateway.busload import frame_bits
 from gateway.config import load_config, parse_config
 from gateway.daemon import Daemon
 from gateway.drives import DriveSet
@@ -245,3 +246,20 @@ def test_odrive_error_faults_match_the_flag_tables(firmware: Firmware) -> None:
             expected |= DriveFault.OTHER
         got = error_faults(firmware, bits)
         assert got is expected or (got == expected and type(got) is DriveFault)
+
+
+def test_tally_counts_ids_and_bits_as_frame_bits_does(channel: str) -> None:
+    frames = [Frame(0x123, b"\x01\x02"), Frame(0x1ABCDEF, b"", True, True, 4),
+              Frame(0x123, bytes(8)), Frame(0x7FF, b"", False, True, 8), Frame(0x10, b"")]
+    gw = Gateway(load_config(None, {"interface": "virtual", "channel": channel}))
+    try:
+        gw._tally(frames, True)
+        gw._tally(frames[:2], False)
+        assert gw.id_counts == {(0x123, False, True): 2, (0x1ABCDEF, True, True): 1,
+                                (0x7FF, False, True): 1, (0x10, False, True): 1,
+                                (0x123, False, False): 1, (0x1ABCDEF, True, False): 1}
+        expected = sum(frame_bits(0 if f.is_remote_frame else f.dlc, f.is_extended_id)
+                       for f in frames + frames[:2])
+        assert gw.bits == expected
+    finally:
+        gw.close()
