@@ -24,8 +24,12 @@ own timing statistics, over the whole run, are read at the end:
   per cycle, so this is up to one period plus the cycle's cost by design.
 
 Beside them, the same-run cost of python-can alone: one cycle's worth of the same frames (4
-velocity commands sent, everything waiting drained) on the same virtual bus with the same
-simulators, in a loop of its own, gives the ratio "gateway cycle / bare python-can cycle".
+velocity commands sent, everything waiting drained) on a virtual bus with the same
+simulators, in a 1 kHz loop of its own with nothing else running (the simulators stepped
+between cycles, outside the timed part), gives the ratio "gateway cycle / bare python-can
+cycle".  With ``--sims thread`` the gateway's cost also carries the simulator thread's share
+of the GIL, so that ratio is the pessimistic one; ``--sims inline`` compares like with like.
+``tools/bench_throughput.py`` makes the same comparison in CPU time, frame for frame.
 
 Run: ``python tools/bench_loop.py [seconds] [--rt PRIORITY] [--cpu N] [--lock]
 [--sims thread|inline] [--spin-us US] [--platform]`` (default 10 s, normal scheduling).
@@ -66,20 +70,25 @@ from gateway.types import Frame, Twist
 from gateway.wgproto import TwistCommand, WgCodec
 
 
-def bare_python_can_cycle_us(channel: str, cycles: int = 5000) -> float:
-    """Median cost of sending 4 Set_Input_Vel frames and draining the bus, per cycle."""
+def bare_python_can_cycle_us(sims: SimulatedControllers, channel: str,
+                             cycles: int = 5000) -> float:
+    """Median cost of sending 4 Set_Input_Vel frames and draining the bus, per cycle, with
+    nothing else running: the simulators (on ``channel``, not started) are stepped in this
+    thread between cycles, outside the timed part, on a 1 ms grid."""
     bus = can.Bus(interface="virtual", channel=channel)
-    frames = [Frame(node << 5 | 0x0D, bytes(8)) for node in (1, 2, 3, 4)]
+    msgs = [to_message(Frame(node << 5 | 0x0D, bytes(8))) for node in (1, 2, 3, 4)]
     samples = []
     try:
+        due = time.monotonic()
         for _ in range(cycles):
             t0 = time.perf_counter()
-            for f in frames:
-                bus.send(can.Message(arbitration_id=f.arbitration_id, data=f.data,
-                                     is_extended_id=False))
+            for msg in msgs:
+                bus.send(msg)
             drain(bus)
             samples.append(time.perf_counter() - t0)
-            time.sleep(0.0005)
+            sims.step(time.monotonic())
+            due += 0.001
+            time.sleep(max(0.0, due - time.monotonic()))
     finally:
         bus.shutdown()
     return statistics.median(samples) * 1e6
@@ -127,13 +136,16 @@ class CanTwister(threading.Thread):
     random, seeded), noting ``perf_counter_ns`` just before each send.
 
     python-can's ``virtual`` bus reaches only its own process, so this is a thread of the
-    daemon's process, asleep between sends.  Counters run 0, 1, 2, ... (mod 256); twist ``k``
+    daemon's process, asleep between sends.  It sends through the simulators' bus (a
+    ``virtual`` bus is safe to share between threads): a bus of its own would get a copy of
+    every frame on the channel and, never read, grow without bound -- and with it the cost of
+    every send and of the garbage collector.  Counters run 0, 1, 2, ... (mod 256); twist ``k``
     is the k-th the gateway accepts, so no counter needs to be unique.
     """
 
-    def __init__(self, channel: str, codec: WgCodec) -> None:
+    def __init__(self, bus: can.BusABC, codec: WgCodec) -> None:
         super().__init__(name="can-twister", daemon=True)
-        self.bus = can.Bus(interface="virtual", channel=channel)
+        self.bus = bus
         self.codec = codec
         self.sent_ns: list[int] = []
         self.stop = threading.Event()
@@ -142,16 +154,13 @@ class CanTwister(threading.Thread):
         rng = random.Random(7)
         k = 0
         due = time.monotonic() + 0.5
-        try:
-            while not self.stop.wait(max(0.0, due - time.monotonic())):
-                cmd = TwistCommand(Twist(0.3 + 0.1 * (k % 3), 0.1, 0.2), k % 256)
-                msg = to_message(self.codec.encode_twist(cmd))
-                self.sent_ns.append(time.perf_counter_ns())
-                self.bus.send(msg)
-                k += 1
-                due += rng.uniform(0.015, 0.025)
-        finally:
-            self.bus.shutdown()
+        while not self.stop.wait(max(0.0, due - time.monotonic())):
+            cmd = TwistCommand(Twist(0.3 + 0.1 * (k % 3), 0.1, 0.2), k % 256)
+            msg = to_message(self.codec.encode_twist(cmd))
+            self.sent_ns.append(time.perf_counter_ns())
+            self.bus.send(msg)
+            k += 1
+            due += rng.uniform(0.015, 0.025)
 
 
 class BenchDaemon(Daemon):
@@ -256,7 +265,11 @@ def main() -> None:
     daemon.scheduler.timer = daemon.gateway.timer = timer
     sender = subprocess.Popen([sys.executable, __file__, "--client", path],
                               stdout=subprocess.PIPE, text=True)
-    twister = CanTwister(cfg.bus.channel, daemon.gateway.wg)
+    sim_bus = daemon.sims.bus if daemon.sims is not None else daemon.sim.bus if (
+        daemon.sim is not None) else None
+    if sim_bus is None:
+        sys.exit("no simulators: nothing to send CAN twists through")
+    twister = CanTwister(sim_bus, daemon.gateway.wg)
     twister.start()
     stopper = threading.Timer(args.seconds, daemon.request_stop)
     stopper.start()
@@ -286,9 +299,9 @@ def main() -> None:
                                                strict=False)]
     can_p50, can_p99, can_max = _percentiles_us(can_e2e)
     # Same simulators, same bus, python-can alone.
-    sims = SimulatedControllers(daemon.gateway.drives.simulators(), "wgb-bare").start()
+    sims = SimulatedControllers(daemon.gateway.drives.simulators(), "wgb-bare")
     try:
-        bare = bare_python_can_cycle_us("wgb-bare")
+        bare = bare_python_can_cycle_us(sims, "wgb-bare")
     finally:
         sims.shutdown()
     print(f"\nrun: {args.seconds:g} s at {stats.rate_hz:g} Hz, achieved {stats.achieved_hz:.1f} Hz,"
