@@ -20,21 +20,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from drivers.odrive import OdriveDriver, OdriveSimulator
-from drivers.odrive.codec import (
-    ENCODER_ESTIMATES,
-    SET_CONTROLLER_MODE,
-    SET_INPUT_VEL,
-    ClearErrors,
-    EncoderEstimates,
-    ErrorStatus,
-    Heartbeat,
-    MotorErrorStatus,
-    OdriveCodec,
-    Request,
-    SetAxisState,
-    SetControllerMode,
-    SetInputVel,
-)
+from drivers.odrive.codec import OdriveCodec
 from drivers.odrive.enums import (
     AXIS_ERROR_05_FAULTS,
     AXIS_ERROR_FAULTS,
@@ -46,6 +32,20 @@ from drivers.odrive.enums import (
     InputMode,
     ProcedureResult,
     error_faults,
+)
+from drivers.odrive.messages import (
+    ENCODER_ESTIMATES,
+    SET_CONTROLLER_MODE,
+    SET_INPUT_VEL,
+    ClearErrors,
+    EncoderEstimates,
+    ErrorStatus,
+    Heartbeat,
+    MotorErrorStatus,
+    Request,
+    SetAxisState,
+    SetControllerMode,
+    SetInputVel,
 )
 from gateway.bus import drain, send_frames
 from gateway.errors import ConfigError, DecodeError, EncodeError, IllegalTransitionError

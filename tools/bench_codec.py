@@ -38,7 +38,8 @@ import cantools
 from cantools.database.can import Database, Message, Signal
 from cantools.database.conversion import BaseConversion
 
-from drivers.odrive.codec import FLOAT32_MAX, SET_INPUT_VEL, EncoderEstimates, OdriveCodec
+from drivers.odrive.codec import OdriveCodec
+from drivers.odrive.messages import FLOAT32_MAX, SET_INPUT_VEL, EncoderEstimates
 from gateway.types import Frame
 
 if TYPE_CHECKING:

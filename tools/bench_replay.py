@@ -28,8 +28,9 @@ import sys
 import tempfile
 import time
 
-from drivers.odrive.codec import Heartbeat, OdriveCodec
+from drivers.odrive.codec import OdriveCodec
 from drivers.odrive.enums import AxisState
+from drivers.odrive.messages import Heartbeat
 from gateway.candump import read_lines
 from gateway.config import load_config
 from gateway.drives import DriveSet

@@ -6,7 +6,9 @@ Reference: the `ODrive CAN protocol
 
 * :mod:`drivers.odrive.enums`: command IDs, axis states, modes, error flags and their mapping
   onto :class:`gateway.types.DriveFault`.
-* :mod:`drivers.odrive.codec`: the pure :class:`OdriveCodec` and the transition table.
+* :mod:`drivers.odrive.messages`: every message's layout, the decoded messages and the
+  axis-state transition table, as data.
+* :mod:`drivers.odrive.codec`: the pure :class:`OdriveCodec`.
 * :mod:`drivers.odrive.driver`: the stateful :class:`OdriveDriver` (registry name ``odrive``).
 * :mod:`drivers.odrive.sim`: :class:`OdriveSimulator`, the device side for tests and ``--sim``.
 """

@@ -11,21 +11,54 @@ configured ``is_extended``, 29-bit IDs (node 0..0xFFFFFF).  The firmware ignores
 flag does not match its configuration, so this codec treats them as "not mine".  Every payload
 is little endian; floats are IEEE-754 float32.
 
-Each message is described once, as a :class:`Layout` (command ID, precompiled ``struct.Struct``,
-the DBC's signal names and the DLCs accepted); encoders and decoders, the tests' cantools
-cross-check and the benchmark all derive from these tables.
+Each message is described once, as a :class:`~drivers.odrive.messages.Layout` in
+:mod:`drivers.odrive.messages`; the encoders and decoders here derive from those tables.
 """
 
 from __future__ import annotations
 
-import enum
 import math
-import struct
-from dataclasses import dataclass, field
 from types import MappingProxyType
-from typing import TYPE_CHECKING, Any, TypeAlias
+from typing import TYPE_CHECKING, Any
 
 from drivers.odrive.enums import AxisState, CmdId, ControlMode, Firmware, InputMode, ProcedureResult
+from drivers.odrive.messages import (
+    CLEAR_ERRORS_05,
+    CLEAR_ERRORS_06,
+    CMD_BITS,
+    CMD_MASK,
+    CONTROLLER_ERROR_05,
+    DEFAULT_EXTENDED_ID,
+    DEFAULT_FIRMWARE,
+    ENCODER_ESTIMATES,
+    ESTOP,
+    FLOAT32_MAX,
+    GET_ERROR_06,
+    GET_MOTOR_ERROR_05,
+    HEARTBEAT,
+    MAX_EXTENDED_NODE_ID,
+    MAX_STANDARD_NODE_ID,
+    SET_AXIS_STATE,
+    SET_CONTROLLER_MODE,
+    SET_INPUT_VEL,
+    TRAJ_DONE_05,
+    TRANSITIONS,
+    U32_MAX,
+    ClearErrors,
+    Command,
+    EncoderEstimates,
+    ErrorStatus,
+    Estop,
+    Feedback,
+    Heartbeat,
+    Layout,
+    MotorErrorStatus,
+    Request,
+    SetAxisState,
+    SetControllerMode,
+    SetInputVel,
+    Step,
+)
 from gateway.codec import MotorCodec
 from gateway.errors import ConfigError, DecodeError, EncodeError, IllegalTransitionError
 from gateway.types import Frame
@@ -33,238 +66,10 @@ from gateway.types import Frame
 if TYPE_CHECKING:
     from collections.abc import Mapping
 
-#: Bits of the command ID in the arbitration ID.
-CMD_BITS = 5
-CMD_MASK = (1 << CMD_BITS) - 1
-#: Largest node ID with 11-bit identifiers (0x3F is the 0.6 broadcast address).
-MAX_STANDARD_NODE_ID = 0x3F
-#: Largest node ID with 29-bit identifiers.
-MAX_EXTENDED_NODE_ID = 0xFFFFFF
-#: Largest finite float32.
-FLOAT32_MAX = 3.4028234663852886e38
-U32_MAX = 0xFFFFFFFF
-#: Defaults of the ``firmware`` and ``extended_id`` motor-block keys.
-DEFAULT_FIRMWARE = Firmware.V0_6
-DEFAULT_EXTENDED_ID = False
-
-
-@dataclass(frozen=True, slots=True)
-class Layout:
-    """One CANSimple message, described once.
-
-    :param cmd: command ID.
-    :param name: message name in the official DBC (without the ``AxisN_`` prefix).
-    :param packer: packing of the fields, little endian.
-    :param signals: DBC signal names of the fields, in ``packer`` order.
-    :param dlcs: data lengths accepted when decoding; the first is the one encoded (the
-        payload is zero-padded up to it).
-    """
-
-    cmd: CmdId
-    name: str
-    packer: struct.Struct
-    signals: tuple[str, ...]
-    dlcs: tuple[int, ...] = (8,)
-    #: Zero bytes appended to the packed fields to reach ``dlcs[0]``.
-    padding: bytes = field(init=False, repr=False)
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "padding", bytes(self.dlcs[0] - self.packer.size))
-
-    def pack(self, *values: float) -> bytes:
-        """The payload for ``values``, zero-padded to the encoded DLC."""
-        data = self.packer.pack(*values)
-        return data + self.padding if self.padding else data
-
-
-SET_INPUT_VEL = Layout(
-    CmdId.SET_INPUT_VEL, "Set_Input_Vel", struct.Struct("<ff"), ("Input_Vel", "Input_Torque_FF")
-)
+#: Bound methods of the two messages on the hot path (a command per wheel per cycle, an
+#: estimate per wheel per feedback period): one attribute lookup fewer each.
 _SET_INPUT_VEL_PACK = SET_INPUT_VEL.packer.pack
-#: DLC 8 as in the DBC and the generated 0.6 header; the official python example sends 4 and
-#: the firmware reads only 4, so both are accepted.
-SET_AXIS_STATE = Layout(
-    CmdId.SET_AXIS_STATE, "Set_Axis_State", struct.Struct("<I"), ("Axis_Requested_State",), (8, 4)
-)
-SET_CONTROLLER_MODE = Layout(
-    CmdId.SET_CONTROLLER_MODE,
-    "Set_Controller_Mode",
-    struct.Struct("<II"),
-    ("Control_Mode", "Input_Mode"),
-)
-CLEAR_ERRORS_05 = Layout(CmdId.CLEAR_ERRORS, "Clear_Errors", struct.Struct("<"), (), (0,))
-CLEAR_ERRORS_06 = Layout(
-    CmdId.CLEAR_ERRORS, "Clear_Errors", struct.Struct("<B"), ("Identify",), (1,)
-)
-ESTOP = Layout(CmdId.ESTOP, "Estop", struct.Struct("<"), (), (0,))
-#: Bytes 5..7 differ: 0.5 motor/encoder/controller error flags (byte 7 bit 7 = trajectory done),
-#: 0.6 procedure result, trajectory done (byte 6 bit 0), reserved.
-HEARTBEAT = Layout(
-    CmdId.HEARTBEAT, "Heartbeat", struct.Struct("<IBBBB"), ("Axis_Error", "Axis_State")
-)
-ENCODER_ESTIMATES = Layout(
-    CmdId.GET_ENCODER_ESTIMATES,
-    "Get_Encoder_Estimates",
-    struct.Struct("<ff"),
-    ("Pos_Estimate", "Vel_Estimate"),
-)
-GET_ERROR_06 = Layout(
-    CmdId.GET_ERROR, "Get_Error", struct.Struct("<II"), ("Active_Errors", "Disarm_Reason")
-)
-#: The firmware sends 64 bits; the 0.5.6 DBC declares 32 (quirk 3 of the spec).
-GET_MOTOR_ERROR_05 = Layout(
-    CmdId.GET_ERROR, "Get_Motor_Error", struct.Struct("<Q"), ("Motor_Error",)
-)
-
 _ESTIMATES_UNPACK = ENCODER_ESTIMATES.packer.unpack
-_TRAJ_DONE_05 = 0x80
-_CONTROLLER_ERROR_05 = 0x01
-
-
-# ----------------------------------------------------------------------------- messages
-
-
-@dataclass(frozen=True, slots=True)
-class Heartbeat:
-    """Cyclic status of one axis (0x01).
-
-    :param node_id: sender.
-    :param axis_error: raw u32 error word (:class:`~drivers.odrive.enums.AxisError` in 0.6,
-        :class:`~drivers.odrive.enums.AxisError05` in 0.5).
-    :param axis_state: current axis state (a plain int if this firmware's enum lacks it).
-    :param trajectory_done: the trajectory-done flag.
-    :param procedure_result: 0.6 only (``SUCCESS`` in 0.5 frames).
-    :param motor_error: 0.5 only: the motor reports an error.
-    :param encoder_error: 0.5 only: the encoder reports an error.
-    :param controller_error: 0.5 only: the controller reports an error.
-    """
-
-    node_id: int
-    axis_error: int
-    axis_state: AxisState | int
-    trajectory_done: bool = False
-    procedure_result: ProcedureResult | int = ProcedureResult.SUCCESS
-    motor_error: bool = False
-    encoder_error: bool = False
-    controller_error: bool = False
-
-
-@dataclass(frozen=True, slots=True)
-class EncoderEstimates:
-    """Get_Encoder_Estimates (0x09).
-
-    :param node_id: sender.
-    :param pos_turns: position estimate in turns (float32, unwrapped by the firmware).
-    :param vel_turns_s: velocity estimate in turns/s.
-    """
-
-    node_id: int
-    pos_turns: float
-    vel_turns_s: float
-
-
-@dataclass(frozen=True, slots=True)
-class ErrorStatus:
-    """0.6 Get_Error (0x03).
-
-    :param node_id: sender.
-    :param active_errors: raw :class:`~drivers.odrive.enums.AxisError` bits now active.
-    :param disarm_reason: raw :class:`~drivers.odrive.enums.AxisError` bits of the last disarm.
-    """
-
-    node_id: int
-    active_errors: int
-    disarm_reason: int
-
-
-@dataclass(frozen=True, slots=True)
-class MotorErrorStatus:
-    """0.5 Get_Motor_Error (0x03).
-
-    :param node_id: sender.
-    :param motor_error: raw u64 :class:`~drivers.odrive.enums.MotorError05` bits.
-    """
-
-    node_id: int
-    motor_error: int
-
-
-@dataclass(frozen=True, slots=True)
-class SetInputVel:
-    """Set_Input_Vel (0x0D). :param vel_turns_s: turns/s. :param torque_ff_nm: N*m."""
-
-    node_id: int
-    vel_turns_s: float
-    torque_ff_nm: float = 0.0
-
-
-@dataclass(frozen=True, slots=True)
-class SetAxisState:
-    """Set_Axis_State (0x07). :param state: requested state (int if unknown)."""
-
-    node_id: int
-    state: AxisState | int
-
-
-@dataclass(frozen=True, slots=True)
-class SetControllerMode:
-    """Set_Controller_Mode (0x0B)."""
-
-    node_id: int
-    control_mode: int
-    input_mode: int
-
-
-@dataclass(frozen=True, slots=True)
-class ClearErrors:
-    """Clear_Errors (0x18). :param identify: 0.6 only: blink the LED."""
-
-    node_id: int
-    identify: bool = False
-
-
-@dataclass(frozen=True, slots=True)
-class Estop:
-    """Estop (0x02)."""
-
-    node_id: int
-
-
-@dataclass(frozen=True, slots=True)
-class Request:
-    """A request for a cyclic message (RTR frame, or DLC 0 data frame in 0.5)."""
-
-    node_id: int
-    cmd: CmdId
-
-
-#: Everything :meth:`OdriveCodec.decode` returns.
-Feedback: TypeAlias = Heartbeat | EncoderEstimates | ErrorStatus | MotorErrorStatus
-#: Everything :meth:`OdriveCodec.decode_command` returns.
-Command: TypeAlias = SetInputVel | SetAxisState | SetControllerMode | ClearErrors | Estop | Request
-
-
-class Step(enum.Enum):
-    """What a requested axis-state change sends."""
-
-    #: Clear_Errors, Set_Controller_Mode(velocity, input mode), Set_Axis_State(CLOSED_LOOP).
-    ARM = "arm"
-    #: Set_Input_Vel(0), Set_Axis_State(IDLE).
-    DISARM = "disarm"
-
-
-def _transitions() -> Mapping[tuple[AxisState, AxisState], Step]:
-    table = {(s, AxisState.IDLE): Step.DISARM for s in AxisState}
-    for s in (AxisState.UNDEFINED, AxisState.IDLE, AxisState.CLOSED_LOOP_CONTROL):
-        table[(s, AxisState.CLOSED_LOOP_CONTROL)] = Step.ARM
-    return MappingProxyType(table)
-
-
-#: (current axis state, requested axis state) -> step.  Disarming is allowed from every state
-#: (it must be able to stop a running calibration); arming only from IDLE, CLOSED_LOOP_CONTROL
-#: (harmless repeat) or UNDEFINED (no heartbeat seen yet), never in the middle of a
-#: calibration or homing procedure, which a new request would abort.  Any other pair is illegal.
-TRANSITIONS: Mapping[tuple[AxisState, AxisState], Step] = _transitions()
 
 
 #: Value -> member of the enums a heartbeat carries: a dict lookup per heartbeat instead of
@@ -442,7 +247,7 @@ class OdriveCodec(MotorCodec[Feedback]):
         if self.firmware is Firmware.V0_6:
             tail = (int(hb.procedure_result), int(hb.trajectory_done), 0)
         else:
-            flags7 = (_TRAJ_DONE_05 if hb.trajectory_done else 0) | int(hb.controller_error)
+            flags7 = (TRAJ_DONE_05 if hb.trajectory_done else 0) | int(hb.controller_error)
             tail = (int(hb.motor_error), int(hb.encoder_error), flags7)
         _check_u32("Axis_Error", hb.node_id, hb.axis_error)
         return self._frame(hb.node_id, HEARTBEAT, hb.axis_error, int(hb.axis_state), *tail)
@@ -522,11 +327,11 @@ class OdriveCodec(MotorCodec[Feedback]):
             node,
             error,
             axis_state,
-            bool(b7 & _TRAJ_DONE_05),
+            bool(b7 & TRAJ_DONE_05),
             ProcedureResult.SUCCESS,
             bool(b5 & 1),
             bool(b6 & 1),
-            bool(b7 & _CONTROLLER_ERROR_05),
+            bool(b7 & CONTROLLER_ERROR_05),
         )
 
     def decode_command(self, frame: Frame) -> Command | None:

@@ -2,7 +2,7 @@
 
 Reference: the `ODrive CAN protocol
 <https://docs.odriverobotics.com/v/latest/manual/can-protocol.html>`_ and
-``specs/can-protocols.md`` section 1.  Frame layouts live in :mod:`drivers.odrive.codec`.
+``specs/can-protocols.md`` section 1.  Frame layouts live in :mod:`drivers.odrive.messages`.
 
 Per motor, the driver
 
@@ -33,18 +33,7 @@ import logging
 import math
 from typing import TYPE_CHECKING, ClassVar, cast
 
-from drivers.odrive.codec import (
-    CMD_BITS,
-    CMD_MASK,
-    DEFAULT_EXTENDED_ID,
-    DEFAULT_FIRMWARE,
-    MAX_EXTENDED_NODE_ID,
-    EncoderEstimates,
-    ErrorStatus,
-    Heartbeat,
-    MotorErrorStatus,
-    OdriveCodec,
-)
+from drivers.odrive.codec import OdriveCodec
 from drivers.odrive.enums import (
     AxisError05,
     AxisState,
@@ -55,6 +44,17 @@ from drivers.odrive.enums import (
     error_class,
     error_faults,
     flag_names,
+)
+from drivers.odrive.messages import (
+    CMD_BITS,
+    CMD_MASK,
+    DEFAULT_EXTENDED_ID,
+    DEFAULT_FIRMWARE,
+    MAX_EXTENDED_NODE_ID,
+    EncoderEstimates,
+    ErrorStatus,
+    Heartbeat,
+    MotorErrorStatus,
 )
 from drivers.odrive.sim import OdriveSimulator
 from gateway.driver import MotorDriver, OptionSpec

@@ -31,18 +31,7 @@ import logging
 import math
 from typing import TYPE_CHECKING
 
-from drivers.odrive.codec import (
-    ClearErrors,
-    ErrorStatus,
-    Estop,
-    Heartbeat,
-    MotorErrorStatus,
-    OdriveCodec,
-    Request,
-    SetAxisState,
-    SetControllerMode,
-    SetInputVel,
-)
+from drivers.odrive.codec import OdriveCodec
 from drivers.odrive.enums import (
     AxisError,
     AxisError05,
@@ -53,6 +42,17 @@ from drivers.odrive.enums import (
     InputMode,
     MotorError05,
     ProcedureResult,
+)
+from drivers.odrive.messages import (
+    ClearErrors,
+    ErrorStatus,
+    Estop,
+    Heartbeat,
+    MotorErrorStatus,
+    Request,
+    SetAxisState,
+    SetControllerMode,
+    SetInputVel,
 )
 from gateway.errors import DecodeError
 from gateway.sim import DeviceSimulator, SimFault
