@@ -13,7 +13,13 @@ window time*), with a window that widens with speed: wheel ``i`` is off its comm
     |\\omega_{meas,i} - \\omega_{cmd,i}| > tol_{abs} + tol_{rel} \\, |\\omega_{cmd,i}|
 
 The time a wheel spends outside its window counts up, the time inside counts down (to no less
-than zero): a fault when the count reaches ``time_s``.  This is the counter-based debouncing of
+than zero): a fault when the count reaches ``time_s``.  A *runaway* -- a wheel turning faster,
+either way, than any command it had in the last ``time_s`` (to ``2 time_s``) plus its window
+-- counts up in proportion to how far outside it is, up to :data:`RUNAWAY_WEIGHT_MAX` times as
+fast: a wheel at full speed against a small command is stopped in a tenth of ``time_s``.  A
+wheel that only lags -- a heavy robot accelerating, a reversal without acceleration limits, a
+blocked wheel -- turns no faster than it was recently told to and counts at the plain rate,
+so slow acceleration does not trip it.  This is the counter-based debouncing of
 automotive diagnostics (AUTOSAR DEM): a wheel that only passes through its window, as an
 oscillating speed loop does a few milliseconds per swing, is still caught, while a ramp through
 the acceleration limits or a motor's own lag leaves the window only briefly, which ``time_s``
@@ -34,6 +40,10 @@ if TYPE_CHECKING:
     from collections.abc import Sequence
 
     from gateway.types import WheelFeedback
+
+
+#: The most a runaway wheel's count may advance per second (see the module docstring).
+RUNAWAY_WEIGHT_MAX = 10.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -103,6 +113,11 @@ class TrackingMonitor:
         #: Each wheel's count (s): time outside its window less time inside, at least 0.
         self._count: list[float] = []
         self._last_s: float | None = None
+        #: Each wheel's largest |command| in the current and the previous period of ``time_s``
+        #: (the runaway test's "recent commands", two floats a wheel).
+        self._peak: list[float] = []
+        self._peak_before: list[float] = []
+        self._period_start_s: float | None = None
         #: The largest error / window ratio seen so far (above 1: a wheel left its window), to
         #: tune the window against a real robot.
         self.worst_ratio = 0.0
@@ -111,6 +126,7 @@ class TrackingMonitor:
         """Forget every wheel's history (the drives stopped following commands)."""
         self._count = [0.0] * len(self._count)
         self._last_s = None
+        self._period_start_s = None
 
     def check(
         self,
@@ -127,25 +143,38 @@ class TrackingMonitor:
         limits = self.limits
         if not limits.enabled:
             return None
+        n = len(command_rad_s)
         count = self._count
-        if len(count) != len(command_rad_s):
-            count = self._count = [0.0] * len(command_rad_s)
+        if len(count) != n:
+            count = self._count = [0.0] * n
+            self._period_start_s = None
         hold = limits.time_s
         last, self._last_s = self._last_s, now_s
         dt = 0.0 if last is None else min(max(now_s - last, 0.0), 0.1 * hold)
+        start = self._period_start_s
+        if start is None:
+            self._peak, self._peak_before, self._period_start_s = [0.0] * n, [0.0] * n, now_s
+        elif now_s - start >= hold:
+            self._peak_before, self._peak, self._period_start_s = self._peak, [0.0] * n, now_s
+        peak, before = self._peak, self._peak_before
         abs_tol, ratio = limits.tolerance_rad_s, limits.tolerance_ratio
         fault: TrackingFault | None = None
         for i, (cmd, fb) in enumerate(zip(command_rad_s, feedback, strict=True)):
+            size = abs(cmd)
+            peak[i] = max(peak[i], size)
             if fb is None:
                 count[i] = 0.0
                 continue
-            window = abs_tol + ratio * abs(cmd)
-            error = abs(fb.velocity_rad_s - cmd)
+            window = abs_tol + ratio * size
+            measured = fb.velocity_rad_s
+            error = abs(measured - cmd)
             # ``not <=`` so that a NaN speed counts as outside the window.
             if not error <= window:
-                if window > 0.0 and error / window > self.worst_ratio:
-                    self.worst_ratio = error / window
-                count[i] += dt
+                off = error / window if window > 0.0 else RUNAWAY_WEIGHT_MAX
+                self.worst_ratio = max(self.worst_ratio, off)
+                # A runaway counts by how far off it is (capped); lagging at the plain rate.
+                runaway = abs(measured) > max(peak[i], before[i]) + window
+                count[i] += dt * (min(off, RUNAWAY_WEIGHT_MAX) if runaway else 1.0)
                 if fault is None and count[i] >= hold:
                     fault = TrackingFault(i, cmd, fb.velocity_rad_s, window, count[i])
             else:

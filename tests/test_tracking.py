@@ -13,7 +13,7 @@ from gateway.config import LoopConfig, parse_config
 from gateway.control import Fault, Supervisor
 from gateway.errors import ConfigError
 from gateway.kinematics import PRESETS, RobotModel
-from gateway.tracking import TrackingFault, TrackingLimits, TrackingMonitor
+from gateway.tracking import RUNAWAY_WEIGHT_MAX, TrackingFault, TrackingLimits, TrackingMonitor
 from gateway.types import DriveFault, DriveState, ErrorCode, GatewayState, MotorStatus, Twist
 from gateway.types import WheelFeedback as Fb
 
@@ -66,6 +66,35 @@ def test_a_short_excursion_is_forgiven_and_counts_down() -> None:
     got = run(mon, [10.0], [0.0], 1.0, start=0.62)
     assert got is not None
     assert got[0] == pytest.approx(0.62 + 0.3)  # the remaining 0.3 s of the count
+
+
+def test_a_runaway_counts_in_proportion_a_lagging_wheel_does_not() -> None:
+    # A wheel at 40 rad/s against a command of 2 (window 1.2): 32x outside, capped at 10x.
+    got = run(TrackingMonitor(LIMITS), [2.0], [40.0], 1.0)
+    assert got is not None and got[0] == pytest.approx(LIMITS.time_s / RUNAWAY_WEIGHT_MAX)
+    # The wrong way, faster than commanded: the same.
+    got = run(TrackingMonitor(LIMITS), [2.0], [-40.0], 1.0)
+    assert got is not None and got[0] == pytest.approx(LIMITS.time_s / RUNAWAY_WEIGHT_MAX)
+    # 2.5x outside, faster: 2.5x the plain rate.
+    got = run(TrackingMonitor(LIMITS), [10.0], [15.0], 1.0)  # window 2.0, error 5.0
+    assert got is not None and got[0] == pytest.approx(LIMITS.time_s / 2.5)
+    # Far behind its command (a heavy robot accelerating, a blocked wheel): the plain rate.
+    got = run(TrackingMonitor(LIMITS), [40.0], [0.0], 1.0)
+    assert got is not None and got[0] == pytest.approx(LIMITS.time_s)
+    # A reversal without acceleration limits: still turning at the last command's -13 rad/s
+    # against +4.5 is lagging, not running away (no faster than recently commanded).
+    mon = TrackingMonitor(LIMITS)
+    assert run(mon, [-13.0], [-13.0], 0.2) is None
+    got = run(mon, [4.5], [-13.0], 1.0, start=0.21)
+    assert got is not None and got[0] == pytest.approx(0.21 + LIMITS.time_s)
+    # ... but once the old command is more than 2 time_s in the past, it would be.
+    assert run(mon, [4.5], [4.5], 1.5, start=2.0) is None
+    got = run(mon, [4.5], [-13.0], 1.0, start=3.6)
+    assert got is not None and got[0] < 3.6 + LIMITS.time_s / 2
+    # A zero window (no tolerance at standstill): any motion counts at the most.
+    zero = dataclasses.replace(LIMITS, tolerance_rad_s=0.0)
+    got = run(TrackingMonitor(zero), [0.0], [0.1], 1.0)
+    assert got is not None and got[0] == pytest.approx(LIMITS.time_s / RUNAWAY_WEIGHT_MAX)
 
 
 def test_an_oscillation_through_the_window_is_caught() -> None:
