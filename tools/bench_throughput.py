@@ -35,8 +35,23 @@ Frames/s = (frames sent + frames received) / time spent in the timed region: the
 one core.  The gateway's state is checked to be RUNNING, and the drivers' rejection counters
 to be unchanged, at the end (so the frames were decoded, not dropped).
 
+Instructions (``--instructions``): valgrind's callgrind (``--cache-sim=no``) counts the same
+work in instructions, exact and repeatable where CPU time on a shared machine swings.  One
+process per protocol runs under callgrind: the setup above, shortened (0.2 s to enable, 0.3 s
+of twist, a pool of exactly N cycles, so every N-cycle window of the 1 kHz mix holds the same
+frames; hash seed 0), then, garbage
+collector frozen, it forks one child per loop and length (N, 2N cycles), that loop only:
+gateway = put each cycle's frames on the gateway bus's receive queue, ``Gateway.cycle``;
+python-can = put them on the bare bus's queue, send the gateway's frames of that cycle (of the
+first N, recorded in the setup), ``recv(0)`` until empty; harness = only the puts (on a queue
+nobody reads), the part common to both.  Instructions per cycle = (I(2N) - I(N)) / N, so
+setup, fork and exit cancel; the harness's is subtracted from the other two.  The parent's
+fork and wait between children add a constant drift per child, measured by empty children at
+both ends and taken out.  ``--verify`` repeats every N-cycle child and adds a 3N one, to show
+the counts repeat and (I(3N) - I(2N)) / (I(2N) - I(N)) - 1 is near 0.
+
 Run: ``.venv/bin/python tools/bench_throughput.py [--cycles N] [--repeats R]
-[--protocol NAME ...] [--profile NAME]``.
+[--protocol NAME ...] [--profile NAME] [--instructions [--instr-cycles N] [--verify]]``.
 """
 
 from __future__ import annotations
@@ -176,10 +191,11 @@ class Result:
 class Bench:
     """One protocol's gateway, its feedback pool and the python-can baseline buses."""
 
-    def __init__(self, protocol: str, clock: Callable[[], int] = time.process_time_ns) -> None:
+    def __init__(self, protocol: str, clock: Callable[[], int] = time.process_time_ns,
+                 overhead_ns: float | None = None) -> None:
         self.protocol = protocol
         self.clock = clock
-        self.overhead_ns = clock_overhead_ns(clock)
+        self.overhead_ns = clock_overhead_ns(clock) if overhead_ns is None else overhead_ns
         self.channel = f"wgtp-{protocol}"
         self.cfg = robot_config(protocol, self.channel)
         self.gw = Gateway(self.cfg, stamp_with_cycle_time=True)
@@ -195,7 +211,8 @@ class Bench:
             bus.shutdown()
         self.gw.close()
 
-    def record_pool(self, seconds: float = 2.0) -> None:
+    def record_pool(self, seconds: float = 2.0, enable_cycles: int = 2000,
+                    twist_cycles: int = 1000) -> None:
         """Enable against the simulators, then record their output per cycle."""
         sims = Sims(self.gw.drives.simulators(), open_bus("virtual", self.channel))
         try:
@@ -212,12 +229,14 @@ class Bench:
                         self.pool.append(got)
                     self.t += PERIOD_S
 
-            run(2000, False)
+            run(enable_cycles, False)
             if gw.state is not GatewayState.RUNNING:
                 raise SystemExit(f"{self.protocol}: did not enable: {gw.supervisor.reason}")
             gw.twist(TWIST, self.t, Source.SOCKET)
-            run(1000, False)
+            run(twist_cycles, False)
+            sent0 = gw.counts["frames_sent"]
             run(round(seconds / PERIOD_S), True)
+            self.sent_estimate = (gw.counts["frames_sent"] - sent0) / len(self.pool)
         finally:
             sims.bus.shutdown()
         self.gw.cycle(self.t)  # takes what the simulators sent after the last cycle
@@ -337,8 +356,25 @@ def main(argv: list[str] | None = None) -> None:
                         help="cProfile the saturated gateway cycles of one protocol")
     parser.add_argument("--sort", default="tottime",
                         help="pstats sort key of --profile (tottime, cumulative, ncalls)")
+    parser.add_argument("--instructions", action="store_true",
+                        help="count instructions per cycle with callgrind instead of CPU time")
+    parser.add_argument("--instr-cycles", type=int, default=200,
+                        help="N of --instructions (pool and differencing length)")
+    parser.add_argument("--verify", action="store_true",
+                        help="--instructions: also check repeatability and linearity")
+    parser.add_argument("--jobs", type=int, default=2, help="callgrind processes at a time")
     args = parser.parse_args(argv)
-    print(__doc__.split("\n\n", 2)[2].split("\n\nRun:")[0])
+    method = __doc__.split("\n\n", 2)[2].split("\n\nRun:")[0]
+    if args.instructions:
+        import throughput_instructions  # noqa: PLC0415 - it imports this module
+
+        print("Instructions" + method.split("\n\nInstructions", 1)[1])
+        print(f"\nPython {platform.python_version()} on {platform.machine()}, "
+              f"N = {args.instr_cycles} cycles, {args.jobs} callgrind processes at a time\n")
+        throughput_instructions.run_instructions(args.protocol or list(PROTOCOLS),
+                                                 args.instr_cycles, args.jobs, args.verify)
+        return
+    print(method.split("\n\nInstructions", 1)[0])
     print(f"\nPython {platform.python_version()} on {platform.machine()}, "
           f"{args.cycles} cycles x {args.repeats} repeats, clock {args.clock}, "
           f"load average {os.getloadavg()[0]:.2f}\n")
