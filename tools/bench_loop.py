@@ -11,7 +11,10 @@ is chosen with ``--sims``: ``thread`` (default, exactly as ``--sim``: a backgrou
 in-process stand-in for controllers that sit on the other end of a real bus).  The daemon's
 own timing statistics, over the whole run, are read at the end:
 
-* cycle cost: the work of one cycle (receive, decide, IK and limits, encode, send, odometry);
+* cycle CPU: the loop thread's CPU time (``thread_time``) in each ``Gateway.cycle``: the
+  issue's "per-cycle CPU", which time the virtual CPU is taken away does not inflate;
+* cycle cost: the wall time of one cycle's work (receive, decide, IK and limits, encode,
+  send, odometry), the daemon's own figure;
 * lateness: when a cycle started minus its deadline (p50/p99/max);
 * missed cycles: deadlines skipped after an overrun (skipped, not burst);
 * twist-to-frame latency: from the twist being sent to the daemon's socket (the client's
@@ -174,14 +177,21 @@ class BenchDaemon(Daemon):
         super().__init__(*args, **kwargs)
         self.frames_sent_ns: dict[int, int] = {}
         self.can_frames_sent_ns: list[int] = []
+        #: CPU time of the loop thread in each ``Gateway.cycle`` (ns).
+        self.cycle_cpu_ns: list[int] = []
         self._ids: list[int] = []
         self._can_twists = 0
         gw = self.gateway
         cycle = gw.cycle
 
+        cpu = self.cycle_cpu_ns
+        thread_time = time.thread_time_ns
+
         def timed_cycle(now_s: float) -> None:
             can_before = gw.counts["can_twists"]
+            c0 = thread_time()
             cycle(now_s)
+            cpu.append(thread_time() - c0)
             can_new = gw.counts["can_twists"] - can_before
             if self._ids or can_new:  # the same instant as the daemon's own "sent"
                 t = time.perf_counter_ns()
@@ -307,6 +317,9 @@ def main() -> None:
     print(f"\nrun: {args.seconds:g} s at {stats.rate_hz:g} Hz, achieved {stats.achieved_hz:.1f} Hz,"
           f" {stats.cycles} cycles, {stats.missed} missed; simulators: {args.sims}; "
           f"spin {cfg.loop.spin_us:g} us; load average at start {load:.2f}")
+    cpu_p50, cpu_p99, cpu_max = _percentiles_us(daemon.cycle_cpu_ns)
+    print(f"cycle CPU     p50 {cpu_p50:8.1f} us  p99 {cpu_p99:8.1f} us  max {cpu_max:8.1f} us  "
+          "(the loop thread's CPU time in Gateway.cycle, thread_time)")
     print(f"cycle cost    p50 {stats.cost_p50_us:8.1f} us  p99 {stats.cost_p99_us:8.1f} us  "
           f"max {stats.cost_max_us:8.1f} us")
     print(f"lateness      p50 {stats.lateness_p50_us:8.1f} us  p99 {stats.lateness_p99_us:8.1f} us"
@@ -329,7 +342,7 @@ def main() -> None:
     verdict = [
         ("p99 lateness <= 200 us", stats.lateness_p99_us <= 200.0),
         ("no missed cycles", stats.missed == 0),
-        ("cycle cost p50 <= 100 us", stats.cost_p50_us <= 100.0),
+        ("cycle CPU p50 <= 100 us", cpu_p50 <= 100.0),
         (f"twist->frames p99 <= {period_us + 200:.0f} us (socket)", e2e_p99 <= period_us + 200),
         (f"(CAN) <= {period_us + 200:.0f} us", can_p99 <= period_us + 200),
     ]
