@@ -124,6 +124,8 @@ class TrackingMonitor:
 
     def reset(self) -> None:
         """Forget every wheel's history (the drives stopped following commands)."""
+        if self._last_s is None:
+            return  # nothing checked since the last reset (called every cycle while idle)
         self._count = [0.0] * len(self._count)
         self._last_s = None
         self._period_start_s = None
