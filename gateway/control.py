@@ -22,7 +22,8 @@ Safety rules:
   follows the nearest feasible twist and counts a warning;
 * a motor that faults or stops answering, or a wheel that stays off its command longer than
   ``tracking_time_s`` (:mod:`gateway.tracking`): zero for every wheel (and disarm with
-  ``fault_action: disarm``); the error names the motor;
+  ``fault_action: disarm``, or when a speed loop closed on the host -- DJI -- would have to
+  hold zero on the feedback in doubt); the error names the motor;
 * e-stop: zero at once, disarm, and stay there until an explicit enable.
 """
 
@@ -48,6 +49,8 @@ ZERO = Twist()
 AUTO_RETRIES = 3
 #: Delay before the first automatic re-enable; the n-th waits n times as long (s).
 AUTO_RETRY_DELAY_S = 0.5
+#: Faults that put the feedback itself in doubt.
+_FEEDBACK_FAULTS = frozenset({ErrorCode.FEEDBACK_TIMEOUT, ErrorCode.TRACKING_ERROR})
 
 
 class Source(enum.Enum):
@@ -119,11 +122,15 @@ class Supervisor:
 
     :param model: the robot, to check twists.
     :param loop: the daemon's settings.
+    :param host_speed_loop: some wheel's speed loop is closed on the host (DJI): a fault
+        about feedback or tracking then releases the motors, whatever ``fault_action`` says.
     """
 
-    def __init__(self, model: RobotModel, loop: LoopConfig) -> None:
+    def __init__(self, model: RobotModel, loop: LoopConfig,
+                 host_speed_loop: bool = False) -> None:
         self.model = model
         self.cfg = loop
+        self.host_speed_loop = host_speed_loop
         self.state = GatewayState.DISABLED
         self.target = ZERO
         self._last_twist_s: float | None = None
@@ -314,9 +321,12 @@ class Supervisor:
         if state in (GatewayState.DISABLED, GatewayState.STOPPING):
             return Decision(ZERO, ramp=True, armed=False, cmd_timeout=False)
         if state is GatewayState.FAULT:
-            # Zero at once: with a motor gone, no wheel should keep driving on its own.
-            return Decision(ZERO, ramp=False, armed=self.cfg.fault_action != "disarm",
-                            cmd_timeout=False)
+            # Zero at once: with a motor gone, no wheel should keep driving on its own.  A speed
+            # loop closed on the host cannot hold zero on feedback that is missing, late or not
+            # followed (late DJI feedback makes it run away): release those motors.
+            release = self.cfg.fault_action == "disarm" or (
+                self.host_speed_loop and self.fault_code in _FEEDBACK_FAULTS)
+            return Decision(ZERO, ramp=False, armed=not release, cmd_timeout=False)
         if state is GatewayState.ENABLING:
             return Decision(ZERO, ramp=True, armed=True, cmd_timeout=False)
         timeout = self.cfg.cmd_timeout_s

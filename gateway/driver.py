@@ -46,6 +46,10 @@ class MotorDriver(abc.ABC):
     NODE_ID_RANGE: ClassVar[tuple[int, int]] = (0, 0x3F)
     #: Feedback older than this marks a motor OFFLINE (s); overridable by the ``liveness_s`` key.
     DEFAULT_LIVENESS_S: ClassVar[float] = 0.25
+    #: Whether this driver closes the wheels' speed loop on the host from the feedback it
+    #: decodes (DJI).  Holding such a wheel at zero speed needs that feedback, so on a fault
+    #: about the feedback or the tracking the gateway releases these motors instead.
+    HOST_SPEED_LOOP: ClassVar[bool] = False
 
     def __init__(self, motors: Sequence[MotorConfig]) -> None:
         self.motors: tuple[MotorConfig, ...] = tuple(motors)

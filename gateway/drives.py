@@ -44,6 +44,8 @@ class DriveSet:
             )
             for name, idx in groups.items()
         )
+        #: Whether any driver closes its speed loop on the host (see MotorDriver).
+        self.host_speed_loop = any(drv.HOST_SPEED_LOOP for drv, _ in self.groups)
         flat = [i for _, idx in self.groups for i in idx]
         self._whole = len(self.groups) == 1 and flat == list(range(len(config.motors)))
         #: Positions in the drivers' concatenated status that give model order (``None``:

@@ -80,7 +80,7 @@ class Gateway:
         self.config = config
         self.model = config.model
         self.drives = DriveSet(config)
-        self.supervisor = Supervisor(self.model, config.loop)
+        self.supervisor = Supervisor(self.model, config.loop, self.drives.host_speed_loop)
         self.odometry = Odometry(self.model)
         self.wg = WgCodec(config.loop.can_ids)
         self.counter = CounterTracker()

@@ -138,3 +138,19 @@ def test_disabled_and_stop() -> None:
     assert sup.decide(1.1).twist == Twist() and sup.decide(1.1).armed
     sup.disable()
     assert not sup.decide(1.2).armed and state_of(sup) is GatewayState.DISABLED
+
+
+@pytest.mark.parametrize(("host_loop", "state", "released"), [
+    (True, DriveState.OFFLINE, True),  # a host-side loop on missing feedback: release
+    (True, DriveState.FAULT, False),  # a fault code: the feedback is fine, hold zero
+    (False, DriveState.OFFLINE, False),  # the drive's own loop holds zero
+])
+def test_fault_releases_host_side_speed_loops_when_feedback_is_in_doubt(
+        host_loop: bool, state: DriveState, released: bool) -> None:
+    sup = Supervisor(MODEL, LoopConfig(), host_speed_loop=host_loop)
+    sup.enable(0.0)
+    sup.motors(motors(DriveState.ENABLED, DriveState.ENABLED), 0.1)
+    assert sup.motors(motors(DriveState.ENABLED, state, age=0.4), 1.0) is not None
+    d = sup.decide(1.0)
+    assert d.twist == Twist() and not d.ramp
+    assert d.armed is not released

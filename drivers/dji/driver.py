@@ -106,6 +106,7 @@ class DjiDriver(MotorDriver):
     )
     NODE_ID_RANGE: ClassVar[tuple[int, int]] = (1, 8)
     DEFAULT_LIVENESS_S: ClassVar[float] = 0.1
+    HOST_SPEED_LOOP: ClassVar[bool] = True
 
     def __init__(self, motors: Sequence[MotorConfig]) -> None:
         super().__init__(motors)
