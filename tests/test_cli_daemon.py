@@ -26,9 +26,11 @@ def test_twist_and_status(runner: CliRunner, daemon: Daemon, sock_path: str) -> 
     assert doc["odometry"]["distance"] > 0.01
     assert [m["name"] for m in doc["motors"]] == ["left", "right"]
     assert doc["timing"]["cycles"] > 10
+    assert doc["tracking"]["time_s"] == 0.5 and doc["tracking"]["worst_ratio"] >= 0.0
     result = runner.invoke(main, ["status", "--socket", sock_path])
     assert result.exit_code == 0, result.output
     assert "state: running" in result.stdout
+    assert "of the window (1 rad/s + 20 % of the command, 0.5 s)" in result.stdout
     assert "odometry: x=" in result.stdout
 
 

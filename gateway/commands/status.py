@@ -41,6 +41,11 @@ def command(
         click.echo(f"  {m['name']:<12} node {m['node_id']:<4} {m['state']:<9} "
                    f"age {'-' if age is None else f'{age * 1000:.1f} ms':>9}  "
                    f"{', '.join(m['faults']) or 'no faults'} {m['detail']}")
+    tr = reply.get("tracking")
+    if tr:  # daemons before the tracking check do not send it
+        click.echo(f"tracking: worst error {tr['worst_ratio']:.2f} of the window "
+                   f"({tr['tolerance_rad_s']:g} rad/s + {100 * tr['tolerance_ratio']:g} % of the "
+                   f"command, {tr['time_s']:g} s)")
     t = reply["timing"]
     click.echo(f"timing: {t['cycles']} cycles, {t['missed']} missed; lateness p50/p99/max "
                f"{t['lateness_p50_us']:.0f}/{t['lateness_p99_us']:.0f}/{t['lateness_max_us']:.0f} "
