@@ -16,8 +16,6 @@ patterns, remote frames.  The rules checked:
 * the pure codecs' decoders return a message or ``None`` or raise ``DecodeError``, nothing else;
 * the device simulators (``--sim``) take any frame without raising;
 * the candump log reader raises ``CandumpError`` only, and accepts only sane IDs and stamps.
-
-Strict xfails mark what needs a change outside the tests (see each reason).
 """
 
 from __future__ import annotations
