@@ -137,8 +137,8 @@ class Run:
         self.streaming = True
         self._cycle = 0
         self._inbox: list[dict[str, object]] = []
-        #: WG_Error frames seen on the bus (read every 10 cycles: the pilot's receive queue
-        #: is bounded and drops the oldest frames).
+        #: WG_Error frames seen on the bus (read every 10 cycles, which keeps the pilot's
+        #: receive queue short: it gets a copy of every frame on the bus).
         self.can_errors: list[ErrorReport] = []
 
     @property
