@@ -21,6 +21,10 @@ if TYPE_CHECKING:
     from pathlib import Path
 
 
+#: Longer than the 10 s default: each starts the daemon as a process.
+pytestmark = pytest.mark.timeout(30)
+
+
 @pytest.fixture
 def notify_socket(sock_path: str) -> Iterator[tuple[socket.socket, str]]:
     path = sock_path.replace("s.sock", "n.sock")

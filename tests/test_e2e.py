@@ -19,6 +19,10 @@ from tests.e2e_helpers import Rig, SocketPilot, path_legs, virtual_config
 if TYPE_CHECKING:
     from pathlib import Path
 
+#: Longer than the 10 s default: each drives a whole path on simulated time (about 2 s idle).
+pytestmark = pytest.mark.timeout(60)
+
+
 CONFIGS = sorted(CONFIG_DIR.glob("*.yaml"))
 
 
