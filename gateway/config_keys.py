@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING
 
 from gateway.kinematics import WheelType
 from gateway.options import OptionSpec
+from gateway.tracking import DEFAULT_LIMITS
 
 if TYPE_CHECKING:
     from collections.abc import Mapping
@@ -88,12 +89,14 @@ GATEWAY_KEYS: Mapping[str, OptionSpec] = MappingProxyType({
     "lock_memory": OptionSpec(bool, False),
     "spin_us": OptionSpec(float, 200.0, minimum=0.0, maximum=5000.0),
     "tracking_tolerance_rad_s": OptionSpec(
-        float, 1.0, minimum=0.0, help="wheel speed error allowed at standstill (wheel rad/s)"),
+        float, DEFAULT_LIMITS.tolerance_rad_s, minimum=0.0,
+        help="wheel speed error allowed at standstill (wheel rad/s)"),
     "tracking_tolerance_ratio": OptionSpec(
-        float, 0.2, minimum=0.0, help="added error allowed per rad/s of command"),
+        float, DEFAULT_LIMITS.tolerance_ratio, minimum=0.0,
+        help="added error allowed per rad/s of command"),
     "tracking_time_s": OptionSpec(
-        float, 0.5, minimum=0.0, help="how long a wheel may stay off its command before a "
-                                      "fault; 0 disables the check"),
+        float, DEFAULT_LIMITS.time_s, minimum=0.0,
+        help="how long a wheel may stay off its command before a fault; 0 disables the check"),
 })
 #: The keys of ``gateway.can_ids:``, the gateway's own CAN IDs (:class:`gateway.wgproto.CanIds`).
 CAN_ID_KEYS: Mapping[str, OptionSpec] = MappingProxyType({

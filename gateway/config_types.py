@@ -15,7 +15,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
-from gateway.tracking import TrackingLimits
+from gateway.tracking import DEFAULT_LIMITS, TrackingLimits
 from gateway.wgproto import CanIds
 
 if TYPE_CHECKING:
@@ -88,9 +88,9 @@ class LoopConfig:
     rt_cpu: int = -1
     lock_memory: bool = False
     spin_us: float = 200.0
-    tracking_tolerance_rad_s: float = 1.0
-    tracking_tolerance_ratio: float = 0.2
-    tracking_time_s: float = 0.5
+    tracking_tolerance_rad_s: float = DEFAULT_LIMITS.tolerance_rad_s
+    tracking_tolerance_ratio: float = DEFAULT_LIMITS.tolerance_ratio
+    tracking_time_s: float = DEFAULT_LIMITS.time_s
 
     @property
     def tracking(self) -> TrackingLimits:

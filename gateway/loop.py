@@ -92,6 +92,8 @@ class Gateway:
         self.period_s = 1.0 / config.loop.rate_hz
         self.prev: IkResult = self.model.ik(Twist())
         self._driven = tuple(i for i, m in enumerate(config.motors) if m is not None)
+        # Every wheel driven (most robots): the commands are the IK's speeds as they are.
+        self._all_driven = len(self._driven) == len(config.motors)
         # The last inverse-kinematics solve of the cycle (see _solve).
         self._ik_key: tuple[Twist, tuple[float | None, ...]] | None = None
         self._ik_result: IkResult = self.prev
@@ -290,7 +292,9 @@ class Gateway:
                     drives.on_frame(frame)
         sup = self.supervisor
         speeds = self.prev.wheel_rad_s
-        fault = sup.motors(self.drives.status(now_s), now_s, [speeds[i] for i in self._driven])
+        if not self._all_driven:
+            speeds = tuple(speeds[i] for i in self._driven)
+        fault = sup.motors(self.drives.status(now_s), now_s, speeds)
         if fault is not None:
             log.error("fault: %s", fault.message)
             self.report_error(fault.code, fault.message, out,

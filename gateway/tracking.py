@@ -69,6 +69,10 @@ class TrackingLimits:
         return self.tolerance_rad_s + self.tolerance_ratio * abs(command_rad_s)
 
 
+#: The defaults, which the ``gateway:`` block's ``tracking_*`` keys take from here.
+DEFAULT_LIMITS = TrackingLimits()
+
+
 @dataclass(frozen=True, slots=True)
 class TrackingFault:
     """A wheel that stayed off its command for too long.
