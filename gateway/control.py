@@ -9,7 +9,7 @@ States (:class:`~gateway.types.GatewayState`)::
 
     DISABLED --enable--> ENABLING --all motors ENABLED--> RUNNING
     RUNNING  --motor FAULT/OFFLINE, or a wheel off its command--> FAULT
-    FAULT    --all answer again, recovery "auto"--> ENABLING
+    FAULT    --all answer again, recovery "auto" (3 tries)--> ENABLING
     FAULT    --enable (recovery "manual")--> ENABLING
     any      --e-stop--> ESTOP --enable--> ENABLING
     any      --disable--> DISABLED            ENABLING --timeout--> FAULT
@@ -47,6 +47,10 @@ if TYPE_CHECKING:
 ZERO = Twist()
 #: Automatic re-enable attempts after a fault, once every motor answers again.
 AUTO_RETRIES = 3
+#: RUNNING this long without a fault gives back the automatic attempts (s): a fault that comes
+#: back soon after every recovery (a wheel pushing against an obstacle) is retried at most
+#: AUTO_RETRIES times, then waits for an explicit enable.
+AUTO_RETRY_RESET_S = 5.0
 #: Delay before the first automatic re-enable; the n-th waits n times as long (s).
 AUTO_RETRY_DELAY_S = 0.5
 #: Faults that put the feedback itself in doubt.
@@ -149,6 +153,7 @@ class Supervisor:
         self._fault_s = 0.0
         self._now_hint = 0.0
         self._auto_attempts = 0
+        self._running_since_s = 0.0
         #: The tracking-error check (active while RUNNING).
         self.tracking = TrackingMonitor(loop.tracking)
 
@@ -258,7 +263,7 @@ class Supervisor:
         if self.state is GatewayState.ENABLING:
             if statuses and all(s.state is DriveState.ENABLED for s in statuses):
                 self.state = GatewayState.RUNNING
-                self._auto_attempts = 0
+                self._running_since_s = now_s
                 self._last_twist_s = now_s
                 return None
             if now_s - self._enable_started_s > self.cfg.enable_timeout_s:
@@ -267,6 +272,8 @@ class Supervisor:
                                          f"{self.cfg.enable_timeout_s:g} s")
             return None
         if self.state is GatewayState.RUNNING:
+            if self._auto_attempts and now_s - self._running_since_s >= AUTO_RETRY_RESET_S:
+                self._auto_attempts = 0
             if bad:
                 return self._fault(bad, "")
             if command_rad_s is not None:
@@ -282,10 +289,14 @@ class Supervisor:
             and not any(s.state is DriveState.OFFLINE for s in statuses)
             and self._auto_attempts < AUTO_RETRIES
             and now_s - self._fault_s >= AUTO_RETRY_DELAY_S * (self._auto_attempts + 1)
+            and not (self.host_speed_loop and self.fault_code is ErrorCode.TRACKING_ERROR)
         ):
             # Every motor answers again: re-run the enable sequence, which clears the errors
-            # that the outage latched (an expired watchdog).  A fault that persists comes back
-            # and, after AUTO_RETRIES tries, waits for an explicit enable.
+            # that the outage latched (an expired watchdog).  A fault that persists, or comes
+            # back within AUTO_RETRY_RESET_S of each recovery, is retried AUTO_RETRIES times and
+            # then waits for an explicit enable.  So does at once a wheel that did not follow a
+            # speed loop closed on the host: that loop ran on the very feedback that failed it
+            # (a late DJI stream makes it run away again after every re-enable).
             self._auto_attempts += 1
             self._start_enable(now_s)
         return None

@@ -20,16 +20,12 @@ from __future__ import annotations
 
 import collections
 import logging
-import time
 from typing import TYPE_CHECKING
 
-import can
-
-from gateway.bus import drain, open_bus, to_message
-from gateway.busload import frame_bits
+from gateway.bus_edge import BusEdge
 from gateway.control import Accepted, Rejection, Source, Supervisor
 from gateway.drives import DriveSet
-from gateway.errors import BusError, DecodeError, GatewayError, KinematicsError
+from gateway.errors import DecodeError, GatewayError, KinematicsError
 from gateway.kinematics import Odometry, apply_limits
 from gateway.timing import LoopTimer
 from gateway.types import ConstraintCode, ErrorCode, Frame, GatewayState, Twist
@@ -46,19 +42,16 @@ from gateway.wgproto import (
 )
 
 if TYPE_CHECKING:
+    import can
+
     from gateway.config import GatewayConfig
     from gateway.kinematics import IkResult, LimitReport
 
 log = logging.getLogger(__name__)
 
-#: Consecutive failed bursts after which the bus is reopened.
-REOPEN_AFTER = 20
-#: Nominal bits of a standard / extended frame by data length 0..8 (busload.frame_bits).
-_STD_BITS = tuple(frame_bits(n, False) for n in range(9))
-_EXT_BITS = tuple(frame_bits(n, True) for n in range(9))
 
 
-class Gateway:
+class Gateway(BusEdge):
     """The gateway's state and its cycle.
 
     :param config: the validated configuration.
@@ -84,6 +77,7 @@ class Gateway:
         self.odometry = Odometry(self.model)
         self.wg = WgCodec(config.loop.can_ids)
         self.counter = CounterTracker()
+        self._last_can_twist_s: float | None = None
         self.timer = timer if timer is not None else LoopTimer(config.loop.rate_hz)
         self.record = record
         self.stamp_with_cycle_time = stamp_with_cycle_time
@@ -99,6 +93,7 @@ class Gateway:
         self._ik_result: IkResult = self.prev
         self._ik_static = not any(w.steered for w in self.model.wheels)
         self.limit_report: LimitReport | None = None
+        self._limits_idle = False  # the last limits left their input as it was
         self._armed = False
         self._last_cycle_s: float | None = None
         self._next_odom_s = 0.0
@@ -122,88 +117,6 @@ class Gateway:
         self.outbox: list[tuple[str, dict[str, object]]] = []
         self.last_error: dict[str, object] | None = None
 
-    # ----------------------------------------------------------------- bus
-
-    def _open(self) -> can.BusABC:
-        bus = self.config.bus
-        return open_bus(bus.interface, bus.channel)
-
-    def _reopen(self) -> None:
-        if not self._own_bus:
-            return
-        self.counts["bus_reopens"] += 1
-        log.warning("reopening the CAN bus after %d failed bursts", self._bus_failures)
-        try:
-            self.bus.shutdown()
-            self.bus = self._open()
-            self._since_reopen = 0  # the failure streak itself ends only when a burst goes out
-        except BusError as err:
-            log.error("reopening the CAN bus failed: %s", err)
-
-    def send(self, frames: list[Frame]) -> bool:
-        """Send one burst; a failure is counted and the next cycle tries again."""
-        if not frames:
-            return True
-        msgs = [to_message(f) for f in frames]
-        send = self.bus.send
-        try:
-            for msg in msgs:
-                send(msg)
-        except (can.CanError, OSError) as err:
-            self.counts["send_failures"] += 1
-            self._bus_failures += 1
-            self._since_reopen += 1
-            log.warning("CAN send failed (%d in a row): %s", self._bus_failures, err)
-            if self._since_reopen >= REOPEN_AFTER:
-                self._reopen()
-            return False
-        self._bus_failures = 0
-        self._since_reopen = 0
-        self.counts["frames_sent"] += len(msgs)
-        self._tally(frames, True)
-        if self.record is not None:
-            stamp = time.time()
-            for msg in msgs:
-                msg.timestamp, msg.is_rx, msg.channel = stamp, False, self.config.bus.channel
-                self.record.on_message_received(msg)
-        return True
-
-    def receive(self, now_s: float) -> list[Frame]:
-        """Everything waiting on the bus, stamped with its receive time (monotonic)."""
-        try:
-            frames = drain(self.bus, timestamp_s=now_s if self.stamp_with_cycle_time else None)
-        except BusError as err:
-            self.counts["send_failures"] += 1
-            log.warning("CAN receive failed: %s", err)
-            return []
-        if not frames:
-            return frames
-        self.counts["frames_received"] += len(frames)
-        self._tally(frames, False)
-        if self.record is not None:
-            stamp = time.time()
-            for f in frames:
-                msg = to_message(f)
-                msg.timestamp, msg.is_rx, msg.channel = stamp, True, self.config.bus.channel
-                self.record.on_message_received(msg)
-        return frames
-
-    def _tally(self, frames: list[Frame], sent: bool) -> None:
-        counts = self.id_counts
-        get = counts.get
-        bits = self.bits
-        # Every frame sent and received: one tuple unpack (Frame is a NamedTuple) instead of
-        # five attribute reads.
-        for arb, _, extended, remote, dlc, _ in frames:
-            key = (arb, extended, sent)
-            counts[key] = get(key, 0) + 1
-            n = 0 if remote else dlc
-            if 0 <= n <= 8:
-                bits += (_EXT_BITS if extended else _STD_BITS)[n]
-            else:
-                bits += frame_bits(n, extended)
-        self.bits = bits
-
     # ----------------------------------------------------------------- inputs
 
     def handle_can_twist(self, frame: Frame, now_s: float, out: list[Frame]) -> None:
@@ -216,14 +129,21 @@ class Gateway:
             return
         if cmd is None:
             return
+        # A sender silent for longer than the command timeout is gone: its next frame starts
+        # a new sequence, even if it repeats the counter it stopped at (a restarted sender).
+        last, self._last_can_twist_s = self._last_can_twist_s, now_s
+        timeout = self.config.loop.cmd_timeout_s
+        if last is not None and timeout > 0.0 and now_s - last > timeout:
+            self.counter.reset()
         kind, lost = self.counter.feed(cmd.counter)
         self.counts["can_lost"] += lost
-        if kind is CounterKind.DUPLICATE:
-            self.counts["can_duplicates"] += 1
-            return
-        self.counts["can_twists"] += 1
+        duplicate = kind is CounterKind.DUPLICATE
+        self.counts["can_duplicates" if duplicate else "can_twists"] += 1
         if cmd.flags & TwistFlags.ESTOP:
+            # Taken even from a repeated frame: an e-stop only ever stops.
             self.supervisor.estop("e-stop requested on CAN")
+            return
+        if duplicate:
             return
         if cmd.flags & TwistFlags.ENABLE:
             self.supervisor.enable(now_s)
@@ -312,10 +232,15 @@ class Gateway:
         dt = now_s - self._last_cycle_s if self._last_cycle_s is not None else self.period_s
         self._last_cycle_s = now_s
         result = self._solve(decision.twist)
-        if decision.ramp:
+        if not decision.ramp:
+            self._limits_idle = False
+        elif not (result is self.prev and self._limits_idle):
+            # (Skipped when the solve is the very result the limits passed unchanged last
+            # cycle: no change means no acceleration and no steering, the same report.)
             result, self.limit_report = apply_limits(
                 self.model, result, self.config.limits, self.prev, dt
             )
+            self._limits_idle = not self.limit_report.limited
         if decision.armed:
             self._armed = True
             out.extend(self.drives.command(result.wheel_rad_s, now_s))
@@ -337,7 +262,10 @@ class Gateway:
         if key is not None and key[0] is twist and (self._ik_static or key[1] is steer):
             return self._ik_result
         result = self.model.try_ik(twist, steer) or self.model.ik(Twist())
-        self._ik_key = (twist, steer)
+        # Steering that starts where this solve ends gives this solve again: keyed by the
+        # result's own angles, the memo holds once the wheels have turned (they become the
+        # next cycle's starting angles when the limits pass the result unchanged).
+        self._ik_key = (twist, result.steer_rad if result.steer_rad == steer else steer)
         self._ik_result = result
         return result
 
@@ -413,17 +341,6 @@ class Gateway:
         }
 
     @property
-    def bus_healthy(self) -> bool:
-        """Whether the last bursts went out (fewer failures in a row than reopen needs)."""
-        return self._bus_failures < REOPEN_AFTER
-
-    @property
     def state(self) -> GatewayState:
         """The supervisor's state."""
         return self.supervisor.state
-
-    def close(self) -> None:
-        """Close the bus if this gateway opened it (safe to call twice)."""
-        if self._own_bus and self.bus is not None:
-            self.bus.shutdown()
-            self._own_bus = False

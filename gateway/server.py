@@ -7,7 +7,8 @@ block: bad lines become :class:`~gateway.protocol.ProtocolError` events, and cli
 reading are disconnected once :attr:`max_pending_bytes_per_client` of output is queued.
 
 Access control -- the socket file's mode and the peers' credentials -- is described in
-:mod:`gateway.access`.
+:mod:`gateway.access`; the clients' side -- lines in, replies and events out, subscriptions --
+is :class:`gateway.connections.Connections`, which the server extends.
 
 More than ``max_clients`` connections: a new connection is accepted and closed at once (the
 client sees end-of-file rather than a connect that hangs in the backlog), and counted in
@@ -20,14 +21,12 @@ until the replies queued for it are sent, then closed at the start of the next p
 from __future__ import annotations
 
 import errno
-import itertools
 import logging
 import selectors
-import socket
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, TypeAlias
+from typing import TYPE_CHECKING
 
 from gateway.access import (
     ControlSocketError,
@@ -38,23 +37,18 @@ from gateway.access import (
     remove_own_socket,
     remove_stale_socket,
 )
+from gateway.connections import Connections, Events
 from gateway.errors import ConfigError
 from gateway.lifecycle import Closing
-from gateway.protocol import (
-    MAX_MESSAGE_BYTES,
-    LineFramer,
-    ProtocolError,
-    Request,
-    Topic,
-    parse_request,
-)
+from gateway.protocol import MAX_MESSAGE_BYTES
 
 if TYPE_CHECKING:
-    from collections.abc import Iterable
+    import socket
+
+__all__ = ["ControlServer", "Events", "ServerCounters"]
 
 log = logging.getLogger(__name__)
 
-_SEND_FLAGS = getattr(socket, "MSG_NOSIGNAL", 0)
 _RESOURCE_ERRNOS = frozenset({errno.EMFILE, errno.ENFILE, errno.ENOBUFS, errno.ENOMEM})
 
 
@@ -80,33 +74,7 @@ class ServerCounters:
     slow_disconnects: int = 0
 
 
-class _Client:
-    __slots__ = ("cid", "framer", "interest", "outbuf", "read_closed", "sock")
-
-    def __init__(self, cid: int, sock: socket.socket, max_message_bytes: int) -> None:
-        self.cid = cid
-        self.sock = sock
-        self.framer = LineFramer(max_message_bytes)
-        self.outbuf = bytearray()
-        self.read_closed = False  # the peer shut down its writing side
-        self.interest = selectors.EVENT_READ
-
-
-@dataclass(slots=True)
-class _Tally:
-    accepted: int = 0
-    refused: int = 0
-    too_long: int = 0
-    malformed: int = 0
-    dropped_partial: int = 0
-    slow_disconnects: int = 0
-
-
-#: What :meth:`ControlServer.poll` returns.
-Events: TypeAlias = list[tuple[int, Request | ProtocolError]]
-
-
-class ControlServer(Closing):
+class ControlServer(Connections, Closing):
     """The control socket server.
 
     :param path: the socket file (at most 107 bytes encoded).
@@ -125,8 +93,6 @@ class ControlServer(Closing):
 
     #: Most connections accepted per select round, so a connection storm cannot stall a cycle.
     ACCEPT_BATCH = 128
-    #: Bytes read from one client per select round.
-    RECV_BYTES = 65536
     #: ``listen()`` backlog asked for (the kernel caps it at ``net.core.somaxconn``).
     BACKLOG = 4096
 
@@ -149,26 +115,19 @@ class ControlServer(Closing):
                 raise ConfigError(f"control socket {name}: expected at least 1, got {value}")
         self._allowed = admitted_uids(allowed_uids)
         self.path = Path(path)
-        self.max_message_bytes = max_message_bytes
         self.max_clients = max_clients
-        self.max_pending_bytes_per_client = max_pending_bytes_per_client
         self.allowed_uids = None if allowed_uids is None else frozenset(allowed_uids)
         check_socket_path(self.path)
         remove_stale_socket(self.path)
-        self._selector = selectors.DefaultSelector()
+        selector = selectors.DefaultSelector()
         try:
             self._listener, self._identity = listen(self.path, mode, self.BACKLOG)
         except BaseException:
-            self._selector.close()
+            selector.close()
             raise
+        super().__init__(selector, max_message_bytes, max_pending_bytes_per_client)
         self._selector.register(self._listener, selectors.EVENT_READ, None)
         self._accepting = True
-        self._full = False
-        self._clients: dict[int, _Client] = {}
-        self._subscribers: dict[Topic, set[int]] = {topic: set() for topic in Topic}
-        self._ids = itertools.count(1)
-        self._half_closed: set[int] = set()
-        self._tally = _Tally()
         self._closed = False
         log.info("control socket listening on %s (mode %o)", self.path, mode)
 
@@ -206,61 +165,6 @@ class ControlServer(Closing):
             if events or remaining <= 0:
                 return events
 
-    def reply(self, client_id: int, data: bytes) -> bool:
-        """Send ``data`` to a client without blocking; what the kernel does not take is queued
-        and flushed by :meth:`poll`.
-
-        :return: ``False`` if the client is gone, or was just disconnected as too slow.
-        """
-        client = self._clients.get(client_id)
-        if client is None:
-            return False
-        if not client.outbuf:
-            sent = self._send(client, data)
-            if sent < 0:
-                return False
-            if sent == len(data):
-                return True
-            client.outbuf += memoryview(data)[sent:]
-            self._update_interest(client)
-        else:
-            client.outbuf += data
-        if len(client.outbuf) > self.max_pending_bytes_per_client:
-            self._tally.slow_disconnects += 1
-            log.warning(
-                "control client %d: %d bytes of output pending, more than %d; disconnecting",
-                client_id, len(client.outbuf), self.max_pending_bytes_per_client,
-            )
-            self._drop(client, "too slow")
-            return False
-        return True
-
-    def subscribe(self, client_id: int, topics: Iterable[Topic]) -> bool:
-        """Add topics to a client's subscriptions.  :return: ``False`` if the client is gone."""
-        client = self._clients.get(client_id)
-        if client is None or client.read_closed:
-            return False
-        for topic in topics:
-            self._subscribers[topic].add(client_id)
-        return True
-
-    def unsubscribe(self, client_id: int) -> bool:
-        """Drop all of a client's subscriptions.  :return: ``False`` if the client is gone."""
-        for ids in self._subscribers.values():
-            ids.discard(client_id)
-        return client_id in self._clients
-
-    def has_subscribers(self, topic: Topic) -> bool:
-        """Whether anyone listens to ``topic`` (to skip building unwanted events)."""
-        return bool(self._subscribers[topic])
-
-    def publish(self, topic: Topic, data: bytes) -> int:
-        """Send an event line to every subscriber of ``topic`` (see :meth:`reply`).
-
-        :return: to how many clients it was sent or queued.
-        """
-        return sum(self.reply(cid, data) for cid in tuple(self._subscribers[topic]))
-
     def fileno(self) -> int:
         """The selector's descriptor: readable while a connection, a request or a writable
         client with queued output waits (for waits finer than epoll's milliseconds)."""
@@ -275,11 +179,6 @@ class ControlServer(Closing):
             len(self._clients), t.accepted, t.refused, t.too_long, t.malformed,
             t.dropped_partial, t.slow_disconnects,
         )
-
-    @property
-    def client_ids(self) -> frozenset[int]:
-        """The ids of the connected clients."""
-        return frozenset(self._clients)
 
     def close(self) -> None:
         """Disconnect every client, stop listening and remove the socket file (if it is still
@@ -347,95 +246,4 @@ class ControlServer(Closing):
                 self._tally.refused += 1
                 conn.close()
                 return
-        client = _Client(next(self._ids), conn, self.max_message_bytes)
-        self._clients[client.cid] = client
-        self._selector.register(conn, selectors.EVENT_READ, client.cid)
-        self._tally.accepted += 1
-        log.debug("control client %d connected", client.cid)
-
-    def _read(self, client: _Client, events: Events) -> None:
-        try:
-            data = client.sock.recv(self.RECV_BYTES)
-        except (BlockingIOError, InterruptedError):
-            return
-        except OSError as err:
-            log.debug("control client %d: receive failed: %s", client.cid, err)
-            self._count_partial(client)
-            self._drop(client, str(err))
-            return
-        if data:
-            for line in client.framer.feed(data):
-                self._line(client.cid, line, events)
-            return
-        self._count_partial(client)
-        client.read_closed = True
-        self._half_closed.add(client.cid)
-        self.unsubscribe(client.cid)
-        if client.outbuf:
-            self._update_interest(client)
-        else:
-            self._drop(client, "disconnected")
-
-    def _count_partial(self, client: _Client) -> None:
-        if client.framer.pending:
-            self._tally.dropped_partial += 1
-            log.debug("control client %d: dropped %d bytes of an unfinished line",
-                      client.cid, client.framer.pending)
-
-    def _line(self, cid: int, line: bytes | ProtocolError, events: Events) -> None:
-        if isinstance(line, ProtocolError):
-            self._tally.too_long += 1
-            events.append((cid, line))
-        elif line.strip():  # blank lines are ignored
-            try:
-                events.append((cid, parse_request(line, self.max_message_bytes)))
-            except ProtocolError as err:
-                self._tally.malformed += 1
-                events.append((cid, err))
-
-    def _send(self, client: _Client, data: bytes | bytearray) -> int:
-        """Bytes the kernel took, or -1 if the client is gone (and was dropped)."""
-        try:
-            return client.sock.send(data, _SEND_FLAGS)
-        except (BlockingIOError, InterruptedError):
-            return 0
-        except OSError as err:
-            self._drop(client, f"send failed: {err}")
-            return -1
-
-    def _flush(self, client: _Client) -> None:
-        sent = self._send(client, client.outbuf)
-        if sent <= 0:
-            return
-        del client.outbuf[:sent]
-        if not client.outbuf:
-            if client.read_closed:
-                self._drop(client, "closed its end")
-            else:
-                self._update_interest(client)
-
-    def _update_interest(self, client: _Client) -> None:
-        interest = (0 if client.read_closed else selectors.EVENT_READ) | (
-            selectors.EVENT_WRITE if client.outbuf else 0
-        )
-        if interest == client.interest:
-            return
-        if not interest:
-            self._selector.unregister(client.sock)
-        elif not client.interest:
-            self._selector.register(client.sock, interest, client.cid)
-        else:
-            self._selector.modify(client.sock, interest, client.cid)
-        client.interest = interest
-
-    def _drop(self, client: _Client, reason: str) -> None:
-        if self._clients.pop(client.cid, None) is None:
-            return
-        self.unsubscribe(client.cid)
-        self._half_closed.discard(client.cid)
-        if client.interest:
-            self._selector.unregister(client.sock)
-        client.sock.close()
-        self._full = False
-        log.debug("control client %d closed: %s", client.cid, reason)
-
+        self._add(conn)

@@ -18,14 +18,15 @@ either way, than any command it had in the last ``time_s`` (to ``2 time_s``) plu
 -- counts up in proportion to how far outside it is, up to :data:`RUNAWAY_WEIGHT_MAX` times as
 fast: a wheel at full speed against a small command is stopped in a tenth of ``time_s``.  A
 wheel that only lags -- a heavy robot accelerating, a reversal without acceleration limits, a
-blocked wheel -- turns no faster than it was recently told to and counts at the plain rate,
-so slow acceleration does not trip it.  This is the counter-based debouncing of
-automotive diagnostics (AUTOSAR DEM): a wheel that only passes through its window, as an
-oscillating speed loop does a few milliseconds per swing, is still caught, while a ramp through
-the acceleration limits or a motor's own lag leaves the window only briefly, which ``time_s``
-absorbs.  One check adds at most a tenth of ``time_s``, so a stalled loop's long gap between
-two checks cannot make a fault out of one sample.  The command is the one sent the cycle before
-(the one the feedback answers).
+blocked wheel, a wheel still coasting when its motor is enabled again (the speed each wheel has
+at the first check counts as a recent command) -- turns no faster than it was recently told
+to and counts at the plain rate, so slow acceleration does not trip it. This is the
+counter-based debouncing of automotive diagnostics (AUTOSAR DEM): a wheel that only passes
+through its window, as an oscillating speed loop does a few milliseconds per swing, is still
+caught, while a ramp through the acceleration limits or a motor's own lag leaves the window
+only briefly, which ``time_s`` absorbs. One check adds at most a tenth of ``time_s``, so a
+stalled loop's long gap between two checks cannot make a fault out of one sample. The command
+is the one sent the cycle before (the one the feedback answers).
 
 Pure: no clock, no I/O; the loop calls :meth:`TrackingMonitor.check` once a cycle while the
 drives are running and :meth:`TrackingMonitor.reset` whenever they are not.
@@ -159,7 +160,12 @@ class TrackingMonitor:
         dt = 0.0 if last is None else min(max(now_s - last, 0.0), 0.1 * hold)
         start = self._period_start_s
         if start is None:
-            self._peak, self._peak_before, self._period_start_s = [0.0] * n, [0.0] * n, now_s
+            # The first check since the drives started: a wheel still turning from before (a
+            # released motor coasting when it is enabled again) is not a runaway while it
+            # slows down from there, so its speed then counts as a recent command.
+            self._peak, self._period_start_s = [0.0] * n, now_s
+            self._peak_before = [0.0 if fb is None or fb.velocity_rad_s != fb.velocity_rad_s
+                                 else abs(fb.velocity_rad_s) for fb in feedback]
         elif now_s - start >= hold:
             self._peak_before, self._peak, self._period_start_s = self._peak, [0.0] * n, now_s
         peak, before = self._peak, self._peak_before

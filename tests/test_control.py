@@ -7,9 +7,25 @@ import dataclasses
 import pytest
 
 from gateway.config import LoopConfig
-from gateway.control import AUTO_RETRY_DELAY_S, Accepted, Fault, Rejection, Supervisor
+from gateway.control import (
+    AUTO_RETRIES,
+    AUTO_RETRY_DELAY_S,
+    AUTO_RETRY_RESET_S,
+    Accepted,
+    Fault,
+    Rejection,
+    Supervisor,
+)
 from gateway.kinematics import PRESETS, RobotModel
-from gateway.types import DriveFault, DriveState, ErrorCode, GatewayState, MotorStatus, Twist
+from gateway.types import (
+    DriveFault,
+    DriveState,
+    ErrorCode,
+    GatewayState,
+    MotorStatus,
+    Twist,
+    WheelFeedback,
+)
 
 MODEL = RobotModel(PRESETS["differential"].wheels(wheel_radius=0.05, track=0.3))
 
@@ -154,3 +170,57 @@ def test_fault_releases_host_side_speed_loops_when_feedback_is_in_doubt(
     d = sup.decide(1.0)
     assert d.twist == Twist() and not d.ramp
     assert d.armed is not released
+
+
+def recover(sup: Supervisor, now_s: float) -> float:
+    """Feed healthy motors until the automatic re-enable reaches RUNNING; the time then."""
+    t = now_s
+    while state_of(sup) is GatewayState.FAULT and t < now_s + 10.0:
+        t += 0.05
+        sup.motors(motors(DriveState.DISABLED, DriveState.DISABLED), t)
+    if state_of(sup) is GatewayState.ENABLING:
+        sup.motors(motors(DriveState.ENABLED, DriveState.ENABLED), t)
+    return t
+
+
+@pytest.mark.parametrize(("running_s", "recoveries"), [
+    (1.0, AUTO_RETRIES),  # the fault comes back soon after each recovery: 3 tries, then wait
+    (AUTO_RETRY_RESET_S, 6),  # RUNNING long enough in between: every fault is retried
+])
+def test_automatic_recovery_is_bounded_unless_running_holds_in_between(
+        running_s: float, recoveries: int) -> None:
+    sup = running()
+    t = 1.0
+    for _ in range(recoveries):
+        assert sup.motors(motors(DriveState.FAULT, DriveState.ENABLED), t) is not None
+        t = recover(sup, t)
+        assert state_of(sup) is GatewayState.RUNNING
+        t += running_s
+        sup.motors(motors(DriveState.ENABLED, DriveState.ENABLED), t)
+    assert sup.motors(motors(DriveState.FAULT, DriveState.ENABLED), t) is not None
+    t = recover(sup, t)
+    if recoveries == AUTO_RETRIES:
+        assert state_of(sup) is GatewayState.FAULT  # waits for an explicit enable
+        sup.enable(t)
+        assert state_of(sup) is GatewayState.ENABLING
+    else:
+        assert state_of(sup) is GatewayState.RUNNING
+
+
+@pytest.mark.parametrize("host_loop", [True, False])
+def test_tracking_fault_of_a_host_side_speed_loop_waits_for_enable(host_loop: bool) -> None:
+    sup = Supervisor(MODEL, LoopConfig(), host_speed_loop=host_loop)
+    sup.enable(0.0)
+    sup.motors(motors(DriveState.ENABLED, DriveState.ENABLED), 0.1)
+    t, fault = 0.1, None
+    while fault is None and t < 2.0:  # the right wheel turns at 10 rad/s on a command of 0
+        t += 0.01
+        status = [dataclasses.replace(m, feedback=WheelFeedback(0.0, 10.0 * k, t))
+                  for k, m in enumerate(motors(DriveState.ENABLED, DriveState.ENABLED))]
+        fault = sup.motors(status, t, (0.0, 0.0))
+    assert fault is not None and fault.code is ErrorCode.TRACKING_ERROR
+    assert "'right'" in fault.message
+    t = recover(sup, t)
+    # The drive's own loop is re-enabled as usual; a loop closed on the host ran away on its
+    # own feedback and is not restarted without an explicit enable.
+    assert state_of(sup) is (GatewayState.FAULT if host_loop else GatewayState.RUNNING)

@@ -2,7 +2,8 @@
 
 Covers the performance changes of issue 6: precomputed pure-Python forward kinematics (against
 numpy's least squares), odometry's one-allocation SE(2) step, the loop's inverse-kinematics
-memo, the drive set's status order, ``drain`` and ``to_message``, and the daemon's wait, which
+memo and the limits it skips while nothing changes, the drive set's status order, ``drain``
+and ``to_message``, and the daemon's wait, which
 must never ask epoll (whole milliseconds, rounded up) for more time than is left.  Also the
 drivers' per-frame shortcuts: received frames built past ``Frame.__new__``, the CiA 402
 statusword table and the ODrive error-word mapping on plain ints.
@@ -10,29 +11,36 @@ statusword table and the ODrive error-word mapping on plain ints.
 
 from __future__ import annotations
 
+import copy
 import math
 import random
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import can
 import pytest
 
+import gateway.loop
 from drivers.cia402.enums import STATUSWORD_MASK, state_from_statusword
 from drivers.odrive.enums import AXIS_ERROR_05_FAULTS, AXIS_ERROR_FAULTS, Firmware, error_faults
 from gateway.bus import drain, to_frame, to_message
 from gateway.busload import frame_bits
 from gateway.config import load_config, parse_config
+from gateway.control import Source
 from gateway.daemon import Daemon
 from gateway.drives import DriveSet
 from gateway.errors import KinematicsError
+from gateway.kinematics import apply_limits
 from gateway.kinematics.odometry import Pose, _advance, compose, se2_exp
 from gateway.loop import Gateway
 from gateway.sdnotify import SystemdNotifier
-from gateway.types import DriveFault, Frame, Twist
+from gateway.types import DriveFault, Frame, GatewayState, Twist
 from tests.conftest import CONFIG_DIR
+from tests.e2e_helpers import Rig, virtual_config
 
 if TYPE_CHECKING:
     from pathlib import Path
+
+    from gateway.kinematics import IkResult, RobotModel
 
 CONFIGS = [None, *sorted(CONFIG_DIR.glob("*.yaml"))]
 
@@ -100,6 +108,67 @@ def test_ik_memo_follows_the_target_object(channel: str) -> None:
         assert gw._solve(Twist(0.0, 0.5, 0.0)) == cfg.model.ik(Twist())  # infeasible -> zero
     finally:
         gw.close()
+
+
+class _AlwaysLimited(Gateway):
+    """A gateway that runs the limits every cycle (the general path): its solves are new
+    objects, never the command of the cycle before."""
+
+    def _solve(self, twist: Twist) -> IkResult:
+        return copy.copy(super()._solve(twist))
+
+
+@pytest.mark.parametrize("robot", ["mecanum.yaml", "swerve.yaml", "ackermann.yaml"])
+def test_limits_skipped_only_when_they_would_change_nothing(
+        channel: str, robot: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    rigs = [Rig(virtual_config(CONFIG_DIR / robot, f"{channel}-{k}")) for k in range(2)]
+    rigs[1].gw.__class__ = _AlwaysLimited
+    fast_model = rigs[0].gw.model
+    calls = {"fast": 0}
+    real = apply_limits
+
+    def counting(model: RobotModel, *args: Any) -> Any:
+        calls["fast"] += model is fast_model
+        return real(model, *args)
+
+    monkeypatch.setattr(gateway.loop, "apply_limits", counting)
+    rng = random.Random(3)
+    try:
+        for rig in rigs:
+            rig.enable()
+        cycles = calls["fast"] = 0
+        for k in range(20):
+            if k % 7 == 6:  # an e-stop, which jumps to zero past the limits, and back
+                for rig in rigs:
+                    rig.gw.supervisor.estop()
+                for _ in range(3):
+                    lockstep(rigs)
+                for rig in rigs:
+                    rig.gw.supervisor.enable(rig.t)
+                while rigs[0].gw.state is not GatewayState.RUNNING:
+                    lockstep(rigs)
+            twist = Twist(rng.uniform(-0.6, 0.6), 0.0, rng.uniform(-0.8, 0.8))
+            hold = rng.choice((1, 3, 25, 80))  # ramps that finish, and ones cut short
+            for rig in rigs:
+                rig.gw.twist(twist, rig.t, Source.INTERNAL)
+            for _ in range(hold):
+                lockstep(rigs)
+                cycles += 1
+        assert all(rig.gw.state is GatewayState.RUNNING for rig in rigs)
+        assert calls["fast"] <= 0.75 * cycles  # the shortcut was taken (runs are deterministic)
+    finally:
+        for rig in rigs:
+            rig.close()
+
+
+def lockstep(rigs: list[Rig]) -> None:
+    """One cycle of both rigs; the same commands and limit reports come out."""
+    for rig in rigs:
+        rig.advance(rig.period)
+    fast, slow = (rig.gw for rig in rigs)
+    assert fast.state is slow.state
+    assert fast.prev == slow.prev
+    assert fast.limit_report == slow.limit_report
 
 
 def test_drive_set_status_in_model_order_across_drivers() -> None:

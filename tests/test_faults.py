@@ -439,6 +439,10 @@ def test_wheel_that_stops_following_faults_and_recovers(run: Run) -> None:
     assert run.victim.model.armed, "the device must still read as armed"
     assert_tracking_fault(run, samples, t0)
     run.victim.clear(SimFault.STALL)
+    if run.rig.gw.drives.host_speed_loop:
+        # DJI: the failed speed loop is wheelgate's own; no automatic re-enable.
+        assert all(s.state is GatewayState.FAULT for s in run.drive(2.0))
+        run.pilot.send(op="enable")
     run.until(GatewayState.RUNNING, within_s=1.5)
     run.drive(1.0)
     assert run.following()
@@ -468,14 +472,19 @@ def test_dji_wheel_not_following_on_late_feedback_is_detected_and_released(run: 
     assert run.rig.gw.supervisor.tracking.worst_ratio > 2.0  # it did oscillate
     samples += run.drive(0.02)
     assert_tracking_fault(run, samples, t0)
-    # The host-side speed loop cannot hold zero on this feedback: zero current until the
-    # automatic retry, not a speed loop closed on late feedback.
+    # The host-side speed loop cannot hold zero on this feedback: zero current, and no
+    # automatic re-enable into the same loop (it would run away again).
     esc = run.victim
     assert isinstance(esc, DjiSimulator)
-    for _ in range(round(0.4 * RATE_HZ)):
+    for _ in range(round(3.0 * RATE_HZ)):
         run.drive(1 / RATE_HZ)
         assert run.state is GatewayState.FAULT
         assert esc.command_raw == 0
+    run.victim.clear(SimFault.LATE)
+    run.pilot.send(op="enable")
+    run.until(GatewayState.RUNNING, within_s=1.5)
+    run.drive(1.0)
+    assert run.following()
 
 
 @pytest.mark.parametrize("run", ["odrive"], indirect=True)

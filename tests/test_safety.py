@@ -13,8 +13,8 @@ import can
 import pytest
 
 from gateway.bus import drain
+from gateway.bus_edge import REOPEN_AFTER
 from gateway.control import AUTO_RETRIES
-from gateway.loop import REOPEN_AFTER
 from gateway.sim import SimFault
 from gateway.types import ConstraintCode, ErrorCode, GatewayState, Twist
 from gateway.wgproto import TwistFlags
@@ -212,6 +212,35 @@ def test_estop_from_socket_and_can_zeroes_at_once_and_latches(rig: Rig, pilot: S
         rig.advance(1.0)
         assert state(rig) is GatewayState.RUNNING
     assert rig.gw.supervisor.counts["estops"] == 2
+
+
+def test_repeated_can_frame_is_ignored_but_never_an_estop(rig: Rig) -> None:
+    rig.send_can_twist(Twist(0.2))
+    rig.advance(0.3)
+    assert min(speeds(rig)) > 5.0
+    rig.counter -= 1  # the same counter again: a repeated frame
+    rig.send_can_twist(Twist(-0.2))
+    rig.advance(0.1)
+    assert rig.gw.counts["can_duplicates"] == 1
+    assert min(speeds(rig)) > 5.0  # the repeat did not command anything
+    rig.counter -= 1
+    rig.send_can_twist(Twist(), TwistFlags.ESTOP)
+    rig.advance(rig.period)
+    assert state(rig) is GatewayState.ESTOP
+    assert rig.gw.counts["can_duplicates"] == 2
+
+
+def test_can_sender_restarting_after_the_command_timeout_is_followed(rig: Rig) -> None:
+    rig.send_can_twist(Twist(0.2))  # counter 0
+    rig.advance(0.3)
+    assert min(speeds(rig)) > 5.0
+    rig.advance(1.0)  # silent past cmd_timeout_s (0.5): ramped to zero
+    assert speeds(rig) == (0.0, 0.0)
+    rig.counter = 0  # restarted: its sequence begins where the old one stopped
+    rig.send_can_twist(Twist(0.2))
+    rig.advance(0.3)
+    assert rig.gw.counts["can_duplicates"] == 0
+    assert min(speeds(rig)) > 5.0
 
 
 def test_bus_trouble_is_retried_counted_and_reopens(rig: Rig, pilot: SocketPilot,

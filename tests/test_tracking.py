@@ -68,18 +68,25 @@ def test_a_short_excursion_is_forgiven_and_counts_down() -> None:
     assert got[0] == pytest.approx(0.62 + 0.3)  # the remaining 0.3 s of the count
 
 
+def at_rest(limits: TrackingLimits = LIMITS, wheels: int = 1) -> TrackingMonitor:
+    """A monitor whose first check (at t = 0) saw every wheel standing still."""
+    mon = TrackingMonitor(limits)
+    assert mon.check([0.0] * wheels, [fb(0.0)] * wheels, 0.0) is None
+    return mon
+
+
 def test_a_runaway_counts_in_proportion_a_lagging_wheel_does_not() -> None:
     # A wheel at 40 rad/s against a command of 2 (window 1.2): 32x outside, capped at 10x.
-    got = run(TrackingMonitor(LIMITS), [2.0], [40.0], 1.0)
+    got = run(at_rest(), [2.0], [40.0], 1.0)
     assert got is not None and got[0] == pytest.approx(LIMITS.time_s / RUNAWAY_WEIGHT_MAX)
     # The wrong way, faster than commanded: the same.
-    got = run(TrackingMonitor(LIMITS), [2.0], [-40.0], 1.0)
+    got = run(at_rest(), [2.0], [-40.0], 1.0)
     assert got is not None and got[0] == pytest.approx(LIMITS.time_s / RUNAWAY_WEIGHT_MAX)
     # 2.5x outside, faster: 2.5x the plain rate.
-    got = run(TrackingMonitor(LIMITS), [10.0], [15.0], 1.0)  # window 2.0, error 5.0
+    got = run(at_rest(), [10.0], [15.0], 1.0)  # window 2.0, error 5.0
     assert got is not None and got[0] == pytest.approx(LIMITS.time_s / 2.5)
     # Far behind its command (a heavy robot accelerating, a blocked wheel): the plain rate.
-    got = run(TrackingMonitor(LIMITS), [40.0], [0.0], 1.0)
+    got = run(at_rest(), [40.0], [0.0], 1.0)
     assert got is not None and got[0] == pytest.approx(LIMITS.time_s)
     # A reversal without acceleration limits: still turning at the last command's -13 rad/s
     # against +4.5 is lagging, not running away (no faster than recently commanded).
@@ -93,8 +100,23 @@ def test_a_runaway_counts_in_proportion_a_lagging_wheel_does_not() -> None:
     assert got is not None and got[0] < 3.6 + LIMITS.time_s / 2
     # A zero window (no tolerance at standstill): any motion counts at the most.
     zero = dataclasses.replace(LIMITS, tolerance_rad_s=0.0)
-    got = run(TrackingMonitor(zero), [0.0], [0.1], 1.0)
+    got = run(at_rest(zero), [0.0], [0.1], 1.0)
     assert got is not None and got[0] == pytest.approx(LIMITS.time_s / RUNAWAY_WEIGHT_MAX)
+
+
+def test_a_wheel_coasting_when_the_check_starts_lags_until_it_speeds_up() -> None:
+    """Motors enabled again while their wheels still coast (a released DJI ESC): braking
+    from the speed a wheel had at the first check is lagging, not running away."""
+    mon = TrackingMonitor(LIMITS)
+    coasting = [fb(-8.5, 0.0)]
+    assert mon.check([0.0], coasting, 0.0) is None
+    got = run(mon, [0.0], [-8.5], 1.0)  # it never slows down: the plain rate
+    assert got is not None and got[0] == pytest.approx(LIMITS.time_s)
+    mon = TrackingMonitor(LIMITS)
+    assert mon.check([0.0], coasting, 0.0) is None
+    assert run(mon, [0.0], [-8.0], 0.1) is None  # braking
+    got = run(mon, [0.0], [-20.0], 1.0, start=0.11)  # then faster than ever: a runaway
+    assert got is not None and got[0] < 0.11 + LIMITS.time_s / 4
 
 
 def test_an_oscillation_through_the_window_is_caught() -> None:

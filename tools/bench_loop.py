@@ -37,8 +37,9 @@ of the GIL, so that ratio is the pessimistic one; ``--sims inline`` compares lik
 Run: ``python tools/bench_loop.py [seconds] [--rt PRIORITY] [--cpu N] [--lock]
 [--sims thread|inline] [--spin-us US] [--platform]`` (default 10 s, normal scheduling).
 ``--platform`` then runs the same scheduler with no work for as long, in the same thread and
-policy: the misses and tails the machine causes by itself (on a VM, stalls of the virtual
-CPU).  ``--rt`` runs
+policy, and rt-tests' ``cyclictest`` (C) at the same rate and priority when it is installed:
+the misses and tails the machine causes by itself (on a VM, stalls of the virtual CPU); CPU
+time the hypervisor took (``/proc/stat`` steal) is printed for every part.  ``--rt`` runs
 the loop thread with SCHED_FIFO (root or LimitRTPRIO), as ``gateway.rt_priority`` does.
 Without SCHED_FIFO and on a shared machine, tails are dominated by the scheduler; the p50
 figures and the ratio are the comparable ones.
@@ -61,6 +62,7 @@ import time
 from typing import Any
 
 import can
+from platform_floor import CyclicTest, cyclictest, empty_loop, steal_s
 
 from gateway.bus import drain, to_message
 from gateway.config import load_config
@@ -68,7 +70,7 @@ from gateway.daemon import Daemon
 from gateway.protocol import ProtocolError, Request, TwistRequest, encode_line
 from gateway.sdnotify import SystemdNotifier
 from gateway.simbus import SimulatedControllers
-from gateway.timing import LoopTimer, Scheduler, TimingStats
+from gateway.timing import LoopTimer
 from gateway.types import Frame, Twist
 from gateway.wgproto import TwistCommand, WgCodec
 
@@ -215,18 +217,6 @@ class BenchDaemon(Daemon):
             self.sims.step(time.monotonic())
 
 
-def empty_loop(seconds: float, rate_hz: float, spin_s: float) -> TimingStats:
-    """The daemon's scheduler with no work at all, in this thread (same scheduling policy):
-    the misses and tails the machine itself causes."""
-    timer = LoopTimer(rate_hz, capacity=int(seconds * rate_hz) + 100)
-    sched = Scheduler(rate_hz, spin_s=spin_s, timer=timer)
-    end = time.perf_counter() + seconds
-    while time.perf_counter() < end:
-        sched.wait_next()
-        sched.end_cycle()
-    return timer.snapshot()
-
-
 def _percentiles_us(values_ns: list[int]) -> tuple[float, float, float]:
     ordered = sorted(values_ns)
     if not ordered:
@@ -284,6 +274,7 @@ def main() -> None:
     stopper = threading.Timer(args.seconds, daemon.request_stop)
     stopper.start()
     load = os.getloadavg()[0]
+    steal_start = steal_s()
     try:
         daemon.run()
     finally:
@@ -298,6 +289,7 @@ def main() -> None:
             sender.kill()
             out, _ = sender.communicate()
     stats = timer.snapshot()
+    steal_end = steal_s()
     sent_ns: dict[int, int] = {}
     for line in out.splitlines():
         if line.strip():
@@ -347,11 +339,28 @@ def main() -> None:
         (f"(CAN) <= {period_us + 200:.0f} us", can_p99 <= period_us + 200),
     ]
     print("targets: " + "; ".join(f"{name}: {'yes' if ok else 'NO'}" for name, ok in verdict))
+    print(f"CPU time stolen by the hypervisor during the run: {_stolen(steal_start, steal_end)}")
     if args.platform:
+        steal_start = steal_s()
         base = empty_loop(args.seconds, cfg.loop.rate_hz, cfg.loop.spin_us * 1e-6)
         print(f"platform floor, the same scheduler with no work for {args.seconds:g} s in this "
               f"thread: {base.missed} missed; lateness p50 {base.lateness_p50_us:.1f} us, p99 "
-              f"{base.lateness_p99_us:.1f} us, max {base.lateness_max_us:.1f} us")
+              f"{base.lateness_p99_us:.1f} us, max {base.lateness_max_us:.1f} us; stolen "
+              f"{_stolen(steal_start, steal_s())}")
+        steal_start = steal_s()
+        ct = cyclictest(args.seconds, cfg.loop.rate_hz, args.rt)
+        if isinstance(ct, CyclicTest):
+            print(f"platform floor in C, cyclictest {ct.command}: {ct.skipped} deadlines skipped "
+                  f"({ct.loops} of {ct.expected} wake-ups), {ct.late} a period or more late, "
+                  f"worst latency {ct.max_us} us; stolen {_stolen(steal_start, steal_s())}")
+        else:
+            print(f"platform floor in C: {ct}")
+
+
+def _stolen(start: float | None, end: float | None) -> str:
+    if start is None or end is None:
+        return "unknown (no steal column in /proc/stat)"
+    return f"{(end - start) * 1e3:.0f} ms (/proc/stat steal, all CPUs, 10 ms resolution)"
 
 
 if __name__ == "__main__":

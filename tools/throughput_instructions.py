@@ -24,8 +24,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import callgrind
-from bench_throughput import PERIOD_S, PROTOCOLS, Bench
 from can.interfaces.virtual import VirtualBus
+from throughput_rig import PERIOD_S, PROTOCOLS, Bench
 
 from gateway.types import GatewayState
 

@@ -9,6 +9,8 @@ Reference: the `ODrive CAN protocol
 * :mod:`drivers.odrive.messages`: every message's layout, the decoded messages and the
   axis-state transition table, as data.
 * :mod:`drivers.odrive.codec`: the pure :class:`OdriveCodec`.
+* :mod:`drivers.odrive.options`: the protocol keys of a motor block and the bus-wide settings.
+* :mod:`drivers.odrive.faults`: heartbeat and error-reply words mapped onto faults and text.
 * :mod:`drivers.odrive.driver`: the stateful :class:`OdriveDriver` (registry name ``odrive``).
 * :mod:`drivers.odrive.sim`: :class:`OdriveSimulator`, the device side for tests and ``--sim``.
 """

@@ -2,7 +2,9 @@
 
 Reference: the `ODrive CAN protocol
 <https://docs.odriverobotics.com/v/latest/manual/can-protocol.html>`_ and
-``specs/can-protocols.md`` section 1.  Frame layouts live in :mod:`drivers.odrive.messages`.
+``specs/can-protocols.md`` section 1.  Frame layouts live in :mod:`drivers.odrive.messages`,
+the protocol keys in :mod:`drivers.odrive.options`, and the mapping of reported errors onto
+faults in :mod:`drivers.odrive.faults`.
 
 Per motor, the driver
 
@@ -34,31 +36,21 @@ import math
 from typing import TYPE_CHECKING, ClassVar, cast
 
 from drivers.odrive.codec import OdriveCodec
-from drivers.odrive.enums import (
-    AxisError05,
-    AxisState,
-    CmdId,
-    Firmware,
-    InputMode,
-    MotorError05,
-    error_class,
-    error_faults,
-    flag_names,
-)
+from drivers.odrive.enums import AxisState, CmdId, InputMode
+from drivers.odrive.faults import error_query_adds_detail, error_reply_detail, heartbeat_faults
 from drivers.odrive.messages import (
     CMD_BITS,
     CMD_MASK,
-    DEFAULT_EXTENDED_ID,
-    DEFAULT_FIRMWARE,
     MAX_EXTENDED_NODE_ID,
     EncoderEstimates,
     ErrorStatus,
     Heartbeat,
     MotorErrorStatus,
 )
+from drivers.odrive.options import OPTIONS, bus_settings
 from drivers.odrive.sim import OdriveSimulator
 from gateway.driver import MotorDriver, OptionSpec
-from gateway.errors import ConfigError, DecodeError, EncodeError, IllegalTransitionError
+from gateway.errors import DecodeError, EncodeError, IllegalTransitionError
 from gateway.types import DriveFault, DriveState, WheelFeedback
 
 if TYPE_CHECKING:
@@ -80,35 +72,7 @@ class OdriveDriver(MotorDriver):
         repeated node ID, or motors that disagree on ``firmware`` or ``extended_id``.
     """
 
-    OPTIONS: ClassVar[Mapping[str, OptionSpec]] = {
-        "firmware": OptionSpec(
-            str,
-            DEFAULT_FIRMWARE.value,
-            choices=tuple(f.value for f in Firmware),
-            help="firmware family: 0.5 (ODrive v3.x) or 0.6 (ODrive Pro, S1, Micro)",
-        ),
-        "extended_id": OptionSpec(
-            bool, DEFAULT_EXTENDED_ID, help="29-bit identifiers (axis.config.can.is_extended)"
-        ),
-        "input_mode": OptionSpec(
-            int,
-            int(InputMode.PASSTHROUGH),
-            choices=(int(InputMode.PASSTHROUGH), int(InputMode.VEL_RAMP)),
-            help="controller input mode: 1 passthrough, 2 vel_ramp (the axis ramps speed)",
-        ),
-        "encoder_request": OptionSpec(
-            str,
-            "cyclic",
-            choices=("cyclic", "rtr"),
-            help="cyclic encoder estimates, or an RTR request on every poll",
-        ),
-        "liveness_s": OptionSpec(
-            float,
-            MotorDriver.DEFAULT_LIVENESS_S,
-            minimum=0.001,
-            help="seconds without heartbeat or encoder estimates before a motor is OFFLINE",
-        ),
-    }
+    OPTIONS: ClassVar[Mapping[str, OptionSpec]] = OPTIONS
     #: Node IDs with 11-bit identifiers (0x3F is the 0.6 broadcast address).
     NODE_ID_RANGE: ClassVar[tuple[int, int]] = (0, 0x3E)
     #: Node IDs with 29-bit identifiers (``extended_id: true``).
@@ -123,15 +87,7 @@ class OdriveDriver(MotorDriver):
     def __init__(self, motors: Sequence[MotorConfig]) -> None:
         super().__init__(motors)
         opts = [self.validate_options(m.options, f"motor {m.wheel!r}") for m in self.motors]
-        first = opts[0] if opts else {"firmware": DEFAULT_FIRMWARE.value, "extended_id": False}
-        for m, o in zip(self.motors, opts, strict=True):
-            for key in ("firmware", "extended_id"):
-                if o[key] != first[key]:
-                    raise ConfigError(
-                        f"motor {m.wheel!r}.{key}: expected {first[key]!r} like motor "
-                        f"{self.motors[0].wheel!r} on the same ODrive bus, got {o[key]!r}"
-                    )
-        self.codec = OdriveCodec(Firmware(first["firmware"]), bool(first["extended_id"]))
+        self.codec = OdriveCodec(*bus_settings(self.motors, opts))
         self._extended_id = self.codec.extended_id
         if opts:
             self.liveness_s = cast("float", opts[0]["liveness_s"])
@@ -363,33 +319,17 @@ class OdriveDriver(MotorDriver):
             self.set_fault(i, DriveFault.NONE)
             self._set_axis_state(i, hb.axis_state)
             return
-        faults = error_faults(fw, hb.axis_error)
-        parts = []
-        if hb.axis_error:
-            names = flag_names(error_class(fw), hb.axis_error)
-            parts.append(f"axis error {hb.axis_error:#010x}: {names}")
-        for flag, fault, name in (
-            (hb.motor_error, DriveFault.MOTOR, "motor"),
-            (hb.encoder_error, DriveFault.ENCODER, "encoder"),
-            (hb.controller_error, DriveFault.CONTROLLER, "controller"),
-        ):
-            if flag:
-                faults |= fault
-                parts.append(f"{name} error flag")
+        faults, detail = heartbeat_faults(fw, hb)
         if faults and not self._faults[i]:
             m = self.motors[i]
-            log.warning('ODrive node %d ("%s") reports %s', m.node_id, m.wheel, "; ".join(parts))
-            self._error_request_due[i] = (
-                fw is Firmware.V0_6
-                or hb.motor_error
-                or bool(hb.axis_error & AxisError05.MOTOR_FAILED)
-            )
+            log.warning('ODrive node %d ("%s") reports %s', m.node_id, m.wheel, detail)
+            self._error_request_due[i] = error_query_adds_detail(fw, hb)
         if faults and self._enabling[i] and t - self._enable_sent_s[i] > self.ENABLE_GRACE_S:
             self._enabling[i] = False
         if not faults:
             self._error_detail[i] = ""
             self._error_request_due[i] = False
-        self._axis_detail[i] = "; ".join(parts)
+        self._axis_detail[i] = detail
         self._publish_fault(i, faults)
         self._set_axis_state(i, hb.axis_state)
 
@@ -400,13 +340,7 @@ class OdriveDriver(MotorDriver):
         self.set_armed(i, armed)
 
     def _on_error_status(self, i: int, msg: ErrorStatus | MotorErrorStatus) -> None:
-        if isinstance(msg, ErrorStatus):
-            cls = error_class(self.codec.firmware)
-            self._error_detail[i] = f"disarm reason: {flag_names(cls, msg.disarm_reason)}"
-        else:
-            self._error_detail[i] = (
-                f"motor error {msg.motor_error:#x}: {flag_names(MotorError05, msg.motor_error)}"
-            )
+        self._error_detail[i] = error_reply_detail(self.codec.firmware, msg)
         self._publish_fault(i, self._faults[i])
 
     def _publish_fault(self, i: int, faults: DriveFault) -> None:

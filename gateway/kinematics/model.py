@@ -20,86 +20,44 @@ arrays cost more than the arithmetic).  numpy is used at build time and on the e
 * **Forward kinematics** (:meth:`RobotModel.fk`): wheel speeds (and steering angles) -> twist
   by least squares over every rolling and sliding equation, with the residual in m/s as a slip
   indicator for redundant drives.
+
+The result types live in :mod:`gateway.kinematics.results` (re-exported here), the wheel check
+in :mod:`gateway.kinematics.validation`, the constraint checks and the nearest-feasible search
+in :mod:`gateway.kinematics.feasibility`, and the least-squares machinery of forward kinematics
+in :mod:`gateway.kinematics.forward`.
 """
 
 from __future__ import annotations
 
-import itertools
 import math
-from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from gateway.errors import InfeasibleTwistError, KinematicsError
-from gateway.kinematics.lsq import FkPlan
+from gateway.kinematics.feasibility import (
+    LIMIT_SLACK,
+    STILL_M_S,
+    Violation,
+    group_violation,
+    limit_excess,
+    nearest_feasible,
+)
+from gateway.kinematics.forward import FkSolver
+from gateway.kinematics.results import FkResult, IkResult, Mobility
+from gateway.kinematics.validation import validate_wheel
 from gateway.kinematics.wheels import CONSTRAINING, Wheel, WheelType
 from gateway.types import Twist
 
 if TYPE_CHECKING:
-    from collections.abc import Iterable, Sequence
+    from collections.abc import Sequence
 
     from numpy.typing import NDArray
 
-#: Below this contact-point speed (m/s) a steered wheel keeps its angle.
-_STILL_M_S = 1e-9
-#: Slack on steering limits (rad) so that boundary projections count as feasible.
-_LIMIT_SLACK = 1e-9
+    from gateway.kinematics.lsq import FkPlan
 
-
-@dataclass(frozen=True, slots=True)
-class IkResult:
-    """Inverse kinematics of one twist.
-
-    :param twist: the twist the wheels realise.
-    :param wheel_rad_s: angular speed of every wheel (model order), rad/s.
-    :param steer_rad: steering angle of every steered wheel, ``None`` for the others.
-    :param steer_rate_rad_s: swivel rate of castor wheels, ``None`` for the others.
-    """
-
-    twist: Twist
-    wheel_rad_s: tuple[float, ...]
-    steer_rad: tuple[float | None, ...]
-    steer_rate_rad_s: tuple[float | None, ...]
-
-
-@dataclass(frozen=True, slots=True)
-class FkResult:
-    """Forward kinematics of measured wheel speeds.
-
-    :param twist: the least-squares body twist.
-    :param wheel_residual_m_s: per wheel, measured minus predicted rim speed, m/s (0 for
-        wheels without a measurement).
-    :param residual_m_s: RMS of every equation's residual (rolling and sliding), m/s: zero for
-        consistent measurements, grows with slip on redundant drives.
-    """
-
-    twist: Twist
-    wheel_residual_m_s: tuple[float, ...]
-    residual_m_s: float
-
-
-@dataclass(frozen=True, slots=True)
-class Mobility:
-    """Degrees of freedom in Siegwart's sense, at the neutral steering angles.
-
-    :param mobility: ``3 - rank C1`` (fixed and steerable sliding rows).
-    :param steerability: rank of the steerable wheels' sliding rows, at most the number of
-        independent steering actuators.
-    :param maneuverability: their sum.
-    """
-
-    mobility: int
-    steerability: int
-    maneuverability: int
-
-
-@dataclass(frozen=True, slots=True)
-class _Violation:
-    wheel: str
-    constraint: str
-    residual_m_s: float
-    detail: str
+# The result types and the wheel check live in their own modules; they are re-exported here.
+__all__ = ["FkResult", "IkResult", "Mobility", "RobotModel", "validate_wheel"]
 
 
 class RobotModel:
@@ -154,10 +112,12 @@ class RobotModel:
         self.neutral_steer: tuple[float | None, ...] = tuple(
             0.0 if w.steered else None for w in wheels
         )
-        self._fk_static = self._build_static_fk()
-        #: Pure-Python least-squares plans of a model without steered wheels, by the pattern
-        #: of unmeasured wheels (``None`` when that pattern leaves the twist undetermined).
-        self._fk_plans: dict[tuple[bool, ...], FkPlan | None] = {}
+        self._fk = FkSolver(self.wheels, self.neutral_steer)
+        # The solver's two halves under their former names.  The per-sample path calls
+        # ``self._fk.plan`` instead: CPython calls a method found on its class faster than a
+        # bound method stored on the instance.
+        self._fk_plan = self._fk.plan
+        self._fk_numpy = self._fk.solve
         self.mobility = self._mobility()
 
     # ----------------------------------------------------------------- matrices
@@ -261,18 +221,18 @@ class RobotModel:
 
     def _solve(
         self, twist: Twist, steer: Sequence[float | None] | None
-    ) -> tuple[IkResult, list[_Violation]]:
+    ) -> tuple[IkResult, list[Violation]]:
         if not twist.is_finite():
             raise KinematicsError(f"Expected a finite twist, but got {twist}")
         vx, vy, wz = twist.vx_m_s, twist.vy_m_s, twist.wz_rad_s
         prev = self.neutral_steer if steer is None else self._steer_or_neutral(steer)
-        violations: list[_Violation] = []
+        violations: list[Violation] = []
         tol = self.slip_tolerance_m_s
         for name, a, b, c in self._slide_rows:
             s = a * vx + b * vy + c * wz
             if abs(s) > tol:
                 violations.append(
-                    _Violation(name, "sliding", abs(s), f"sideways contact speed {s:+.4g} m/s")
+                    Violation(name, "sliding", abs(s), f"sideways contact speed {s:+.4g} m/s")
                 )
         speeds = [0.0] * self.n
         angles: list[float | None] = [None] * self.n
@@ -290,20 +250,20 @@ class RobotModel:
                 rates[i] = -(sl[0] * vx + sl[1] * vy + sl[2] * wz) / w.d
                 continue
             speed = math.hypot(px, py)
-            if speed <= _STILL_M_S:
+            if speed <= STILL_M_S:
                 angles[i] = sigma0
                 continue
             base = math.atan2(py, px) - h0
-            kmin = math.ceil((w.steer_min - _LIMIT_SLACK - base) / math.pi)
-            kmax = math.floor((w.steer_max + _LIMIT_SLACK - base) / math.pi)
+            kmin = math.ceil((w.steer_min - LIMIT_SLACK - base) / math.pi)
+            kmax = math.floor((w.steer_max + LIMIT_SLACK - base) / math.pi)
             if kmin > kmax:
                 # Nearest reachable angle and the sliding speed it would cause.
-                excess, limit = _limit_excess(w, base)
+                excess, limit = limit_excess(w, base)
                 hx, hy = math.cos(h0 + limit), math.sin(h0 + limit)
                 slide = abs(py * hx - px * hy)
                 if slide > tol:
                     violations.append(
-                        _Violation(
+                        Violation(
                             w.name,
                             "steering limit",
                             slide,
@@ -319,32 +279,10 @@ class RobotModel:
                 speeds[i] = (speed if k % 2 == 0 else -speed) / w.radius
             angles[i] = sigma
         for group, members in self._groups.items():
-            v = self._group_violation(group, members, vx, vy, wz)
+            v = group_violation(self.wheels, group, members, vx, vy, wz)
             if v is not None and v.residual_m_s > tol:
                 violations.append(v)
         return IkResult(twist, tuple(speeds), tuple(angles), tuple(rates)), violations
-
-    def _group_violation(
-        self, group: str, members: Sequence[int], vx: float, vy: float, wz: float
-    ) -> _Violation | None:
-        vel = [(vx - wz * self.wheels[i].y, vy + wz * self.wheels[i].x) for i in members]
-        ref = max(range(len(members)), key=lambda j: math.hypot(*vel[j]))
-        rx, ry = vel[ref]
-        norm = math.hypot(rx, ry)
-        if norm <= _STILL_M_S:
-            return None
-        ux, uy = rx / norm, ry / norm
-        worst, who = 0.0, members[ref]
-        for j, (px, py) in enumerate(vel):
-            side = abs(px * uy - py * ux)
-            if side > worst:
-                worst, who = side, members[j]
-        return _Violation(
-            self.wheels[who].name,
-            "steering coupling",
-            worst,
-            f"wheels of steer group {group!r} would need different angles",
-        )
 
     # ----------------------------------------------------------------- nearest feasible twist
 
@@ -358,89 +296,16 @@ class RobotModel:
         centre of rotation; the nearest candidate that :meth:`ik` accepts wins (zero always
         does).
         """
-        xi = np.array([twist.vx_m_s, twist.vy_m_s, twist.wz_rad_s])
-        base = [np.array(row[1:]) for row in self._slide_rows]
-        extra: list[list[NDArray[np.float64]]] = [[]]
-        if self._groups:
-            extra.append([np.array([0.0, 0.0, 1.0])])
-        single: list[list[NDArray[np.float64]]] = []
-        for _, w, x, y, h0 in self._steered:
-            if w.type is WheelType.CASTOR:
-                continue
-            single.append([np.array([1.0, 0.0, -y]), np.array([0.0, 1.0, x])])
-            for lim in (w.steer_min, w.steer_max):
-                h = h0 + lim
-                n = np.array([-math.sin(h), math.cos(h)])
-                single.append([np.array([n[0], n[1], -n[0] * y + n[1] * x])])
-        extra.extend(single)
-        extra.extend(a + b for a, b in itertools.combinations(single, 2))
-        best, best_cost = Twist(), math.inf
-        weight = np.array([1.0, 1.0, self.rho])
-        for rows in extra:
-            cand = _project(xi, base + rows, weight)
-            t = Twist(float(cand[0]), float(cand[1]), float(cand[2]))
-            cost = float(np.sum(((cand - xi) * weight) ** 2))
-            if cost < best_cost - 1e-15 and self.feasible(t, steer):
-                best, best_cost = t, cost
-        return best
+        return nearest_feasible(
+            twist,
+            self._slide_rows,
+            self._steered,
+            bool(self._groups),
+            self.rho,
+            lambda t: self.feasible(t, steer),
+        )
 
     # ----------------------------------------------------------------- forward kinematics
-
-    def _build_static_fk(self) -> NDArray[np.float64] | None:
-        if self._steered:
-            return None
-        a, _ = self._fk_system([1.0] * self.n, self.neutral_steer)
-        if int(np.linalg.matrix_rank(a)) < 3:
-            return None
-        pinv: NDArray[np.float64] = np.asarray(np.linalg.pinv(a), dtype=np.float64)
-        return pinv
-
-    def _fk_plan(self, wheel_rad_s: Sequence[float | None]) -> FkPlan | None:
-        """The precomputed least squares for the neutral angles and these measured wheels
-        (built on first use of each pattern); ``None`` if the model has steered wheels or
-        the pattern leaves the twist undetermined."""
-        if self._steered:
-            return None
-        key = tuple(v is None for v in wheel_rad_s)
-        try:
-            return self._fk_plans[key]
-        except KeyError:
-            pass
-        speeds = [None if missing else 1.0 for missing in key]
-        a, _ = self._fk_system(speeds, self.neutral_steer)
-        plan = None
-        if int(np.linalg.matrix_rank(a)) >= 3:
-            pinv = np.asarray(np.linalg.pinv(a), dtype=np.float64)
-            measured = tuple((i, w.radius) for i, w in enumerate(self.wheels)
-                             if not key[i])
-            m = len(measured)
-            rows = [(float(r[0]), float(r[1]), float(r[2])) for r in a]
-            plan = FkPlan(
-                measured=measured,
-                pinv_x=tuple(float(v) for v in pinv[0, :m]),
-                pinv_y=tuple(float(v) for v in pinv[1, :m]),
-                pinv_w=tuple(float(v) for v in pinv[2, :m]),
-                rolling=tuple(rows[:m]),
-                sliding=tuple(rows[m:]),
-            )
-        self._fk_plans[key] = plan
-        return plan
-
-    def _fk_system(
-        self, speeds: Sequence[float | None], steer: Sequence[float | None]
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        rows: list[tuple[float, float, float]] = []
-        rhs: list[float] = []
-        for i, w in enumerate(self.wheels):
-            sigma = steer[i] or 0.0
-            if speeds[i] is not None:
-                rows.append(w.rolling_row(sigma))
-                rhs.append(w.radius * float(speeds[i] or 0.0))
-        for i, w in enumerate(self.wheels):
-            if w.type in CONSTRAINING:
-                rows.append(w.sliding_row(steer[i] or 0.0))
-                rhs.append(0.0)
-        return np.array(rows, dtype=float).reshape(len(rows), 3), np.array(rhs)
 
     def fk(
         self,
@@ -457,7 +322,7 @@ class RobotModel:
         if plan is not None:
             vx, vy, wz, rms, per_wheel = plan.solve(self.n, wheel_rad_s, per_wheel=True)
             return FkResult(Twist(vx, vy, wz), tuple(per_wheel or ()), rms)
-        return self._fk_numpy(wheel_rad_s, st)
+        return self._fk.solve(wheel_rad_s, st)
 
     def fk_twist(
         self,
@@ -473,7 +338,7 @@ class RobotModel:
         if plan is not None:
             vx, vy, wz, rms, _ = plan.solve(self.n, wheel_rad_s, per_wheel=False)
             return vx, vy, wz, rms
-        r = self._fk_numpy(wheel_rad_s, st)
+        r = self._fk.solve(wheel_rad_s, st)
         return r.twist.vx_m_s, r.twist.vy_m_s, r.twist.wz_rad_s, r.residual_m_s
 
     def _fk_checked(
@@ -490,32 +355,7 @@ class RobotModel:
                 )
         st = self._steer_or_neutral(steer)
         # Neutral angles (None or 0 everywhere): the rows are the precomputed ones.
-        return st, (None if any(st) else self._fk_plan(wheel_rad_s))
-
-    def _fk_numpy(
-        self, wheel_rad_s: Sequence[float | None], st: Sequence[float | None]
-    ) -> FkResult:
-        a, b = self._fk_system(wheel_rad_s, st)
-        if self._fk_static is not None and all(v is not None for v in wheel_rad_s):
-            xi = self._fk_static @ b
-        else:
-            if int(np.linalg.matrix_rank(a)) < 3:
-                raise KinematicsError(
-                    f"Expected enough wheel speeds to fix the twist (rank 3), but the "
-                    f"{sum(v is not None for v in wheel_rad_s)} given leave it undetermined"
-                )
-            xi = np.asarray(np.linalg.lstsq(a, b, rcond=None)[0], dtype=np.float64)
-        res = a @ xi - b
-        per_wheel = [0.0] * self.n
-        k = 0
-        for i in range(self.n):
-            if wheel_rad_s[i] is not None:
-                per_wheel[i] = float(-res[k])
-                k += 1
-        rms = float(math.sqrt(float(np.mean(res**2)))) if res.size else 0.0
-        return FkResult(
-            Twist(float(xi[0]), float(xi[1]), float(xi[2])), tuple(per_wheel), rms
-        )
+        return st, (None if any(st) else self._fk.plan(wheel_rad_s))
 
     def index(self, name: str) -> int:
         """Position of the wheel ``name``.
@@ -529,63 +369,3 @@ class RobotModel:
                 f"Unknown wheel {name!r}; expected one of: {', '.join(self.names)}"
             ) from None
 
-
-def _limit_excess(w: Wheel, base: float) -> tuple[float, float]:
-    """For an angle ``base`` (mod pi) out of ``w``'s limits: (signed excess, nearest limit)."""
-    best: tuple[float, float] = (math.inf, 0.0)
-    for lim in (w.steer_min, w.steer_max):
-        diff = (base - lim + math.pi / 2) % math.pi - math.pi / 2
-        if abs(diff) < abs(best[0]):
-            best = (diff, lim)
-    return best
-
-
-def _project(
-    xi: NDArray[np.float64], rows: Iterable[NDArray[np.float64]], weight: NDArray[np.float64]
-) -> NDArray[np.float64]:
-    """Weighted least-squares projection of ``xi`` onto ``{t : row . t = 0 for every row}``."""
-    m = np.array(list(rows), dtype=float).reshape(-1, 3)
-    if m.size == 0:
-        return xi
-    mw = m / weight
-    z = xi * weight
-    projected: NDArray[np.float64] = np.asarray(
-        (z - np.linalg.pinv(mw) @ (mw @ z)) / weight, dtype=np.float64
-    )
-    return projected
-
-
-def validate_wheel(w: Wheel) -> None:
-    """Check one wheel's parameters.
-
-    :raises KinematicsError: naming the wheel, what was expected and what came.
-    """
-    what = f"wheel {w.name!r}"
-    for key in ("alpha", "l", "beta", "radius", "gamma", "d"):
-        value = getattr(w, key)
-        if not math.isfinite(value):
-            raise KinematicsError(f"{what}: expected a finite {key}, but got {value!r}")
-    if w.radius <= 0.0:
-        raise KinematicsError(f"{what}: expected radius > 0 m, but got {w.radius!r}")
-    if w.l < 0.0:
-        raise KinematicsError(f"{what}: expected l >= 0 m, but got {w.l!r}")
-    if w.type is WheelType.SWEDISH and not abs(w.gamma) < math.pi / 2 - 1e-6:
-        raise KinematicsError(
-            f"{what}: expected |gamma| < pi/2 (rollers parallel to the axle cannot roll), "
-            f"but got {w.gamma!r}"
-        )
-    if w.type is not WheelType.SWEDISH and w.gamma != 0.0:
-        raise KinematicsError(f"{what}: gamma applies to Swedish wheels only, got {w.gamma!r}")
-    if w.type is WheelType.CASTOR and w.d <= 0.0:
-        raise KinematicsError(f"{what}: expected castor offset d > 0 m, but got {w.d!r}")
-    if w.type is not WheelType.CASTOR and w.d != 0.0:
-        raise KinematicsError(f"{what}: offset d applies to castor wheels only, got {w.d!r}")
-    if w.steered and not w.steer_min <= 0.0 <= w.steer_max:
-        raise KinematicsError(
-            f"{what}: expected steer_min <= 0 <= steer_max, but got "
-            f"[{w.steer_min!r}, {w.steer_max!r}]"
-        )
-    if not w.max_steer_rate > 0.0:
-        raise KinematicsError(
-            f"{what}: expected max_steer_rate > 0 rad/s, but got {w.max_steer_rate!r}"
-        )
