@@ -93,7 +93,7 @@ class Gateway(BusEdge):
         self._ik_result: IkResult = self.prev
         self._ik_static = not any(w.steered for w in self.model.wheels)
         self.limit_report: LimitReport | None = None
-        self._limits_idle = False  # the last limits left their input as it was
+        self._prev_limited = False  # prev came out of the limits (not an e-stop's jump)
         self._armed = False
         self._last_cycle_s: float | None = None
         self._next_odom_s = 0.0
@@ -233,14 +233,15 @@ class Gateway(BusEdge):
         self._last_cycle_s = now_s
         result = self._solve(decision.twist)
         if not decision.ramp:
-            self._limits_idle = False
-        elif not (result is self.prev and self._limits_idle):
-            # (Skipped when the solve is the very result the limits passed unchanged last
-            # cycle: no change means no acceleration and no steering, the same report.)
+            self._prev_limited = False
+        elif not (result is self.prev and self._prev_limited):
+            # (Skipped when the solve is the very command the limits passed last cycle -- any
+            # change would have been a new object: no change means no acceleration and no
+            # steering, the same report.)
             result, self.limit_report = apply_limits(
                 self.model, result, self.config.limits, self.prev, dt
             )
-            self._limits_idle = not self.limit_report.limited
+            self._prev_limited = True
         if decision.armed:
             self._armed = True
             out.extend(self.drives.command(result.wheel_rad_s, now_s))

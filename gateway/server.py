@@ -20,6 +20,7 @@ until the replies queued for it are sent, then closed at the start of the next p
 
 from __future__ import annotations
 
+import dataclasses
 import errno
 import logging
 import selectors
@@ -174,11 +175,7 @@ class ControlServer(Connections, Closing):
     @property
     def counters(self) -> ServerCounters:
         """A snapshot of the counters."""
-        t = self._tally
-        return ServerCounters(
-            len(self._clients), t.accepted, t.refused, t.too_long, t.malformed,
-            t.dropped_partial, t.slow_disconnects,
-        )
+        return ServerCounters(len(self._clients), **dataclasses.asdict(self._tally))
 
     def close(self) -> None:
         """Disconnect every client, stop listening and remove the socket file (if it is still

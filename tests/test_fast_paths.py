@@ -60,13 +60,13 @@ def test_fk_fast_path_matches_numpy(path: Path | None) -> None:
             speeds[rng.randrange(model.n)] = None
         steer = model.neutral_steer
         try:
-            ref = model._fk_numpy(speeds, steer)
+            ref = model._fk.solve(speeds, steer)
         except KinematicsError:  # too few wheels measured: both paths refuse
             with pytest.raises(KinematicsError):
                 model.fk(speeds, steer)
             continue
         got = model.fk(speeds, steer)
-        fast += model._fk_plan(speeds) is not None
+        fast += model._fk.plan(speeds) is not None
         assert _close(got.twist.vx_m_s, ref.twist.vx_m_s)
         assert _close(got.twist.vy_m_s, ref.twist.vy_m_s)
         assert _close(got.twist.wz_rad_s, ref.twist.wz_rad_s)

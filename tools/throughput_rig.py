@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import can
+import yaml
 
 from gateway.bus import drain, open_bus, send_frames
 from gateway.config import parse_config
@@ -39,25 +40,12 @@ PROTOCOLS: dict[str, dict[str, object]] = {
     "vesc": {"driver": "vesc", "pole_pairs": 7, "gear_ratio": 10.0, "max_rpm": 3000},
     "cia402": {"driver": "cia402", "gear_ratio": 10.0, "max_rpm": 3000},
     "dji": {"driver": "dji", "esc": "c620", "gear_ratio": 19.203208556149733, "max_rpm": 9000},
+    # The shipped example's controller (config/example_dbc.yaml), geared as the others.
     "dbc": {
-        "driver": "dbc",
+        **yaml.safe_load((ROOT / "config" / "example_dbc.yaml").read_text())["motor_defaults"],
         "dbc": str(ROOT / "config" / "example_controller.dbc"),
         "gear_ratio": 10.0,
         "max_rpm": 3000,
-        "command_message": "WD_Velocity_Command",
-        "command_signal": "Target_Velocity",
-        "command_unit": "rpm",
-        "feedback_message": "WD_Feedback",
-        "velocity_signal": "Actual_Velocity",
-        "velocity_unit": "rpm",
-        "position_signal": "Position_Count",
-        "position_unit": "counts",
-        "counts_per_rev": 4096,
-        "position_wrap_bits": 32,
-        "fault_message": "WD_Feedback",
-        "fault_signal": "Fault_Code",
-        "enable_message": "WD_Enable",
-        "enable_signal": "Enable",
     },
 }
 

@@ -113,11 +113,6 @@ class RobotModel:
             0.0 if w.steered else None for w in wheels
         )
         self._fk = FkSolver(self.wheels, self.neutral_steer)
-        # The solver's two halves under their former names.  The per-sample path calls
-        # ``self._fk.plan`` instead: CPython calls a method found on its class faster than a
-        # bound method stored on the instance.
-        self._fk_plan = self._fk.plan
-        self._fk_numpy = self._fk.solve
         self.mobility = self._mobility()
 
     # ----------------------------------------------------------------- matrices
