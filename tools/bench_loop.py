@@ -16,7 +16,10 @@ own timing statistics, over the whole run, are read at the end:
 * cycle cost: the wall time of one cycle's work (receive, decide, IK and limits, encode,
   send, odometry), the daemon's own figure;
 * lateness: when a cycle started minus its deadline (p50/p99/max);
-* missed cycles: deadlines skipped after an overrun (skipped, not burst);
+* missed cycles: deadlines skipped after an overrun (skipped, not burst), each late start
+  classed by :func:`platform_floor.attribute` from the loop thread's schedstat over the
+  interval before it: on CPU for more than a period, runnable but not running, or asleep
+  past its deadline;
 * twist-to-frame latency: from the twist being sent to the daemon's socket (the client's
   ``perf_counter`` just before ``sendall``; CLOCK_MONOTONIC, the same clock in both
   processes) to the end of the send of the cycle that applied it; beside it the daemon's own
@@ -36,9 +39,11 @@ of the GIL, so that ratio is the pessimistic one; ``--sims inline`` compares lik
 
 Run: ``python tools/bench_loop.py [seconds] [--rt PRIORITY] [--cpu N] [--lock]
 [--sims thread|inline] [--spin-us US] [--platform]`` (default 10 s, normal scheduling).
-``--platform`` then runs the same scheduler with no work for as long, in the same thread and
-policy, and rt-tests' ``cyclictest`` (C) at the same rate and priority when it is installed:
-the misses and tails the machine causes by itself (on a VM, stalls of the virtual CPU); CPU
+``--platform`` then runs the same scheduler for as long, in the same thread and policy, doing
+the same constant arithmetic in every cycle (as much CPU time at the median as the gateway's
+cycle took), and rt-tests' ``cyclictest`` (C) at the same rate and priority when it is
+installed: the misses and tails the machine causes by itself (on a VM, stalls of the virtual
+CPU), and how much the CPU time of a constant workload spreads; CPU
 time the hypervisor took (``/proc/stat`` steal) is printed for every part.  ``--rt`` runs
 the loop thread with SCHED_FIFO (root or LimitRTPRIO), as ``gateway.rt_priority`` does.
 Without SCHED_FIFO and on a shared machine, tails are dominated by the scheduler; the p50
@@ -62,7 +67,14 @@ import time
 from typing import Any
 
 import can
-from platform_floor import CyclicTest, cyclictest, empty_loop, steal_s
+from platform_floor import (
+    CyclicTest,
+    MissRecorder,
+    cyclictest,
+    describe_misses,
+    fixed_work_loop,
+    steal_s,
+)
 
 from gateway.bus import drain, to_message
 from gateway.config import load_config
@@ -203,6 +215,15 @@ class BenchDaemon(Daemon):
                 self.can_frames_sent_ns.extend([t] * can_new)
 
         gw.cycle = timed_cycle  # type: ignore[method-assign]
+        #: Notes every late start (made in the loop's thread, which run() is called in).
+        self.recorder: MissRecorder | None = None
+
+    def _wait(self) -> None:
+        if self.recorder is None:
+            self.recorder = MissRecorder(self.scheduler)
+        self.recorder.before_wait()
+        super()._wait()
+        self.recorder.after_wait(time.perf_counter())  # the scheduler's clock
 
     def handle(self, client: int, request: Request | ProtocolError, now_s: float) -> None:
         pending = len(self._pending_twists)
@@ -236,8 +257,8 @@ def main() -> None:
     parser.add_argument("--sims", choices=("thread", "inline"), default="thread",
                         help="simulators in a background thread (as --sim) or stepped inline")
     parser.add_argument("--platform", action="store_true",
-                        help="then run the same scheduler with no work for as long (the "
-                             "machine's own misses and tails)")
+                        help="then run the same scheduler with constant work for as long, "
+                             "and cyclictest (the machine's own misses and tails)")
     parser.add_argument("--spin-us", type=float, default=None, metavar="US",
                         help="spin this long before each deadline instead of sleeping "
                              "(gateway.spin_us; default: the config's, 200 us)")
@@ -340,13 +361,22 @@ def main() -> None:
     ]
     print("targets: " + "; ".join(f"{name}: {'yes' if ok else 'NO'}" for name, ok in verdict))
     print(f"CPU time stolen by the hypervisor during the run: {_stolen(steal_start, steal_end)}")
+    misses = daemon.recorder.misses if daemon.recorder is not None else []
+    print("missed cycles by cause (the loop thread's schedstat over each interval from the "
+          "cycle before): " + describe_misses(misses, stats.missed, period_us, cfg.loop.spin_us))
     if args.platform:
         steal_start = steal_s()
-        base = empty_loop(args.seconds, cfg.loop.rate_hz, cfg.loop.spin_us * 1e-6)
-        print(f"platform floor, the same scheduler with no work for {args.seconds:g} s in this "
-              f"thread: {base.missed} missed; lateness p50 {base.lateness_p50_us:.1f} us, p99 "
-              f"{base.lateness_p99_us:.1f} us, max {base.lateness_max_us:.1f} us; stolen "
+        base = fixed_work_loop(args.seconds, cfg.loop.rate_hz, cfg.loop.spin_us * 1e-6, cpu_p50)
+        w50, w99, wmax = base.work_us
+        print(f"platform floor, the same scheduler doing the same arithmetic in every cycle "
+              f"({cpu_p50:.0f} us of CPU at the median, as the gateway's cycle) for "
+              f"{args.seconds:g} s in this thread: {base.stats.missed} missed; lateness p50 "
+              f"{base.stats.lateness_p50_us:.1f} us, p99 {base.stats.lateness_p99_us:.1f} us, "
+              f"max {base.stats.lateness_max_us:.1f} us; CPU time of the constant work p50 "
+              f"{w50:.1f} us, p99 {w99:.1f} us, max {wmax:.1f} us; stolen "
               f"{_stolen(steal_start, steal_s())}")
+        print("its missed cycles by cause: " + describe_misses(
+            base.misses, base.stats.missed, period_us, cfg.loop.spin_us))
         steal_start = steal_s()
         ct = cyclictest(args.seconds, cfg.loop.rate_hz, args.rt)
         if isinstance(ct, CyclicTest):
