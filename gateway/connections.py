@@ -13,7 +13,7 @@ import itertools
 import logging
 import selectors
 import socket
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, TypeAlias
 
 from gateway.protocol import LineFramer, ProtocolError, Request, Topic, parse_request
@@ -43,10 +43,20 @@ class Connection:
         self.interest = selectors.EVENT_READ
 
 
-@dataclass(slots=True)
-class Tally:
-    """The running counts behind :class:`gateway.server.ServerCounters`."""
+@dataclass(frozen=True, slots=True)
+class ServerCounters:
+    """A snapshot of the server's counters (all since start except ``clients``).
 
+    :param clients: clients connected now.
+    :param accepted: connections admitted as clients.
+    :param refused: connections closed at once: uid not allowed, or ``max_clients`` reached.
+    :param too_long: lines longer than ``max_message_bytes``.
+    :param malformed: lines that failed to parse (not counting ``too_long``).
+    :param dropped_partial: clients that disconnected in the middle of a line.
+    :param slow_disconnects: clients disconnected for not reading their output.
+    """
+
+    clients: int = 0
     accepted: int = 0
     refused: int = 0
     too_long: int = 0
@@ -80,7 +90,8 @@ class Connections:
         self._subscribers: dict[Topic, set[int]] = {topic: set() for topic in Topic}
         self._ids = itertools.count(1)
         self._half_closed: set[int] = set()
-        self._tally = Tally()
+        #: The counters since start (``clients`` is filled in by the snapshot).
+        self._counts = ServerCounters()
         #: Set while connections are refused for ``max_clients`` (logged once per episode).
         self._full = False
 
@@ -104,7 +115,7 @@ class Connections:
         else:
             client.outbuf += data
         if len(client.outbuf) > self.max_pending_bytes_per_client:
-            self._tally.slow_disconnects += 1
+            self._counts = replace(self._counts, slow_disconnects=self._counts.slow_disconnects + 1)
             log.warning(
                 "control client %d: %d bytes of output pending, more than %d; disconnecting",
                 client_id, len(client.outbuf), self.max_pending_bytes_per_client,
@@ -151,7 +162,7 @@ class Connections:
         client = Connection(next(self._ids), conn, self.max_message_bytes)
         self._clients[client.cid] = client
         self._selector.register(conn, selectors.EVENT_READ, client.cid)
-        self._tally.accepted += 1
+        self._counts = replace(self._counts, accepted=self._counts.accepted + 1)
         log.debug("control client %d connected", client.cid)
 
     def _read(self, client: Connection, events: Events) -> None:
@@ -179,19 +190,19 @@ class Connections:
 
     def _count_partial(self, client: Connection) -> None:
         if client.framer.pending:
-            self._tally.dropped_partial += 1
+            self._counts = replace(self._counts, dropped_partial=self._counts.dropped_partial + 1)
             log.debug("control client %d: dropped %d bytes of an unfinished line",
                       client.cid, client.framer.pending)
 
     def _line(self, cid: int, line: bytes | ProtocolError, events: Events) -> None:
         if isinstance(line, ProtocolError):
-            self._tally.too_long += 1
+            self._counts = replace(self._counts, too_long=self._counts.too_long + 1)
             events.append((cid, line))
         elif line.strip():  # blank lines are ignored
             try:
                 events.append((cid, parse_request(line, self.max_message_bytes)))
             except ProtocolError as err:
-                self._tally.malformed += 1
+                self._counts = replace(self._counts, malformed=self._counts.malformed + 1)
                 events.append((cid, err))
 
     def _send(self, client: Connection, data: bytes | bytearray) -> int:

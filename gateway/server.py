@@ -25,7 +25,6 @@ import errno
 import logging
 import selectors
 import time
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -38,7 +37,7 @@ from gateway.access import (
     remove_own_socket,
     remove_stale_socket,
 )
-from gateway.connections import Connections, Events
+from gateway.connections import Connections, Events, ServerCounters
 from gateway.errors import ConfigError
 from gateway.lifecycle import Closing
 from gateway.protocol import MAX_MESSAGE_BYTES
@@ -51,28 +50,6 @@ __all__ = ["ControlServer", "Events", "ServerCounters"]
 log = logging.getLogger(__name__)
 
 _RESOURCE_ERRNOS = frozenset({errno.EMFILE, errno.ENFILE, errno.ENOBUFS, errno.ENOMEM})
-
-
-@dataclass(frozen=True, slots=True)
-class ServerCounters:
-    """A snapshot of the server's counters (all since start except ``clients``).
-
-    :param clients: clients connected now.
-    :param accepted: connections admitted as clients.
-    :param refused: connections closed at once: uid not allowed, or ``max_clients`` reached.
-    :param too_long: lines longer than ``max_message_bytes``.
-    :param malformed: lines that failed to parse (not counting ``too_long``).
-    :param dropped_partial: clients that disconnected in the middle of a line.
-    :param slow_disconnects: clients disconnected for not reading their output.
-    """
-
-    clients: int = 0
-    accepted: int = 0
-    refused: int = 0
-    too_long: int = 0
-    malformed: int = 0
-    dropped_partial: int = 0
-    slow_disconnects: int = 0
 
 
 class ControlServer(Connections, Closing):
@@ -175,7 +152,7 @@ class ControlServer(Connections, Closing):
     @property
     def counters(self) -> ServerCounters:
         """A snapshot of the counters."""
-        return ServerCounters(len(self._clients), **dataclasses.asdict(self._tally))
+        return dataclasses.replace(self._counts, clients=len(self._clients))
 
     def close(self) -> None:
         """Disconnect every client, stop listening and remove the socket file (if it is still
@@ -232,7 +209,7 @@ class ControlServer(Connections, Closing):
                 log.warning("control socket %s: %d clients connected, refusing more",
                             self.path, len(self._clients))
                 self._full = True
-            self._tally.refused += 1
+            self._counts = dataclasses.replace(self._counts, refused=self._counts.refused + 1)
             conn.close()
             return
         if self._allowed is not None:
@@ -240,7 +217,7 @@ class ControlServer(Connections, Closing):
             if uid is None or uid not in self._allowed:
                 log.warning("control socket %s: refused a client with uid %s (allowed: %s)",
                             self.path, uid, sorted(self._allowed))
-                self._tally.refused += 1
+                self._counts = dataclasses.replace(self._counts, refused=self._counts.refused + 1)
                 conn.close()
                 return
         self._add(conn)
