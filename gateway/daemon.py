@@ -234,7 +234,7 @@ class Daemon:
         gw = self.gateway
         start = time.perf_counter()
         gw.cycle(now_s)
-        sent = time.perf_counter()
+        sent = gw.burst_sent_s
         for arrived in self._pending_twists:
             self.scheduler.timer.record_latency(sent - arrived)
         self._pending_twists.clear()

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import collections
 import logging
+import time
 from typing import TYPE_CHECKING
 
 from gateway.bus_edge import BusEdge
@@ -96,6 +97,9 @@ class Gateway(BusEdge):
         self._prev_limited = False  # prev came out of the limits (not an e-stop's jump)
         self._armed = False
         self._last_cycle_s: float | None = None
+        #: ``time.perf_counter()`` when the last cycle's burst of wheel frames was sent (before
+        #: odometry and publishing): where the daemon's twist-to-frames latency ends.
+        self.burst_sent_s = 0.0
         self._next_odom_s = 0.0
         self._next_status_s = 0.0
         self._odom_stamp = -1.0
@@ -251,6 +255,7 @@ class Gateway(BusEdge):
         out.extend(self.drives.poll(now_s))
         self.prev = result
         self.send(out)
+        self.burst_sent_s = time.perf_counter()
         self._integrate()
         self._publish(now_s)
 

@@ -26,6 +26,11 @@ def test_twist_and_status(runner: CliRunner, daemon: Daemon, sock_path: str) -> 
     assert doc["odometry"]["distance"] > 0.01
     assert [m["name"] for m in doc["motors"]] == ["left", "right"]
     assert doc["timing"]["cycles"] > 10
+    # Every twist's latency runs from reading it to its cycle's wheel burst: at most a period
+    # (the cycle it waits for) plus the cycle, never negative.
+    timing = doc["timing"]
+    assert timing["latency_samples"] >= 5
+    assert 0.0 < timing["latency_p50_us"] <= timing["latency_max_us"] < 1e6
     assert doc["tracking"]["time_s"] == 0.5 and doc["tracking"]["worst_ratio"] >= 0.0
     result = runner.invoke(main, ["status", "--socket", sock_path])
     assert result.exit_code == 0, result.output

@@ -22,12 +22,14 @@ own timing statistics, over the whole run, are read at the end:
   past its deadline;
 * twist-to-frame latency: from the twist being sent to the daemon's socket (the client's
   ``perf_counter`` just before ``sendall``; CLOCK_MONOTONIC, the same clock in both
-  processes) to the end of the send of the cycle that applied it; beside it the daemon's own
-  figure, which starts when the request is read;
+  processes) to the end of the send of the wheel frames of the cycle that applied it (before
+  that cycle's odometry and publishing, ``Gateway.burst_sent_s``); beside it the daemon's
+  own figure, which starts when the request is read;
 * the same from CAN: a ``WG_Twist_Cmd`` about every 20 ms from a sender thread on the same
   virtual bus (python-can's ``virtual`` bus reaches only its own process), from just before
-  its ``send`` to the end of the send of the cycle that read it.  The loop reads the bus once
-  per cycle, so this is up to one period plus the cycle's cost by design.
+  its ``send`` to the end of the send of the wheel frames of the cycle that read it.  The
+  loop reads the bus once per cycle, so this is up to one period plus the cycle's cost by
+  design.
 
 Beside them, the same-run cost of python-can alone: one cycle's worth of the same frames (4
 velocity commands sent, everything waiting drained) on a virtual bus with the same
@@ -207,8 +209,8 @@ class BenchDaemon(Daemon):
             cycle(now_s)
             cpu.append(thread_time() - c0)
             can_new = gw.counts["can_twists"] - can_before
-            if self._ids or can_new:  # the same instant as the daemon's own "sent"
-                t = time.perf_counter_ns()
+            if self._ids or can_new:  # the daemon's own "sent": the wheel burst went out
+                t = round(gw.burst_sent_s * 1e9)  # perf_counter, as perf_counter_ns
                 for i in self._ids:
                     self.frames_sent_ns[i] = t
                 self._ids.clear()

@@ -24,6 +24,8 @@ shows by how much.
 
 from __future__ import annotations
 
+import argparse
+import gc
 import os
 import shutil
 import subprocess
@@ -338,3 +340,38 @@ def _parse(text: str, expected: int, interval_us: int, command: str) -> CyclicTe
         return f"cyclictest output unreadable (found {sorted(found)})"
     # "Total" counts the histogram's buckets only; the overflows were wake-ups too.
     return CyclicTest(expected, loops + overflows, max_us, late + overflows, command)
+
+
+def main() -> None:
+    """Run the constant-work control alone (to alternate with ``tools/bench_loop.py``)."""
+    parser = argparse.ArgumentParser(description="The constant-work control loop alone: the "
+                                     "daemon's scheduler doing fixed arithmetic every cycle.")
+    parser.add_argument("seconds", nargs="?", type=float, default=60.0)
+    parser.add_argument("--rt", type=int, default=0, metavar="PRIORITY",
+                        help="SCHED_FIFO priority (0: normal scheduling)")
+    parser.add_argument("--rate", type=float, default=1000.0, help="loop rate, Hz")
+    parser.add_argument("--work-us", type=float, default=100.0,
+                        help="median CPU time of the work per cycle, us")
+    parser.add_argument("--spin-us", type=float, default=200.0,
+                        help="spin before each deadline, us (the daemon's default)")
+    args = parser.parse_args()
+    gc.freeze()  # as the daemon does
+    if args.rt:
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(args.rt))
+        except OSError as err:
+            raise SystemExit(f"SCHED_FIFO {args.rt} refused: {err.strerror or err}") from err
+    start = steal_s()
+    run = fixed_work_loop(args.seconds, args.rate, args.spin_us * 1e-6, args.work_us)
+    end = steal_s()
+    w50, w99, wmax = run.work_us
+    stolen = "unknown" if start is None or end is None else f"{(end - start) * 1e3:.0f} ms"
+    print(f"constant work ({args.work_us:g} us calibrated), {args.seconds:g} s at {args.rate:g} "
+          f"Hz: {run.stats.missed} missed; lateness p99 {run.stats.lateness_p99_us:.1f} us; "
+          f"work CPU p50 {w50:.1f} us, p99 {w99:.1f} us, max {wmax:.1f} us; stolen {stolen}")
+    print("missed cycles by cause: " + describe_misses(
+        run.misses, run.stats.missed, 1e6 / args.rate, args.spin_us))
+
+
+if __name__ == "__main__":
+    main()
