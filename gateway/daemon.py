@@ -42,7 +42,7 @@ from gateway.report import status_dict
 from gateway.sdnotify import SystemdNotifier
 from gateway.server import ControlServer
 from gateway.simbus import SimulatedControllers
-from gateway.timing import Scheduler, realtime_setup
+from gateway.timing import MissProbe, Scheduler, realtime_setup
 from gateway.types import ErrorCode, Frame, GatewayState
 
 if TYPE_CHECKING:
@@ -115,6 +115,8 @@ class Daemon:
         self._watchdog_s = self.notifier.watchdog_period_s
         self._next_watchdog = 0.0
         self.rt_notes: list[str] = []
+        #: Classifies the loop's late starts; made by :meth:`run` in the loop's thread.
+        self.miss_probe: MissProbe | None = None
         # The server's selector descriptor, readable when a request or a connection waits:
         # lets the loop wait for requests with microsecond resolution (see _wait).
         fileno = getattr(self.server, "fileno", None)
@@ -209,6 +211,10 @@ class Daemon:
                 None if self.config.loop.rt_cpu < 0 else self.config.loop.rt_cpu,
                 self.config.loop.lock_memory,
             )
+            # Classifies late starts from this thread's scheduler statistics (opened here,
+            # in the loop's thread).
+            self.miss_probe = MissProbe(self.scheduler)
+            self._closers.append(self.miss_probe.close)
             if self.sim is not None:
                 # Started after realtime_setup, the simulators' thread inherits SCHED_FIFO when
                 # the loop has it: a SCHED_OTHER thread preempted while it holds the GIL would
@@ -278,12 +284,17 @@ class Daemon:
         """
         sched = self.scheduler
         spin = sched.spin_s
+        probe = self.miss_probe
+        if probe is not None:
+            probe.before_wait()
         while True:
             whole_ms = math.floor((sched.remaining_s() - spin) * 1000.0)
             if whole_ms < 1:
                 break
             self._serve(self.server.poll((whole_ms - 0.5) * 1e-3))
-        sched.wait_next(self._wait_fine)
+        woke = sched.wait_next(self._wait_fine)
+        if probe is not None:
+            probe.after_wait(woke)
         self._serve(self.server.poll(0.0))
 
     def _wait_fine(self, timeout_s: float) -> None:

@@ -17,9 +17,9 @@ own timing statistics, over the whole run, are read at the end:
   send, odometry), the daemon's own figure;
 * lateness: when a cycle started minus its deadline (p50/p99/max);
 * missed cycles: deadlines skipped after an overrun (skipped, not burst), each late start
-  classed by :func:`platform_floor.attribute` from the loop thread's schedstat over the
-  interval before it: on CPU for more than a period, runnable but not running, or asleep
-  past its deadline;
+  classed by the daemon's :class:`~gateway.timing.MissProbe` from the loop thread's schedstat
+  over the interval before it: on CPU for more than a period, runnable but not running, or
+  asleep past its deadline;
 * twist-to-frame latency: from the twist being sent to the daemon's socket (the client's
   ``perf_counter`` just before ``sendall``; CLOCK_MONOTONIC, the same clock in both
   processes) to the end of the send of the wheel frames of the cycle that applied it (before
@@ -69,14 +69,7 @@ import time
 from typing import Any
 
 import can
-from platform_floor import (
-    CyclicTest,
-    MissRecorder,
-    cyclictest,
-    describe_misses,
-    fixed_work_loop,
-    steal_s,
-)
+from platform_floor import CyclicTest, cyclictest, fixed_work_loop, steal_s
 
 from gateway.bus import drain, to_message
 from gateway.config import load_config
@@ -217,15 +210,6 @@ class BenchDaemon(Daemon):
                 self.can_frames_sent_ns.extend([t] * can_new)
 
         gw.cycle = timed_cycle  # type: ignore[method-assign]
-        #: Notes every late start (made in the loop's thread, which run() is called in).
-        self.recorder: MissRecorder | None = None
-
-    def _wait(self) -> None:
-        if self.recorder is None:
-            self.recorder = MissRecorder(self.scheduler)
-        self.recorder.before_wait()
-        super()._wait()
-        self.recorder.after_wait(time.perf_counter())  # the scheduler's clock
 
     def handle(self, client: int, request: Request | ProtocolError, now_s: float) -> None:
         pending = len(self._pending_twists)
@@ -363,9 +347,10 @@ def main() -> None:
     ]
     print("targets: " + "; ".join(f"{name}: {'yes' if ok else 'NO'}" for name, ok in verdict))
     print(f"CPU time stolen by the hypervisor during the run: {_stolen(steal_start, steal_end)}")
-    misses = daemon.recorder.misses if daemon.recorder is not None else []
-    print("missed cycles by cause (the loop thread's schedstat over each interval from the "
-          "cycle before): " + describe_misses(misses, stats.missed, period_us, cfg.loop.spin_us))
+    probe = daemon.miss_probe
+    print("missed cycles by cause (the daemon's MissProbe: the loop thread's schedstat over "
+          "each interval from the cycle before): "
+          + (probe.describe() if probe is not None else "not classified"))
     if args.platform:
         steal_start = steal_s()
         base = fixed_work_loop(args.seconds, cfg.loop.rate_hz, cfg.loop.spin_us * 1e-6, cpu_p50)
@@ -377,8 +362,7 @@ def main() -> None:
               f"max {base.stats.lateness_max_us:.1f} us; CPU time of the constant work p50 "
               f"{w50:.1f} us, p99 {w99:.1f} us, max {wmax:.1f} us; stolen "
               f"{_stolen(steal_start, steal_s())}")
-        print("its missed cycles by cause: " + describe_misses(
-            base.misses, base.stats.missed, period_us, cfg.loop.spin_us))
+        print("its missed cycles by cause: " + base.late_starts)
         steal_start = steal_s()
         ct = cyclictest(args.seconds, cfg.loop.rate_hz, args.rt)
         if isinstance(ct, CyclicTest):

@@ -14,11 +14,11 @@ Three independent readings, none of which runs any wheelgate work:
   column of ``/proc/stat``), read before and after a run.
 
 A loop that misses deadlines while these show the same misses, or stolen time, is held up by
-the machine, not by its own work.  :class:`MissRecorder` and :func:`attribute` look at each
-miss: they split the time from one cycle's start to the late start of the next into the loop
-thread's CPU time, the time it was runnable but not running, and the rest, as the guest
-kernel accounts them (``/proc/thread-self/schedstat``).  On a virtual machine the guest does
-not see every stall: a constant workload's CPU time spreads too, and :func:`fixed_work_loop`
+the machine, not by its own work.  The daemon's own
+:class:`~gateway.timing.MissProbe` classifies each of its late starts from the loop thread's
+scheduler statistics (on a CPU, runnable but not running, or asleep); :func:`fixed_work_loop`
+runs the same probe, so the two compare directly.  On a virtual machine the guest does not
+see every stall: a constant workload's CPU time spreads too, and :func:`fixed_work_loop`
 shows by how much.
 """
 
@@ -33,162 +33,26 @@ import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
 
-from gateway.timing import LoopTimer, Scheduler, TimingStats
-
-if TYPE_CHECKING:
-    from collections.abc import Sequence
+from gateway.timing import LoopTimer, MissProbe, Scheduler, TimingStats
 
 #: Width of cyclictest's latency histogram (us); later wake-ups count as overflows.
 HISTOGRAM_US = 2000
-
-
-class SchedStat:
-    """The calling thread's scheduler statistics, ``/proc/thread-self/schedstat``.
-
-    Opened once (the descriptor stays bound to the thread that opened it) and re-read with
-    ``pread`` (about 1 us).  :meth:`read` gives ``None`` where the file does not exist.
-    """
-
-    def __init__(self) -> None:
-        try:
-            self._fd: int | None = os.open("/proc/thread-self/schedstat", os.O_RDONLY)
-        except OSError:
-            self._fd = None
-
-    def read(self) -> tuple[int, int] | None:
-        """``(on-CPU ns, runnable-but-not-running ns)`` of the thread since it started."""
-        if self._fd is None:
-            return None
-        fields = os.pread(self._fd, 128, 0).split()
-        return int(fields[0]), int(fields[1])
-
-    def close(self) -> None:
-        """Release the descriptor."""
-        if self._fd is not None:
-            os.close(self._fd)
-            self._fd = None
-
-
-@dataclass(frozen=True, slots=True)
-class Miss:
-    """One late start: the interval from a cycle's start to the start of the next, which
-    came a whole period or more after its deadline (so deadlines were skipped).
-
-    :param late_us: how late the next start was past the deadline it was due at.
-    :param on_cpu_us: the loop thread's CPU time in the interval (its work, its serving of
-        the socket and its spin before the deadline), as the guest kernel accounts it.
-    :param runnable_us: time it was runnable but not running (the guest's run-queue delay).
-    """
-
-    late_us: float
-    on_cpu_us: float
-    runnable_us: float
-
-
-class MissRecorder:
-    """Notes every late start of a :class:`~gateway.timing.Scheduler`'s loop as a :class:`Miss`.
-
-    Create it in the loop's thread; call :meth:`before_wait` just before waiting for the next
-    deadline and :meth:`after_wait` as soon as the wait returns.
-
-    >>> times = iter([0.0, 0.0025])  # the first deadline at 0, the loop woken 2.5 ms later
-    >>> sched = Scheduler(1000.0, spin_s=0.0, clock=lambda: next(times))
-    >>> recorder = MissRecorder(sched)
-    >>> recorder.before_wait()
-    >>> recorder.after_wait(sched.wait_next())
-    >>> [round(m.late_us) for m in recorder.misses], sched.timer.missed
-    ([2500], 2)
-    >>> recorder.close()
-    """
-
-    def __init__(self, scheduler: Scheduler) -> None:
-        self._sched = scheduler
-        self._stat = SchedStat()
-        self._woke = self._stat.read()
-        self._due = 0.0
-        self._missed = 0
-        self.misses: list[Miss] = []
-
-    def before_wait(self) -> None:
-        """Note the deadline the loop is about to wait for."""
-        self._due = self._sched.next_deadline_s()
-        self._missed = self._sched.timer.missed
-
-    def after_wait(self, woke_s: float) -> None:
-        """Note the start at ``woke_s`` (the scheduler's clock); a :class:`Miss` if late."""
-        now = self._stat.read()
-        if now is None:
-            return
-        if self._sched.timer.missed > self._missed and self._woke is not None:
-            self.misses.append(Miss(
-                late_us=(woke_s - self._due) * 1e6,
-                on_cpu_us=(now[0] - self._woke[0]) / 1e3,
-                runnable_us=(now[1] - self._woke[1]) / 1e3,
-            ))
-        self._woke = now
-
-    def close(self) -> None:
-        """Release the schedstat descriptor."""
-        self._stat.close()
-
-
-def attribute(misses: Sequence[Miss], period_us: float, spin_us: float) -> dict[str, int]:
-    """Count each miss under what the guest kernel saw of the loop thread in its interval.
-
-    * ``on_cpu``: accounted as running for more than a period (its spin before each deadline
-      not counted): its work did not fit, or the machine slowed it down in a way the guest
-      kernel cannot see;
-    * ``runnable``: otherwise, if it was runnable but not running for at least half of the
-      time it was late by: queued behind other threads, or woken while its virtual CPU was
-      not running (the guest's run-queue clock goes on while the hypervisor has the CPU);
-    * ``stalled``: otherwise: neither running nor runnable for most of that time, so its
-      wake-up came late (a timer interrupt held up by the machine).
-
-    A constant workload (:func:`fixed_work_loop`) alone in its process shows all three on a
-    virtual machine; each is the machine's unless the loop misses more than that control.
-
-    >>> attribute([Miss(1500, 1400, 0), Miss(1200, 300, 900), Miss(5000, 250, 10)], 1000, 200)
-    {'on_cpu': 1, 'runnable': 1, 'stalled': 1}
-    """
-    counts = {"on_cpu": 0, "runnable": 0, "stalled": 0}
-    for m in misses:
-        if m.on_cpu_us - spin_us > period_us:
-            counts["on_cpu"] += 1
-        elif m.runnable_us >= 0.5 * m.late_us:
-            counts["runnable"] += 1
-        else:
-            counts["stalled"] += 1
-    return counts
-
-
-def describe_misses(misses: Sequence[Miss], skipped: int, period_us: float, spin_us: float) -> str:
-    """One line: how many late starts, by cause, and their extremes."""
-    if not misses:
-        return "none" if not skipped else "unknown (no /proc/thread-self/schedstat)"
-    causes = attribute(misses, period_us, spin_us)
-    late = sorted(m.late_us for m in misses)
-    return (f"{len(misses)} late starts ({skipped} deadlines skipped): on CPU over a period "
-            f"{causes['on_cpu']}, runnable but not running {causes['runnable']}, asleep past "
-            f"the deadline {causes['stalled']}; the thread's CPU time in those intervals max "
-            f"{max(m.on_cpu_us for m in misses):.0f} us (spin included), runnable "
-            f"max {max(m.runnable_us for m in misses):.0f} us; late by p50 "
-            f"{late[len(late) // 2]:.0f} us, max {late[-1]:.0f} us")
 
 
 @dataclass(frozen=True, slots=True)
 class WorkLoop:
     """A run of :func:`fixed_work_loop`.
 
-    :param stats: the scheduler's timing statistics.
+    :param stats: the scheduler's timing statistics (late starts by cause included).
     :param work_us: CPU time (p50, p99, max) of the constant workload, cycle by cycle.
-    :param misses: its late starts.
+    :param late_starts: the :class:`~gateway.timing.MissProbe`'s description of its late
+        starts.
     """
 
     stats: TimingStats
     work_us: tuple[float, float, float]
-    misses: tuple[Miss, ...]
+    late_starts: str
 
 
 def _arithmetic(n: int) -> int:
@@ -227,23 +91,23 @@ def fixed_work_loop(seconds: float, rate_hz: float, spin_s: float,
     n = _calibrate(work_us)
     timer = LoopTimer(rate_hz, capacity=int(seconds * rate_hz) + 100)
     sched = Scheduler(rate_hz, spin_s=spin_s, timer=timer)
-    recorder = MissRecorder(sched)
+    probe = MissProbe(sched)
     costs: list[int] = []
     end = time.perf_counter() + seconds
     try:
         while time.perf_counter() < end:
-            recorder.before_wait()
-            recorder.after_wait(sched.wait_next())
+            probe.before_wait()
+            probe.after_wait(sched.wait_next())
             c0 = time.thread_time_ns()
             _arithmetic(n)
             costs.append(time.thread_time_ns() - c0)
             sched.end_cycle()
     finally:
-        recorder.close()
+        probe.close()
     costs.sort()
     k = len(costs)
     spread = (costs[k // 2] / 1e3, costs[min(k - 1, int(0.99 * k))] / 1e3, costs[-1] / 1e3)
-    return WorkLoop(timer.snapshot(), spread, tuple(recorder.misses))
+    return WorkLoop(timer.snapshot(), spread, probe.describe())
 
 
 def steal_s() -> float | None:
@@ -369,8 +233,7 @@ def main() -> None:
     print(f"constant work ({args.work_us:g} us calibrated), {args.seconds:g} s at {args.rate:g} "
           f"Hz: {run.stats.missed} missed; lateness p99 {run.stats.lateness_p99_us:.1f} us; "
           f"work CPU p50 {w50:.1f} us, p99 {w99:.1f} us, max {wmax:.1f} us; stolen {stolen}")
-    print("missed cycles by cause: " + describe_misses(
-        run.misses, run.stats.missed, 1e6 / args.rate, args.spin_us))
+    print("missed cycles by cause: " + run.late_starts)
 
 
 if __name__ == "__main__":

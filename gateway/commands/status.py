@@ -10,6 +10,9 @@ from gateway.cli import config_option, json_option
 from gateway.client import ControlClient
 from gateway.commands._common import socket_for
 
+#: Late-start causes in the status's timing (``late_<key>``), as printed.
+_LATE_CAUSES = (("on_cpu", "on CPU"), ("runnable", "runnable"), ("asleep", "asleep"))
+
 
 @click.command()
 @config_option
@@ -47,7 +50,10 @@ def command(
                    f"({tr['tolerance_rad_s']:g} rad/s + {100 * tr['tolerance_ratio']:g} % of the "
                    f"command, {tr['time_s']:g} s)")
     t = reply["timing"]
-    click.echo(f"timing: {t['cycles']} cycles, {t['missed']} missed; lateness p50/p99/max "
+    causes = [(t.get(f"late_{key}", 0), text) for key, text in _LATE_CAUSES]
+    why = (" (late starts: " + ", ".join(f"{text} {n}" for n, text in causes) + ")"
+           if any(n for n, _ in causes) else "")
+    click.echo(f"timing: {t['cycles']} cycles, {t['missed']} missed{why}; lateness p50/p99/max "
                f"{t['lateness_p50_us']:.0f}/{t['lateness_p99_us']:.0f}/{t['lateness_max_us']:.0f} "
                f"us; cost p50/p99/max {t['cost_p50_us']:.0f}/{t['cost_p99_us']:.0f}/"
                f"{t['cost_max_us']:.0f} us")

@@ -7,6 +7,8 @@
 * :class:`LoopTimer` (:mod:`gateway.timing.stats`) records lateness, cost, skipped cycles and
   twist-to-frame latency into fixed-size ring buffers (no allocation per cycle) and summarises
   them on demand in a frozen :class:`TimingStats`.
+* :class:`MissProbe` (:mod:`gateway.timing.misses`) tells, for every late start, whether the
+  loop thread was running, waiting for a CPU or asleep (its schedstat), and counts each cause.
 * :func:`realtime_setup` (:mod:`gateway.timing.realtime`) applies ``gc.freeze()``,
   ``SCHED_FIFO``, CPU pinning and ``mlockall`` as far as the process is allowed to, and reports
   what it did.
@@ -27,8 +29,10 @@ The loop in the daemon::
 
 from __future__ import annotations
 
+from gateway.timing.misses import MissCause, MissProbe
 from gateway.timing.realtime import realtime_setup
 from gateway.timing.scheduler import Scheduler
 from gateway.timing.stats import DEFAULT_CAPACITY, LoopTimer, TimingStats
 
-__all__ = ["DEFAULT_CAPACITY", "LoopTimer", "Scheduler", "TimingStats", "realtime_setup"]
+__all__ = ["DEFAULT_CAPACITY", "LoopTimer", "MissCause", "MissProbe", "Scheduler", "TimingStats",
+           "realtime_setup"]

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from gateway.errors import ConfigError
+from gateway.timing.misses import MissCause
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -41,6 +42,12 @@ class TimingStats:
     :param latency_p50_us: median twist-to-frame latency.
     :param latency_p99_us: 99th percentile of the latency.
     :param latency_max_us: largest latency in the window.
+    :param late_on_cpu: late starts (each skipping one or more deadlines) since start-up for
+        which the loop thread was on a CPU for more than a period
+        (:class:`~gateway.timing.misses.MissCause`; all three stay 0 where the kernel's
+        per-thread statistics cannot be read).
+    :param late_runnable: late starts for which it was runnable but not running.
+    :param late_asleep: late starts for which it was woken late.
     """
 
     cycles: int
@@ -57,6 +64,9 @@ class TimingStats:
     latency_p50_us: float
     latency_p99_us: float
     latency_max_us: float
+    late_on_cpu: int = 0
+    late_runnable: int = 0
+    late_asleep: int = 0
 
     def summary(self) -> str:
         """One line for ``STATUS=`` and logs."""
@@ -135,6 +145,9 @@ class LoopTimer:
         self.cycles = 0
         #: Deadlines skipped after overruns since start-up (cheap to read every cycle).
         self.missed = 0
+        #: Late starts since start-up by cause (:class:`~gateway.timing.misses.MissCause`
+        #: value), as classified by a :class:`~gateway.timing.misses.MissProbe`.
+        self.late_by_cause = {cause.value: 0 for cause in MissCause}
 
     @property
     def capacity(self) -> int:
@@ -158,6 +171,10 @@ class LoopTimer:
     def record_missed(self, count: int) -> None:
         """Count ``count`` skipped deadlines."""
         self.missed += count
+
+    def record_late_start(self, cause: MissCause) -> None:
+        """Count one late start under ``cause``."""
+        self.late_by_cause[cause.value] += 1
 
     def record_latency(self, latency_s: float) -> None:
         """Record one twist-to-frame latency (twist received to its frames sent), s."""
@@ -192,4 +209,7 @@ class LoopTimer:
             latency_p50_us=latency[0],
             latency_p99_us=latency[1],
             latency_max_us=latency[2],
+            late_on_cpu=self.late_by_cause["on_cpu"],
+            late_runnable=self.late_by_cause["runnable"],
+            late_asleep=self.late_by_cause["asleep"],
         )
