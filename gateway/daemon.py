@@ -295,6 +295,9 @@ class Daemon:
         woke = sched.wait_next(self._wait_fine)
         if probe is not None:
             probe.after_wait(woke)
+            text = probe.report(woke)
+            if text is not None:
+                log.warning("control loop: %s", text)
         self._serve(self.server.poll(0.0))
 
     def _wait_fine(self, timeout_s: float) -> None:

@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import json
+import logging
 import os
 import re
+import time
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -12,7 +14,7 @@ import pytest
 
 from gateway.cli import main
 from gateway.timing import MissCause, MissProbe, Scheduler
-from gateway.timing.misses import SchedStat
+from gateway.timing.misses import REPORT_INTERVAL_S, SchedStat
 from tests.test_timing import FakeClock
 
 if TYPE_CHECKING:
@@ -100,6 +102,41 @@ def test_the_interval_starts_at_the_previous_start() -> None:
     next_cycle(sched, probe)
     assert probe.recent[-1].cause is MissCause.ASLEEP
     assert probe.recent[-1].on_cpu_s == pytest.approx(0.001)
+
+
+def test_reports_come_at_once_then_at_most_every_interval() -> None:
+    clock = FakeClock(oversleep=0.025)  # every wait wakes 2.5 periods late: asleep
+    thread = FakeThread()
+    sched, probe = loop(clock, thread)
+    assert probe.report(clock.now) is None  # nothing yet
+    next_cycle(sched, probe)
+    first = probe.report(clock.now)
+    assert first is not None
+    assert first.startswith("1 late start (on CPU 0, runnable 0, asleep 1; worst 24.8 ms late)")
+    for _ in range(3):
+        next_cycle(sched, probe)
+        assert probe.report(clock.now) is None  # within the interval: held back
+    clock.work(REPORT_INTERVAL_S)
+    thread.on_cpu_ns += int(REPORT_INTERVAL_S * 1e9)  # and a long stretch of work: on CPU
+    next_cycle(sched, probe)
+    second = probe.report(clock.now)
+    assert second is not None
+    assert second.startswith("4 late starts (on CPU 1, runnable 0, asleep 3; worst ")
+    assert second.endswith(f"; {sched.timer.missed} deadlines skipped since start-up")
+    assert probe.report(clock.now + 2 * REPORT_INTERVAL_S) is None  # nothing new
+
+
+def test_the_daemon_logs_the_reports(daemon: Daemon, monkeypatch: pytest.MonkeyPatch,
+                                     caplog: pytest.LogCaptureFixture) -> None:
+    probe = daemon.miss_probe
+    assert probe is not None
+    lines = iter(["3 late starts (as if)"])
+    monkeypatch.setattr(probe, "report", lambda now_s: next(lines, None))
+    with caplog.at_level(logging.WARNING, logger="gateway.daemon"):
+        deadline = time.monotonic() + 5.0
+        while "control loop: 3 late starts (as if)" not in caplog.text:
+            assert time.monotonic() < deadline, caplog.text
+            time.sleep(0.01)
 
 
 def test_without_statistics_nothing_is_classified() -> None:

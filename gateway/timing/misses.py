@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import collections
 import enum
+import math
 import os
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -36,6 +37,9 @@ if TYPE_CHECKING:
 
 #: Late starts kept in :attr:`MissProbe.recent`.
 RECENT = 64
+
+#: Least time between two :meth:`MissProbe.report` lines (s).
+REPORT_INTERVAL_S = 10.0
 
 
 class MissCause(enum.Enum):
@@ -155,6 +159,11 @@ class MissProbe:
         self.recent: collections.deque[Miss] = collections.deque(maxlen=RECENT)
         #: The largest of each figure over every late start (s): late, on CPU, runnable.
         self.worst = (0.0, 0.0, 0.0)
+        #: Late starts classified so far.
+        self.count = 0
+        self._reported = 0
+        self._reported_by = dict(scheduler.timer.late_by_cause)
+        self._next_report_s = -math.inf
 
     @property
     def available(self) -> bool:
@@ -177,10 +186,28 @@ class MissProbe:
             runnable = (now[1] - self._woke[1]) * 1e-9
             cause = classify(late, on_cpu, runnable, self._sched.period_s, self._sched.spin_s)
             timer.record_late_start(cause)
+            self.count += 1
             self.recent.append(Miss(late, skipped, on_cpu, runnable, cause))
             w = self.worst
             self.worst = (max(w[0], late), max(w[1], on_cpu), max(w[2], runnable))
         self._woke = now
+
+    def report(self, now_s: float) -> str | None:
+        """A line on the late starts since the last one, for the log: at once after the first,
+        then at most one every :data:`REPORT_INTERVAL_S` (the rest accumulate); ``None``
+        when there is nothing (yet) to say.  Cheap enough to call every cycle."""
+        if self.count == self._reported or now_s < self._next_report_s:
+            return None
+        new = self.count - self._reported
+        by = self._sched.timer.late_by_cause
+        delta = {key: by[key] - self._reported_by.get(key, 0) for key in by}
+        latest = list(self.recent)[-min(new, len(self.recent)):]
+        worst = max((m.late_s for m in latest), default=0.0)
+        self._reported, self._reported_by = self.count, dict(by)
+        self._next_report_s = now_s + REPORT_INTERVAL_S
+        return (f"{new} late start{'s' if new != 1 else ''} (on CPU {delta['on_cpu']}, runnable "
+                f"{delta['runnable']}, asleep {delta['asleep']}; worst {worst * 1e3:.1f} ms late)"
+                f"; {self._sched.timer.missed} deadlines skipped since start-up")
 
     def describe(self) -> str:
         """One line: late starts by cause and the worst figures (for benchmarks and logs)."""
