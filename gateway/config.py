@@ -27,6 +27,7 @@ the loaders, as this module's public names.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import tempfile
@@ -44,6 +45,7 @@ from gateway.config_keys import (
     KINEMATICS_KEYS,
     LIMIT_KEYS,
     MOTOR_KEYS,
+    STEERING_KEYS,
     TOP_KEYS,
     WHEEL_KEYS,
 )
@@ -52,8 +54,8 @@ from gateway.errors import ConfigError, DriverNotFoundError, KinematicsError
 from gateway.kinematics import PRESETS, Limits, RobotModel, Wheel, WheelType
 from gateway.kinematics.model import validate_wheel
 from gateway.options import OptionSpec, validate_block
-from gateway.registry import get_driver_class
-from gateway.types import MotorConfig
+from gateway.registry import get_driver_class, valid_drivers
+from gateway.types import MotorConfig, MotorRole
 from gateway.wgproto import CanIds
 
 if TYPE_CHECKING:
@@ -169,7 +171,11 @@ def parse_config(
         )
         for i, (w, block) in enumerate(zip(wheels, motor_raw, strict=True))
     )
-    _check_nodes(motors, source)
+    steering = _steering(
+        raw.get("steering"), raw.get("steering_defaults", {}), wheels, source, config_dir
+    )
+    _check_nodes((*motors, *steering), source)
+    wheels = _limit_steer_rates(wheels, steering)
     kin = validate_block(raw.get("kinematics", {}), KINEMATICS_KEYS, f"{source}: kinematics")
     try:
         model = RobotModel(wheels, slip_tolerance_m_s=float(kin["slip_tolerance_m_s"]))  # type: ignore[arg-type]
@@ -188,7 +194,8 @@ def parse_config(
     if not isinstance(name, str):
         raise ConfigError(f"{source}: name: expected str, got {name!r}")
     return GatewayConfig(
-        source, name, str(drive), MappingProxyType(geometry), model, motors, limits, bus, loop
+        source, name, str(drive), MappingProxyType(geometry), model, motors, limits, bus, loop,
+        steering,
     )
 
 
@@ -275,23 +282,107 @@ def _generic_wheels(
     return wheels, motors
 
 
+def _steering(
+    raw: object, defaults: object, wheels: list[Wheel], source: str, config_dir: str
+) -> tuple[MotorConfig, ...]:
+    """The ``steering:`` blocks: one actuator per steered wheel or steer group."""
+    if raw is None:
+        if defaults not in (None, {}):
+            raise ConfigError(f"{source}: steering_defaults: given without a steering: block")
+        return ()
+    if not isinstance(raw, dict):
+        raise ConfigError(f"{source}: steering: expected a mapping of steered wheel or steer "
+                          f"group to actuator block, got {raw!r}")
+    if not isinstance(defaults, dict):
+        raise ConfigError(f"{source}: steering_defaults: expected a mapping, got {defaults!r}")
+    by_name = {w.name: w for w in wheels}
+    groups: dict[str, list[str]] = {}
+    for w in wheels:
+        if w.steered and w.steer_group is not None:
+            groups.setdefault(w.steer_group, []).append(w.name)
+    choices = [w.name for w in wheels if w.type is WheelType.STEERABLE and w.steer_group is None]
+    choices += sorted(groups)
+    out: list[MotorConfig] = []
+    for key, block in raw.items():
+        where = f"{source}: steering.{key}"
+        wheel = by_name.get(key)
+        if wheel is None and key not in groups:
+            raise ConfigError(
+                f"{where}: unknown steered wheel or steer group (this robot's: "
+                f"{', '.join(choices) or 'none'})"
+            )
+        if wheel is not None and wheel.steer_group is not None:
+            raise ConfigError(
+                f"{where}: wheel {key!r} is steered together with its group "
+                f"{wheel.steer_group!r}; give the group's actuator as "
+                f"steering.{wheel.steer_group}"
+            )
+        members = [key] if wheel is not None else groups[key]
+        for name in members:
+            kind = by_name[name].type
+            if kind is WheelType.CASTOR:
+                raise ConfigError(f"{where}: wheel {name!r} is a castor wheel; it swivels by "
+                                  f"itself and takes no steering actuator")
+            if kind is not WheelType.STEERABLE:
+                raise ConfigError(f"{where}: wheel {name!r} is not steered (a {kind.value} "
+                                  f"wheel); expected one of {', '.join(choices) or 'none'}")
+        if not isinstance(block, dict):
+            raise ConfigError(f"{where}: expected a mapping, got {block!r}")
+        travel = (min(by_name[n].steer_min for n in members),
+                  max(by_name[n].steer_max for n in members))
+        out.append(
+            _motor(block, defaults, f"{key} steering", where, config_dir, tuple(members), travel)
+        )
+    return tuple(out)
+
+
+#: The share of a steering actuator's top speed that the commanded steering rate may use, so
+#: that its position loop has room to catch up.
+STEER_RATE_SHARE = 0.8
+
+
+def _limit_steer_rates(wheels: list[Wheel], steering: tuple[MotorConfig, ...]) -> list[Wheel]:
+    """The wheels, each steering rate limit at most :data:`STEER_RATE_SHARE` of the top speed
+    (``max_rpm`` through ``gear_ratio``) of the actuator that turns the wheel."""
+    limit: dict[str, float] = {}
+    for a in steering:
+        rate = STEER_RATE_SHARE * a.max_rpm * 2.0 * math.pi / 60.0 / a.gear_ratio
+        for name in a.steers:
+            limit[name] = rate
+    return [
+        dataclasses.replace(w, max_steer_rate=min(w.max_steer_rate, limit[w.name]))
+        if w.name in limit else w
+        for w in wheels
+    ]
+
+
 def _motor(
     raw: Mapping[str, object],
     defaults: Mapping[str, object],
     wheel: str,
     where: str,
     config_dir: str,
+    steers: tuple[str, ...] = (),
+    travel: tuple[float, float] = (-math.pi, math.pi),
 ) -> MotorConfig:
+    """A motor block, or with ``steers`` a steering actuator's block."""
+    keys = STEERING_KEYS if steers else MOTOR_KEYS
     merged = {**defaults, **raw}
-    common = {k: merged[k] for k in MOTOR_KEYS if k in merged}
-    v = validate_block(common, MOTOR_KEYS, where, "motor keys")
+    common = {k: merged[k] for k in keys if k in merged}
+    v = validate_block(common, keys, where, "steering keys" if steers else "motor keys")
     driver = str(v["driver"])
     try:
         cls = get_driver_class(driver)
     except DriverNotFoundError as err:
         raise ConfigError(f"{where}.driver: {err}") from err
+    if steers and not cls.STEERING:
+        able = sorted(n for n in valid_drivers() if _steers(n))
+        raise ConfigError(
+            f"{where}.driver: the {driver} driver does not command steering actuators "
+            f"(drivers that do: {', '.join(able) or 'none'})"
+        )
     node_id = int(v["node_id"])  # type: ignore[call-overload]
-    protocol = {k: x for k, x in merged.items() if k not in MOTOR_KEYS}
+    protocol = {k: x for k, x in merged.items() if k not in keys}
     if "config_dir" in cls.OPTIONS and "config_dir" not in protocol:
         # Relative paths in protocol keys (a DBC file) are relative to the config file.
         protocol["config_dir"] = config_dir
@@ -305,7 +396,19 @@ def _motor(
         invert=bool(v["invert"]),
         max_rpm=float(v["max_rpm"]),  # type: ignore[arg-type]
         options=MappingProxyType(options),
+        role=MotorRole.STEER if steers else MotorRole.DRIVE,
+        zero_rad=float(v.get("zero_rad", 0.0)),  # type: ignore[arg-type]
+        steers=steers,
+        steer_range_rad=travel,
     )
+
+
+def _steers(name: str) -> bool:
+    """Whether the driver ``name`` commands steering actuators (``False`` if it cannot load)."""
+    try:
+        return get_driver_class(name).STEERING
+    except DriverNotFoundError:
+        return False
 
 
 def _check_nodes(motors: tuple[MotorConfig | None, ...], source: str) -> None:
@@ -316,7 +419,7 @@ def _check_nodes(motors: tuple[MotorConfig | None, ...], source: str) -> None:
         key = (m.driver, m.node_id)
         if key in seen:
             raise ConfigError(
-                f"{source}: motors of wheels {seen[key]!r} and {m.wheel!r} share "
+                f"{source}: the motors of {seen[key]!r} and {m.wheel!r} share "
                 f"{m.driver} node_id {m.node_id}; expected unique node IDs"
             )
         seen[key] = m.wheel

@@ -26,8 +26,8 @@ if TYPE_CHECKING:
 
 #: The top-level keys of a configuration file.
 TOP_KEYS = frozenset(
-    {"name", "drive", "geometry", "wheels", "motors", "motor_defaults", "limits",
-     "kinematics", "bus", "gateway"}
+    {"name", "drive", "geometry", "wheels", "motors", "motor_defaults", "steering",
+     "steering_defaults", "limits", "kinematics", "bus", "gateway"}
 )
 #: The keys of a motor block that every driver takes (``motor_defaults:`` is merged in first);
 #: any other key is a protocol key of the driver.
@@ -37,6 +37,15 @@ MOTOR_KEYS: Mapping[str, OptionSpec] = MappingProxyType({
     "gear_ratio": OptionSpec(float, 1.0, minimum=1e-9, help="motor turns per wheel turn"),
     "invert": OptionSpec(bool, False),
     "max_rpm": OptionSpec(float, minimum=1e-9, help="motor speed limit in RPM at the motor"),
+})
+#: The keys of a steering actuator's block (``steering:``, with ``steering_defaults:`` merged
+#: in first) that every driver takes; any other key is a protocol key of the driver.
+STEERING_KEYS: Mapping[str, OptionSpec] = MappingProxyType({
+    **MOTOR_KEYS,
+    "gear_ratio": OptionSpec(float, 1.0, minimum=1e-9,
+                             help="motor turns per turn of the wheel's plane"),
+    "zero_rad": OptionSpec(float, 0.0, help="motor position (rad, the controller's frame) "
+                                             "with the wheels at their neutral angle"),
 })
 #: The keys of one item of ``wheels:`` (``drive: generic``).
 WHEEL_KEYS: Mapping[str, OptionSpec] = MappingProxyType({
@@ -97,6 +106,9 @@ GATEWAY_KEYS: Mapping[str, OptionSpec] = MappingProxyType({
     "tracking_time_s": OptionSpec(
         float, DEFAULT_LIMITS.time_s, minimum=0.0,
         help="how long a wheel may stay off its command before a fault; 0 disables the check"),
+    "tracking_steer_tolerance_rad": OptionSpec(
+        float, DEFAULT_LIMITS.steer_tolerance_rad, minimum=0.0,
+        help="steering-angle error allowed of a steering actuator (rad)"),
 })
 #: The keys of ``gateway.can_ids:``, the gateway's own CAN IDs (:class:`gateway.wgproto.CanIds`).
 CAN_ID_KEYS: Mapping[str, OptionSpec] = MappingProxyType({

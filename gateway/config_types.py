@@ -68,6 +68,7 @@ class LoopConfig:
     :param tracking_tolerance_ratio: how much the window widens per rad/s of command.
     :param tracking_time_s: how long a wheel may stay outside its window before a FAULT
         (0: no tracking-error check); see :mod:`gateway.tracking`.
+    :param tracking_steer_tolerance_rad: the steering-angle window of steering actuators (rad).
     """
 
     rate_hz: float = 200.0
@@ -91,12 +92,13 @@ class LoopConfig:
     tracking_tolerance_rad_s: float = DEFAULT_LIMITS.tolerance_rad_s
     tracking_tolerance_ratio: float = DEFAULT_LIMITS.tolerance_ratio
     tracking_time_s: float = DEFAULT_LIMITS.time_s
+    tracking_steer_tolerance_rad: float = DEFAULT_LIMITS.steer_tolerance_rad
 
     @property
     def tracking(self) -> TrackingLimits:
         """The tracking-error check's limits."""
         return TrackingLimits(self.tracking_tolerance_rad_s, self.tracking_tolerance_ratio,
-                              self.tracking_time_s)
+                              self.tracking_time_s, self.tracking_steer_tolerance_rad)
 
 
 @dataclass(frozen=True, slots=True)
@@ -112,6 +114,8 @@ class GatewayConfig:
     :param limits: speed and acceleration limits.
     :param bus: bus settings.
     :param loop: the daemon's settings.
+    :param steering: the steering actuators (``steering:`` blocks), each naming the wheels it
+        turns; steered wheels without one are steered outside the gateway.
     """
 
     source: str
@@ -123,6 +127,7 @@ class GatewayConfig:
     limits: Limits
     bus: BusConfig
     loop: LoopConfig = field(default_factory=LoopConfig)
+    steering: tuple[MotorConfig, ...] = ()
 
     @property
     def wheels(self) -> tuple[Wheel, ...]:

@@ -34,7 +34,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from gateway.errors import InfeasibleTwistError
-from gateway.tracking import TrackingMonitor
+from gateway.tracking import SteerMonitor, TrackingMonitor
 from gateway.types import DriveState, ErrorCode, GatewayState, Twist
 
 if TYPE_CHECKING:
@@ -156,6 +156,8 @@ class Supervisor:
         self._running_since_s = 0.0
         #: The tracking-error check (active while RUNNING).
         self.tracking = TrackingMonitor(loop.tracking)
+        #: The steering actuators' angle check (active while RUNNING).
+        self.steer_tracking = SteerMonitor(loop.tracking)
 
     # ----------------------------------------------------------------- commands
 
@@ -250,15 +252,20 @@ class Supervisor:
         statuses: Sequence[MotorStatus],
         now_s: float,
         command_rad_s: Sequence[float] | None = None,
+        steer_rad: Sequence[float] | None = None,
     ) -> Fault | None:
         """Take the motors' states; return the fault when one starts.
 
-        :param command_rad_s: each motor's wheel speed as commanded the cycle before (the
-            order of ``statuses``), for the tracking-error check; ``None`` skips it.
+        :param command_rad_s: each drive motor's wheel speed as commanded the cycle before
+            (the order of ``statuses``, whose drive motors come first; steering actuators
+            follow), for the tracking-error check; ``None`` skips it.
+        :param steer_rad: each steering actuator's angle as commanded the cycle before (the
+            order of the statuses after the drive motors), for the steering check.
         """
         self._now_hint = now_s
         if self.state is not GatewayState.RUNNING:
             self.tracking.reset()
+            self.steer_tracking.reset()
         bad = [s for s in statuses if s.state in (DriveState.FAULT, DriveState.OFFLINE)]
         if self.state is GatewayState.ENABLING:
             if statuses and all(s.state is DriveState.ENABLED for s in statuses):
@@ -277,10 +284,22 @@ class Supervisor:
             if bad:
                 return self._fault(bad, "")
             if command_rad_s is not None:
-                off = self.tracking.check(command_rad_s, [s.feedback for s in statuses], now_s)
+                n = len(command_rad_s)
+                feedback = [s.feedback for s in statuses]
+                if len(feedback) != n:
+                    del feedback[n:]
+                off = self.tracking.check(command_rad_s, feedback, now_s)
                 if off is not None:
                     return self._fault([statuses[off.index]], off.describe(),
                                        ErrorCode.TRACKING_ERROR)
+                if steer_rad is not None:
+                    actuators = statuses[n:]
+                    turn = self.steer_tracking.check(
+                        steer_rad, [s.feedback for s in actuators], now_s
+                    )
+                    if turn is not None:
+                        return self._fault([actuators[turn.index]], turn.describe(),
+                                           ErrorCode.TRACKING_ERROR)
             return None
         if (
             self.state is GatewayState.FAULT

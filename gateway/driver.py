@@ -50,11 +50,20 @@ class MotorDriver(abc.ABC):
     #: decodes (DJI).  Holding such a wheel at zero speed needs that feedback, so on a fault
     #: about the feedback or the tracking the gateway releases these motors instead.
     HOST_SPEED_LOOP: ClassVar[bool] = False
+    #: Whether this driver also commands steering actuators (motors with
+    #: :attr:`~gateway.types.MotorRole.STEER`): armed in position control, commanded with a
+    #: steering angle, reporting that angle (absolute, from ``zero_rad``) as feedback.
+    STEERING: ClassVar[bool] = False
 
     def __init__(self, motors: Sequence[MotorConfig]) -> None:
         self.motors: tuple[MotorConfig, ...] = tuple(motors)
         owners: dict[int, str] = {}
         for m in self.motors:
+            if m.steering and not self.STEERING:
+                raise ConfigError(
+                    f"motor {m.wheel!r}: the {m.driver} driver does not command steering "
+                    f"actuators"
+                )
             where = f"motor {m.wheel!r}.node_id"
             self.validate_node_id(m.node_id, where, m.options)
             if m.node_id in owners:
@@ -116,21 +125,25 @@ class MotorDriver(abc.ABC):
 
     @abc.abstractmethod
     def enable(self, now_s: float) -> list[Frame]:
-        """Start the enable sequence (clear errors, select velocity mode, arm).
+        """Start the enable sequence (clear errors, select velocity mode, or position mode for
+        a steering actuator, arm).
 
         Sequences that wait for answers go on through :meth:`poll` and :meth:`on_frame`.
         """
 
     @abc.abstractmethod
     def disable(self, now_s: float) -> list[Frame]:
-        """Frames that command zero speed and disarm where the protocol can."""
+        """Frames that command zero speed and disarm where the protocol can (a steering
+        actuator is released where it stands)."""
 
     @abc.abstractmethod
     def command(self, wheel_rad_s: Sequence[float], now_s: float) -> list[Frame]:
-        """Velocity command frames for this cycle.
+        """Command frames for this cycle.
 
-        :param wheel_rad_s: one wheel speed per motor, in :attr:`motors` order, rad/s.
-        :raises EncodeError: if a speed cannot be encoded (the loop limits speeds first).
+        :param wheel_rad_s: one setpoint per motor, in :attr:`motors` order: the wheel speed in
+            rad/s for a drive motor, the steering angle in rad (from the neutral plane angle,
+            counter-clockwise positive) for a steering actuator (:attr:`STEERING` drivers).
+        :raises EncodeError: if a setpoint cannot be encoded (the loop limits speeds first).
         """
 
     @abc.abstractmethod
@@ -142,7 +155,7 @@ class MotorDriver(abc.ABC):
         """
 
     def preview_command(self, wheel_rad_s: Sequence[float]) -> list[Frame]:
-        """The velocity frames :meth:`command` would send for these speeds from a freshly
+        """The frames :meth:`command` would send for these setpoints from a freshly
         enabled driver with no feedback (pure; for ``wheelgate frames`` and tests).
 
         The default runs a fresh instance; drivers whose frames depend on feedback override it

@@ -4,6 +4,12 @@
 order, hands each driver the speeds of its own motors and returns all frames of the cycle in
 one list (moteus' "build all, then send once"), so no two wheels act on commands from different
 cycles.
+
+Steering actuators (``steering:`` blocks) join the driver of their protocol, after its drive
+motors: a driver serves every motor of its protocol on the bus, whatever each one does (DJI packs
+four ESCs into one frame, CANopen has one SYNC per bus).  Their setpoint is the steering angle of
+the first wheel they turn (wheels steered together share it), and their feedback is the measured
+angle, which the odometry uses in place of the commanded one (:meth:`DriveSet.measured_steer`).
 """
 
 from __future__ import annotations
@@ -18,11 +24,11 @@ if TYPE_CHECKING:
     from gateway.config import GatewayConfig
     from gateway.driver import MotorDriver
     from gateway.sim import DeviceSimulator
-    from gateway.types import Frame, MotorStatus, WheelFeedback
+    from gateway.types import Frame, MotorConfig, MotorStatus, WheelFeedback
 
 
 class DriveSet:
-    """Every driven wheel's driver.
+    """Every driven wheel's driver, and every steering actuator's.
 
     :param config: the validated configuration.
     :raises DriverNotFoundError: if a driver cannot be loaded.
@@ -30,34 +36,56 @@ class DriveSet:
 
     def __init__(self, config: GatewayConfig) -> None:
         self.config = config
+        n = len(config.motors)
+        # Setpoint slots: 0..n-1 are the wheels' speeds (model order), n + k the steering angle
+        # of actuator k.
+        slots: list[MotorConfig | None] = [*config.motors, *config.steering]
         groups: dict[str, list[int]] = {}
-        for i, motor in enumerate(config.motors):
+        for i, motor in enumerate(slots):
             if motor is not None:
                 groups.setdefault(motor.driver, []).append(i)
-        #: (driver, wheel indices in model order) pairs.
+        #: (driver, setpoint slots) pairs: a slot below the number of wheels is that wheel's
+        #: speed (model order); slot ``wheels + k`` is steering actuator ``k``'s angle.
         self.groups: tuple[tuple[MotorDriver, tuple[int, ...]], ...] = tuple(
             (
-                get_driver_class(name)(
-                    [m for m in (config.motors[i] for i in idx) if m is not None]
-                ),
+                get_driver_class(name)([m for m in (slots[i] for i in idx) if m is not None]),
                 tuple(idx),
             )
             for name, idx in groups.items()
         )
+        index = config.model.index
+        #: Per steering actuator, the model indices of the wheels it turns.
+        self.steered_by: tuple[tuple[int, ...], ...] = tuple(
+            tuple(index(w) for w in a.steers) for a in config.steering
+        )
         #: Whether any driver closes its speed loop on the host (see MotorDriver).
         self.host_speed_loop = any(drv.HOST_SPEED_LOOP for drv, _ in self.groups)
         flat = [i for _, idx in self.groups for i in idx]
-        self._whole = len(self.groups) == 1 and flat == list(range(len(config.motors)))
+        self._whole = len(self.groups) == 1 and flat == list(range(n))
         #: Positions in the drivers' concatenated status that give model order (``None``:
         #: already in model order), so :meth:`status` needs no sort per cycle.
         self._status_order: tuple[int, ...] | None = (
             None if flat == sorted(flat) else tuple(sorted(range(len(flat)), key=flat.__getitem__))
         )
 
-    def _split(self, wheel_rad_s: Sequence[float]) -> list[Sequence[float]]:
+    def steer_setpoints(self, steer_rad: Sequence[float | None]) -> list[float]:
+        """Every steering actuator's setpoint for these wheel angles (model order)."""
+        return [steer_rad[ix[0]] or 0.0 for ix in self.steered_by]
+
+    def _split(
+        self, wheel_rad_s: Sequence[float], steer_rad: Sequence[float | None] | None
+    ) -> list[Sequence[float]]:
         if self._whole and len(wheel_rad_s) == len(self.config.motors):
             return [wheel_rad_s]  # one driver for every wheel, in model order: nothing to split
-        return [[wheel_rad_s[i] for i in idx] for _, idx in self.groups]
+        setpoints = list(wheel_rad_s)
+        if self.steered_by:
+            if steer_rad is None:
+                raise ValueError(
+                    f"Expected the wheels' steering angles for the {len(self.steered_by)} "
+                    f"steering actuators, but got None."
+                )
+            setpoints.extend(self.steer_setpoints(steer_rad))
+        return [[setpoints[i] for i in idx] for _, idx in self.groups]
 
     def enable(self, now_s: float) -> list[Frame]:
         """Enable frames of every driver."""
@@ -67,19 +95,32 @@ class DriveSet:
         """Zero-speed and disarm frames of every driver."""
         return [f for drv, _ in self.groups for f in drv.disable(now_s)]
 
-    def command(self, wheel_rad_s: Sequence[float], now_s: float) -> list[Frame]:
-        """This cycle's velocity frames for every wheel (model order, rad/s)."""
+    def command(
+        self,
+        wheel_rad_s: Sequence[float],
+        now_s: float,
+        steer_rad: Sequence[float | None] | None = None,
+    ) -> list[Frame]:
+        """This cycle's frames for every wheel (model order, rad/s) and steering actuator.
+
+        :param steer_rad: every wheel's steering angle (model order, ``None`` for wheels not
+            steered); needed when there are steering actuators.
+        """
         out: list[Frame] = []
-        for (drv, _), speeds in zip(self.groups, self._split(wheel_rad_s), strict=True):
-            out.extend(drv.command(speeds, now_s))
+        setpoints = self._split(wheel_rad_s, steer_rad)
+        for (drv, _), values in zip(self.groups, setpoints, strict=True):
+            out.extend(drv.command(values, now_s))
         return out
 
-    def preview(self, wheel_rad_s: Sequence[float]) -> list[Frame]:
-        """The velocity frames for these speeds with every driver freshly enabled and no
+    def preview(
+        self, wheel_rad_s: Sequence[float], steer_rad: Sequence[float | None] | None = None
+    ) -> list[Frame]:
+        """The frames for these speeds and angles with every driver freshly enabled and no
         feedback (what ``wheelgate frames`` prints)."""
         out: list[Frame] = []
-        for (drv, _), speeds in zip(self.groups, self._split(wheel_rad_s), strict=True):
-            out.extend(drv.preview_command(speeds))
+        setpoints = self._split(wheel_rad_s, steer_rad)
+        for (drv, _), values in zip(self.groups, setpoints, strict=True):
+            out.extend(drv.preview_command(values))
         return out
 
     def poll(self, now_s: float) -> list[Frame]:
@@ -94,7 +135,8 @@ class DriveSet:
         return False
 
     def status(self, now_s: float) -> list[MotorStatus]:
-        """Every motor's status, in model order of their wheels."""
+        """Every motor's status: the drive motors in model order of their wheels, then the
+        steering actuators in the order of the ``steering:`` blocks."""
         out: list[MotorStatus] = []
         for drv, idx in self.groups:
             statuses = drv.status(now_s)
@@ -109,11 +151,40 @@ class DriveSet:
 
     def feedback_by_wheel(self) -> list[WheelFeedback | None]:
         """The latest feedback of every wheel in model order (``None``: passive or none yet)."""
-        out: list[WheelFeedback | None] = [None] * len(self.config.motors)
+        n = len(self.config.motors)
+        out: list[WheelFeedback | None] = [None] * n
         for drv, idx in self.groups:
             for k, i in enumerate(idx):
-                out[i] = drv.feedback(k)
+                if i < n:
+                    out[i] = drv.feedback(k)
         return out
+
+    def steer_feedback(self) -> list[WheelFeedback | None]:
+        """The latest feedback of every steering actuator (``None``: none yet)."""
+        n = len(self.config.motors)
+        out: list[WheelFeedback | None] = [None] * len(self.steered_by)
+        for drv, idx in self.groups:
+            for k, i in enumerate(idx):
+                if i >= n:
+                    out[i - n] = drv.feedback(k)
+        return out
+
+    def measured_steer(
+        self, commanded: tuple[float | None, ...]
+    ) -> tuple[float | None, ...]:
+        """Every wheel's steering angle: measured by its actuator where it has one that has
+        reported, else ``commanded`` (returned as is when no actuator has reported)."""
+        if not self.steered_by:
+            return commanded
+        out: list[float | None] | None = None
+        for fb, wheels in zip(self.steer_feedback(), self.steered_by, strict=True):
+            if fb is None:
+                continue
+            if out is None:
+                out = list(commanded)
+            for i in wheels:
+                out[i] = fb.position_rad
+        return commanded if out is None else tuple(out)
 
     def simulators(self) -> list[DeviceSimulator]:
         """A device simulator for every motor."""

@@ -10,10 +10,11 @@ Each cycle:
    (timestamped on receipt);
 2. the supervisor turns the motors' states and the newest valid twist into a target;
 3. inverse kinematics and limits (one scale factor, reported) give every wheel's speed;
-4. every wheel's frame is built, then all go out as one burst, so no two wheels act on
-   commands from different cycles;
-5. odometry integrates the encoder positions exactly (SE(2)); odometry and status go out on
-   CAN and to socket subscribers at their rates.
+4. every wheel's frame (and every steering actuator's) is built, then all go out as one
+   burst, so no two wheels act on commands from different cycles;
+5. odometry integrates the encoder positions exactly (SE(2)), with the steering angles the
+   actuators measure (the commanded ones for wheels steered outside the gateway); odometry and
+   status go out on CAN and to socket subscribers at their rates.
 """
 
 from __future__ import annotations
@@ -87,8 +88,14 @@ class Gateway(BusEdge):
         self.period_s = 1.0 / config.loop.rate_hz
         self.prev: IkResult = self.model.ik(Twist())
         self._driven = tuple(i for i, m in enumerate(config.motors) if m is not None)
+        # The wheel each motor's name stands for (a steering actuator: its first wheel), for
+        # the wheel field of WG_Error and the faulted-motor mask of WG_Status.
+        self._wheel_of = {w.name: i for i, w in enumerate(self.model.wheels)}
+        for actuator, wheels in zip(config.steering, self.drives.steered_by, strict=True):
+            self._wheel_of[actuator.wheel] = wheels[0]
         # Every wheel driven (most robots): the commands are the IK's speeds as they are.
         self._all_driven = len(self._driven) == len(config.motors)
+        self._steering = bool(config.steering)
         # The last inverse-kinematics solve of the cycle (see _solve).
         self._ik_key: tuple[Twist, tuple[float | None, ...]] | None = None
         self._ik_result: IkResult = self.prev
@@ -188,7 +195,7 @@ class Gateway(BusEdge):
             wheel = err.wheel
         out.append(self.wg.encode_error(ErrorReport(
             code=code,
-            wheel=NO_WHEEL if wheel is None else self.model.index(wheel),
+            wheel=NO_WHEEL if wheel is None else self._wheel_of[wheel],
             constraint=ConstraintCode.from_name(err.constraint) if err else ConstraintCode.NONE,
             twist_counter=twist_counter,
             residual_m_s=err.residual_m_s if err else 0.0,
@@ -218,7 +225,8 @@ class Gateway(BusEdge):
         speeds = self.prev.wheel_rad_s
         if not self._all_driven:
             speeds = tuple(speeds[i] for i in self._driven)
-        fault = sup.motors(self.drives.status(now_s), now_s, speeds)
+        steer = self.drives.steer_setpoints(self.prev.steer_rad) if self._steering else None
+        fault = sup.motors(self.drives.status(now_s), now_s, speeds, steer)
         if fault is not None:
             log.error("fault: %s", fault.message)
             self.report_error(fault.code, fault.message, out,
@@ -248,7 +256,7 @@ class Gateway(BusEdge):
             self._prev_limited = True
         if decision.armed:
             self._armed = True
-            out.extend(self.drives.command(result.wheel_rad_s, now_s))
+            out.extend(self.drives.command(result.wheel_rad_s, now_s, result.steer_rad))
         elif self._armed:
             self._armed = False
             out.extend(self.drives.disable(now_s))
@@ -289,7 +297,7 @@ class Gateway(BusEdge):
             if positions[i] is None:
                 return  # integrate once every driven wheel has reported
         try:
-            self.odometry.update(positions, newest, self.prev.steer_rad)
+            self.odometry.update(positions, newest, self.drives.measured_steer(self.prev.steer_rad))
         except KinematicsError as err:
             self.counts["odometry_errors"] += 1
             log.warning("odometry update skipped: %s", err)
@@ -317,7 +325,7 @@ class Gateway(BusEdge):
         sup = self.supervisor
         mask = 0
         for name in sup.faulted:
-            mask |= 1 << min(self.model.index(name), 7)  # wheels 8 and up share bit 7
+            mask |= 1 << min(self._wheel_of[name], 7)  # wheels 8 and up share bit 7
         flags = StatusFlags(0)
         if sup.cmd_timeout_active:
             flags |= StatusFlags.CMD_TIMEOUT_ACTIVE

@@ -19,8 +19,9 @@ When the odometry is updated
     that changes within an interval costs a second-order error (``tools/bench_replay.py``
     measures it).  Whatever is pending is integrated at the end of the log.
 
-Steering angles are not in the log: the gateway commands steering without CAN frames of its
-own.  Robots with steered wheels take them from the source that
+Steering angles come from the steering actuators' feedback in the log when every steered
+wheel has one.  Otherwise the wheels were steered outside the gateway and the log holds no
+angles: robots with steered wheels take them from the source that
 :mod:`gateway.replay_steering` describes (:class:`SteeringSource`): the twist of the wheels
 that are not steered, the gateway's own ``WG_Odom_Velocity`` frames, or the neutral angles.
 """
@@ -107,7 +108,8 @@ class ReplaySummary:
     :param skipped_updates: intervals the forward kinematics could not solve (too few wheels
         with feedback); their motion is lost.
     :param silent_wheels: driven wheels with no feedback in the log (the odometry starts once
-        every driven wheel has reported, so one silent wheel leaves it at the origin).
+        every driven wheel has reported, so one silent wheel leaves it at the origin), and
+        steering actuators with none (their wheels are then replayed at the neutral angle).
     """
 
     pose: Pose
@@ -163,9 +165,13 @@ class Replay:
         self.max_interval_s = max_interval_s
         #: Lines that could not be read, in order (filled by :meth:`feed_lines`).
         self.errors: list[CandumpError] = []
-        self._subset = fixed_subset(config)
-        steered = any(w.steered for w in self.model.wheels)
-        if not steered:
+        covered = {name for a in config.steering for name in a.steers}
+        measured = bool(covered) and covered >= {w.name for w in self.model.wheels if w.steered}
+        self._subset = None if measured else fixed_subset(config)
+        steered = any(w.steered for w in self.model.wheels) and not measured
+        if measured:
+            self.steering = SteeringSource.ACTUATORS
+        elif not steered:
             self.steering = SteeringSource.NONE
         elif self._subset is not None:
             self.steering = SteeringSource.FIXED_WHEELS
@@ -291,6 +297,8 @@ class Replay:
         )
 
     def _integrate(self, positions: Sequence[float | None], stamp: float) -> OdometryState:
+        if self.steering is SteeringSource.ACTUATORS:
+            self._steer = self.drives.measured_steer(self._steer)
         if self._subset is None:
             return self.odometry.update(positions, stamp, self._steer)
         state = self.odometry.update([positions[i] for i in self._subset[0]], stamp)
@@ -332,5 +340,9 @@ class Replay:
             end_s=self._group_s,
             steering=self.steering,
             skipped_updates=self._skipped,
-            silent_wheels=tuple(self.model.names[i] for i in self._needed if feedback[i] is None),
+            silent_wheels=(
+                *(self.model.names[i] for i in self._needed if feedback[i] is None),
+                *(a.wheel for a, fb in zip(self.config.steering, self.drives.steer_feedback(),
+                                           strict=True) if fb is None),
+            ),
         )

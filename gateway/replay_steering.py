@@ -1,8 +1,10 @@
-"""Steering angles for a replayed log, which holds none: where they come from and how.
+"""Steering angles for a replayed log: where they come from and how.
 
-The gateway commands steering without CAN frames of its own, so a candump log has wheel
-speeds and positions but no steering angles.  :class:`~gateway.replay.Replay` replays a robot
-with steered wheels with the first of these that applies:
+When every steered wheel has a steering actuator (``steering:`` blocks), the log holds their
+feedback and the replay takes the measured angles (:attr:`SteeringSource.ACTUATORS`), as the
+gateway does.  Otherwise the wheels are steered outside the gateway and a candump log has wheel
+speeds and positions but no steering angles.  :class:`~gateway.replay.Replay` then replays a
+robot with steered wheels with the first of these that applies:
 
 * :attr:`SteeringSource.FIXED_WHEELS`: the wheels that are not steered determine the twist on
   their own (Ackermann with driven rear wheels, the differential drive with a castor): the
@@ -50,6 +52,7 @@ class SteeringSource(enum.Enum):
     """Where a replay takes the steering angles from (see the module docstring)."""
 
     NONE = "none (no steered wheels)"
+    ACTUATORS = "measured by the steering actuators"
     FIXED_WHEELS = "left out: the wheels that are not steered fix the twist"
     GATEWAY_TWIST = "inverse kinematics of the gateway's WG_Odom_Velocity frames"
     NEUTRAL = "neutral angles (the log has no steering information)"

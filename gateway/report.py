@@ -51,6 +51,7 @@ def status_dict(daemon: Daemon, now_s: float) -> dict[str, object]:
         "tracking": {
             **dataclasses.asdict(sup.tracking.limits),
             "worst_ratio": sup.tracking.worst_ratio,
+            "steer_worst_ratio": sup.steer_tracking.worst_ratio,
         },
         "odometry": gw.odometry_dict(),
         "counters": {**gw.counts, **sup.counts, "rejected_frames": rejected},

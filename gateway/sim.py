@@ -31,6 +31,11 @@ class MotorModel:
         \\dot v = \\operatorname{clip}\\left(\\frac{v_{target} - v}{\\tau},
         -a_{max}, a_{max}\\right), \\qquad \\dot p = v
 
+    In position mode (:attr:`target_position_rad` set, a steering actuator) the speed target is
+    a proportional position loop with velocity feed-forward, as in the controllers' firmware:
+    :math:`v_{target} = \\operatorname{clip}(v_{ff} + k_p (p_{target} - p), \\pm v_{max})`.
+    With the default gain and time constant the loop is damped at 0.71 of critical.
+
     :param time_constant_s: velocity time constant tau (s).
     :param max_accel_rad_s2: acceleration limit (rad/s^2, motor side).
     """
@@ -45,11 +50,34 @@ class MotorModel:
     position_rad: float = 0.0
     #: Whether the motor is driven; a disarmed motor coasts to a stop.
     armed: bool = False
+    #: Position mode: the commanded shaft angle (rad); ``None`` in velocity mode.
+    target_position_rad: float | None = None
+    #: Position mode: the speed feed-forward (rad/s).
+    velocity_ff_rad_s: float = 0.0
+    #: Position mode: the loop gain (rad/s per rad).
+    position_gain_1_s: float = 50.0
+    #: Position mode: the speed limit (rad/s).
+    max_speed_rad_s: float = math.inf
+
+    #: The longest step of the position loop (s); longer steps are split.
+    POSITION_STEP_S = 0.0005
 
     def step(self, dt_s: float) -> None:
         """Advance the model by ``dt_s`` seconds (exact for the linear part)."""
         if dt_s <= 0.0:
             return
+        if self.target_position_rad is not None and self.armed:
+            n = max(1, math.ceil(dt_s / self.POSITION_STEP_S - 1e-9))
+            for _ in range(n):
+                error = self.target_position_rad - self.position_rad
+                speed = self.velocity_ff_rad_s + self.position_gain_1_s * error
+                limit = self.max_speed_rad_s
+                self.target_rad_s = min(max(speed, -limit), limit)
+                self._step(dt_s / n)
+            return
+        self._step(dt_s)
+
+    def _step(self, dt_s: float) -> None:
         target = self.target_rad_s if self.armed else 0.0
         v0 = self.velocity_rad_s
         v1 = target + (v0 - target) * math.exp(-dt_s / self.time_constant_s)
@@ -89,6 +117,12 @@ class DeviceSimulator(abc.ABC):
     def __init__(self, motor: MotorConfig, model: MotorModel | None = None) -> None:
         self.motor = motor
         self.model = model if model is not None else MotorModel()
+        if motor.steering:
+            # A steering actuator starts with its wheels at their neutral angle, and holds
+            # position once armed (until the first angle command, where it stands).
+            self.model.position_rad = motor.zero_rad
+            self.model.target_position_rad = motor.zero_rad
+            self.model.max_speed_rad_s = motor.max_rpm * 2.0 * math.pi / 60.0
         self.faults = SimFault.NONE
         self._last_tick_s: float | None = None
         self._drop_toggle = False
@@ -151,6 +185,11 @@ class DeviceSimulator(abc.ABC):
     def wheel_velocity_rad_s(self) -> float:
         """Ground truth: the wheel speed in rad/s."""
         return self.motor.motor_to_wheel_rad_s(self.model.velocity_rad_s)
+
+    @property
+    def steer_rad(self) -> float:
+        """Ground truth of a steering actuator: the steering angle in rad."""
+        return self.motor.motor_to_steer_rad(self.model.position_rad)
 
     # ----------------------------------------------------------------- hooks
 

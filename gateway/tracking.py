@@ -28,6 +28,12 @@ only briefly, which ``time_s`` absorbs. One check adds at most a tenth of ``time
 stalled loop's long gap between two checks cannot make a fault out of one sample. The command
 is the one sent the cycle before (the one the feedback answers).
 
+Steering actuators get the same rule on their angle (:class:`SteerMonitor`): an actuator is
+off its command when the measured steering angle differs from the one commanded the cycle
+before by more than ``steer_tolerance_rad``; the gateway limits the commanded angle's rate, so
+a healthy actuator follows within its own lag, and one that is blocked or has lost its zero
+leaves the drive wheels pushing along a heading the robot does not have.
+
 Pure: no clock, no I/O; the loop calls :meth:`TrackingMonitor.check` once a cycle while the
 drives are running and :meth:`TrackingMonitor.reset` whenever they are not.
 """
@@ -54,11 +60,13 @@ class TrackingLimits:
     :param tolerance_rad_s: the window's half-width at standstill (wheel rad/s).
     :param tolerance_ratio: how much the window widens per rad/s of command.
     :param time_s: how long a wheel may stay outside the window; 0 disables the check.
+    :param steer_tolerance_rad: the largest steering-angle error of a steering actuator (rad).
     """
 
     tolerance_rad_s: float = 1.0
     tolerance_ratio: float = 0.2
     time_s: float = 0.5
+    steer_tolerance_rad: float = 0.2
 
     @property
     def enabled(self) -> bool:
@@ -157,7 +165,7 @@ class TrackingMonitor:
             self._period_start_s = None
         hold = limits.time_s
         last, self._last_s = self._last_s, now_s
-        dt = 0.0 if last is None else min(max(now_s - last, 0.0), 0.1 * hold)
+        dt = _interval(last, now_s, hold)
         start = self._period_start_s
         if start is None:
             # The first check since the drives started: a wheel still turning from before (a
@@ -189,6 +197,99 @@ class TrackingMonitor:
                 count[i] += dt * (min(off, RUNAWAY_WEIGHT_MAX) if runaway else 1.0)
                 if fault is None and count[i] >= hold:
                     fault = TrackingFault(i, cmd, fb.velocity_rad_s, window, count[i])
+            else:
+                count[i] = max(count[i] - dt, 0.0)
+        return fault
+
+
+def _interval(last_s: float | None, now_s: float, hold_s: float) -> float:
+    """The time a check counts: since the last one, at most a tenth of ``hold_s``."""
+    return 0.0 if last_s is None else min(max(now_s - last_s, 0.0), 0.1 * hold_s)
+
+
+@dataclass(frozen=True, slots=True)
+class SteerFault:
+    """A steering actuator that stayed off its commanded angle for too long.
+
+    :param index: position of the actuator in the checked sequence.
+    :param command_rad: the steering angle commanded (rad).
+    :param measured_rad: the steering angle the actuator reports (rad).
+    :param window_rad: the allowed error (rad).
+    :param duration_s: the actuator's count: time outside its window less time inside (s).
+    """
+
+    index: int
+    command_rad: float
+    measured_rad: float
+    window_rad: float
+    duration_s: float
+
+    def describe(self) -> str:
+        """The fault in words, without the actuator's name.
+
+        >>> print(SteerFault(0, 1.5, 0.25, 0.2, 0.5).describe())
+        ... # doctest: +NORMALIZE_WHITESPACE
+        does not reach its angle: 0.250 rad measured, 1.500 rad commanded
+        (error 1.250 rad, window 0.200 rad) for a net 0.500 s
+        """
+        error = abs(self.measured_rad - self.command_rad)
+        return (
+            f"does not reach its angle: {self.measured_rad + 0.0:.3f} rad measured, "
+            f"{self.command_rad:.3f} rad commanded (error {error:.3f} rad, "
+            f"window {self.window_rad:.3f} rad) for a net {self.duration_s:.3f} s"
+        )
+
+
+class SteerMonitor:
+    """Watches every steering actuator's angle against its command (see the module docstring).
+
+    :param limits: ``steer_tolerance_rad`` and ``time_s``.
+    """
+
+    def __init__(self, limits: TrackingLimits) -> None:
+        self.limits = limits
+        self._count: list[float] = []
+        self._last_s: float | None = None
+        #: The largest error / window ratio seen so far.
+        self.worst_ratio = 0.0
+
+    def reset(self) -> None:
+        """Forget every actuator's history (the drives stopped following commands)."""
+        self._count = [0.0] * len(self._count)
+        self._last_s = None
+
+    def check(
+        self,
+        command_rad: Sequence[float],
+        feedback: Sequence[WheelFeedback | None],
+        now_s: float,
+    ) -> SteerFault | None:
+        """Compare each actuator's measured angle with its command; the first fault, if any.
+
+        :param command_rad: every actuator's commanded steering angle (rad).
+        :param feedback: every actuator's latest feedback (``None``: none yet, skipped).
+        :param now_s: the time of this check (s).
+        """
+        limits = self.limits
+        if not limits.enabled:
+            return None
+        count = self._count
+        if len(count) != len(command_rad):
+            count = self._count = [0.0] * len(command_rad)
+        last, self._last_s = self._last_s, now_s
+        dt = _interval(last, now_s, limits.time_s)
+        window = limits.steer_tolerance_rad
+        fault: SteerFault | None = None
+        for i, (cmd, fb) in enumerate(zip(command_rad, feedback, strict=True)):
+            if fb is None:
+                count[i] = 0.0
+                continue
+            error = abs(fb.position_rad - cmd)
+            if not error <= window:  # a NaN angle is outside
+                self.worst_ratio = max(self.worst_ratio, error / window if window else 1e9)
+                count[i] += dt
+                if fault is None and count[i] >= limits.time_s:
+                    fault = SteerFault(i, cmd, fb.position_rad, window, count[i])
             else:
                 count[i] = max(count[i] - dt, 0.0)
         return fault

@@ -215,17 +215,36 @@ def _frozen_mapping() -> Mapping[str, object]:
     return MappingProxyType({})
 
 
+class MotorRole(enum.Enum):
+    """What a motor does: turn a wheel (speed commands) or steer one (angle commands)."""
+
+    #: Turns its wheel; commanded in wheel rad/s, feedback is the wheel's angle and speed.
+    DRIVE = "drive"
+    #: Turns a wheel's plane (a steering actuator); commanded with the steering angle in rad
+    #: from the wheel's neutral plane angle, feedback is that angle and its rate.
+    STEER = "steer"
+
+
 @dataclass(frozen=True, slots=True)
 class MotorConfig:
-    """The motor block of one wheel, validated.
+    """The motor block of one wheel, or of one steering actuator, validated.
 
-    :param wheel: name of the wheel this motor turns.
+    :param wheel: name of the wheel this motor turns; for a steering actuator, the name of the
+        block (a wheel or a steer group) followed by ``" steering"``.
     :param driver: registry name of the protocol driver, e.g. ``"odrive"``.
     :param node_id: the controller's node ID (protocol-specific range).
-    :param gear_ratio: motor turns per wheel turn (> 0).
-    :param invert: the motor turns backwards for a positive wheel speed.
+    :param gear_ratio: motor turns per wheel turn (> 0); for a steering actuator, motor turns
+        per turn of the wheel's plane.
+    :param invert: the motor turns backwards for a positive wheel speed (a steering actuator:
+        for a positive, counter-clockwise, steering angle).
     :param max_rpm: the motor's speed limit in RPM at the motor (> 0).
     :param options: protocol keys, validated by the driver (read-only mapping).
+    :param role: turns a wheel, or steers.
+    :param zero_rad: a steering actuator's motor position (rad at the motor, in the
+        controller's own position frame) at which its wheels stand at their neutral plane angle.
+    :param steers: the wheels a steering actuator turns (model names; empty for a drive motor).
+    :param steer_range_rad: a steering actuator's travel: the smallest and largest steering
+        angle of its wheels (rad, from their ``steer_min`` and ``steer_max``).
     """
 
     wheel: str
@@ -235,6 +254,23 @@ class MotorConfig:
     invert: bool = False
     max_rpm: float = 3000.0
     options: Mapping[str, object] = field(default_factory=_frozen_mapping)
+    role: MotorRole = MotorRole.DRIVE
+    zero_rad: float = 0.0
+    steers: tuple[str, ...] = ()
+    steer_range_rad: tuple[float, float] = (-math.pi, math.pi)
+
+    @property
+    def steering(self) -> bool:
+        """Whether this is a steering actuator."""
+        return self.role is MotorRole.STEER
+
+    def steer_to_motor_rad(self, steer_rad: float) -> float:
+        """The motor position (rad, controller frame) for a steering angle (rad)."""
+        return self.zero_rad + steer_rad * self.gear_ratio * self.sign
+
+    def motor_to_steer_rad(self, motor_rad: float) -> float:
+        """The steering angle (rad) at a motor position (rad, controller frame)."""
+        return (motor_rad - self.zero_rad) * self.sign / self.gear_ratio
 
     @property
     def sign(self) -> float:

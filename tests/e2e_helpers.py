@@ -23,6 +23,8 @@ if TYPE_CHECKING:
     from collections.abc import Callable
     from pathlib import Path
 
+    from gateway.sim import DeviceSimulator
+
 
 #: Simulator step (s).  DJI ESCs report the 13-bit rotor angle every millisecond; a slower
 #: step would let the rotor turn more than half a revolution between reports, which no
@@ -43,7 +45,8 @@ class Rig:
 
     Time is simulated: :meth:`advance` steps the simulators several times per gateway
     cycle.  Ground truth: the simulators' exact wheel angles integrated by an independent
-    odometry every simulator step.
+    odometry every simulator step, with the steering actuators' exact angles (the commanded
+    ones for wheels without an actuator).
     """
 
     def __init__(self, config: GatewayConfig, socket_path: str | None = None) -> None:
@@ -63,7 +66,7 @@ class Rig:
         self.truth = Odometry(config.model)
         self._sim_index = self._map_sims()
         self.counter = 0
-        dji = any(m is not None and m.driver == "dji" for m in config.motors)
+        dji = any(m is not None and m.driver == "dji" for m in (*config.motors, *config.steering))
         self.sim_steps = max(2, math.ceil(self.period / DJI_STEP_S - 1e-9)) if dji else 2
 
     def _map_sims(self) -> list[int | None]:
@@ -85,8 +88,21 @@ class Rig:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
+    @property
+    def drive_sims(self) -> list[DeviceSimulator]:
+        """The simulators of the drive motors (not the steering actuators)."""
+        return [s for s in self.sims if not s.motor.steering]
+
     def truth_positions(self) -> list[float | None]:
         return [None if k is None else self.sims[k].wheel_position_rad for k in self._sim_index]
+
+    def truth_steer(self) -> tuple[float | None, ...]:
+        """Every wheel's steering angle: the actuator simulator's, else the commanded one."""
+        steer = list(self.gw.prev.steer_rad)
+        for sim in self.sims:
+            for name in sim.motor.steers:
+                steer[self.config.model.index(name)] = sim.steer_rad
+        return tuple(steer)
 
     def advance(self, seconds: float, each: Callable[[Rig], None] | None = None) -> None:
         """Run ``seconds`` of simulated time."""
@@ -102,7 +118,7 @@ class Rig:
             for k in range(self.sim_steps):
                 ts = self.t + (k + 1) * self.period / self.sim_steps
                 self.ctl.step(ts)
-                self.truth.update(self.truth_positions(), ts, self.gw.prev.steer_rad)
+                self.truth.update(self.truth_positions(), ts, self.truth_steer())
             self.t += self.period
 
     def enable(self, timeout_s: float = 5.0) -> None:
@@ -113,7 +129,7 @@ class Rig:
             waited += self.period
         if self.gw.state is not GatewayState.RUNNING:
             raise AssertionError(f"did not enable: {self.gw.supervisor.reason}")
-        self.truth.update(self.truth_positions(), self.t, self.gw.prev.steer_rad)
+        self.truth.update(self.truth_positions(), self.t, self.truth_steer())
         self.gw.odometry.reset()
         self.truth.reset()
 

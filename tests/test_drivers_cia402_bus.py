@@ -3,6 +3,7 @@ against canopen's server (and canopen's client against the simulator)."""
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 from typing import TYPE_CHECKING
 
@@ -81,8 +82,9 @@ class Bench:
             self.state(i) is DriveState.ENABLED for i in range(len(self.sims))))
 
 
-@pytest.fixture
-def bench(channel: str) -> Iterator[Callable[..., Bench]]:
+@contextlib.contextmanager
+def benches(channel: str) -> Iterator[Callable[..., Bench]]:
+    """A maker of benches on ``channel``, shutting every bench down at the end."""
     made: list[Bench] = []
 
     def make(motors: Sequence[MotorConfig], **sim_kwargs: object) -> Bench:
@@ -97,10 +99,18 @@ def bench(channel: str) -> Iterator[Callable[..., Bench]]:
         made.append(Bench(drv, sims, gw, ctl))
         return made[-1]
 
-    yield make
-    for b in made:
-        b.gw.shutdown()
-        b.ctl.shutdown()
+    try:
+        yield make
+    finally:
+        for b in made:
+            b.gw.shutdown()
+            b.ctl.shutdown()
+
+
+@pytest.fixture
+def bench(channel: str) -> Iterator[Callable[..., Bench]]:
+    with benches(channel) as make:
+        yield make
 
 
 LEFT = MotorConfig("left", "cia402", 3, gear_ratio=10.0)

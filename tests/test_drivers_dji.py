@@ -571,18 +571,35 @@ def test_make_simulator() -> None:
 
 
 class Rig:
-    """Driver + simulators on a virtual bus, stepped in simulated time (1 kHz)."""
+    """Driver + simulators on a virtual bus; simulators at 1 kHz, the driver every
+    ``period_ms``."""
 
     def __init__(self, drv: DjiDriver, gw: can.BusABC, ctl: SimulatedControllers) -> None:
-        self.drv, self.gw, self.ctl, self.t = drv, gw, ctl, 0.0
+        self.drv, self.gw, self.ctl, self.ms = drv, gw, ctl, 0
 
-    def run(self, seconds: float, speeds: Sequence[float]) -> None:
+    @property
+    def t(self) -> float:
+        return self.ms * 0.001
+
+    def run(
+        self,
+        seconds: float,
+        setpoints: Sequence[float],
+        period_ms: int = 1,
+        probe: DjiSimulator | None = None,
+    ) -> list[float]:
+        """Run; return ``probe.steer_rad`` every ms (nothing without a probe)."""
+        trace = []
         for _ in range(round(seconds * 1000)):
-            self.t += 0.001
+            self.ms += 1
             self.ctl.step(self.t)
             for f in drain(self.gw):
                 self.drv.on_frame(f.stamped(self.t))
-            send_frames(self.gw, self.drv.poll(self.t) + self.drv.command(speeds, self.t))
+            if self.ms % period_ms == 0:
+                send_frames(self.gw, self.drv.poll(self.t) + self.drv.command(setpoints, self.t))
+            if probe is not None:
+                trace.append(probe.steer_rad)
+        return trace
 
 
 def _rig(

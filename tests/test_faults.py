@@ -200,7 +200,7 @@ class Run:
     def following(self) -> bool:
         """Whether every wheel turns at the commanded speed (ground truth, 2 %)."""
         target = self.rig.config.model.ik(self.rig.gw.prev.twist).wheel_rad_s
-        truth = [s.wheel_velocity_rad_s for s in self.rig.sims]
+        truth = [s.wheel_velocity_rad_s for s in self.rig.drive_sims]
         return self.state is GatewayState.RUNNING and min(target) > 0.0 and all(
             abs(v - w) <= 0.02 * abs(w) for v, w in zip(truth, target, strict=True))
 
@@ -622,7 +622,7 @@ def test_bus_refusing_sends_loop_goes_on_drives_fall_back(
     assert calls["refused"] >= len(samples)
     assert gw.counts["send_failures"] >= len(samples)
     assert gw.counts["bus_reopens"] >= 1
-    truth = [abs(s.wheel_velocity_rad_s) for s in run.rig.sims]
+    truth = [abs(s.wheel_velocity_rad_s) for s in run.rig.drive_sims]
     if run.key == "odrive":  # the axis watchdog (0.5 s) disarms and latches an error
         fault = next(s for s in samples if s.state is GatewayState.FAULT)
         assert "WATCHDOG_TIMER_EXPIRED" in fault.reason

@@ -67,7 +67,9 @@ class Session:
             for f in rx:
                 self.host.on_frame(f.stamped(t))
             self.t = round(t + self.step_s, 9)
-            self._tx = self.host.poll(self.t) + self.host.command(speeds, self.t)
+            self._tx = self.host.poll(self.t) + self.host.command(
+                speeds, self.t, self.host.config.model.neutral_steer
+            )
         return out
 
 
@@ -204,9 +206,11 @@ def test_labels_of_the_gateways_own_messages_follow_the_config() -> None:
     ("mecanum.yaml", Frame(0x200, bytes(8)),
      "DJI COMMAND_ESC_1_4 (front_left, front_right, rear_left, rear_right)"),
     ("mecanum.yaml", Frame(0x203, bytes(8)), "DJI node 3 FEEDBACK_ESC_3 (rear_left)"),
-    ("synchro.yaml", Frame(0x080, b""), "CiA 402 SYNC (wheel_1, wheel_2, wheel_3)"),
+    ("synchro.yaml", Frame(0x080, b""),
+     "CiA 402 SYNC (wheel_1, wheel_2, wheel_3, synchro steering)"),
     ("synchro.yaml", Frame(0x502, bytes(8)), "CiA 402 node 2 RPDO4 (wheel_2)"),
     ("synchro.yaml", Frame(0x703, bytes(1)), "CiA 402 node 3 HEARTBEAT (wheel_3)"),
+    ("synchro.yaml", Frame(0x504, bytes(6)), "CiA 402 node 4 RPDO4 (synchro steering)"),
     ("example_dbc.yaml", Frame(0x282, bytes(8)), "DBC node 2 WD_Feedback (right)"),
 ])
 def test_labels_of_other_protocols(config: str, frame: Frame, text: str) -> None:

@@ -10,6 +10,7 @@ simulators' exact wheel angles).
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 import math
 import sys
@@ -18,6 +19,7 @@ from typing import TYPE_CHECKING
 
 import can
 import pytest
+import yaml
 
 from drivers.odrive.codec import OdriveCodec
 from gateway.cli import COMMANDS, main
@@ -82,8 +84,13 @@ def short_legs(config: GatewayConfig) -> list[tuple[Twist, float]]:
 
 
 def record(name: str, folder: Path) -> Session:
-    """Drive a session of ``config/<name>.yaml`` and keep its log and odometry."""
-    cfg = virtual_config(CONFIG_DIR / f"{name}.yaml", f"wg-odom-{name}", rate_hz=100.0)
+    """Drive a session of ``config/<name>.yaml`` and keep its log and odometry; a name ending
+    in ``_external`` drives that robot without its steering actuators (steered outside the
+    gateway, so the log holds no angles)."""
+    base = name.removesuffix("_external")
+    cfg = virtual_config(CONFIG_DIR / f"{base}.yaml", f"wg-odom-{name}", rate_hz=100.0)
+    if base != name:
+        cfg = dataclasses.replace(cfg, steering=())
     legs = short_legs(cfg) if name == "ackermann" else path_legs(cfg, "square")
     path = folder / f"{name}.log"
     with Rig(cfg) as rig:
@@ -149,8 +156,9 @@ def test_replay_matches_the_gateway_and_the_ground_truth(
 
 @pytest.mark.parametrize(("name", "source"), [
     ("ackermann", SteeringSource.FIXED_WHEELS),
-    ("tricycle", SteeringSource.GATEWAY_TWIST),
-    ("swerve", SteeringSource.GATEWAY_TWIST),
+    ("tricycle_external", SteeringSource.GATEWAY_TWIST),
+    ("tricycle", SteeringSource.ACTUATORS),
+    ("swerve", SteeringSource.ACTUATORS),
 ])
 def test_steered_robots_replay_within_one_percent(
     sessions: Callable[[str], Session], name: str, source: SteeringSource
@@ -171,7 +179,7 @@ def test_without_gateway_frames_steering_is_neutral_and_wrong(
 ) -> None:
     # The documented limitation: a tricycle log without WG_Odom_Velocity frames has no
     # steering information; the turns of the steered wheel are missed and the summary says so.
-    s = sessions("tricycle")
+    s = sessions("tricycle_external")
     stripped = tmp_path / "no_wg.log"
     with open(s.log, encoding="ascii") as f:
         stripped.write_text("".join(line for line in f if " 102#" not in line))
@@ -179,11 +187,19 @@ def test_without_gateway_frames_steering_is_neutral_and_wrong(
     assert got.steering is SteeringSource.NEUTRAL
     err = math.hypot(got.pose.x_m - s.truth.pose.x_m, got.pose.y_m - s.truth.pose.y_m)
     assert err > 0.2 * s.truth.distance_m
-    result = runner.invoke(command, ["-c", str(CONFIG_DIR / "tricycle.yaml"), str(stripped)],
-                           obj=OBJ)
+    doc = yaml.safe_load((CONFIG_DIR / "tricycle.yaml").read_text())
+    external = tmp_path / "tricycle.yaml"
+    external.write_text(yaml.safe_dump({k: v for k, v in doc.items() if k != "steering"}))
+    result = runner.invoke(command, ["-c", str(external), str(stripped)], obj=OBJ)
     assert result.exit_code == 0, result.output
     assert "replayed at their neutral angles" in result.stderr
     assert "steering: neutral angles" in result.stdout
+    # With the actuator configured but absent from the log, the summary names it.
+    result = runner.invoke(command, ["-c", str(CONFIG_DIR / "tricycle.yaml"), str(stripped)],
+                           obj=OBJ)
+    assert result.exit_code == 0, result.output
+    assert "steering: measured by the steering actuators" in result.stdout
+    assert "warning: no feedback from front steering" in result.stderr
 
 
 # ----------------------------------------------------------------- the update rule

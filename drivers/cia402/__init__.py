@@ -1,4 +1,5 @@
-"""CANopen CiA 402 drives in profile velocity mode (driver name ``cia402``).
+"""CANopen CiA 402 drives in profile velocity mode (driver name ``cia402``); steering
+actuators in cyclic synchronous position mode.
 
 * :mod:`~drivers.cia402.enums`: wire enums and the CiA 402 state machine as tables.
 * :mod:`~drivers.cia402.faults`: SDO abort codes, EMCY codes, error register.

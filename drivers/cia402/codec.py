@@ -1,14 +1,15 @@
-"""Pure frame builders and parsers for CANopen (CiA 301) with the CiA 402 velocity objects.
+"""Pure frame builders and parsers for CANopen (CiA 301) with the CiA 402 drive objects.
 
 No I/O, no clock: every function maps values to a :class:`~gateway.types.Frame` or back.  The
-PDO layout the gateway writes into each drive is data (:data:`RPDO_MAP`,
-:data:`TPDO_POSITION_MAP`, :data:`TPDO_VELOCITY_MAP`) and the packed form is one precompiled
-``struct.Struct("<Hi")`` (statusword/controlword u16 + int32), as in the spec's worked examples.
+PDO layout the gateway writes into each drive is data (:data:`RPDO_MAP` for a drive motor,
+:data:`RPDO_POSITION_MAP` for a steering actuator, :data:`TPDO_POSITION_MAP`,
+:data:`TPDO_VELOCITY_MAP`) and the packed form is one precompiled ``struct.Struct("<Hi")``
+(statusword/controlword u16 + int32), as in the spec's worked examples.
 
 SDO frames live in :mod:`drivers.cia402.sdo`.
 
 Reference: CiA 301 (NMT, SYNC, EMCY, PDO), CiA 402 (objects
-0x6040/0x6041/0x6064/0x606C/0x60FF); byte layouts and worked frames in
+0x6040/0x6041/0x6064/0x606C/0x607A/0x60FF); byte layouts and worked frames in
 ``/work/shared/specs/can-protocols.md`` section 3.
 """
 
@@ -42,6 +43,12 @@ if TYPE_CHECKING:
 RPDO_MAP: tuple[tuple[int, int, int], ...] = (
     (ObjectIndex.CONTROLWORD, 0, 16),
     (ObjectIndex.TARGET_VELOCITY, 0, 32),
+)
+#: RPDO content of a steering actuator (cyclic synchronous position): controlword (U16) +
+#: target position (I32), the "RPDO3 = 6040 + 607A" of the DS402 default pattern.
+RPDO_POSITION_MAP: tuple[tuple[int, int, int], ...] = (
+    (ObjectIndex.CONTROLWORD, 0, 16),
+    (ObjectIndex.TARGET_POSITION, 0, 32),
 )
 #: TPDO with statusword (U16) + position actual value (I32).
 TPDO_POSITION_MAP: tuple[tuple[int, int, int], ...] = (
@@ -79,7 +86,8 @@ def unpack_mapping_entry(entry: int) -> tuple[int, int, int]:
 class PdoLayout:
     """Which PDO numbers (1..4) carry the command and the two feedback messages of one node.
 
-    :param rpdo: RPDO with controlword + target velocity (default RPDO4, 0x500 + node).
+    :param rpdo: RPDO with controlword + target velocity, or target position for a steering
+        actuator (default RPDO4, 0x500 + node).
     :param tpdo_position: TPDO with statusword + position (default TPDO3, 0x380 + node).
     :param tpdo_velocity: TPDO with statusword + velocity (default TPDO4, 0x480 + node).
     """
@@ -103,6 +111,21 @@ def velocity_to_raw(value: float, what: str) -> int:
             f"Expected {what} between {lo} and {hi} device units, but got {value!r}."
         )
     return round(value)
+
+
+def position_to_raw(counts: float, what: str) -> int:
+    """Round a target position (position units) and wrap it into the int32 range.
+
+    The position objects wrap modulo 2^32 (0x6064 past 2^31 - 1 goes on at -2^31), and the
+    drive compares target and actual position in that frame, so a position past the end is
+    sent wrapped rather than refused.
+
+    :raises EncodeError: if it is not finite.
+    """
+    if not math.isfinite(counts):
+        raise EncodeError(f"Expected {what} as a finite number of position units, but got "
+                          f"{counts!r}.")
+    return (round(counts) + (1 << 31)) % (1 << 32) - (1 << 31)
 
 
 # ----------------------------------------------------------------- NMT, SYNC, heartbeat, EMCY
@@ -141,18 +164,20 @@ def make_emcy(node_id: int, code: int, register: int, data: bytes = b"") -> Fram
 # ----------------------------------------------------------------- PDOs
 
 
-def make_rpdo(cob_id: int, controlword: int, target_velocity: int) -> Frame:
-    """The command RPDO: controlword (u16) + target velocity (i32), 6 bytes little endian.
+def make_rpdo(cob_id: int, controlword: int, target: int) -> Frame:
+    """The command RPDO: controlword (u16) + target (i32), 6 bytes little endian.
 
+    :param target: target velocity (0x60FF, device velocity units) of a drive motor, or
+        target position (0x607A, position units) of a steering actuator.
     :raises EncodeError: if a value does not fit its field.
     """
     # Every cycle sends one per node: plain ints in range pass with one test each (check()
     # also takes int subclasses such as Controlword members, and raises).
     if not (type(controlword) is int and 0 <= controlword <= _U16_MAX):
         DataType.UNSIGNED16.check(controlword, "a controlword")
-    if not (type(target_velocity) is int and _I32_MIN <= target_velocity <= _I32_MAX):
-        DataType.INTEGER32.check(target_velocity, "a target velocity")
-    return Frame(cob_id, _PDO_PACK(controlword, target_velocity))
+    if not (type(target) is int and _I32_MIN <= target <= _I32_MAX):
+        DataType.INTEGER32.check(target, "a target velocity or position")
+    return Frame(cob_id, _PDO_PACK(controlword, target))
 
 
 def make_tpdo(cob_id: int, statusword: int, value: int) -> Frame:
@@ -248,9 +273,10 @@ class Cia402Codec(MotorCodec[Cia402Message]):
             node_id: rpdo_cob_id(layout.rpdo, node_id) for node_id, layout in self.nodes.items()
         }
 
-    def rpdo(self, node_id: int, controlword: int, target_velocity: int) -> Frame:
-        """The command RPDO of ``node_id`` (its configured RPDO number)."""
-        return make_rpdo(self._rpdo_ids[node_id], controlword, target_velocity)
+    def rpdo(self, node_id: int, controlword: int, target: int) -> Frame:
+        """The command RPDO of ``node_id`` (its configured RPDO number): controlword and
+        target velocity (drive motor) or target position (steering actuator)."""
+        return make_rpdo(self._rpdo_ids[node_id], controlword, target)
 
     def encode_command(self, commands: Mapping[int, float]) -> tuple[Frame, ...]:
         """RPDOs with controlword ENABLE OPERATION (0x000F) and the rounded target velocity.

@@ -23,6 +23,29 @@ SYNC (0x080) goes out once per bus: after the RPDOs of every :meth:`command` cal
 :meth:`poll` every 10 ms while :meth:`command` is not being called (enable sequence, disabled
 drives), so TPDO feedback and liveness never stop.
 
+**Steering actuators** (:attr:`Cia402Driver.STEERING`) run in cyclic synchronous position mode
+(CSP, 0x6060 = 8; drive motors stay in profile velocity, 3), with the target position 0x607A
+in place of 0x60FF in their command RPDO (6040 + 607A), in position units (``counts_per_rev``
+per motor turn).  CSP rather than profile position (PP, 1) because this driver streams one
+setpoint per node every cycle, each followed by one SYNC, and that is the contract of CSP
+(CiA 402-2, "cyclic synchronous position mode": the drive takes a new 0x607A at every SYNC and
+interpolates over the cycle; synchronous RPDOs, transmission type 1, apply at the SYNC).  PP
+takes a new setpoint only through the controlword handshake: bit 4 "new setpoint" rising edge
+(with bit 5 "change set immediately"), wait for statusword bit 12 "setpoint acknowledge", clear
+bit 4, wait for bit 12 to clear.  That is a statusword round trip through a TPDO per setpoint,
+so at best one setpoint every other cycle (fewer with feedback latency), an edge-sensitive state
+per node that a lost RPDO or TPDO stalls, and a profile the drive re-plans at every setpoint.
+CSP has no handshake: a lost RPDO just repeats the previous target.  What CSP asks of the
+master, the driver does: the RPDOs must be synchronous (``sync: false`` is refused for a
+steering actuator); the target must be a trajectory the drive can follow, so each cycle's
+target moves from the previous one by at most ``max_rpm`` times the time since it (at most
+:attr:`Cia402Driver.SLEW_MAX_DT_S`), starting from the measured position; and the drive follows
+0x607A from the moment it reaches OPERATION ENABLED, so the enable walk sends the measured
+position as the target (:mod:`drivers.cia402.sequence`).  A steering actuator's stop is SHUTDOWN
+at once.  Its feedback is absolute in the drive's frame: the first 0x6064 after the driver
+starts (or after a boot-up) is taken as is, and later ones unwrapped modulo 2^32, so the angle
+stays right across the int32 wrap.
+
 Reference: CiA 301 and CiA 402 (https://www.can-cia.org/can-knowledge/cia402-series),
 ``/work/shared/specs/can-protocols.md`` section 3.
 """
@@ -42,6 +65,7 @@ from drivers.cia402.codec import (
     Heartbeat,
     PdoFeedback,
     make_sync,
+    position_to_raw,
     velocity_to_raw,
 )
 from drivers.cia402.enums import CobBase, Controlword, NmtState, State
@@ -87,12 +111,20 @@ class _Node:
     counts: int = 0
     last_raw: int | None = None
     velocity_rad_s: float = 0.0
+    #: A steering actuator (cyclic synchronous position): absolute position, target in RPDO.
+    steer: bool = False
+    #: Steering: the target position of the last RPDO (counts, unwrapped); ``None`` while not
+    #: armed, so the next armed cycle starts from the measured position.
+    setpoint: float | None = None
+    #: Steering: when :attr:`setpoint` last moved (s).
+    setpoint_s: float = 0.0
     restart_pending: bool = False
     boot_restarts: int = 0
 
 
 class Cia402Driver(MotorDriver):
-    """CANopen CiA 402 drives in profile velocity mode, one instance per bus.
+    """CANopen CiA 402 drives in profile velocity mode (steering actuators: cyclic synchronous
+    position mode), one instance per bus.
 
     :param motors: the motors, each with ``driver: cia402`` and a node ID 1..127.
     :raises ConfigError: for a bad option, a node ID out of range or used twice.
@@ -105,6 +137,10 @@ class Cia402Driver(MotorDriver):
     SYNC_FALLBACK_PERIOD_S: ClassVar[float] = 0.01
     #: Boot-up messages during one enable sequence that restart it; one more is a failure.
     MAX_BOOT_RESTARTS: ClassVar[int] = 3
+    STEERING: ClassVar[bool] = True
+    #: Longest time one cycle's steering target may advance over (s): a late or resumed cycle
+    #: does not turn into a jump the drive cannot follow.
+    SLEW_MAX_DT_S: ClassVar[float] = 0.05
 
     def __init__(self, motors: Sequence[MotorConfig]) -> None:
         super().__init__(motors)
@@ -115,14 +151,22 @@ class Cia402Driver(MotorDriver):
         self.sync_enabled = any(o.sync for o in opts)
         self._nodes = [
             _Node(o, NodeSequencer(m.node_id, f'node {m.node_id} ("{m.wheel}")', self.codec,
-                                   configuration_steps(m.node_id, o)))
+                                   configuration_steps(m.node_id, o), position=o.position_mode),
+                  steer=o.position_mode)
             for m, o in pairs
         ]
+        #: Indices of the steering actuators in :attr:`motors`.
+        self._steering = tuple(i for i, node in enumerate(self._nodes) if node.steer)
+        #: Each steering actuator's speed limit in position units per second (``max_rpm``).
+        self._slew = tuple(m.max_rpm / 60.0 * o.counts_per_rev for m, o in pairs)
         self._last_sync_s: float | None = None
         #: Each motor's ``max_wheel_rad_s`` (a computed property), for :meth:`command`.
         self._limits = tuple(m.max_wheel_rad_s for m in self.motors)
-        #: Each motor's (sign, gear ratio), for the feedback's motor-to-wheel conversion.
-        self._wheel_side = tuple((m.sign, m.gear_ratio) for m in self.motors)
+        #: Each motor's (sign, gear ratio, zero), for the feedback's motor-to-wheel conversion
+        #: (``zero_rad`` of a steering actuator, 0 for a drive motor).
+        self._wheel_side = tuple(
+            (m.sign, m.gear_ratio, m.zero_rad if m.steering else 0.0) for m in self.motors
+        )
 
     # ----------------------------------------------------------------- hooks
 
@@ -150,9 +194,49 @@ class Cia402Driver(MotorDriver):
     def command(self, wheel_rad_s: Sequence[float], now_s: float) -> list[Frame]:
         """One command RPDO per armed node, then one SYNC if ``sync`` is on.
 
-        :param wheel_rad_s: wheel speeds in rad/s, in :attr:`motors` order.
+        A steering actuator's target moves toward the commanded angle by at most ``max_rpm``
+        since the previous cycle (see the module docstring).
+
+        :param wheel_rad_s: in :attr:`motors` order, wheel speeds in rad/s, and steering
+            angles in rad for steering actuators.
         :raises EncodeError: for a wrong count, a speed that is not finite or beyond
-            ``max_rpm``; no frame is built then.
+            ``max_rpm``, an angle that is not finite; no frame is built then.
+        """
+        raws = self._raws(wheel_rad_s)
+        nodes = self._nodes
+        for i in self._steering:
+            node = nodes[i]
+            if node.seq.phase is Phase.ARMED:
+                raws[i] = self._slew_to(i, node, wheel_rad_s[i], now_s)
+        out = [
+            self.codec.rpdo(m.node_id, _ENABLE_OPERATION, raw)
+            for m, node, raw in zip(self.motors, nodes, raws, strict=True)
+            if node.seq.phase is Phase.ARMED
+        ]
+        if self.sync_enabled:
+            out.append(self._sync(now_s))
+        return out
+
+    def preview_command(self, wheel_rad_s: Sequence[float]) -> list[Frame]:
+        """The RPDO of every node as if armed, then SYNC if ``sync`` is on (pure).
+
+        A freshly enabled driver has no position to start a steering slew from, so a steering
+        actuator's RPDO carries the commanded angle's own target position.
+
+        :raises EncodeError: as :meth:`command`.
+        """
+        raws = self._raws(wheel_rad_s)
+        out = [self.codec.rpdo(m.node_id, _ENABLE_OPERATION, raw)
+               for m, raw in zip(self.motors, raws, strict=True)]
+        if self.sync_enabled:
+            out.append(make_sync())
+        return out
+
+    def _raws(self, wheel_rad_s: Sequence[float]) -> list[int]:
+        """Every motor's RPDO target: velocity units, or a steering actuator's target position
+        for the angle itself (int32, wrapped).
+
+        :raises EncodeError: as :meth:`command`.
         """
         if len(wheel_rad_s) != len(self.motors):
             raise EncodeError(
@@ -162,6 +246,10 @@ class Cia402Driver(MotorDriver):
         lo, hi = INT32_RANGE
         for m, node, limit, w in zip(self.motors, self._nodes, self._limits, wheel_rad_s,
                                      strict=True):
+            if node.steer:
+                raws.append(position_to_raw(self._target_counts(m, node, w),
+                                            f"target position for node {m.node_id}"))
+                continue
             if not math.isfinite(w) or abs(w) > limit * (1.0 + 1e-9):
                 raise EncodeError(
                     f'Expected velocity for node {m.node_id} ("{m.wheel}") between '
@@ -173,14 +261,31 @@ class Cia402Driver(MotorDriver):
                 # velocity_to_raw raises; its message is only built on this path.
                 raw = velocity_to_raw(units, f"target velocity for node {m.node_id}")
             raws.append(raw)
-        out = [
-            self.codec.rpdo(m.node_id, _ENABLE_OPERATION, raw)
-            for m, node, raw in zip(self.motors, self._nodes, raws, strict=True)
-            if node.seq.phase is Phase.ARMED
-        ]
-        if self.sync_enabled:
-            out.append(self._sync(now_s))
-        return out
+        return raws
+
+    @staticmethod
+    def _target_counts(m: MotorConfig, node: _Node, angle: float) -> float:
+        """The target position (counts, unwrapped) of steering angle ``angle`` (rad).
+
+        :raises EncodeError: if the angle is not finite.
+        """
+        if not math.isfinite(angle):
+            raise EncodeError(
+                f'Expected a finite steering angle in rad for node {m.node_id} ("{m.wheel}"), '
+                f"but got {angle!r}."
+            )
+        return node.opts.rad_to_counts(m.steer_to_motor_rad(angle))
+
+    def _slew_to(self, i: int, node: _Node, angle: float, now_s: float) -> int:
+        """This cycle's target position of armed steering actuator ``i`` (int32, wrapped)."""
+        target = self._target_counts(self.motors[i], node, angle)
+        if node.setpoint is None:  # just armed: start where the drive stands
+            node.setpoint, node.setpoint_s = float(node.counts), now_s
+        dt = min(max(now_s - node.setpoint_s, 0.0), self.SLEW_MAX_DT_S)
+        step = self._slew[i] * dt
+        node.setpoint += min(max(target - node.setpoint, -step), step)
+        node.setpoint_s = now_s
+        return position_to_raw(node.setpoint, f"target position for node {node.seq.node_id}")
 
     def poll(self, now_s: float) -> list[Frame]:
         """Enable/stop sequence steps, deadlines, and the fallback SYNC."""
@@ -273,15 +378,19 @@ class Cia402Driver(MotorDriver):
         seq.on_status(msg.statusword)
         # Every TPDO: motor to wheel side as MotorConfig.motor_to_wheel_rad_s (x * sign / gear)
         # with the per-motor constants from __init__.
-        sign, gear = self._wheel_side[i]
+        sign, gear, zero = self._wheel_side[i]
         if msg.kind is FeedbackKind.POSITION:
             if node.last_raw is not None:
                 node.counts += wrap_delta(node.last_raw, msg.value)
+            elif node.steer:
+                node.counts = msg.value  # absolute: zero_rad is in the drive's own frame
             node.last_raw = msg.value
+            if node.steer:
+                seq.hold = msg.value
         else:
             node.velocity_rad_s = node.opts.units_to_rad_s(msg.value) * sign / gear
         if node.last_raw is not None:
-            position = node.opts.counts_to_rad(node.counts) * sign / gear
+            position = (node.opts.counts_to_rad(node.counts) - zero) * sign / gear
             self._feedback[i] = WheelFeedback(position, node.velocity_rad_s, now_s)
         state = seq.state
         if state is State.OPERATION_ENABLED:
@@ -298,7 +407,11 @@ class Cia402Driver(MotorDriver):
         node.nmt = msg.state
         seq = node.seq
         if msg.state is NmtState.BOOT_UP:
-            node.last_raw = None  # the counter may restart: continue from the current angle
+            # The counter may restart: a drive motor continues from the current angle, a
+            # steering actuator takes the next position as absolute (and not as a target).
+            node.last_raw = None
+            if node.steer:
+                seq.hold = None
             if seq.phase in _ENABLING:
                 node.boot_restarts += 1
                 if node.boot_restarts > self.MAX_BOOT_RESTARTS:
@@ -337,6 +450,8 @@ class Cia402Driver(MotorDriver):
             self._detail[i] = ""
             self._armed[i] = True
             return
+        if seq.phase is not Phase.ARMED:
+            node.setpoint = None  # a steering actuator's next armed cycle starts afresh
         flags, detail = DriveFault.NONE, ""
         emcy_text = "" if emcy is None else describe_emcy(emcy.code, emcy.register, emcy.data)
         if seq.phase is Phase.FAILED:

@@ -193,6 +193,7 @@ class ObjectIndex(enum.IntEnum):
     MODES_OF_OPERATION_DISPLAY = 0x6061
     POSITION_ACTUAL_VALUE = 0x6064
     VELOCITY_ACTUAL_VALUE = 0x606C
+    TARGET_POSITION = 0x607A
     TARGET_VELOCITY = 0x60FF
     SUPPORTED_DRIVE_MODES = 0x6502
 
@@ -251,7 +252,7 @@ class ControlwordBit(enum.IntFlag):
 
 
 class StatuswordBit(enum.IntFlag):
-    """Bits of the statusword (0x6041); bit 12 is "speed = 0" in profile velocity mode."""
+    """Bits of the statusword (0x6041); bits 12 and 13 mean something else in each mode."""
 
     NONE = 0
     READY_TO_SWITCH_ON = 0x0001
@@ -266,7 +267,12 @@ class StatuswordBit(enum.IntFlag):
     REMOTE = 0x0200
     TARGET_REACHED = 0x0400
     INTERNAL_LIMIT_ACTIVE = 0x0800
+    #: Profile velocity mode: the speed is 0.
     SPEED_ZERO = 0x1000
+    #: Cyclic synchronous modes: the drive follows the target (an alias of bit 12).
+    FOLLOWS_TARGET = 0x1000
+    #: Cyclic synchronous and profile position modes: following error.
+    FOLLOWING_ERROR = 0x2000
 
 
 class State(enum.IntEnum):

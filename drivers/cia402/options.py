@@ -5,10 +5,15 @@ Units:
 * ``velocity_factor``: device velocity units (0x60FF, 0x606C) = motor RPM x velocity_factor.
   1.0 for a drive that counts in RPM; 10.0 for 0.1 RPM units; ``counts_per_rev / 60`` for a
   drive in increments per second.
-* ``counts_per_rev``: position units (0x6064) per motor revolution.
+* ``counts_per_rev``: position units (0x6064 position actual value, 0x607A target position) per
+  motor revolution (encoder increments on most drives).
 
 Both act on the motor side; ``gear_ratio`` and ``invert`` of the motor block take the value to
-the wheel.
+the wheel, ``zero_rad`` (steering actuators) to the steering angle.
+
+A drive motor runs in profile velocity mode (3), a steering actuator in cyclic synchronous
+position mode (8), which takes its target at every SYNC: ``sync: false`` is refused for it
+(:mod:`drivers.cia402.driver` gives the reasons for the mode).
 """
 
 from __future__ import annotations
@@ -18,11 +23,15 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 from drivers.cia402.codec import PdoLayout
+from drivers.cia402.enums import OperationMode
 from gateway.driver import MotorDriver, OptionSpec
 from gateway.errors import ConfigError
 
 if TYPE_CHECKING:
     from gateway.types import MotorConfig
+
+#: 2^31: the position objects (0x6064, 0x607A) are int32.
+_INT32_LIMIT = float(1 << 31)
 
 #: Default liveness timeout (s): feedback TPDOs run at the loop rate, heartbeats every 100 ms.
 DEFAULT_LIVENESS_S = 0.25
@@ -34,7 +43,8 @@ OPTIONS: dict[str, OptionSpec] = {
         help="device velocity units per motor RPM (units = motor RPM x factor)",
     ),
     "counts_per_rev": OptionSpec(
-        int, 4096, minimum=1, help="position units (0x6064) per motor revolution"
+        int, 4096, minimum=1,
+        help="position units (0x6064, 0x607A) per motor revolution (encoder increments)",
     ),
     "sync": OptionSpec(
         bool, True, help="PDOs on SYNC, which the driver sends once per command cycle"
@@ -77,13 +87,22 @@ class NodeOptions:
     event_timer_ms: int = 10
     liveness_s: float = DEFAULT_LIVENESS_S
     layout: PdoLayout = field(default_factory=PdoLayout)
+    #: Mode of operation written to 0x6060: profile velocity for a drive motor, cyclic
+    #: synchronous position for a steering actuator.
+    mode: OperationMode = OperationMode.PROFILE_VELOCITY
+
+    @property
+    def position_mode(self) -> bool:
+        """Whether the node runs in cyclic synchronous position mode (a steering actuator)."""
+        return self.mode is OperationMode.CYCLIC_SYNCHRONOUS_POSITION
 
     @classmethod
     def from_motor(cls, motor: MotorConfig) -> NodeOptions:
-        """Validate ``motor.options``.
+        """Validate ``motor.options`` (and, for a steering actuator, ``zero_rad``).
 
-        :raises ConfigError: for an unknown key, a bad value, or both feedback TPDOs on one
-            PDO number.
+        :raises ConfigError: for an unknown key, a bad value, both feedback TPDOs on one PDO
+            number, or a steering actuator with ``sync: false`` or a ``zero_rad`` outside the
+            drive's int32 position range.
         """
         where = f"wheel {motor.wheel!r} (node {motor.node_id})"
         opts = _Options.validate_options(motor.options, where)
@@ -97,14 +116,31 @@ class NodeOptions:
                 f"{where}.tpdo_velocity: expected a TPDO other than tpdo_position "
                 f"({layout.tpdo_position}), got {layout.tpdo_velocity}"
             )
+        counts_per_rev = int(opts["counts_per_rev"])  # type: ignore[call-overload]
+        mode = OperationMode.PROFILE_VELOCITY
+        if motor.steering:
+            mode = OperationMode.CYCLIC_SYNCHRONOUS_POSITION
+            if not opts["sync"]:
+                raise ConfigError(
+                    f"{where}.sync: expected true for a steering actuator (cyclic synchronous "
+                    f"position mode takes its target at every SYNC), got false"
+                )
+            limit = _INT32_LIMIT * 2.0 * math.pi / counts_per_rev
+            if not -limit <= motor.zero_rad < limit:
+                raise ConfigError(
+                    f"{where}.zero_rad: expected a motor position within the drive's int32 "
+                    f"position range (-{limit:.6g} to {limit:.6g} rad at {counts_per_rev} "
+                    f"counts per revolution), got {motor.zero_rad!r}"
+                )
         return cls(
             velocity_factor=float(opts["velocity_factor"]),  # type: ignore[arg-type]
-            counts_per_rev=int(opts["counts_per_rev"]),  # type: ignore[call-overload]
+            counts_per_rev=counts_per_rev,
             sync=bool(opts["sync"]),
             heartbeat_ms=int(opts["heartbeat_ms"]),  # type: ignore[call-overload]
             event_timer_ms=int(opts["event_timer_ms"]),  # type: ignore[call-overload]
             liveness_s=float(opts["liveness_s"]),  # type: ignore[arg-type]
             layout=layout,
+            mode=mode,
         )
 
     def rpm_to_units(self, motor_rpm: float) -> float:
@@ -122,3 +158,7 @@ class NodeOptions:
     def counts_to_rad(self, counts: int) -> float:
         """Motor angle in rad for position units."""
         return counts * (2.0 * math.pi) / self.counts_per_rev
+
+    def rad_to_counts(self, motor_rad: float) -> float:
+        """Position units (not rounded, not wrapped) for a motor angle in rad."""
+        return motor_rad * self.counts_per_rev / (2.0 * math.pi)

@@ -6,6 +6,13 @@ command RPDO, checking the statusword from the feedback TPDOs after each step.  
 a deadline; a missed deadline or an SDO abort ends in :attr:`Phase.FAILED` with a message
 naming the node, the step and the cause.
 
+The target field of the RPDOs the sequencer sends itself is 0 for a drive motor (target
+velocity).  For a steering actuator (cyclic synchronous position) it is :attr:`NodeSequencer.hold`,
+the latest position actual value: a CSP drive follows 0x607A from the moment it reaches
+OPERATION ENABLED, so the walk sends no controlword until that position is known, and the
+drive is enabled on the spot where it stands.  Its stop is SHUTDOWN at once (released where it
+stands): statusword bit 12 means "follows the target" in CSP, not "speed 0".
+
 Nothing here blocks or reads the clock: the driver passes ``now_s`` and sends what comes back.
 """
 
@@ -75,6 +82,7 @@ class NodeSequencer:
     :param label: how messages name it, e.g. ``node 3 ("left")``.
     :param codec: builds the command RPDO for controlword steps.
     :param steps: from :func:`~drivers.cia402.steps.configuration_steps`.
+    :param position: a steering actuator in cyclic synchronous position mode (see above).
     """
 
     #: Deadline for each SDO answer (s).
@@ -95,11 +103,16 @@ class NodeSequencer:
     MAX_WALK_STEPS = 8
 
     def __init__(self, node_id: int, label: str, codec: Cia402Codec,
-                 steps: tuple[Step, ...]) -> None:
+                 steps: tuple[Step, ...], *, position: bool = False) -> None:
         self.node_id = node_id
         self.label = label
         self.codec = codec
         self.steps = steps
+        self.position = position
+        #: The target field of the sequencer's own RPDOs: 0 (velocity) for a drive motor; for
+        #: a steering actuator the latest position actual value (counts, int32) that the driver
+        #: passes in, ``None`` until one came.
+        self.hold: int | None = None if position else 0
         self.phase = Phase.IDLE
         #: Why the sequence failed ("" unless FAILED).
         self.error = ""
@@ -128,6 +141,8 @@ class NodeSequencer:
         self._i, self._awaiting, self._retry_s = 0, False, now_s
         self._step_s = now_s
         self._edge, self._edges = None, 0
+        if self.position:
+            self.hold = None  # only a position read after this start counts
         return self._issue(now_s)
 
     def stop(self, now_s: float) -> list[Frame]:
@@ -219,7 +234,7 @@ class NodeSequencer:
 
     def _rpdo(self, word: int) -> Frame:
         self._last_cw = word
-        return self.codec.rpdo(self.node_id, word, 0)
+        return self.codec.rpdo(self.node_id, word, 0 if self.hold is None else self.hold)
 
     def _advance(self, now_s: float) -> None:
         self._i += 1
@@ -287,13 +302,18 @@ class NodeSequencer:
         current, target = self._edge
         word = TRANSITIONS.get(self._edge)
         if now_s - self._step_s > self.STEP_TIMEOUT_S:
+            if self.hold is None:
+                return self.fail(
+                    f"no position actual value (0x6064) in a TPDO within "
+                    f"{self.STEP_TIMEOUT_S:g} s; a cyclic synchronous position drive is only "
+                    f"enabled with its target set to where it stands", DriveFault.COMMUNICATION)
             how = "on its own" if word is None else f"after controlword 0x{word:04X}"
             return self.fail(
                 f"no transition {current.label} -> {target.label} within "
                 f"{self.STEP_TIMEOUT_S:g} s {how} (statusword 0x{self.statusword or 0:04X})",
                 DriveFault.CONTROLLER)
-        if word is None or now_s - self._cw_sent_s < self.CW_RESEND_S:
-            return []
+        if word is None or now_s - self._cw_sent_s < self.CW_RESEND_S or self.hold is None:
+            return []  # (no hold position yet: a CSP drive would run to target 0)
         self._cw_sent_s = now_s
         if word is Controlword.FAULT_RESET and (self._last_cw is None or self._last_cw & 0x80):
             return [self._rpdo(Controlword.DISABLE_VOLTAGE)]  # bit 7 low first: a rising edge
@@ -309,7 +329,7 @@ class NodeSequencer:
                         self.label, self.statusword or 0)
             self.phase = Phase.IDLE
             return []
-        moving = (self.statusword is not None
+        moving = (not self.position and self.statusword is not None
                   and not self.statusword & StatuswordBit.SPEED_ZERO)
         if (state is State.OPERATION_ENABLED and moving
                 and now_s - self._step_s < self.STOP_TIMEOUT_S):

@@ -8,7 +8,13 @@ RPDO4 and TPDO4 are off, TPDO1/2 are on): a driver that does not remap fails the
 Quantisation follows a real drive: position actual value (0x6064) is an int32 count that wraps
 modulo 2^32 (``initial_position`` lets a test start near the wrap), velocities are int32
 device units.  The motor follows 0x60FF only in OPERATION ENABLED with mode 3 displayed and
-halt clear.  Reference: CiA 301 and CiA 402; ``/work/shared/specs/can-protocols.md`` section 3.
+halt clear.  In cyclic synchronous position mode (8, a steering actuator) it follows 0x607A
+instead, under the same conditions, with the position loop of :class:`~gateway.sim.MotorModel`
+(speed limited to ``max_rpm``): the int32 target is taken modulo 2^32 relative to the current
+position, as a drive compares target and actual position.  Statusword bit 12 is "speed 0" in
+mode 3 and "follows the target" in mode 8.  For a steering actuator the position frame of
+0x6064 is the model's (``initial_position`` 0), since ``zero_rad`` is given in it.
+Reference: CiA 301 and CiA 402; ``/work/shared/specs/can-protocols.md`` section 3.
 """
 
 from __future__ import annotations
@@ -27,6 +33,7 @@ from drivers.cia402.enums import (
     OperationMode,
     State,
     StatuswordBit,
+    supported_mode_bit,
 )
 from drivers.cia402.faults import ErrorRegister, SdoAbortCode
 from drivers.cia402.options import NodeOptions
@@ -70,7 +77,8 @@ class Cia402Simulator(DeviceSimulator):
     :param heartbeat_ms: 0x1017 at power-up (0 = no heartbeat until configured).
     :param command_timeout_s: fault (EMCY 0x8250 RPDO timeout) when OPERATION ENABLED and no
         RPDO came for this long; ``None`` disables the watchdog.
-    :param supported_modes: 0x6502; writing an unsupported 0x6060 is aborted.
+    :param supported_modes: 0x6502; writing an unsupported 0x6060 is aborted.  ``None``:
+        modes 1, 3, 4, 6, 7 (0x6D), plus 8 (0x80, CSP) for a steering actuator.
     :param mode_switch_delay_s: 0x6061 follows 0x6060 after this delay.
     :param missing_objects: indices to leave out of the dictionary (SDO abort 0x06020000).
     :param fault_code: EMCY code sent on an injected :attr:`SimFault.FAULT`.
@@ -80,7 +88,7 @@ class Cia402Simulator(DeviceSimulator):
     def __init__(
         self, motor: MotorConfig, model: MotorModel | None = None, *,
         initial_position: int = 0, heartbeat_ms: int = 0,
-        command_timeout_s: float | None = None, supported_modes: int = 0x6D,
+        command_timeout_s: float | None = None, supported_modes: int | None = None,
         mode_switch_delay_s: float = 0.0, missing_objects: Iterable[int] = (),
         fault_code: int = 0x2310, fault_register: int = 0x03,
     ) -> None:
@@ -91,6 +99,10 @@ class Cia402Simulator(DeviceSimulator):
         self.command_timeout_s = command_timeout_s
         self.mode_switch_delay_s = mode_switch_delay_s
         self.fault_code, self.fault_register = fault_code, fault_register
+        if supported_modes is None:
+            supported_modes = 0x6D | (
+                supported_mode_bit(OperationMode.CYCLIC_SYNCHRONOUS_POSITION)
+                if motor.steering else 0)
         self.od = SimObjectDictionary(self.node_id, heartbeat_ms, supported_modes,
                                       missing_objects)
         #: Counters for assertions: SYNCs seen, RPDOs applied, SDO aborts sent, bad PDOs.
@@ -143,6 +155,10 @@ class Cia402Simulator(DeviceSimulator):
             sw |= StatuswordBit.VOLTAGE_ENABLED
         if self.state is State.SWITCH_ON_DISABLED:
             sw |= StatuswordBit.QUICK_STOP
+        if self.od.get(0x6061) == OperationMode.CYCLIC_SYNCHRONOUS_POSITION:
+            if self._following():
+                sw |= StatuswordBit.FOLLOWS_TARGET
+            return sw
         rpm_units = abs(self.opts.rad_s_to_units(self.model.velocity_rad_s))
         if rpm_units < self.opts.velocity_factor:  # below 1 RPM
             sw |= StatuswordBit.SPEED_ZERO
@@ -346,11 +362,27 @@ class Cia402Simulator(DeviceSimulator):
                 and self._now - self._last_rpdo_s > self.command_timeout_s):
             self._raise_fault(0x8250, ErrorRegister.GENERIC | ErrorRegister.COMMUNICATION)
         self._refresh()
-        follow = (self.state is State.OPERATION_ENABLED and not self._controlword & 0x100
-                  and self.od.get(0x6061) == OperationMode.PROFILE_VELOCITY)
-        self.model.armed = self.state in _OPERATING
-        target = self.od.get(0x60FF) if follow else 0
-        self.model.target_rad_s = self.opts.units_to_rad_s(target)
+        model = self.model
+        model.armed = self.state in _OPERATING
+        mode = self.od.get(0x6061)
+        follow = self._following()
+        if follow and mode == OperationMode.CYCLIC_SYNCHRONOUS_POSITION:
+            model.target_position_rad = self._target_position_rad()
+            return
+        model.target_position_rad = None  # velocity mode, or stopping
+        target = self.od.get(0x60FF) if follow and mode == OperationMode.PROFILE_VELOCITY else 0
+        model.target_rad_s = self.opts.units_to_rad_s(target)
+
+    def _following(self) -> bool:
+        """Whether the motor follows the target: OPERATION ENABLED and halt (bit 8) clear."""
+        return self.state is State.OPERATION_ENABLED and not self._controlword & 0x100
+
+    def _target_position_rad(self) -> float:
+        """0x607A as a model position: the int32 target modulo 2^32 from where the motor is."""
+        model = self.model
+        here = self.initial_position + self.opts.rad_to_counts(model.position_rad)
+        delta = (self.od.get(0x607A) - here + (1 << 31)) % (1 << 32) - (1 << 31)
+        return model.position_rad + delta * (2.0 * math.pi) / self.opts.counts_per_rev
 
     def _on_tick(self, now_s: float) -> list[Frame]:
         self._now = now_s

@@ -2,9 +2,9 @@
 
 It holds the objects the gateway touches (0x1000, 0x1001, 0x1017, PDO parameters
 0x1400-0x1403 / 0x1600-0x1603 / 0x1800-0x1803 / 0x1A00-0x1A03, and 0x6040, 0x6041, 0x6060,
-0x6061, 0x6064, 0x606C, 0x60FF, 0x6502) and refuses what a real device refuses, with the SDO
-abort code CiA 301 gives: unknown object or subindex, read-only, wrong length, a mapping change
-while the PDO is valid or before its count is cleared, an unmappable object or more than
+0x6061, 0x6064, 0x606C, 0x607A, 0x60FF, 0x6502) and refuses what a real device refuses, with
+the SDO abort code CiA 301 gives: unknown object or subindex, read-only, wrong length, a mapping
+change while the PDO is valid or before its count is cleared, an unmappable object or more than
 64 bits, a COB-ID change of a valid PDO, an unsupported mode of operation.
 
 The default PDO mapping is deliberately not the gateway's (Faulhaber-like: RPDO3 = 6040 + 60FF,
@@ -80,6 +80,7 @@ class SimObjectDictionary:
             (0x6061, 0): Entry(_I8, OperationMode.PROFILE_POSITION, False, True),
             (0x6064, 0): Entry(_I32, 0, writable=False, mappable=True),
             (0x606C, 0): Entry(_I32, 0, writable=False, mappable=True),
+            (0x607A, 0): Entry(_I32, 0, mappable=True),
             (0x60FF, 0): Entry(_I32, 0, mappable=True),
             (0x6502, 0): Entry(_U32, self.supported_modes, writable=False),
         }

@@ -3,10 +3,12 @@
 :func:`configuration_steps` lists the steps in order: NMT pre-operational; the command RPDO
 and the two feedback TPDOs remapped by SDO, each switched off through COB-ID bit 31 while its
 mapping changes; the unused TPDOs switched off; transmission types (1 = every SYNC, or 255 =
-event-driven with an event timer); the producer heartbeat time (0x1017); mode of operation 3
-(profile velocity) and a read-back of 0x6061 until it says 3 (``canopen``'s ``op_mode`` setter
-only logs a failed switch); NMT start.  :class:`~drivers.cia402.sequence.NodeSequencer` runs
-them.
+event-driven with an event timer); the producer heartbeat time (0x1017); the mode of operation
+(3, profile velocity, for a drive motor; 8, cyclic synchronous position, for a steering actuator)
+and a read-back of 0x6061 until it says so (``canopen``'s ``op_mode`` setter only logs a failed
+switch); NMT start.  A steering actuator's command RPDO carries the target position (0x607A)
+where a drive motor's carries the target velocity (0x60FF).
+:class:`~drivers.cia402.sequence.NodeSequencer` runs them.
 
 Reference: CiA 301 (PDO communication and mapping parameters), CiA 402 (0x6060/0x6061).
 """
@@ -16,7 +18,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from drivers.cia402.codec import RPDO_MAP, TPDO_POSITION_MAP, TPDO_VELOCITY_MAP, mapping_entry
+from drivers.cia402.codec import (
+    RPDO_MAP,
+    RPDO_POSITION_MAP,
+    TPDO_POSITION_MAP,
+    TPDO_VELOCITY_MAP,
+    mapping_entry,
+)
 from drivers.cia402.enums import (
     PDO_COB_INVALID,
     DataType,
@@ -31,6 +39,13 @@ from drivers.cia402.enums import (
 
 if TYPE_CHECKING:
     from drivers.cia402.options import NodeOptions
+
+
+#: How step descriptions name the modes the driver selects.
+MODE_TEXT: dict[OperationMode, str] = {
+    OperationMode.PROFILE_VELOCITY: "profile velocity",
+    OperationMode.CYCLIC_SYNCHRONOUS_POSITION: "cyclic synchronous position",
+}
 
 
 @dataclass(frozen=True, slots=True)
@@ -95,15 +110,15 @@ def configuration_steps(node_id: int, opts: NodeOptions) -> tuple[Step, ...]:
     """Everything written into a node before NMT start, in order, ending with NMT start.
 
     :param node_id: the node (1..127).
-    :param opts: its options (PDO numbers, SYNC or event-driven, heartbeat time).
+    :param opts: its options (PDO numbers, SYNC or event-driven, heartbeat time, mode).
     """
     lay = opts.layout
     tx_type = TransmissionType.SYNC_EVERY if opts.sync else TransmissionType.EVENT_PROFILE
     timer = None if opts.sync else opts.event_timer_ms
     steps: list[Step] = [NmtStep(NmtCommand.ENTER_PRE_OPERATIONAL)]
     steps += _pdo_steps("RPDO", lay.rpdo, rpdo_cob_id(lay.rpdo, node_id),
-                        ObjectIndex.RPDO_COMMUNICATION, ObjectIndex.RPDO_MAPPING, RPDO_MAP,
-                        tx_type, None)
+                        ObjectIndex.RPDO_COMMUNICATION, ObjectIndex.RPDO_MAPPING,
+                        RPDO_POSITION_MAP if opts.position_mode else RPDO_MAP, tx_type, None)
     for number, entries in ((lay.tpdo_position, TPDO_POSITION_MAP),
                             (lay.tpdo_velocity, TPDO_VELOCITY_MAP)):
         steps += _pdo_steps("TPDO", number, tpdo_cob_id(number, node_id),
@@ -118,9 +133,9 @@ def configuration_steps(node_id: int, opts: NodeOptions) -> tuple[Step, ...]:
     steps += [
         SdoWriteStep(ObjectIndex.PRODUCER_HEARTBEAT_TIME, 0, opts.heartbeat_ms,
                      DataType.UNSIGNED16, "producer heartbeat time"),
-        SdoWriteStep(ObjectIndex.MODES_OF_OPERATION, 0, OperationMode.PROFILE_VELOCITY,
-                     DataType.INTEGER8, "modes of operation = profile velocity"),
-        SdoExpectStep(ObjectIndex.MODES_OF_OPERATION_DISPLAY, 0, OperationMode.PROFILE_VELOCITY,
+        SdoWriteStep(ObjectIndex.MODES_OF_OPERATION, 0, opts.mode, DataType.INTEGER8,
+                     f"modes of operation = {MODE_TEXT[opts.mode]}"),
+        SdoExpectStep(ObjectIndex.MODES_OF_OPERATION_DISPLAY, 0, opts.mode,
                       DataType.INTEGER8, "modes of operation display"),
         NmtStep(NmtCommand.START),
     ]

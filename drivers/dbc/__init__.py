@@ -1,7 +1,9 @@
 """Generic driver for any motor controller whose CAN messages are described by a DBC file.
 
 The user names a DBC file and, in the motor block, the message and signal that carry the
-velocity command and those that carry the velocity and position feedback, with their units;
+velocity command (a drive motor) or the position command (a steering actuator, with the
+message that selects position control, if any) and those that carry the velocity and
+position feedback, with their units;
 cantools (https://cantools.readthedocs.io/) encodes and decodes them.  The DBC format is
 Vector's "DBC File Format Documentation" (v1.0.5); ``config/example_controller.dbc`` is a small
 commented example and ODrive's official ``odrive-cansimple.dbc``

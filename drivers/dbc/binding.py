@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Any
 
 import cantools
 
+from drivers.dbc.options import UnitConversion
 from gateway.errors import ConfigError
 from gateway.types import MAX_EXTENDED_ID, MAX_STANDARD_ID
 
@@ -82,24 +83,33 @@ class MotorBinding:
 
     :param node_id: the controller's node ID.
     :param label: the wheel's name, for messages.
-    :param command: the velocity command signal.
+    :param command: the velocity command signal (a drive motor), else ``None``.
     :param velocity: the velocity feedback signal.
     :param position: the position feedback signal.
     :param fault: the fault-code signal, if configured.
     :param enable: the arming signal, if configured.
     :param enable_value: value of ``enable`` that arms.
     :param disable_value: value of ``enable`` that disarms.
+    :param target: the position command signal (a steering actuator), else ``None``.
+    :param mode: the signals that select position control, each with the value that does.
     """
 
     node_id: int
     label: str
-    command: SignalRef
+    command: SignalRef | None
     velocity: SignalRef
     position: SignalRef
     fault: SignalRef | None = None
     enable: SignalRef | None = None
     enable_value: float = 1.0
     disable_value: float = 0.0
+    target: SignalRef | None = None
+    mode: tuple[tuple[SignalRef, float], ...] = ()
+
+    @property
+    def steering(self) -> bool:
+        """Whether this motor is commanded in position (a steering actuator)."""
+        return self.target is not None
 
 
 class DatabaseCache:
@@ -186,7 +196,7 @@ def _signal(
         known = _known([s.name for s in msg.signals])
         raise ConfigError(
             f"{where}.{keys[1]}: message {msg_name!r} has no signal {sig_name!r}; "
-            f"known signals: {known}"
+            f"known signals: {known} (in {path})"
         ) from None
     if msg.is_container or sig.multiplexer_ids:
         raise ConfigError(
@@ -217,8 +227,9 @@ def bind_motor(
     :param cache: where loaded databases are kept.
     :param where: file and key path of the block for messages.
     :raises ConfigError: for a missing or invalid file, an unknown message or signal (the
-        message lists the known names), a frame ID out of range, or a position signal that
-        cannot wrap as configured.
+        message lists the known names), a frame ID out of range, a position signal that
+        cannot wrap as configured, a value that does not fit its signal, or (a steering
+        actuator) position signals too small for its travel (:func:`check_travel`).
     """
     path = resolve_path(opts)
     db = cache.load(path, where)
@@ -226,7 +237,25 @@ def bind_motor(
     def ref(msg: str, sig: str, keys: tuple[str, str]) -> SignalRef:
         return _signal(db, msg, sig, keys, path, where, motor, opts)
 
-    command = ref(opts.command_message, opts.command_signal, ("command_message", "command_signal"))
+    command = (
+        ref(opts.command_message, opts.command_signal, ("command_message", "command_signal"))
+        if opts.command_message
+        else None
+    )
+    target = (
+        ref(
+            opts.position_command_message,
+            opts.position_command_signal,
+            ("position_command_message", "position_command_signal"),
+        )
+        if opts.position_command_message
+        else None
+    )
+    keys = ("position_mode_message", "position_mode_values")
+    mode = tuple(
+        (ref(opts.position_mode_message, name, keys), value)
+        for name, value in opts.position_mode_values
+    )
     velocity = ref(
         opts.feedback_message, opts.velocity_signal, ("feedback_message", "velocity_signal")
     )
@@ -259,6 +288,15 @@ def bind_motor(
                     f"{where}.{key}: expected a value between {enable.minimum:g} and "
                     f"{enable.maximum:g} for signal {enable.name!r}, got {value!r}"
                 )
+    for sig, value in mode:
+        if not sig.minimum <= value <= sig.maximum:
+            raise ConfigError(
+                f"{where}.position_mode_values.{sig.name}: expected a value between "
+                f"{sig.minimum:g} and {sig.maximum:g} for signal {sig.name!r} of message "
+                f"{sig.message_name!r} in {path}, got {value!r}"
+            )
+    if target is not None:
+        check_travel(motor, opts, target, position, path, where)
     return MotorBinding(
         node_id=motor.node_id,
         label=motor.wheel,
@@ -269,4 +307,60 @@ def bind_motor(
         enable=enable,
         enable_value=opts.enable_value,
         disable_value=opts.disable_value,
+        target=target,
+        mode=mode,
     )
+
+
+def check_travel(
+    motor: MotorConfig,
+    opts: DbcOptions,
+    target: SignalRef,
+    position: SignalRef,
+    path: str,
+    where: str,
+) -> None:
+    """Check that a steering actuator's position signals can carry its whole travel.
+
+    The travel is every steering angle the actuator's wheels allow (``steer_range_rad``, from
+    their ``steer_min`` and ``steer_max``), i.e. the motor positions from
+    ``steer_to_motor_rad(steer_min)`` to ``steer_to_motor_rad(steer_max)``.  The position
+    command must carry every one of them.  The position feedback is absolute: a signal that
+    wraps must not wrap within the travel (else the angle at start-up is ambiguous), and one
+    that does not wrap must carry every position too.
+
+    :raises ConfigError: naming the key, the signal, its message and the DBC file, what the
+        travel needs and what the signal carries.
+    """
+    units = UnitConversion.build(motor, opts)
+    low, high = motor.steer_range_rad
+    ends = (motor.steer_to_motor_rad(low), motor.steer_to_motor_rad(high))
+    span = (
+        f"steering angles from {low:g} to {high:g} rad (motor positions {min(ends):g} to "
+        f"{max(ends):g} rad)"
+    )
+    hint = "; use a wider signal, or narrow the wheel's steering limits"
+
+    def carries(key: str, signal: SignalRef, need: list[float]) -> None:
+        if need[0] < signal.minimum or need[1] > signal.maximum:
+            raise ConfigError(
+                f"{where}.{key}: signal {signal.name!r} of message {signal.message_name!r} in "
+                f"{path} carries {signal.minimum:g} to {signal.maximum:g}, but {span} need "
+                f"{need[0]:g} to {need[1]:g}{hint}"
+            )
+
+    carries("position_command_signal", target, sorted(units.motor_to_target(x) for x in ends))
+    bits = opts.position_wrap_bits
+    if position.is_float:
+        return
+    if bits:
+        wrap = abs((1 << bits) * position.scale)
+        width = abs(units.motor_to_position(ends[1]) - units.motor_to_position(ends[0]))
+        if wrap <= width:
+            raise ConfigError(
+                f"{where}.position_wrap_bits: signal {position.name!r} of message "
+                f"{position.message_name!r} in {path} wraps every {wrap:g} (2**{bits} steps), "
+                f"but the absolute position of {span} spans {width:g}{hint}"
+            )
+        return
+    carries("position_signal", position, sorted(units.motor_to_position(x) for x in ends))

@@ -8,8 +8,13 @@ configures are sent with their DBC initial value (``GenSigStartValue``), else 0 
 the signal's range.
 
 Both directions are here: the gateway side (:meth:`DbcCodec.encode_command`,
-:meth:`DbcCodec.encode_enable`, :meth:`DbcCodec.decode`) and the device side used by the
-simulator (:meth:`DbcCodec.decode_request`, :meth:`DbcCodec.encode_feedback`).
+:meth:`DbcCodec.encode_enable`, :meth:`DbcCodec.encode_mode`, :meth:`DbcCodec.decode`) and the
+device side used by the simulator (:meth:`DbcCodec.decode_request`,
+:meth:`DbcCodec.encode_feedback`).
+
+A motor's command signal is its velocity command (a drive motor) or its position command (a
+steering actuator, :attr:`Role.POSITION_COMMAND`); the signals that select position control
+(:attr:`Role.MODE`) always carry their configured value.
 
 DBC format reference: Vector "DBC File Format Documentation" v1.0.5; cantools:
 https://cantools.readthedocs.io/en/latest/
@@ -45,11 +50,15 @@ class Role(enum.IntEnum):
     VELOCITY = 3
     POSITION = 4
     FAULT = 5
+    #: The position command of a steering actuator.
+    POSITION_COMMAND = 6
+    #: A signal that selects position control (a fixed value per motor).
+    MODE = 7
 
 
-_TX_ROLES = (Role.COMMAND, Role.ENABLE)
-#: Roles that several motors may share on the same signal (a board-wide enable or fault).
-_SHAREABLE = (Role.ENABLE, Role.FAULT)
+_COMMANDS = (Role.COMMAND, Role.POSITION_COMMAND)
+#: Roles that several motors may share on the same signal (a board-wide enable, fault or mode).
+_SHAREABLE = (Role.ENABLE, Role.FAULT, Role.MODE)
 
 
 @dataclass(frozen=True, slots=True)
@@ -74,7 +83,8 @@ class DbcRequest:
     """A command or arming value decoded on the device side.
 
     :param node_id: the addressed motor's node ID.
-    :param role: :attr:`Role.COMMAND` or :attr:`Role.ENABLE`.
+    :param role: :attr:`Role.COMMAND`, :attr:`Role.POSITION_COMMAND`, :attr:`Role.ENABLE` or
+        :attr:`Role.MODE`.
     :param value: the signal's physical value.
     """
 
@@ -89,6 +99,8 @@ class _Member:
     role: Role
     ref: SignalRef
     label: str
+    #: The value a :attr:`Role.MODE` signal always carries.
+    fixed: float = 0.0
     #: ``ref.name``, read once: the property builds a str on every call, and every received
     #: frame looks up each member's signal by name.
     name: str = field(init=False)
@@ -131,7 +143,12 @@ class DbcCodec(MotorCodec[tuple[DbcReading, ...]]):
         self._tx: dict[int, _Group] = {}
         self._rx: dict[int, _Group] = {}
         for b in self.bindings:
-            self._add(self._tx, b, Role.COMMAND, b.command)
+            if b.command is not None:
+                self._add(self._tx, b, Role.COMMAND, b.command)
+            if b.target is not None:
+                self._add(self._tx, b, Role.POSITION_COMMAND, b.target)
+            for ref, value in b.mode:
+                self._add(self._tx, b, Role.MODE, ref, value)
             if b.enable is not None:
                 self._add(self._tx, b, Role.ENABLE, b.enable)
             self._add(self._rx, b, Role.VELOCITY, b.velocity)
@@ -146,9 +163,15 @@ class DbcCodec(MotorCodec[tuple[DbcReading, ...]]):
                 f"({self._rx[both[0]].describe()})"
             )
         self._enable_values = {b.node_id: (b.enable_value, b.disable_value) for b in bindings}
+        self._command_role = {
+            b.node_id: Role.COMMAND if b.command is not None else Role.POSITION_COMMAND
+            for b in bindings
+        }
 
     @staticmethod
-    def _add(table: dict[int, _Group], b: MotorBinding, role: Role, ref: SignalRef) -> None:
+    def _add(
+        table: dict[int, _Group], b: MotorBinding, role: Role, ref: SignalRef, fixed: float = 0.0
+    ) -> None:
         group = table.get(ref.frame_id)
         if group is None:
             group = table[ref.frame_id] = _Group(ref)
@@ -161,49 +184,66 @@ class DbcCodec(MotorCodec[tuple[DbcReading, ...]]):
             if (
                 m.ref.name == ref.name
                 and m.node_id != b.node_id
-                and not (role == m.role and role in _SHAREABLE)
+                and not (role == m.role and role in _SHAREABLE and fixed == m.fixed)
             ):
                 raise ConfigError(
                     f'signal "{ref.name}" of {group.describe()} is configured for node '
                     f"{m.node_id} ({m.label!r}) and node {b.node_id} ({b.label!r})"
                 )
-        group.members.append(_Member(b.node_id, role, ref, b.label))
+        group.members.append(_Member(b.node_id, role, ref, b.label, fixed))
 
     # ----------------------------------------------------------------- gateway side
 
     def encode_command(
         self, commands: Mapping[int, float], armed: Mapping[int, bool] | None = None
     ) -> tuple[Frame, ...]:
-        """Velocity command frames, one per command message touched, in configuration order.
+        """Command frames, one per command message touched, in configuration order.
 
-        :param commands: node ID -> command signal value (physical, signal units).  A motor
-            that shares a message with a commanded one but is absent gets the default value.
+        :param commands: node ID -> command signal value (physical, signal units): the
+            velocity command of a drive motor, the position command of a steering actuator.
+            A motor that shares a message with a commanded one but is absent gets the default.
         :param armed: node ID -> armed; sets enable signals that share the command message.
         :raises EncodeError: for a value that is not finite or outside the signal's range.
         """
+        role = self._command_role
         values: dict[tuple[int, Role], float] = {
-            (node, Role.COMMAND): value for node, value in commands.items()
+            (node, role[node]): value for node, value in commands.items()
         }
         for node, on in (armed or {}).items():
             values[(node, Role.ENABLE)] = self._enable_values[node][0 if on else 1]
-        touched = set(commands)
-        return self._encode(self._tx, values, touched, Role.COMMAND)
+        return self._encode(self._tx, values, set(commands), _COMMANDS)
 
-    def encode_enable(self, node_ids: Iterable[int], enable: bool) -> tuple[Frame, ...]:
+    def encode_enable(
+        self, node_ids: Iterable[int], enable: bool, hold: Mapping[int, float] | None = None
+    ) -> tuple[Frame, ...]:
         """Arming (``enable``) or disarming frames for the motors that have an enable signal.
 
-        Command signals that share the message are sent as zero.
+        Velocity commands that share the message are sent as zero, position commands as
+        ``hold`` (never the default: that would move a steering actuator).
 
         :param node_ids: the motors to arm or disarm.
+        :param hold: node ID -> position command value (signal units) of steering actuators.
         :raises EncodeError: if a configured value does not fit the signal.
         """
-        values: dict[tuple[int, Role], float] = {}
-        nodes = set()
-        for node in node_ids:
+        values = self._held(node_ids, hold)
+        nodes = {node for node, _ in values}
+        for node in nodes:
             values[(node, Role.ENABLE)] = self._enable_values[node][0 if enable else 1]
-            values[(node, Role.COMMAND)] = 0.0
-            nodes.add(node)
-        return self._encode(self._tx, values, nodes, Role.ENABLE)
+        return self._encode(self._tx, values, nodes, (Role.ENABLE,))
+
+    def encode_mode(
+        self, node_ids: Iterable[int], hold: Mapping[int, float] | None = None
+    ) -> tuple[Frame, ...]:
+        """Frames that select position control, for the motors that have mode signals.
+
+        Commands that share the message are sent as in :meth:`encode_enable`.
+
+        :param node_ids: the motors to switch.
+        :param hold: as for :meth:`encode_enable`.
+        :raises EncodeError: if a configured value does not fit the signal.
+        """
+        values = self._held(node_ids, hold)
+        return self._encode(self._tx, values, {n for n, _ in values}, (Role.MODE,))
 
     def decode(self, frame: Frame) -> tuple[DbcReading, ...] | None:
         """Feedback in ``frame``, one reading per motor whose signals it carries.
@@ -265,19 +305,44 @@ class DbcCodec(MotorCodec[tuple[DbcReading, ...]]):
 
     # ----------------------------------------------------------------- internals
 
+    def _held(
+        self, node_ids: Iterable[int], hold: Mapping[int, float] | None
+    ) -> dict[tuple[int, Role], float]:
+        """Zero velocity commands and held position commands of ``node_ids``."""
+        values: dict[tuple[int, Role], float] = {}
+        for node in node_ids:
+            role = self._command_role[node]
+            if role == Role.COMMAND:
+                values[(node, role)] = 0.0
+            elif hold is not None and node in hold:
+                values[(node, role)] = hold[node]
+            else:
+                raise EncodeError(
+                    f"Expected a position to hold for node {node}, a steering actuator, "
+                    "but got none."
+                )
+        return values
+
     def _encode(
         self,
         table: dict[int, _Group],
         values: dict[tuple[int, Role], float],
         nodes: set[int],
-        needed: Role | None,
+        needed: tuple[Role, ...] | None,
     ) -> tuple[Frame, ...]:
         frames = []
         for group in table.values():
-            if not any(m.node_id in nodes and needed in (None, m.role) for m in group.members):
+            if not any(
+                m.node_id in nodes and (needed is None or m.role in needed)
+                for m in group.members
+            ):
                 continue
             data = dict(group.defaults)
             for m in group.members:
+                if m.role == Role.MODE:
+                    if m.node_id in nodes:
+                        data[m.name] = m.fixed
+                    continue
                 key = (m.node_id, m.role)
                 if key not in values:
                     continue

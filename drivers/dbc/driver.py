@@ -29,6 +29,35 @@ add``, the default) or the DBC IDs as they are (``none``, for DBCs with one mess
 such as ODrive's ``Axis3_...``).  See :data:`drivers.dbc.options.OPTIONS` for every key,
 Vector's "DBC File Format Documentation" for the format and https://cantools.readthedocs.io/
 for the codec library.
+
+A steering actuator (a ``steering:`` block, :attr:`DbcDriver.STEERING`) names its position
+command instead of a velocity command, e.g. an ODrive axis through the official DBC::
+
+    steering:
+      front_left:
+        driver: dbc
+        node_id: 5
+        gear_ratio: 12.8
+        max_rpm: 3000
+        dbc: odrive-cansimple.dbc
+        node_id_in_frame: none
+        position_command_message: Axis5_Set_Input_Pos
+        position_command_signal: Input_Pos
+        position_command_unit: rev
+        position_mode_message: Axis5_Set_Controller_Mode
+        position_mode_values: {Control_Mode: 3, Input_Mode: 1}   # POSITION, PASSTHROUGH
+        feedback_message: Axis5_Get_Encoder_Estimates
+        velocity_signal: Vel_Estimate
+        velocity_unit: rev/s
+        position_signal: Pos_Estimate
+        position_unit: rev
+        enable_message: Axis5_Set_Axis_State
+        enable_signal: Axis_Requested_State
+        enable_value: 8                  # CLOSED_LOOP_CONTROL
+        disable_value: 1                 # IDLE
+
+Its position is absolute in the controller's frame (``zero_rad`` is defined there): the first
+sample is taken as it is, and counter wrap-around is undone from there on.
 """
 
 from __future__ import annotations
@@ -60,21 +89,25 @@ log = logging.getLogger(__name__)
 class DbcDriver(MotorDriver):
     """Drives every ``driver: dbc`` motor on one bus through the messages of its DBC file.
 
-    The DBC file, messages and signals are checked when the driver is built.
+    The DBC file, messages and signals are checked when the driver is built.  Drive motors
+    and steering actuators may be mixed in any order.
 
-    :param motors: the motor blocks, in the order :meth:`command` gets speeds.
+    :param motors: the motor blocks, in the order :meth:`command` gets setpoints.
     :raises ConfigError: for a bad key, a missing or invalid DBC file, a name the DBC does
-        not have (the message lists the names it has), or frame IDs that collide.
+        not have (the message lists the names it has), frame IDs that collide, a drive motor
+        without a velocity command, or a steering actuator without a position command or
+        whose position signals cannot carry its travel.
     """
 
     OPTIONS: ClassVar[Mapping[str, OptionSpec]] = OPTIONS
     NODE_ID_RANGE: ClassVar[tuple[int, int]] = (0, 0x7FF)
+    STEERING: ClassVar[bool] = True
 
     def __init__(self, motors: Sequence[MotorConfig]) -> None:
         super().__init__(motors)
         cache = DatabaseCache()
         self._opts: tuple[DbcOptions, ...] = tuple(
-            parse_options(m.options, motor_where(m)) for m in self.motors
+            parse_options(m.options, motor_where(m), m.role) for m in self.motors
         )
         self.liveness_s = self._opts[0].liveness_s if self._opts else self.liveness_s
         self._units = tuple(
@@ -92,10 +125,17 @@ class DbcDriver(MotorDriver):
         self._pos_first: list[int | float | None] = [None] * n
         self._pos_last: list[int | float] = [0] * n
         self._pos_total: list[int] = [0] * n
+        #: Per steering actuator, the last position command sent (signal units).
+        self._target: list[float | None] = [None] * n
+        #: Per steering actuator, the absolute motor position last measured (rad).
+        self._motor_rad: list[float | None] = [None] * n
 
     @classmethod
     def validate_options(cls, raw: Mapping[str, object], where: str) -> dict[str, object]:
         """Validate the protocol keys, including the rules between keys (no file access).
+
+        The role of the block is not known here, so a block needs a velocity command or a
+        position command; the driver checks the one its role needs.
 
         :raises ConfigError: naming the key.
         """
@@ -106,35 +146,45 @@ class DbcDriver(MotorDriver):
     # ----------------------------------------------------------------- hooks
 
     def enable(self, now_s: float) -> list[Frame]:
-        """A zero velocity command, then the arming frames (if an enable signal is set)."""
+        """Position-mode selection (steering actuators that configure it), a zero velocity
+        command (drive motors) or a hold-where-it-stands position command (steering
+        actuators), then the arming frames (if an enable signal is set)."""
+        hold = self._hold()
+        frames = list(self.codec.encode_mode(self._steer_nodes(), hold))
         for i in range(len(self.motors)):
             self.set_armed(i, True)
-        return self._with_enable(True)
+        return frames + [f for f in self._with_enable(True, hold) if f not in frames]
 
     def disable(self, now_s: float) -> list[Frame]:
-        """A zero velocity command, then the disarming frames (if an enable signal is set)."""
+        """A zero velocity command (drive motors) or a position command where it stands
+        (steering actuators), then the disarming frames (if an enable signal is set)."""
         for i in range(len(self.motors)):
             self.set_armed(i, False)
-        return self._with_enable(False)
+        return self._with_enable(False, self._hold())
 
     def command(self, wheel_rad_s: Sequence[float], now_s: float) -> list[Frame]:
-        """Velocity command frames; disarmed motors are commanded zero.
+        """Command frames: a velocity per drive motor (zero while disarmed), a position per
+        steering actuator (where it stands while disarmed).
 
-        :raises EncodeError: for the wrong number of speeds, a speed that is not finite, or
-            a command outside the signal's range.
+        :param wheel_rad_s: per motor, the wheel speed (rad/s) or the steering angle (rad).
+        :raises EncodeError: for the wrong number of setpoints, a setpoint that is not finite,
+            or a command outside the signal's range.
         """
         if len(wheel_rad_s) != len(self.motors):
             raise EncodeError(
                 f"Expected {len(self.motors)} wheel speeds, but got {len(wheel_rad_s)}."
             )
         commands: dict[int, float] = {}
-        for i, (m, speed) in enumerate(zip(self.motors, wheel_rad_s, strict=True)):
-            if not math.isfinite(speed):
+        for i, (m, value) in enumerate(zip(self.motors, wheel_rad_s, strict=True)):
+            if m.steering:
+                commands[m.node_id] = self._steer_command(i, m, value)
+                continue
+            if not math.isfinite(value):
                 raise EncodeError(
                     f'Expected a finite speed for node {m.node_id} ("{m.wheel}"), '
-                    f"but got {speed!r}."
+                    f"but got {value!r}."
                 )
-            commands[m.node_id] = self._units[i].wheel_to_command(speed) if self._armed[i] else 0.0
+            commands[m.node_id] = self._units[i].wheel_to_command(value) if self._armed[i] else 0.0
         return list(self.codec.encode_command(commands, self._armed_map()))
 
     def on_frame(self, frame: Frame) -> bool:
@@ -162,18 +212,50 @@ class DbcDriver(MotorDriver):
     def _nodes(self) -> list[int]:
         return [m.node_id for m in self.motors]
 
+    def _steer_nodes(self) -> list[int]:
+        return [m.node_id for m in self.motors if m.steering]
+
     def _armed_map(self) -> dict[int, bool]:
         return {m.node_id: self._armed[i] for i, m in enumerate(self.motors)}
 
-    def _with_enable(self, enable: bool) -> list[Frame]:
-        """Zero commands, then arming frames (those not already sent: the enable signal may
-        share the command message)."""
-        frames = self._zero()
-        frames += [f for f in self.codec.encode_enable(self._nodes(), enable) if f not in frames]
-        return frames
+    def _steer_command(self, i: int, m: MotorConfig, angle: float) -> float:
+        """The position command value (signal units) for steering angle ``angle`` (rad)."""
+        if not math.isfinite(angle):
+            raise EncodeError(
+                f'Expected a finite steering angle in rad for node {m.node_id} ("{m.wheel}"), '
+                f"but got {angle!r}."
+            )
+        if not self._armed[i]:
+            return self._hold_value(i)
+        value = self._units[i].motor_to_target(m.steer_to_motor_rad(angle))
+        self._target[i] = value
+        return value
 
-    def _zero(self) -> list[Frame]:
-        return list(self.codec.encode_command(dict.fromkeys(self._nodes(), 0.0), self._armed_map()))
+    def _hold_value(self, i: int) -> float:
+        """Where steering actuator ``i`` stands (signal units): measured, else the last
+        command, else its neutral position."""
+        measured = self._motor_rad[i]
+        if measured is not None:
+            return self._units[i].motor_to_target(measured)
+        last = self._target[i]
+        if last is not None:
+            return last
+        return self._units[i].motor_to_target(self.motors[i].zero_rad)
+
+    def _hold(self) -> dict[int, float]:
+        return {m.node_id: self._hold_value(i) for i, m in enumerate(self.motors) if m.steering}
+
+    def _with_enable(self, enable: bool, hold: Mapping[int, float]) -> list[Frame]:
+        """Zero (or hold) commands, then arming frames (those not already sent: the enable
+        signal may share the command message)."""
+        commands = {
+            m.node_id: hold[m.node_id] if m.steering else 0.0 for m in self.motors
+        }
+        frames = list(self.codec.encode_command(commands, self._armed_map()))
+        frames += [
+            f for f in self.codec.encode_enable(self._nodes(), enable, hold) if f not in frames
+        ]
+        return frames
 
     def _take(self, i: int, reading: DbcReading, timestamp_s: float) -> None:
         binding = self.bindings[i]
@@ -186,7 +268,7 @@ class DbcDriver(MotorDriver):
         if reading.velocity is not None:
             self._velocity[i] = self._units[i].velocity_to_wheel(reading.velocity)
         if reading.position_raw is not None:
-            self._position[i] = self._unwrap(i, reading.position_raw)
+            self._position[i] = self._angle(i, reading.position_raw)
         vel, pos = self._velocity[i], self._position[i]
         if (
             vel is not None
@@ -195,8 +277,40 @@ class DbcDriver(MotorDriver):
         ):
             self.store_feedback(i, WheelFeedback(pos, vel, timestamp_s))
 
-    def _unwrap(self, i: int, raw: int | float) -> float:
-        """Wheel angle (rad) since the first sample, undoing counter wrap-around exactly."""
+    def _angle(self, i: int, raw: int | float) -> float:
+        """The wheel angle (drive motor, from the first sample) or the steering angle
+        (steering actuator, absolute) for a raw position value (rad)."""
+        steps = self._unwrap(i, raw)
+        ref = self.bindings[i].position
+        if not self.motors[i].steering:
+            return self._units[i].position_to_wheel(steps * ref.scale)
+        base = ref.to_physical(self._base_raw(i))
+        motor_rad = self._units[i].position_to_motor(base + steps * ref.scale)
+        self._motor_rad[i] = motor_rad
+        return self.motors[i].motor_to_steer_rad(motor_rad)
+
+    def _base_raw(self, i: int) -> int | float:
+        """The absolute raw value of steering actuator ``i``'s first sample.
+
+        A counter that wraps modulo ``2**position_wrap_bits`` gives the position only up to
+        whole wraps: of the values it may stand for, take the one nearest the neutral position
+        ``zero_rad`` (exact while the travel is shorter than half a wrap either way, which
+        :func:`~drivers.dbc.binding.check_travel` ensures).
+        """
+        first = self._pos_first[i]
+        if first is None:
+            raise DecodeError(f"No position sample yet for node {self.motors[i].node_id}.")
+        bits = self._opts[i].position_wrap_bits
+        if not bits or not isinstance(first, int):
+            return first
+        ref, units = self.bindings[i].position, self._units[i]
+        zero_phys = units.motor_to_position(self.motors[i].zero_rad)
+        zero_raw = (zero_phys - float(ref.signal.offset)) / ref.scale
+        modulus = 1 << bits
+        return first + round((zero_raw - first) / modulus) * modulus
+
+    def _unwrap(self, i: int, raw: int | float) -> int | float:
+        """Raw steps since the first sample, undoing counter wrap-around exactly."""
         first = self._pos_first[i]
         if first is None:
             self._pos_first[i] = first = raw
@@ -210,7 +324,5 @@ class DbcDriver(MotorDriver):
                 step -= modulus
             self._pos_total[i] += step
             self._pos_last[i] = raw
-            delta: float = self._pos_total[i]
-        else:
-            delta = raw - first
-        return self._units[i].position_to_wheel(delta * self.bindings[i].position.scale)
+            return self._pos_total[i]
+        return raw - first

@@ -5,21 +5,30 @@ Every key is described once in :data:`OPTIONS` (an :class:`~gateway.driver.Optio
 the rules that involve several keys.  :class:`UnitConversion` derives, from the options and the
 motor block (gear ratio, inversion), the factors between wheel rad/s and the signal values.
 Nothing here reads the DBC file; :mod:`drivers.dbc.binding` does.
+
+A drive motor names its velocity command (``command_message``, ``command_signal``); a steering
+actuator (a ``steering:`` block) names its position command instead
+(``position_command_message``, ``position_command_signal``, in a position unit) and, if the
+controller needs one, the message that selects position control (``position_mode_message``
+with ``position_mode_values``, signal name -> value, sent by ``enable()``).  Which of the two a
+block needs depends on its role, which only the driver knows: config loading checks that at
+least one is complete, the driver checks the right one (:func:`parse_options` with ``role``).
 """
 
 from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
+from types import MappingProxyType
 from typing import TYPE_CHECKING
 
 from gateway.errors import ConfigError
 from gateway.options import OptionSpec, validate_block
+from gateway.types import MotorRole
 
 if TYPE_CHECKING:
-    from collections.abc import Mapping
-
     from gateway.types import MotorConfig
 
 log = logging.getLogger(__name__)
@@ -42,6 +51,7 @@ POSITION_UNITS: dict[str, float] = {
     "counts": 1.0 / _TWO_PI,
 }
 _SIDES = ("motor", "wheel")
+_NO_VALUES: Mapping[str, object] = MappingProxyType({})
 
 #: The protocol keys of a ``driver: dbc`` motor block.  ``""`` means "not used" or
 #: "same as another key", as each help text says.
@@ -50,12 +60,32 @@ OPTIONS: dict[str, OptionSpec] = {
     "config_dir": OptionSpec(
         str, "", help="directory relative DBC paths start from; '' = current directory"
     ),
-    "command_message": OptionSpec(str, help="DBC message that carries the velocity command"),
-    "command_signal": OptionSpec(str, help="signal of command_message with the velocity"),
+    "command_message": OptionSpec(
+        str, "", help="DBC message that carries the velocity command (drive motors)"
+    ),
+    "command_signal": OptionSpec(str, "", help="signal of command_message with the velocity"),
     "command_unit": OptionSpec(str, "rpm", tuple(VELOCITY_UNITS), help="unit of command_signal"),
     "command_scale": OptionSpec(float, 1.0, help="signal value = speed in command_unit * this"),
     "command_side": OptionSpec(
-        str, "motor", _SIDES, help="command_signal is the motor speed or the wheel speed"
+        str, "motor", _SIDES, help="the command signal (speed or position) is motor or wheel side"
+    ),
+    "position_command_message": OptionSpec(
+        str, "", help="DBC message that carries the position command (steering actuators)"
+    ),
+    "position_command_signal": OptionSpec(
+        str, "", help="signal of position_command_message with the position"
+    ),
+    "position_command_unit": OptionSpec(
+        str, "rev", tuple(POSITION_UNITS), help="unit of position_command_signal"
+    ),
+    "position_command_scale": OptionSpec(
+        float, 1.0, help="signal value = angle in position_command_unit * this"
+    ),
+    "position_mode_message": OptionSpec(
+        str, "", help="message that selects position control in enable(); '' = none"
+    ),
+    "position_mode_values": OptionSpec(
+        Mapping, _NO_VALUES, help="signal of position_mode_message -> value that selects it"
     ),
     "pole_pairs": OptionSpec(int, 1, minimum=1, help="motor pole pairs, for the erpm unit"),
     "feedback_message": OptionSpec(str, help="DBC message that carries the measured velocity"),
@@ -107,6 +137,12 @@ class DbcOptions:
     command_unit: str
     command_scale: float
     command_side: str
+    position_command_message: str
+    position_command_signal: str
+    position_command_unit: str
+    position_command_scale: float
+    position_mode_message: str
+    position_mode_values: tuple[tuple[str, float], ...]
     pole_pairs: int
     feedback_message: str
     velocity_signal: str
@@ -130,7 +166,9 @@ class DbcOptions:
     liveness_s: float
 
 
-def parse_options(values: Mapping[str, object], where: str) -> DbcOptions:
+def parse_options(
+    values: Mapping[str, object], where: str, role: MotorRole | None = None
+) -> DbcOptions:
     """Validate a motor block's protocol keys and check the rules between keys.
 
     Values that :meth:`~gateway.driver.MotorDriver.validate_options` already normalised pass
@@ -140,21 +178,18 @@ def parse_options(values: Mapping[str, object], where: str) -> DbcOptions:
 
     :param values: the protocol keys of the block (defaults filled in for missing ones).
     :param where: file and key path of the block for messages.
+    :param role: what the motor does: a drive motor needs a velocity command and takes no
+        position command, a steering actuator the other way round; ``None`` (config load,
+        where the role is not known) needs one of the two.
     :return: the typed options.
     :raises ConfigError: naming the key, for an unknown, missing or bad value.
     """
     out = validate_block(values, OPTIONS, where, "protocol keys for this driver")
-    for key in (
-        "dbc",
-        "command_message",
-        "command_signal",
-        "feedback_message",
-        "velocity_signal",
-        "position_signal",
-    ):
+    for key in ("dbc", "feedback_message", "velocity_signal", "position_signal"):
         if not out[key]:
             raise ConfigError(f"{where}.{key}: expected a non-empty name, got ''")
-    for key in ("command_scale", "velocity_scale", "position_scale"):
+    _check_command_keys(out, where, role)
+    for key in ("command_scale", "velocity_scale", "position_scale", "position_command_scale"):
         if out[key] == 0.0:
             raise ConfigError(f"{where}.{key}: expected a non-zero factor, got 0.0")
     if bool(out["enable_message"]) != bool(out["enable_signal"]):
@@ -176,11 +211,84 @@ def parse_options(values: Mapping[str, object], where: str) -> DbcOptions:
             f"{where}.node_id_shift: only used with node_id_in_frame 'add', "
             f"got {out['node_id_shift']!r}"
         )
+    out["position_mode_values"] = _mode_values(out, where)
     out["position_message"] = out["position_message"] or out["feedback_message"]
     if out["fault_signal"]:
         out["fault_message"] = out["fault_message"] or out["feedback_message"]
     out["feedback_side"] = out["feedback_side"] or out["command_side"]
     return DbcOptions(**out)  # type: ignore[arg-type]
+
+
+_VELOCITY_KEYS = ("command_message", "command_signal")
+_POSITION_KEYS = ("position_command_message", "position_command_signal")
+
+
+def _check_command_keys(out: Mapping[str, object], where: str, role: MotorRole | None) -> None:
+    """The command keys a block needs for its role (see :func:`parse_options`)."""
+    velocity, position = bool(out["command_message"]), bool(out["position_command_message"])
+    if role is None:
+        for pair in (_VELOCITY_KEYS, _POSITION_KEYS):
+            if bool(out[pair[0]]) != bool(out[pair[1]]):
+                given, missing = pair if out[pair[0]] else pair[::-1]
+                raise ConfigError(f"{where}.{missing}: required when {given} is given")
+        if not (velocity or position):
+            raise ConfigError(
+                f"{where}.command_message: required key is missing (a drive motor names its "
+                "velocity command in command_message and command_signal, a steering actuator "
+                "its position command in position_command_message and position_command_signal)"
+            )
+        return
+    if role is MotorRole.DRIVE:
+        for key in _VELOCITY_KEYS:
+            if not out[key]:
+                raise ConfigError(
+                    f"{where}.{key}: expected a non-empty name for a drive motor's velocity "
+                    "command, got ''"
+                )
+        for key in (*_POSITION_KEYS, "position_mode_message"):
+            if out[key]:
+                raise ConfigError(
+                    f"{where}.{key}: only a steering actuator takes a position command; "
+                    f"expected '' for a drive motor, got {out[key]!r}"
+                )
+        return
+    for key in _POSITION_KEYS:
+        if not out[key]:
+            raise ConfigError(
+                f"{where}.{key}: expected a non-empty name for a steering actuator's position "
+                "command (it is commanded in position, not in velocity), got ''"
+            )
+    for key in _VELOCITY_KEYS:
+        if out[key]:
+            raise ConfigError(
+                f"{where}.{key}: a steering actuator is commanded in position "
+                f"(position_command_message); expected '', got {out[key]!r}"
+            )
+
+
+def _mode_values(out: Mapping[str, object], where: str) -> tuple[tuple[str, float], ...]:
+    """``position_mode_values`` as (signal, value) pairs, checked against the message key."""
+    raw = out["position_mode_values"]
+    if isinstance(raw, tuple):  # already parsed
+        return raw
+    key = f"{where}.position_mode_values"
+    if not isinstance(raw, Mapping):
+        raise ConfigError(f"{key}: expected a mapping of signal name to value, got {raw!r}")
+    pairs: list[tuple[str, float]] = []
+    for name, value in raw.items():
+        if not isinstance(name, str) or not name:
+            raise ConfigError(f"{key}: expected signal names, got {name!r}")
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ConfigError(f"{key}.{name}: expected a number, got {value!r}")
+        if not math.isfinite(value):
+            raise ConfigError(f"{key}.{name}: expected a finite number, got {value!r}")
+        pairs.append((name, float(value)))
+    if out["position_mode_message"] and not pairs:
+        raise ConfigError(f"{key}: required when position_mode_message is given")
+    if pairs and not out["position_mode_message"]:
+        raise ConfigError(f"{where}.position_mode_message: required when position_mode_values "
+                          "is given")
+    return tuple(pairs)
 
 
 @dataclass(frozen=True, slots=True)
@@ -195,6 +303,7 @@ class UnitConversion:
     :param command_per_rad_s: command signal value per rad/s on the command side.
     :param velocity_per_rad_s: velocity signal value per rad/s on the feedback side.
     :param position_per_rad: position signal value per rad on the feedback side.
+    :param target_per_rad: position command signal value per rad on the command side.
     :param command_gear: gear ratio if the command is motor side, else 1.
     :param feedback_gear: gear ratio if the feedback is motor side, else 1.
     :param sign: -1.0 for an inverted motor, else 1.0.
@@ -204,6 +313,7 @@ class UnitConversion:
     command_per_rad_s: float
     velocity_per_rad_s: float
     position_per_rad: float
+    target_per_rad: float
     command_gear: float
     feedback_gear: float
     sign: float
@@ -221,10 +331,14 @@ class UnitConversion:
         pos = POSITION_UNITS[opts.position_unit] * opts.position_scale
         if opts.position_unit == "counts":
             pos *= opts.counts_per_rev
+        target = POSITION_UNITS[opts.position_command_unit] * opts.position_command_scale
+        if opts.position_command_unit == "counts":
+            target *= opts.counts_per_rev
         return cls(
             command_per_rad_s=cmd,
             velocity_per_rad_s=vel,
             position_per_rad=pos,
+            target_per_rad=target,
             command_gear=motor.gear_ratio if opts.command_side == "motor" else 1.0,
             feedback_gear=motor.gear_ratio if opts.feedback_side == "motor" else 1.0,
             sign=motor.sign,
@@ -243,7 +357,22 @@ class UnitConversion:
         """Wheel angle (rad) for a change of the position signal value."""
         return delta / self.position_per_rad * self.sign / self.feedback_gear
 
+    # Steering actuators: absolute positions in the controller's frame, motor rad (the sign is
+    # already in MotorConfig.steer_to_motor_rad).
+
+    def motor_to_target(self, motor_rad: float) -> float:
+        """Position command signal value for a motor position (rad, controller frame)."""
+        return motor_rad * self.command_gear / self.gear_ratio * self.target_per_rad
+
+    def position_to_motor(self, value: float) -> float:
+        """Motor position (rad, controller frame) for a position signal value (absolute)."""
+        return value / self.position_per_rad * self.gear_ratio / self.feedback_gear
+
     # Device side, for the simulator: the motor model turns at the (inverted) shaft speed.
+
+    def target_to_motor(self, value: float) -> float:
+        """Motor position (rad) that a position command signal value asks for."""
+        return value / self.target_per_rad * self.gear_ratio / self.command_gear
 
     def command_to_motor(self, value: float) -> float:
         """Motor shaft speed (rad/s) that a command signal value asks for."""

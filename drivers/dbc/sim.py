@@ -13,6 +13,14 @@ injected ``SimFault.FAULT`` disarms the motor and reports ``fault_code`` in the 
 the code stays latched until the fault is cleared in the simulator *and* (with an enable
 signal) the enable value arrives again.  With ``command_timeout_s`` set, the motor stops when
 no command arrives for that long.
+
+A steering actuator (``motor.steering``) follows the position command instead: each value sets
+``model.target_position_rad`` (the model's position loop), once position control is selected,
+which is from the start without ``position_mode_message`` and otherwise when a frame carries
+every configured ``position_mode_values`` (another value deselects it: the motor stops where it
+stands).  Its position signal reports the ABSOLUTE motor position in the controller's frame
+(``initial_raw`` 0, the signal's offset undone), quantised and wrapped as above.  Without
+commands for ``command_timeout_s`` it holds where it stands.
 """
 
 from __future__ import annotations
@@ -62,7 +70,7 @@ class DbcSimulator(DeviceSimulator):
         if fault_code == 0:
             raise ValueError("Expected a non-zero fault code, but got 0.")
         where = motor_where(motor)
-        opts = parse_options(motor.options, where)
+        opts = parse_options(motor.options, where, motor.role)
         self.binding = bind_motor(motor, opts, DatabaseCache(), where)
         self.codec = DbcCodec([self.binding])
         self.units = UnitConversion.build(motor, opts)
@@ -77,6 +85,8 @@ class DbcSimulator(DeviceSimulator):
         self._last_command_s: float | None = None
         self._next_emit_s: float | None = None
         self.model.armed = self.binding.enable is None
+        #: Whether position control is selected (a steering actuator).
+        self.position_mode = not self.binding.mode
         #: Last command signal value received (signal units), ``None`` before the first.
         self.last_command: float | None = None
         #: Malformed frames of the configured command messages.
@@ -90,6 +100,8 @@ class DbcSimulator(DeviceSimulator):
     def position_raw(self) -> int | float:
         """The raw position signal value for the model's current angle."""
         value = self.units.motor_to_position(self.model.position_rad)
+        if self.motor.steering:
+            value -= float(self.binding.position.signal.offset)
         step = value / self.binding.position.scale
         if not self._wrap_bits:
             return self.initial_raw + step
@@ -116,16 +128,37 @@ class DbcSimulator(DeviceSimulator):
                 "simulated node %d rejects %s: %s", self.motor.node_id, frame.to_cansend(), err
             )
             return []
-        for req in requests or ():
-            if req.node_id != self.motor.node_id:
-                continue
+        mine = [r for r in requests or () if r.node_id == self.motor.node_id]
+        self._select_mode([r.value for r in mine if r.role == Role.MODE])
+        for req in mine:
             if req.role == Role.COMMAND:
                 self.last_command = req.value
                 self._last_command_s = now_s
                 self.model.target_rad_s = self.units.command_to_motor(req.value)
-            else:
+            elif req.role == Role.POSITION_COMMAND:
+                self.last_command = req.value
+                self._last_command_s = now_s
+                if self.position_mode:
+                    self.model.target_position_rad = self.units.target_to_motor(req.value)
+            elif req.role == Role.ENABLE:
                 self._arm(req.value)
         return []
+
+    def _select_mode(self, values: list[float]) -> None:
+        """Select or deselect position control from the mode signals of one frame."""
+        if not values:
+            return
+        wanted = self.binding.mode
+        on = len(values) == len(wanted) and all(
+            abs(got - want) <= abs(ref.scale) / 2.0
+            for got, (ref, want) in zip(values, wanted, strict=True)
+        )
+        if on and not self.position_mode:
+            self.model.target_position_rad = self.model.position_rad
+        elif not on:
+            self.model.target_position_rad = None
+            self.model.target_rad_s = 0.0
+        self.position_mode = on
 
     def _arm(self, value: float) -> None:
         enable = self.binding.enable
@@ -146,6 +179,8 @@ class DbcSimulator(DeviceSimulator):
             and now_s - self._last_command_s > self.command_timeout_s
         ):
             self.model.target_rad_s = 0.0
+            if self.model.target_position_rad is not None:
+                self.model.target_position_rad = self.model.position_rad
         due = self._next_emit_s
         if due is not None and now_s < due - 1e-9:
             return []

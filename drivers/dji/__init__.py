@@ -6,6 +6,7 @@ CAN_receive.{h,c}``) and ``specs/can-protocols.md`` section 4.
 
 * :mod:`drivers.dji.codec`: the pure wire format (frame IDs, field tables, unwrapping);
 * :mod:`drivers.dji.pi`: the pure rotor-speed PI controller;
+* :mod:`drivers.dji.position`: the pure position loop of a steering actuator;
 * :mod:`drivers.dji.driver`: :class:`DjiDriver`, the stateful driver;
 * :mod:`drivers.dji.sim`: :class:`DjiSimulator`, a simulated ESC with a current-driven motor.
 """
@@ -25,6 +26,7 @@ from drivers.dji.codec import (
 )
 from drivers.dji.driver import TEMP_HYSTERESIS_C, DjiDriver
 from drivers.dji.pi import SpeedPi
+from drivers.dji.position import STEERING_OPTIONS, PositionLoop, power_up_position_rad
 from drivers.dji.sim import DjiMotorModel, DjiSimulator
 
 __all__ = [
@@ -33,6 +35,7 @@ __all__ = [
     "ESC_MODELS",
     "M2006_GEAR_RATIO",
     "M3508_GEAR_RATIO",
+    "STEERING_OPTIONS",
     "TEMP_HYSTERESIS_C",
     "DjiCodec",
     "DjiDriver",
@@ -41,5 +44,7 @@ __all__ = [
     "DjiMotorModel",
     "DjiSimulator",
     "EscModel",
+    "PositionLoop",
     "SpeedPi",
+    "power_up_position_rad",
 ]

@@ -24,10 +24,29 @@ Things the protocol does not have, and what the driver does instead:
   ``max_temp_c - TEMP_HYSTERESIS_C``, and :meth:`~DjiDriver.enable` re-arms it;
 * ``0x700`` (quick ID setting) is never sent.
 
+**Steering actuators** (``STEERING``): the ESC has no position mode either, so a steering
+actuator gets a host-side cascade every cycle: the position loop of
+:class:`drivers.dji.position.PositionLoop` (P plus a D term on the error rate, with the
+commanded angle's change since the previous cycle as speed feed-forward) gives a rotor-speed
+set point, clipped to ``max_rpm``, which the same speed PI as a wheel's turns into the current.
+"Arming it in position mode" is arming that cascade (no frames); on a fault, a disable or lost
+feedback it gets zero current like every other motor.  The position it follows and reports is
+**absolute within one rotor turn only**: the ESC reports the rotor angle 0..8191 within a turn,
+so the driver takes the first sample's reading, moved by whole turns to lie within half a turn
+of ``zero_rad``, plus the unwrapped change since
+(:func:`drivers.dji.position.power_up_position_rad`).  ``zero_rad`` is the rotor's reading at
+the wheels' neutral angle (0..2 pi, or any value that differs from it by whole turns).  A geared
+actuator must therefore be **powered up with its wheels at the neutral angle, or within half a
+rotor turn of it** (``pi / gear_ratio`` at the wheel's plane: 9.4 degrees through an M3508's
+gearbox, 5 degrees through an M2006's); powered up further away, every angle is off by whole
+rotor turns and nothing detects it.  Turns made while feedback is lost are lost too.
+
 Motor-block keys (``OPTIONS``): ``esc`` (``"c620"`` default, or ``"c610"``), ``kp`` (A per rad/s
 of **rotor** speed error, default 0.1), ``ki`` (A per rad of integrated rotor speed error,
 default 1.0), ``max_current_a`` (0 = the ESC's full scale: 20 A C620, 10 A C610),
-``liveness_s`` (0.1, the same for every motor of the bus) and ``max_temp_c`` (80 degC).
+``liveness_s`` (0.1, the same for every motor of the bus) and ``max_temp_c`` (80 degC); for a
+steering actuator only (an error in a drive motor's block) ``steer_kp`` (default 35 1/s) and
+``steer_kd`` (default 0.7), see :data:`drivers.dji.position.STEERING_OPTIONS`.
 The common ``gear_ratio`` must be set to the gearbox ratio: 3591/187 (~19.2032) for the M3508,
 36 for the M2006; ``max_rpm`` is at the rotor (about 9000 for an M3508 at 24 V).
 """
@@ -50,6 +69,7 @@ from drivers.dji.codec import (
     unwrap_delta,
 )
 from drivers.dji.pi import SpeedPi
+from drivers.dji.position import STEERING_OPTIONS, PositionLoop, power_up_position_rad
 from drivers.dji.sim import DjiSimulator
 from gateway.driver import MotorDriver, OptionSpec
 from gateway.errors import ConfigError, DecodeError, EncodeError
@@ -102,21 +122,26 @@ class DjiDriver(MotorDriver):
             "max_temp_c": OptionSpec(
                 float, 80.0, minimum=0.0, maximum=255.0, help="C620 over-temperature limit (degC)"
             ),
+            **STEERING_OPTIONS,
         }
     )
     NODE_ID_RANGE: ClassVar[tuple[int, int]] = (1, 8)
     DEFAULT_LIVENESS_S: ClassVar[float] = 0.1
     HOST_SPEED_LOOP: ClassVar[bool] = True
+    STEERING: ClassVar[bool] = True
 
     def __init__(self, motors: Sequence[MotorConfig]) -> None:
         super().__init__(motors)
         self._esc: list[EscModel] = []
         self._pi: list[SpeedPi] = []
         self._max_temp_c: list[float] = []
+        #: Per motor, the position loop of a steering actuator, ``None`` for a drive motor.
+        self._position: list[PositionLoop | None] = []
         liveness: set[float] = set()
         for m in self.motors:
             where = f"motor {m.wheel!r}"
             opts = self.validate_options(m.options, where)
+            self._position.append(self._position_loop(m, opts, where))
             esc = ESC_MODELS[str(opts["esc"])]
             limit = _number(opts, "max_current_a") or esc.full_scale_a
             if limit > esc.full_scale_a:
@@ -145,17 +170,60 @@ class DjiDriver(MotorDriver):
         self._rotor_rad_s = [0.0] * n
         self._last_count: list[int | None] = [None] * n
         self._count_sum = [0] * n
+        #: Rotor position (rad) at the first sample: 0 for a drive motor (its position counts
+        #: from there), the absolute power-up position for a steering actuator.
+        self._origin_rad = [0.0] * n
+        #: Rotor position (rad) of the latest sample, from ``_origin_rad``.
+        self._rotor_rad = [0.0] * n
+        #: A steering actuator's rotor target of the previous cycle, for the feed-forward.
+        self._last_target_rad: list[float | None] = [None] * n
         self._raw: list[DjiFeedback | None] = [None] * n
         self._last_command_s: float | None = None
-        #: (speed bound in rad/s, gear ratio, sign) per motor, for the per-cycle paths.
+        #: (speed bound in rad/s, gear ratio, sign, steering) per motor, for the per-cycle
+        #: paths.
         self._scale = tuple(
-            (m.max_wheel_rad_s * (1.0 + 1e-9), m.gear_ratio, m.sign) for m in self.motors
+            (m.max_wheel_rad_s * (1.0 + 1e-9), m.gear_ratio, m.sign, m.steering)
+            for m in self.motors
         )
+
+    @classmethod
+    def validate_options(cls, raw: Mapping[str, object], where: str) -> dict[str, object]:
+        """Validate the protocol keys and fill in defaults, except the steering keys.
+
+        ``steer_kp`` and ``steer_kd`` are checked but left out unless given: they mean nothing
+        to a drive motor, whose block must not carry them; a steering actuator without them
+        gets their defaults when the driver is built.
+
+        :raises ConfigError: for an unknown key, or a bad value.
+        """
+        out = super().validate_options(raw, where)
+        for key in STEERING_OPTIONS:
+            if key not in raw:
+                del out[key]
+        return out
+
+    @staticmethod
+    def _position_loop(
+        m: MotorConfig, opts: Mapping[str, object], where: str
+    ) -> PositionLoop | None:
+        if not m.steering:
+            given = sorted(k for k in STEERING_OPTIONS if k in opts)
+            if given:
+                raise ConfigError(
+                    f"{where}.{given[0]}: expected only in a steering actuator's block "
+                    f"(steering:), got it in a drive motor's block"
+                )
+            return None
+        return PositionLoop.from_options(opts, m.max_rpm * RAD_S_PER_RPM)
 
     # ----------------------------------------------------------------- hooks
 
     def enable(self, now_s: float) -> list[Frame]:
-        """Arm the host-side speed loop of every motor that is not in fault (no frames)."""
+        """Arm the host-side loops of every motor that is not in fault (no frames).
+
+        A steering actuator's cascade (position loop, then speed loop) is the DJI stand-in for
+        a position control mode; it holds the commanded angle from the next :meth:`command`.
+        """
         self._reset_loops()
         for i, m in enumerate(self.motors):
             if self._faults[i]:
@@ -172,14 +240,18 @@ class DjiDriver(MotorDriver):
         return self._frames([0.0] * len(self.motors))
 
     def command(self, wheel_rad_s: Sequence[float], now_s: float) -> list[Frame]:
-        """Run every motor's speed loop once and pack the currents.
+        """Run every motor's loops once and pack the currents.
 
-        A motor gets zero current (and an empty integrator) unless it is ENABLED, i.e. armed,
-        with fresh feedback and no fault.
+        A drive motor's speed loop follows its wheel speed; a steering actuator's position loop
+        turns its angle into a rotor-speed target for its speed loop, with the change of the
+        target since the previous call as feed-forward (none on the first call after
+        :meth:`enable`).  A motor gets zero current (and an empty integrator) unless it is
+        ENABLED, i.e. armed, with fresh feedback and no fault.
 
-        :param wheel_rad_s: one wheel speed per motor, rad/s, within ``max_rpm``.
-        :raises EncodeError: for a wrong number of speeds, or a speed that is not finite or
-            above the motor's ``max_rpm``.
+        :param wheel_rad_s: one setpoint per motor: a drive motor's wheel speed in rad/s within
+            ``max_rpm``, a steering actuator's steering angle in rad.
+        :raises EncodeError: for a wrong number of setpoints, a speed that is not finite or
+            above the motor's ``max_rpm``, or a steering angle that is not finite.
         """
         targets = self._rotor_targets(wheel_rad_s)
         dt = 0.0 if self._last_command_s is None else now_s - self._last_command_s
@@ -187,12 +259,18 @@ class DjiDriver(MotorDriver):
         self._last_command_s = now_s
         currents = []
         for i, target in enumerate(targets):
+            speed = target
+            loop = self._position[i]
+            if loop is not None:  # a steering actuator: target is a rotor position
+                last, self._last_target_rad[i] = self._last_target_rad[i], target
+                ff = 0.0 if last is None or dt <= 0.0 else (target - last) / dt
+                speed = loop.speed_target(target - self._rotor_rad[i], ff, self._rotor_rad_s[i])
             if self.state(i, now_s) is not DriveState.ENABLED:
                 self._integral_a[i] = 0.0
                 currents.append(0.0)
                 continue
             current, self._integral_a[i] = self._pi[i].step(
-                self._integral_a[i], target - self._rotor_rad_s[i], dt
+                self._integral_a[i], speed - self._rotor_rad_s[i], dt
             )
             currents.append(current)
         return self._frames(currents)
@@ -200,12 +278,17 @@ class DjiDriver(MotorDriver):
     def preview_command(self, wheel_rad_s: Sequence[float]) -> list[Frame]:
         """The frames :meth:`command` would send for zero measured speed and empty integrators.
 
-        Pure: ignores armed state and feedback and changes nothing (for ``frames`` output).
+        A steering actuator is assumed at rest at its neutral angle (rotor at ``zero_rad``,
+        as at power-up) with no feed-forward (a first cycle).  Pure: ignores armed state and
+        feedback and changes nothing (for ``frames`` output).
 
         :raises EncodeError: as :meth:`command`.
         """
         targets = self._rotor_targets(wheel_rad_s)
-        currents = [pi.preview(t) for pi, t in zip(self._pi, targets, strict=True)]
+        currents = []
+        for m, loop, pi, target in zip(self.motors, self._position, self._pi, targets, strict=True):
+            speed = target if loop is None else loop.speed_target(target - m.zero_rad, 0.0, 0.0)
+            currents.append(pi.preview(speed))
         return list(self.codec.encode_command(self._raw_currents(currents)))
 
     def on_frame(self, frame: Frame) -> bool:
@@ -249,18 +332,30 @@ class DjiDriver(MotorDriver):
 
     def _reset_loops(self) -> None:
         self._integral_a = [0.0] * len(self.motors)
+        self._last_target_rad = [None] * len(self.motors)
         self._last_command_s = None
 
     def _rotor_targets(self, wheel_rad_s: Sequence[float]) -> list[float]:
+        """Rotor speed (drive motor) or rotor position (steering actuator) targets, rad(/s)."""
         if len(wheel_rad_s) != len(self.motors):
+            what = "setpoints" if any(m.steering for m in self.motors) else "wheel speeds"
             raise EncodeError(
-                f"Expected {len(self.motors)} wheel speeds for the DJI motors, "
+                f"Expected {len(self.motors)} {what} for the DJI motors, "
                 f"but got {len(wheel_rad_s)}."
             )
         out: list[float] = []
         # Per-motor constants from __init__; the same arithmetic as m.max_wheel_rad_s and
         # m.wheel_to_motor_rad_s(w) (w * gear * sign).
-        for (bound, gear, sign), w in zip(self._scale, wheel_rad_s, strict=True):
+        for (bound, gear, sign, steer), w in zip(self._scale, wheel_rad_s, strict=True):
+            if steer:
+                m = self.motors[len(out)]
+                if not math.isfinite(w):
+                    raise EncodeError(
+                        f"Expected a finite steering angle in rad for node {m.node_id} "
+                        f'("{m.wheel}"), but got {w}.'
+                    )
+                out.append(m.steer_to_motor_rad(w))
+                continue
             if not (math.isfinite(w) and abs(w) <= bound):
                 m = self.motors[len(out)]
                 lim = m.max_wheel_rad_s
@@ -292,13 +387,19 @@ class DjiDriver(MotorDriver):
                     t - prev.timestamp_s,
                 )
             self._count_sum[i] += unwrap_delta(last, fb.angle_count)
+        elif m.steering:
+            self._origin_rad[i] = power_up_position_rad(fb.angle_count, m.zero_rad)
         self._last_count[i] = fb.angle_count
         self._raw[i] = fb
         rotor_rad_s = self._rotor_rad_s[i] = fb.speed_rpm * RAD_S_PER_RPM
-        rotor_rad = self._count_sum[i] * 2.0 * math.pi / COUNTS_PER_REV
-        _, gear, sign = self._scale[i]
-        # Wheel side as m.motor_to_wheel_rad_s: x * sign / gear.
-        self._feedback[i] = WheelFeedback(rotor_rad * sign / gear, rotor_rad_s * sign / gear, t)
+        rotor_rad = self._rotor_rad[i] = (
+            self._origin_rad[i] + self._count_sum[i] * 2.0 * math.pi / COUNTS_PER_REV
+        )
+        _, gear, sign, steer = self._scale[i]
+        # Wheel side as m.motor_to_wheel_rad_s: x * sign / gear; a steering actuator's
+        # position as m.motor_to_steer_rad: from zero_rad.
+        position = (rotor_rad - m.zero_rad if steer else rotor_rad) * sign / gear
+        self._feedback[i] = WheelFeedback(position, rotor_rad_s * sign / gear, t)
         if self._esc[i].reports_temperature:
             self._check_temperature(i, fb)
 

@@ -18,7 +18,12 @@ What the simulated ESC does:
   ESC protecting itself); clearing it restores the normal temperature, and the next command
   frame switches the output on again (DJI has no clear command);
 * ``SimFault.SILENT`` stops the feedback (the base class does this);
-* ``0x700`` frames are counted in :attr:`DjiSimulator.id_set_requests` and otherwise ignored.
+* ``0x700`` frames are counted in :attr:`DjiSimulator.id_set_requests` and otherwise ignored;
+* a **steering actuator** is simulated like any other ESC: current in, rotor angle out.  The
+  ESC has no position mode, so the model's position loop stays off (``target_position_rad`` is
+  ``None``): the gateway's host-side cascade holds the angle.  The rotor starts at
+  ``zero_rad`` (the wheels at their neutral angle) unless ``initial_position_rad`` says
+  otherwise, and the feedback carries its angle within the turn, as the real encoder does.
 """
 
 from __future__ import annotations
@@ -117,7 +122,8 @@ class DjiSimulator(DeviceSimulator):
         ``None`` (default) holds the last set point, as the spec says the ESC does.
     :param temperature_c: temperature reported while healthy (degC).
     :param fault_temperature_c: temperature reported while ``SimFault.FAULT`` is injected.
-    :param initial_position_rad: rotor angle at start (rad), e.g. just below a 13-bit wrap.
+    :param initial_position_rad: rotor angle at start (rad), e.g. just below a 13-bit wrap;
+        ``None`` (default): 0 for a drive motor, ``zero_rad`` for a steering actuator.
     """
 
     def __init__(
@@ -129,7 +135,7 @@ class DjiSimulator(DeviceSimulator):
         command_timeout_s: float | None = None,
         temperature_c: int = 35,
         fault_temperature_c: int = 110,
-        initial_position_rad: float = 0.0,
+        initial_position_rad: float | None = None,
     ) -> None:
         esc_name = motor.options.get("esc", "c620")
         if esc_name not in ESC_MODELS:
@@ -140,7 +146,12 @@ class DjiSimulator(DeviceSimulator):
         self.esc: EscModel = ESC_MODELS[str(esc_name)]
         self.physics = model if model is not None else DjiMotorModel.for_esc(self.esc)
         super().__init__(motor, self.physics)
-        self.physics.position_rad = initial_position_rad
+        # Current-driven whatever the motor does: no position mode on the ESC.
+        self.physics.target_position_rad = None
+        if initial_position_rad is not None:
+            self.physics.position_rad = initial_position_rad
+        elif not motor.steering:
+            self.physics.position_rad = 0.0
         self.esc_id = motor.node_id
         self.feedback_period_s = feedback_period_s
         self.command_timeout_s = command_timeout_s

@@ -36,10 +36,13 @@ from drivers.odrive.messages import (
     GET_ERROR_06,
     GET_MOTOR_ERROR_05,
     HEARTBEAT,
+    INPUT_POS_FF_MAX,
+    INPUT_POS_FF_SCALE,
     MAX_EXTENDED_NODE_ID,
     MAX_STANDARD_NODE_ID,
     SET_AXIS_STATE,
     SET_CONTROLLER_MODE,
+    SET_INPUT_POS,
     SET_INPUT_VEL,
     TRAJ_DONE_05,
     TRANSITIONS,
@@ -56,6 +59,7 @@ from drivers.odrive.messages import (
     Request,
     SetAxisState,
     SetControllerMode,
+    SetInputPos,
     SetInputVel,
     Step,
 )
@@ -175,6 +179,28 @@ class OdriveCodec(MotorCodec[Feedback]):
             self.extended_id,
         )
 
+    def make_set_input_pos(
+        self,
+        node_id: int,
+        pos_turns: float,
+        vel_ff_turns_s: float = 0.0,
+        torque_ff_nm: float = 0.0,
+    ) -> Frame:
+        """Set_Input_Pos: a position set point with speed and torque feed-forward.
+
+        :param pos_turns: position set point in turns (finite float32).
+        :param vel_ff_turns_s: speed feed-forward in turns/s, sent in steps of 0.001 and
+            clipped to +-32.767 (int16); a feed-forward only shapes the approach.
+        :param torque_ff_nm: torque feed-forward in N*m, as ``vel_ff_turns_s``.
+        :raises EncodeError: for a non-finite position or feed-forward, or a bad node ID.
+        """
+        _check_float32("Input_Pos", node_id, pos_turns, "turns")
+        _check_float32("Vel_FF", node_id, vel_ff_turns_s, "turns/s")
+        _check_float32("Torque_FF", node_id, torque_ff_nm, "Nm")
+        return self._frame(
+            node_id, SET_INPUT_POS, pos_turns, _ff_counts(vel_ff_turns_s), _ff_counts(torque_ff_nm)
+        )
+
     def make_set_axis_state(self, node_id: int, state: int) -> Frame:
         """Set_Axis_State, DLC 8.
 
@@ -212,12 +238,15 @@ class OdriveCodec(MotorCodec[Feedback]):
         current: AxisState | int,
         requested: AxisState,
         input_mode: InputMode = InputMode.PASSTHROUGH,
+        control_mode: ControlMode = ControlMode.VELOCITY_CONTROL,
     ) -> tuple[Frame, ...]:
         """The frames that take an axis from ``current`` to ``requested`` (:data:`TRANSITIONS`).
 
         :param current: the axis state last reported (``UNDEFINED`` when unknown).
         :param requested: ``IDLE`` or ``CLOSED_LOOP_CONTROL``.
-        :param input_mode: input mode selected when arming (velocity control).
+        :param input_mode: input mode selected when arming.
+        :param control_mode: control mode selected when arming (position for a steering
+            actuator).
         :raises IllegalTransitionError: for a pair the table does not allow.
         """
         step = TRANSITIONS.get((current, requested)) if isinstance(current, AxisState) else None
@@ -236,7 +265,7 @@ class OdriveCodec(MotorCodec[Feedback]):
             )
         return (
             self.make_clear_errors(node_id),
-            self.make_set_controller_mode(node_id, ControlMode.VELOCITY_CONTROL, input_mode),
+            self.make_set_controller_mode(node_id, control_mode, input_mode),
             self.make_set_axis_state(node_id, AxisState.CLOSED_LOOP_CONTROL),
         )
 
@@ -351,6 +380,11 @@ class OdriveCodec(MotorCodec[Feedback]):
         if cmd == CmdId.SET_INPUT_VEL:
             vel, torque = _unpack(SET_INPUT_VEL, node, frame)
             return SetInputVel(node, vel, torque)
+        if cmd == CmdId.SET_INPUT_POS:
+            pos, vel_ff, torque_ff = _unpack(SET_INPUT_POS, node, frame)
+            return SetInputPos(
+                node, pos, vel_ff * INPUT_POS_FF_SCALE, torque_ff * INPUT_POS_FF_SCALE
+            )
         if cmd == CmdId.SET_AXIS_STATE:
             (state,) = _unpack(SET_AXIS_STATE, node, frame)
             state = int(state)
@@ -375,6 +409,12 @@ def _unpack(layout: Layout, node: int, frame: Frame) -> tuple[Any, ...]:
             f"(ID {frame.arbitration_id:#x}), but got {len(frame.data)}."
         )
     return layout.packer.unpack_from(frame.data)
+
+
+def _ff_counts(value: float) -> int:
+    """A Set_Input_Pos feed-forward in int16 counts of 0.001, clipped."""
+    clipped = min(max(value, -INPUT_POS_FF_MAX), INPUT_POS_FF_MAX)
+    return round(clipped / INPUT_POS_FF_SCALE)
 
 
 def _check_float32(name: str, node_id: int, value: float, unit: str) -> None:

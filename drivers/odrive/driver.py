@@ -22,6 +22,14 @@ Per motor, the driver
   the motor/encoder/controller flags) and then asks once for Get_Error (0.6: active errors and
   disarm reason) or Get_Motor_Error (0.5) to complete the detail text.
 
+Steering actuators (motors with the ``STEER`` role) arm in POSITION_CONTROL with the
+PASSTHROUGH input mode and get one Set_Input_Pos per cycle: the steering angle through
+``zero_rad``, ``gear_ratio`` and ``invert`` in turns, with the commanded angle's rate since the
+previous cycle as speed feed-forward (the gateway already limits the steering rate, so the axis
+needs no trajectory of its own).  Their feedback is the absolute position estimate, so the axis'
+position frame must be fixed across power cycles (an absolute encoder, or an index search whose
+result ``zero_rad`` records).
+
 Odometry precision: the position is the firmware's float32 estimate in turns.  Its resolution
 is one float32 ULP, 2**(e - 23) turns for a value in [2**e, 2**(e + 1)): 1.2e-7 turn near 1
 turn, 0.0078 turn at 1e5 turns, 0.125 turn beyond 2**20 turns.  The driver subtracts the first
@@ -36,7 +44,7 @@ import math
 from typing import TYPE_CHECKING, ClassVar, cast
 
 from drivers.odrive.codec import OdriveCodec
-from drivers.odrive.enums import AxisState, CmdId, InputMode
+from drivers.odrive.enums import AxisState, CmdId, ControlMode, InputMode
 from drivers.odrive.faults import error_query_adds_detail, error_reply_detail, heartbeat_faults
 from drivers.odrive.messages import (
     CMD_BITS,
@@ -50,7 +58,7 @@ from drivers.odrive.messages import (
 from drivers.odrive.options import OPTIONS, bus_settings
 from drivers.odrive.sim import OdriveSimulator
 from gateway.driver import MotorDriver, OptionSpec
-from gateway.errors import DecodeError, EncodeError, IllegalTransitionError
+from gateway.errors import ConfigError, DecodeError, EncodeError, IllegalTransitionError
 from gateway.types import DriveFault, DriveState, WheelFeedback
 
 if TYPE_CHECKING:
@@ -83,6 +91,8 @@ class OdriveDriver(MotorDriver):
     ENABLE_ATTEMPTS: ClassVar[int] = 3
     #: Heartbeats this soon after an enable may still carry the errors it just cleared.
     ENABLE_GRACE_S: ClassVar[float] = 0.3
+    #: Steering actuators: position control with Set_Input_Pos.
+    STEERING: ClassVar[bool] = True
 
     def __init__(self, motors: Sequence[MotorConfig]) -> None:
         super().__init__(motors)
@@ -93,6 +103,19 @@ class OdriveDriver(MotorDriver):
             self.liveness_s = cast("float", opts[0]["liveness_s"])
         n = len(self.motors)
         self._input_mode = [InputMode(cast("int", o["input_mode"])) for o in opts]
+        for m, mode in zip(self.motors, self._input_mode, strict=True):
+            if m.steering and mode is not InputMode.PASSTHROUGH:
+                raise ConfigError(
+                    f"motor {m.wheel!r}.input_mode: expected {int(InputMode.PASSTHROUGH)} "
+                    f"(passthrough) for a steering actuator, which gets the gateway's "
+                    f"rate-limited angle and its speed as feed-forward, got {int(mode)}"
+                )
+        #: Whether each motor is a steering actuator (position control).
+        self._steer = tuple(m.steering for m in self.motors)
+        self._any_steer = any(self._steer)
+        #: The previous cycle's steering command of each motor: (time, angle), for the
+        #: speed feed-forward.
+        self._last_angle: list[tuple[float, float] | None] = [None] * n
         self._rtr = [o["encoder_request"] == "rtr" for o in opts]
         self._axis_state: list[AxisState | int] = [AxisState.UNDEFINED] * n
         self._heartbeat_s: list[float | None] = [None] * n
@@ -169,9 +192,11 @@ class OdriveDriver(MotorDriver):
     def _arm_frames(self, i: int, now_s: float) -> tuple[Frame, ...]:
         m = self.motors[i]
         current = self._axis_state[i] if self._alive(i, now_s) else AxisState.UNDEFINED
+        mode = ControlMode.POSITION_CONTROL if m.steering else ControlMode.VELOCITY_CONTROL
+        self._last_angle[i] = None
         try:
             return self.codec.make_transition(
-                m.node_id, current, AxisState.CLOSED_LOOP_CONTROL, self._input_mode[i]
+                m.node_id, current, AxisState.CLOSED_LOOP_CONTROL, self._input_mode[i], mode
             )
         except IllegalTransitionError as err:
             raise IllegalTransitionError(f'Cannot enable wheel "{m.wheel}": {err}') from err
@@ -187,31 +212,69 @@ class OdriveDriver(MotorDriver):
         return frames
 
     def command(self, wheel_rad_s: Sequence[float], now_s: float) -> list[Frame]:
-        """One Set_Input_Vel per axis: turns/s = wheel rad/s * gear_ratio * sign / (2 pi).
+        """One Set_Input_Vel per axis: turns/s = wheel rad/s * gear_ratio * sign / (2 pi); a
+        steering actuator gets Set_Input_Pos instead (see the module docstring).
 
-        :param wheel_rad_s: wheel speeds in rad/s, in :attr:`motors` order.
+        :param wheel_rad_s: wheel speeds in rad/s (steering angles in rad for steering
+            actuators), in :attr:`motors` order.
         :raises EncodeError: for a speed that is not finite or beyond the motor's ``max_rpm``,
-            or a number of speeds other than the number of motors.
+            a steering angle that is not finite, or a number of setpoints other than the
+            number of motors.
         """
         if len(wheel_rad_s) != len(self.motors):
             raise EncodeError(
                 f"Expected {len(self.motors)} wheel speeds for the ODrive axes, "
                 f"but got {len(wheel_rad_s)}."
             )
+        if self._any_steer:
+            return self._command_mixed(wheel_rad_s, now_s)
         # Per-motor constants come from __init__; the arithmetic is the same as
         # m.wheel_to_motor_rad_s(w) / TAU against m.max_wheel_rad_s.
         make = self.codec.make_set_input_vel
         out: list[Frame] = []
         for (node_id, gear, sign, bound), w in zip(self._cmd, wheel_rad_s, strict=True):
             if not (math.isfinite(w) and abs(w) <= bound):
-                m = self.motors[len(out)]
-                limit = m.max_wheel_rad_s
-                raise EncodeError(
-                    f'Expected velocity for node {m.node_id} ("{m.wheel}") between '
-                    f"{-limit:.3g} and {limit:.3g} rad/s, but got {w}."
-                )
+                raise self._speed_error(len(out), w)
             out.append(make(node_id, w * gear * sign / TAU))
         return out
+
+    def _command_mixed(self, setpoints: Sequence[float], now_s: float) -> list[Frame]:
+        """:meth:`command` for a bus with steering actuators."""
+        out: list[Frame] = []
+        for i, (m, value) in enumerate(zip(self.motors, setpoints, strict=True)):
+            if not m.steering:
+                out.extend(self._drive_frame(i, value))
+                continue
+            if not math.isfinite(value):
+                raise EncodeError(
+                    f'Expected a finite steering angle for node {m.node_id} ("{m.wheel}") in '
+                    f"rad, but got {value}."
+                )
+            last, self._last_angle[i] = self._last_angle[i], (now_s, value)
+            rate = 0.0
+            if last is not None and now_s > last[0]:
+                rate = (value - last[1]) / (now_s - last[0])
+            # Motor side as MotorConfig.steer_to_motor_rad; the speed within max_rpm.
+            limit = m.max_rpm / 60.0
+            ff = min(max(rate * m.gear_ratio * m.sign / TAU, -limit), limit)
+            out.append(
+                self.codec.make_set_input_pos(m.node_id, m.steer_to_motor_rad(value) / TAU, ff)
+            )
+        return out
+
+    def _drive_frame(self, i: int, w: float) -> tuple[Frame]:
+        node_id, gear, sign, bound = self._cmd[i]
+        if not (math.isfinite(w) and abs(w) <= bound):
+            raise self._speed_error(i, w)
+        return (self.codec.make_set_input_vel(node_id, w * gear * sign / TAU),)
+
+    def _speed_error(self, i: int, w: float) -> EncodeError:
+        m = self.motors[i]
+        limit = m.max_wheel_rad_s
+        return EncodeError(
+            f'Expected velocity for node {m.node_id} ("{m.wheel}") between '
+            f"{-limit:.3g} and {limit:.3g} rad/s, but got {w}."
+        )
 
     def poll(self, now_s: float) -> list[Frame]:
         """RTR encoder requests (``encoder_request: rtr``), error queries and enable retries."""
@@ -296,6 +359,14 @@ class OdriveDriver(MotorDriver):
 
     def _on_estimates(self, i: int, pos_turns: float, vel_turns_s: float, t: float) -> None:
         _, gear, sign, _ = self._cmd[i]
+        if self._steer[i]:
+            # A steering actuator: the absolute angle, in the axis' own position frame.
+            m = self.motors[i]
+            self._encoder_s[i] = t
+            self._feedback[i] = WheelFeedback(
+                m.motor_to_steer_rad(pos_turns * TAU), vel_turns_s * TAU * sign / gear, t
+            )
+            return
         pos0 = self._pos0_turns[i]
         if pos0 is None:
             pos0 = self._pos0_turns[i] = pos_turns

@@ -67,6 +67,17 @@ class Layout:
 SET_INPUT_VEL = Layout(
     CmdId.SET_INPUT_VEL, "Set_Input_Vel", struct.Struct("<ff"), ("Input_Vel", "Input_Torque_FF")
 )
+#: Feed-forwards in 0.001 rev/s and 0.001 N*m (0.5 fixed; 0.6 configurable, these by default).
+SET_INPUT_POS = Layout(
+    CmdId.SET_INPUT_POS,
+    "Set_Input_Pos",
+    struct.Struct("<fhh"),
+    ("Input_Pos", "Vel_FF", "Torque_FF"),
+)
+#: The scale of Set_Input_Pos's Vel_FF (rev/s per count) and Torque_FF (N*m per count).
+INPUT_POS_FF_SCALE = 0.001
+#: The largest feed-forward Set_Input_Pos carries, in rev/s or N*m (int16 counts).
+INPUT_POS_FF_MAX = 32767 * INPUT_POS_FF_SCALE
 #: DLC 8 as in the DBC and the generated 0.6 header; the official python example sends 4 and
 #: the firmware reads only 4, so both are accepted.
 SET_AXIS_STATE = Layout(
@@ -185,6 +196,17 @@ class SetInputVel:
 
 
 @dataclass(frozen=True, slots=True)
+class SetInputPos:
+    """Set_Input_Pos (0x0C). :param pos_turns: turns. :param vel_ff_turns_s: turns/s.
+    :param torque_ff_nm: N*m."""
+
+    node_id: int
+    pos_turns: float
+    vel_ff_turns_s: float = 0.0
+    torque_ff_nm: float = 0.0
+
+
+@dataclass(frozen=True, slots=True)
 class SetAxisState:
     """Set_Axis_State (0x07). :param state: requested state (int if unknown)."""
 
@@ -227,7 +249,9 @@ class Request:
 #: Everything :meth:`OdriveCodec.decode` returns.
 Feedback: TypeAlias = Heartbeat | EncoderEstimates | ErrorStatus | MotorErrorStatus
 #: Everything :meth:`OdriveCodec.decode_command` returns.
-Command: TypeAlias = SetInputVel | SetAxisState | SetControllerMode | ClearErrors | Estop | Request
+Command: TypeAlias = (
+    SetInputVel | SetInputPos | SetAxisState | SetControllerMode | ClearErrors | Estop | Request
+)
 
 
 class Step(enum.Enum):

@@ -13,8 +13,11 @@ Modelled behaviour:
   Get_Motor_Error;
 * axis states IDLE <-> CLOSED_LOOP_CONTROL through Set_Axis_State; arming is refused while an
   error is latched; other requested states are ignored;
-* the speed follows Set_Input_Vel only in velocity control (the firmware default is position
-  control, which holds still), ramped at ``vel_ramp_rate_turns_s2`` in VEL_RAMP input mode;
+* the speed follows Set_Input_Vel only in velocity control, ramped at
+  ``vel_ramp_rate_turns_s2`` in VEL_RAMP input mode; in position control (the firmware default)
+  the axis follows Set_Input_Pos with its speed feed-forward (the model's position loop) and,
+  when armed, first holds where it stands (0.5 ``Axis::run_closed_loop_control_loop`` sets the
+  input position to the estimate);
 * watchdog: any frame addressed to the axis feeds it (0.5 ``do_command`` calls
   ``watchdog_feed()`` first); ``watchdog_timeout_s`` without one in CLOSED_LOOP_CONTROL latches
   WATCHDOG_TIMER_EXPIRED and disarms;
@@ -52,6 +55,7 @@ from drivers.odrive.messages import (
     Request,
     SetAxisState,
     SetControllerMode,
+    SetInputPos,
     SetInputVel,
 )
 from gateway.errors import DecodeError
@@ -105,6 +109,8 @@ class OdriveSimulator(DeviceSimulator):
         self.control_mode = int(ControlMode.POSITION_CONTROL)
         self.input_mode = int(InputMode.PASSTHROUGH)
         self.input_vel_turns_s = 0.0
+        self.input_pos_turns = self.position_turns
+        self.input_vel_ff_turns_s = 0.0
         self.setpoint_turns_s = 0.0
         self._last_fed_s: float | None = None
         self._next_heartbeat_s: float | None = None
@@ -135,6 +141,9 @@ class OdriveSimulator(DeviceSimulator):
             return []
         if isinstance(cmd, SetInputVel):
             self.input_vel_turns_s = cmd.vel_turns_s
+        elif isinstance(cmd, SetInputPos):
+            self.input_pos_turns = cmd.pos_turns
+            self.input_vel_ff_turns_s = cmd.vel_ff_turns_s
         elif isinstance(cmd, SetAxisState):
             self._request_state(cmd.state)
         elif isinstance(cmd, SetControllerMode):
@@ -188,6 +197,9 @@ class OdriveSimulator(DeviceSimulator):
                 log.debug("simulated ODrive %d refuses to arm: errors latched", self.node_id)
                 self.procedure_result = ProcedureResult.DISARMED
                 return
+            if self.axis_state != AxisState.CLOSED_LOOP_CONTROL:
+                self.input_pos_turns = self.position_turns
+                self.input_vel_ff_turns_s = 0.0
             self.axis_state = AxisState.CLOSED_LOOP_CONTROL
             self.procedure_result = ProcedureResult.SUCCESS
             self.model.armed = True
@@ -215,6 +227,13 @@ class OdriveSimulator(DeviceSimulator):
 
     def _update_setpoint(self, dt: float) -> None:
         armed = self.axis_state == AxisState.CLOSED_LOOP_CONTROL
+        model = self.model
+        if self.control_mode == ControlMode.POSITION_CONTROL:
+            model.target_position_rad = (self.input_pos_turns - self.initial_position_turns) * TAU
+            model.velocity_ff_rad_s = self.input_vel_ff_turns_s * TAU
+            self.setpoint_turns_s = self.input_vel_ff_turns_s if armed else 0.0
+            return
+        model.target_position_rad = None
         target = self.input_vel_turns_s if armed else 0.0
         if self.control_mode != ControlMode.VELOCITY_CONTROL:
             target = 0.0

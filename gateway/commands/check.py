@@ -37,11 +37,13 @@ def command(ctx: click.Context, config_path: str | None) -> None:
     click.echo("wheels:")
     header = (
         f"  {'name':<12} {'type':<9} {'alpha':>7} {'l':>7} {'beta':>7} {'radius':>7} "
-        f"{'gamma':>7} {'d':>6}  {'steer':<15} motor"
+        f"{'gamma':>7} {'d':>6}  {'steer (rate)':<26} motor"
     )
     click.echo(header)
     for w, m in zip(model.wheels, cfg.motors, strict=True):
         steer = f"[{w.steer_min:.3g}, {w.steer_max:.3g}]" if w.steered else "-"
+        if w.steered and math.isfinite(w.max_steer_rate):
+            steer += f" {w.max_steer_rate:.3g} rad/s"
         motor = (
             "passive"
             if m is None
@@ -51,7 +53,16 @@ def command(ctx: click.Context, config_path: str | None) -> None:
         )
         click.echo(
             f"  {w.name:<12} {w.type.value:<9} {w.alpha:>7.4f} {w.l:>7.4f} {w.beta:>7.4f} "
-            f"{w.radius:>7.4f} {w.gamma:>7.4f} {w.d:>6.3f}  {steer:<15} {motor}"
+            f"{w.radius:>7.4f} {w.gamma:>7.4f} {w.d:>6.3f}  {steer:<26} {motor}"
+        )
+    if cfg.steering:
+        click.echo("steering:")
+    for a in cfg.steering:
+        rate = rad_s_to_rpm(a.max_rpm * 2.0 * math.pi / 60.0 / a.gear_ratio)
+        click.echo(
+            f"  {', '.join(a.steers)}: {a.driver} node {a.node_id}, gear {a.gear_ratio:g}, "
+            f"zero at {a.zero_rad:g} rad, max {a.max_rpm:g} rpm ({rate:.4g} rpm of the wheel's "
+            f"plane)" + (", inverted" if a.invert else "")
         )
     lim = cfg.limits
     click.echo(

@@ -1,4 +1,5 @@
-"""``wheelgate frames``: the velocity command frames for a twist, in cansend syntax."""
+"""``wheelgate frames``: the command frames for a twist (wheel speeds, and steering angles for
+steering actuators), in cansend syntax."""
 
 from __future__ import annotations
 
@@ -19,13 +20,14 @@ _FEEDBACK_DEPENDENT = {"dji": "current for zero measured speed and an empty inte
 @twist_options
 @click.pass_context
 def command(ctx: click.Context, config_path: str | None, vx: float, vy: float, wz: float) -> None:
-    """Print the velocity command frames for a twist, one per line, as can-utils cansend
-    takes them (8 hex digits for extended IDs, R for remote frames)."""
+    """Print the command frames for a twist, one per line, as can-utils cansend takes them
+    (8 hex digits for extended IDs, R for remote frames): the wheels' speeds, then the
+    steering actuators' angles."""
     check_finite(vx=vx, vy=vy, wz=wz)
     cfg = load(ctx, config_path)
     result, report = apply_limits(cfg.model, cfg.model.ik(Twist(vx, vy, wz)), cfg.limits)
     drives = DriveSet(cfg)
-    for frame in drives.preview(result.wheel_rad_s):
+    for frame in drives.preview(result.wheel_rad_s, result.steer_rad):
         click.echo(frame.to_cansend())
     if report.speed_scale < 1.0:
         click.echo(

@@ -150,7 +150,9 @@ def command(
     """Replay a candump LOG (candump -l, wheelgate run --record) through the drivers and the
     odometry: final pose, distance, trajectory.
 
-    Steered wheels have no angle in the log: see the summary's "steering" line."""
+    Steered wheels take their angles from their steering actuators' feedback when the
+    configuration gives every one an actuator; otherwise the log has none: see the summary's
+    "steering" line."""
     if min_interval_ms is not None and not math.isfinite(min_interval_ms):
         raise click.BadParameter(f"expected a finite number, got {min_interval_ms!r}",
                                  param_hint="--min-interval-ms")

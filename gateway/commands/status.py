@@ -39,16 +39,19 @@ def command(
     click.echo(f"odometry: x={odo['x']:.4f} m y={odo['y']:.4f} m theta={odo['theta']:.4f} rad "
                f"v=({odo['vx']:.3f}, {odo['vy']:.3f}, {odo['wz']:.3f}) slip={odo['slip']:.4f} m/s "
                f"distance={odo['distance']:.3f} m")
+    width = max([12, *(len(str(m["name"])) for m in reply["motors"])])
     for m in reply["motors"]:
         age = m["feedback_age_s"]
-        click.echo(f"  {m['name']:<12} node {m['node_id']:<4} {m['state']:<9} "
+        click.echo(f"  {m['name']:<{width}} node {m['node_id']:<4} {m['state']:<9} "
                    f"age {'-' if age is None else f'{age * 1000:.1f} ms':>9}  "
                    f"{', '.join(m['faults']) or 'no faults'} {m['detail']}")
     tr = reply.get("tracking")
     if tr:  # daemons before the tracking check do not send it
         click.echo(f"tracking: worst error {tr['worst_ratio']:.2f} of the window "
                    f"({tr['tolerance_rad_s']:g} rad/s + {100 * tr['tolerance_ratio']:g} % of the "
-                   f"command, {tr['time_s']:g} s)")
+                   f"command, {tr['time_s']:g} s)"
+                   + (f"; steering {tr['steer_worst_ratio']:.2f} of "
+                      f"{tr['steer_tolerance_rad']:g} rad" if tr.get("steer_worst_ratio") else ""))
     t = reply["timing"]
     causes = [(t.get(f"late_{key}", 0), text) for key, text in _LATE_CAUSES]
     why = (" (late starts: " + ", ".join(f"{text} {n}" for n, text in causes) + ")"

@@ -140,9 +140,9 @@ class FrameLabeler:
     def __init__(self, config: GatewayConfig) -> None:
         ids = config.loop.can_ids
         self._own = {(getattr(ids, key), ids.extended): name for key, name in OWN_MESSAGES.items()}
-        #: (driver name, motor, probe) per configured motor.
+        #: (driver name, motor, probe) per configured motor and steering actuator.
         self._probes: list[tuple[str, MotorConfig, MotorDriver]] = []
-        for motor in config.motors:
+        for motor in (*config.motors, *config.steering):
             if motor is None:
                 continue
             try:
