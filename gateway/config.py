@@ -44,6 +44,7 @@ from gateway.config_keys import (
     GATEWAY_KEYS,
     KINEMATICS_KEYS,
     LIMIT_KEYS,
+    LINKAGE_KEYS,
     MOTOR_KEYS,
     STEERING_KEYS,
     TOP_KEYS,
@@ -53,6 +54,7 @@ from gateway.config_types import BusConfig, GatewayConfig, LoopConfig
 from gateway.errors import ConfigError, DriverNotFoundError, KinematicsError
 from gateway.kinematics import PRESETS, Limits, RobotModel, Wheel, WheelType
 from gateway.kinematics.model import validate_wheel
+from gateway.linkage import virtual_angle
 from gateway.options import OptionSpec, validate_block
 from gateway.registry import get_driver_class, valid_drivers
 from gateway.types import MotorConfig, MotorRole
@@ -303,37 +305,107 @@ def _steering(
     choices = [w.name for w in wheels if w.type is WheelType.STEERABLE and w.steer_group is None]
     choices += sorted(groups)
     out: list[MotorConfig] = []
+    owner: dict[str, str] = {}
     for key, block in raw.items():
         where = f"{source}: steering.{key}"
-        wheel = by_name.get(key)
-        if wheel is None and key not in groups:
-            raise ConfigError(
-                f"{where}: unknown steered wheel or steer group (this robot's: "
-                f"{', '.join(choices) or 'none'})"
-            )
-        if wheel is not None and wheel.steer_group is not None:
-            raise ConfigError(
-                f"{where}: wheel {key!r} is steered together with its group "
-                f"{wheel.steer_group!r}; give the group's actuator as "
-                f"steering.{wheel.steer_group}"
-            )
-        members = [key] if wheel is not None else groups[key]
-        for name in members:
-            kind = by_name[name].type
-            if kind is WheelType.CASTOR:
-                raise ConfigError(f"{where}: wheel {name!r} is a castor wheel; it swivels by "
-                                  f"itself and takes no steering actuator")
-            if kind is not WheelType.STEERABLE:
-                raise ConfigError(f"{where}: wheel {name!r} is not steered (a {kind.value} "
-                                  f"wheel); expected one of {', '.join(choices) or 'none'}")
         if not isinstance(block, dict):
             raise ConfigError(f"{where}: expected a mapping, got {block!r}")
-        travel = (min(by_name[n].steer_min for n in members),
-                  max(by_name[n].steer_max for n in members))
-        out.append(
-            _motor(block, defaults, f"{key} steering", where, config_dir, tuple(members), travel)
-        )
+        link = validate_block({k: block[k] for k in LINKAGE_KEYS if k in block}, LINKAGE_KEYS,
+                              where)
+        keys = {k: x for k, x in block.items() if k not in LINKAGE_KEYS}
+        listed = link["wheels"]
+        if listed:
+            members = _linkage_wheels(listed, str(link["linkage"]), by_name, choices, where)
+        else:
+            if link["linkage"] != "direct":
+                raise ConfigError(f"{where}.wheels: expected the wheels a {link['linkage']} "
+                                  f"linkage turns, got none")
+            members = _actuated_wheels(str(key), by_name, groups, choices, where)
+        for name in members:
+            if name in owner:
+                raise ConfigError(f"{where}: wheel {name!r} is already turned by "
+                                  f"steering.{owner[name]}; expected one actuator per wheel")
+            owner[name] = str(key)
+        if link["linkage"] == "ackermann":
+            axle = by_name[members[0]].x
+            lows = [virtual_angle(by_name[n].steer_min, axle, by_name[n].y) for n in members]
+            highs = [virtual_angle(by_name[n].steer_max, axle, by_name[n].y) for n in members]
+            travel = (max(lows), min(highs))  # where every wheel is within its limits
+        else:
+            travel = (min(by_name[n].steer_min for n in members),
+                      max(by_name[n].steer_max for n in members))
+        out.append(_motor(keys, defaults, f"{key} steering", where, config_dir, tuple(members),
+                          travel, str(link["linkage"])))
     return tuple(out)
+
+
+def _actuated_wheels(
+    key: str, by_name: Mapping[str, Wheel], groups: Mapping[str, list[str]],
+    choices: list[str], where: str,
+) -> list[str]:
+    """The wheels of a direct actuator named ``key``: a steered wheel, or a steer group."""
+    wheel = by_name.get(key)
+    if wheel is None and key not in groups:
+        raise ConfigError(
+            f"{where}: unknown steered wheel or steer group (this robot's: "
+            f"{', '.join(choices) or 'none'})"
+        )
+    if wheel is not None and wheel.steer_group is not None:
+        raise ConfigError(
+            f"{where}: wheel {key!r} is steered together with its group "
+            f"{wheel.steer_group!r}; give the group's actuator as steering.{wheel.steer_group}"
+        )
+    members = [key] if wheel is not None else groups[key]
+    for name in members:
+        _check_steerable(by_name[name], choices, where)
+    return members
+
+
+def _linkage_wheels(
+    listed: object, linkage: str, by_name: Mapping[str, Wheel], choices: list[str], where: str
+) -> list[str]:
+    """The wheels a linkage turns: steerable, of one axle off the reference point's line,
+    each within a quarter turn of straight ahead."""
+    if linkage != "ackermann":
+        raise ConfigError(f"{where}.wheels: expected linkage: ackermann with a list of wheels "
+                          f"(a direct actuator is named after its wheel or steer group)")
+    if not (isinstance(listed, list) and len(listed) >= 2
+            and all(isinstance(n, str) and n in by_name for n in listed)):
+        raise ConfigError(f"{where}.wheels: expected a list of two or more of this robot's "
+                          f"steered wheels ({', '.join(choices) or 'none'}), got {listed!r}")
+    members = [str(n) for n in listed]
+    axle = by_name[members[0]].x
+    for name in members:
+        w = by_name[name]
+        _check_steerable(w, choices, where)
+        if w.steer_group is not None:
+            raise ConfigError(f"{where}.wheels: wheel {name!r} is steered with its group "
+                              f"{w.steer_group!r}; a linkage turns wheels of its own")
+    for name in members:
+        w = by_name[name]
+        if abs(w.x - axle) > 1e-9 or abs(axle) < 1e-9:
+            raise ConfigError(
+                f"{where}.wheels: expected wheels of one axle ahead of or behind the reference "
+                f"point (same x, not 0), got {name!r} at x = {w.x:g} m against "
+                f"{members[0]!r} at {axle:g} m"
+            )
+    for name in members:
+        w = by_name[name]
+        if max(-w.steer_min, w.steer_max) >= math.pi / 2:
+            raise ConfigError(
+                f"{where}.wheels: wheel {name!r} steers to {max(-w.steer_min, w.steer_max):g} "
+                f"rad; an Ackermann linkage turns its wheels less than pi/2 either way"
+            )
+    return members
+
+
+def _check_steerable(wheel: Wheel, choices: list[str], where: str) -> None:
+    if wheel.type is WheelType.CASTOR:
+        raise ConfigError(f"{where}: wheel {wheel.name!r} is a castor wheel; it swivels by "
+                          f"itself and takes no steering actuator")
+    if wheel.type is not WheelType.STEERABLE:
+        raise ConfigError(f"{where}: wheel {wheel.name!r} is not steered (a {wheel.type.value} "
+                          f"wheel); expected one of {', '.join(choices) or 'none'}")
 
 
 #: The share of a steering actuator's top speed that the commanded steering rate may use, so
@@ -364,6 +436,7 @@ def _motor(
     config_dir: str,
     steers: tuple[str, ...] = (),
     travel: tuple[float, float] = (-math.pi, math.pi),
+    linkage: str = "direct",
 ) -> MotorConfig:
     """A motor block, or with ``steers`` a steering actuator's block."""
     keys = STEERING_KEYS if steers else MOTOR_KEYS
@@ -400,6 +473,7 @@ def _motor(
         zero_rad=float(v.get("zero_rad", 0.0)),  # type: ignore[arg-type]
         steers=steers,
         steer_range_rad=travel,
+        linkage=linkage,
     )
 
 

@@ -47,6 +47,15 @@ STEERING_KEYS: Mapping[str, OptionSpec] = MappingProxyType({
     "zero_rad": OptionSpec(float, 0.0, help="motor position (rad, the controller's frame) "
                                              "with the wheels at their neutral angle"),
 })
+#: The keys of a steering block that say what it turns (not merged from
+#: ``steering_defaults:``): several wheels through a linkage.
+LINKAGE_KEYS: Mapping[str, OptionSpec] = MappingProxyType({
+    "wheels": OptionSpec(list, [], help="the wheels a linkage turns; empty: the block's name "
+                                        "is the wheel or steer group"),
+    "linkage": OptionSpec(str, "direct", choices=("direct", "ackermann"),
+                          help="ackermann: the angle is that of a virtual wheel in the middle "
+                               "of the wheels' axle"),
+})
 #: The keys of one item of ``wheels:`` (``drive: generic``).
 WHEEL_KEYS: Mapping[str, OptionSpec] = MappingProxyType({
     "name": OptionSpec(str),

@@ -8,14 +8,16 @@ cycles.
 Steering actuators (``steering:`` blocks) join the driver of their protocol, after its drive
 motors: a driver serves every motor of its protocol on the bus, whatever each one does (DJI packs
 four ESCs into one frame, CANopen has one SYNC per bus).  Their setpoint is the steering angle of
-the first wheel they turn (wheels steered together share it), and their feedback is the measured
-angle, which the odometry uses in place of the commanded one (:meth:`DriveSet.measured_steer`).
+the first wheel they turn (wheels steered together share it; through an Ackermann linkage, the
+virtual middle wheel's angle, :mod:`gateway.linkage`), and their feedback is the measured angle,
+which the odometry uses in place of the commanded one (:meth:`DriveSet.measured_steer`).
 """
 
 from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+from gateway.linkage import virtual_angle, wheel_angle
 from gateway.registry import get_driver_class
 
 if TYPE_CHECKING:
@@ -58,6 +60,14 @@ class DriveSet:
         self.steered_by: tuple[tuple[int, ...], ...] = tuple(
             tuple(index(w) for w in a.steers) for a in config.steering
         )
+        wheels = config.model.wheels
+        #: Per steering actuator, ``None`` (direct) or, for an Ackermann linkage, the axle's
+        #: x and each of its wheels' y (m, body frame).
+        self._linkage: tuple[tuple[float, tuple[float, ...]] | None, ...] = tuple(
+            (wheels[ix[0]].x, tuple(wheels[i].y for i in ix)) if a.linkage == "ackermann"
+            else None
+            for a, ix in zip(config.steering, self.steered_by, strict=True)
+        )
         #: Whether any driver closes its speed loop on the host (see MotorDriver).
         self.host_speed_loop = any(drv.HOST_SPEED_LOOP for drv, _ in self.groups)
         flat = [i for _, idx in self.groups for i in idx]
@@ -70,7 +80,26 @@ class DriveSet:
 
     def steer_setpoints(self, steer_rad: Sequence[float | None]) -> list[float]:
         """Every steering actuator's setpoint for these wheel angles (model order)."""
-        return [steer_rad[ix[0]] or 0.0 for ix in self.steered_by]
+        out = []
+        for ix, link in zip(self.steered_by, self._linkage, strict=True):
+            if link is None:
+                out.append(steer_rad[ix[0]] or 0.0)
+                continue
+            # Every wheel of an inverse-kinematics solve gives the same virtual angle, except
+            # when a wheel stopped at its limit (a twist too slow to slip beyond the
+            # tolerance): then the smallest keeps every wheel within its limits.
+            candidates = [virtual_angle(steer_rad[i] or 0.0, link[0], y)
+                          for i, y in zip(ix, link[1], strict=True)]
+            out.append(min(candidates, key=abs))
+        return out
+
+    def wheel_angles(self, actuator: int, angle: float) -> list[tuple[int, float]]:
+        """(model index, steering angle) of every wheel that steering actuator ``actuator``
+        turns, with the actuator at ``angle`` (rad)."""
+        ix, link = self.steered_by[actuator], self._linkage[actuator]
+        if link is None:
+            return [(i, angle) for i in ix]
+        return [(i, wheel_angle(angle, link[0], y)) for i, y in zip(ix, link[1], strict=True)]
 
     def _split(
         self, wheel_rad_s: Sequence[float], steer_rad: Sequence[float | None] | None
@@ -177,13 +206,13 @@ class DriveSet:
         if not self.steered_by:
             return commanded
         out: list[float | None] | None = None
-        for fb, wheels in zip(self.steer_feedback(), self.steered_by, strict=True):
+        for k, fb in enumerate(self.steer_feedback()):
             if fb is None:
                 continue
             if out is None:
                 out = list(commanded)
-            for i in wheels:
-                out[i] = fb.position_rad
+            for i, angle in self.wheel_angles(k, fb.position_rad):
+                out[i] = angle
         return commanded if out is None else tuple(out)
 
     def simulators(self) -> list[DeviceSimulator]:

@@ -244,7 +244,11 @@ class MotorConfig:
         controller's own position frame) at which its wheels stand at their neutral plane angle.
     :param steers: the wheels a steering actuator turns (model names; empty for a drive motor).
     :param steer_range_rad: a steering actuator's travel: the smallest and largest steering
-        angle of its wheels (rad, from their ``steer_min`` and ``steer_max``).
+        angle it is commanded (rad, from its wheels' ``steer_min`` and ``steer_max``).
+    :param linkage: how a steering actuator's angle turns its wheels: ``"direct"`` (each wheel
+        at the actuator's angle) or ``"ackermann"`` (a steering linkage: the actuator's angle
+        is that of a virtual wheel in the middle of the wheels' axle, see
+        :mod:`gateway.linkage`).
     """
 
     wheel: str
@@ -258,6 +262,7 @@ class MotorConfig:
     zero_rad: float = 0.0
     steers: tuple[str, ...] = ()
     steer_range_rad: tuple[float, float] = (-math.pi, math.pi)
+    linkage: str = "direct"
 
     @property
     def steering(self) -> bool:

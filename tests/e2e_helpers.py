@@ -100,8 +100,11 @@ class Rig:
         """Every wheel's steering angle: the actuator simulator's, else the commanded one."""
         steer = list(self.gw.prev.steer_rad)
         for sim in self.sims:
-            for name in sim.motor.steers:
-                steer[self.config.model.index(name)] = sim.steer_rad
+            if not sim.motor.steering:
+                continue
+            k = self.config.steering.index(sim.motor)
+            for i, angle in self.gw.drives.wheel_angles(k, sim.steer_rad):
+                steer[i] = angle
         return tuple(steer)
 
     def advance(self, seconds: float, each: Callable[[Rig], None] | None = None) -> None:

@@ -91,7 +91,7 @@ def record(name: str, folder: Path) -> Session:
     cfg = virtual_config(CONFIG_DIR / f"{base}.yaml", f"wg-odom-{name}", rate_hz=100.0)
     if base != name:
         cfg = dataclasses.replace(cfg, steering=())
-    legs = short_legs(cfg) if name == "ackermann" else path_legs(cfg, "square")
+    legs = short_legs(cfg) if base == "ackermann" else path_legs(cfg, "square")
     path = folder / f"{name}.log"
     with Rig(cfg) as rig:
         log = SimClockLog(path, lambda: rig.t)
@@ -155,7 +155,8 @@ def test_replay_matches_the_gateway_and_the_ground_truth(
 
 
 @pytest.mark.parametrize(("name", "source"), [
-    ("ackermann", SteeringSource.FIXED_WHEELS),
+    ("ackermann_external", SteeringSource.FIXED_WHEELS),
+    ("ackermann", SteeringSource.ACTUATORS),
     ("tricycle_external", SteeringSource.GATEWAY_TWIST),
     ("tricycle", SteeringSource.ACTUATORS),
     ("swerve", SteeringSource.ACTUATORS),

@@ -27,6 +27,7 @@ from gateway.config import load_config, parse_config
 from gateway.drives import DriveSet
 from gateway.errors import ConfigError, EncodeError
 from gateway.kinematics import Odometry
+from gateway.linkage import virtual_angle
 from gateway.sim import SimFault
 from gateway.types import ErrorCode, GatewayState, MotorConfig, MotorRole, Twist
 from tests.conftest import CONFIG_DIR
@@ -363,3 +364,106 @@ def test_actuators_take_travel_and_rate_limit_from_their_wheels() -> None:
     assert front.max_steer_rate == pytest.approx(0.8 * 3000 * 2 * math.pi / 60 / 50)
     # The swerve modules could turn at 19.6 rad/s: the configured 8 rad/s stays.
     assert all(w.max_steer_rate == 8.0 for w in load_config(SWERVE).wheels)
+
+
+# ----------------------------------------------------------------------------- Ackermann linkage
+
+ACKERMANN = CONFIG_DIR / "ackermann.yaml"
+
+
+@given(vx=st.floats(-1.0, 1.0), curvature=st.floats(-1.0, 1.0))
+def test_linkage_angle_is_the_same_from_either_front_wheel(vx: float, curvature: float) -> None:
+    cfg = load_config(ACKERMANN)
+    res = cfg.model.try_ik(Twist(vx, 0.0, vx * curvature))
+    if res is None:
+        return
+    drives = DriveSet(cfg)
+    (delta,) = drives.steer_setpoints(res.steer_rad)
+    left, right = (cfg.wheels[cfg.model.index(n)] for n in ("front_left", "front_right"))
+    front = [res.steer_rad[cfg.model.index(n)] or 0.0 for n in ("front_left", "front_right")]
+    for _, angle in drives.wheel_angles(0, delta):
+        assert abs(angle) <= 0.6 + 1e-12  # the linkage keeps both within their limits
+    # A twist too slow to slip beyond the tolerance may leave a wheel stopped at its limit, or
+    # (standing still) where it was: the geometry is exact otherwise.
+    if max(abs(a) for a in front) >= 0.6 - 1e-9 or abs(vx) < 1e-3:
+        return
+    for angle, wheel in zip(front, (left, right), strict=True):
+        assert virtual_angle(angle, wheel.x, wheel.y) == pytest.approx(delta, abs=1e-12)
+    for i, angle in drives.wheel_angles(0, delta):
+        # And back: the linkage puts each wheel where the inverse kinematics wants it.
+        assert angle == pytest.approx(res.steer_rad[i], abs=1e-12)
+    if curvature > 0.01:  # a left turn, forward or back
+        assert front[0] > delta > 0.0  # the inner wheel turns more
+    assert left.x == right.x
+
+
+def test_linkage_travel_is_where_both_wheels_are_within_limits() -> None:
+    cfg = load_config(ACKERMANN)
+    (a,) = cfg.steering
+    assert a.linkage == "ackermann" and a.steers == ("front_left", "front_right")
+    low, high = a.steer_range_rad
+    assert high == pytest.approx(-low)
+    # At full travel the inner wheel is at its 0.6 rad limit, the virtual wheel short of it.
+    drives = DriveSet(cfg)
+    angles = dict(drives.wheel_angles(0, high))
+    assert max(angles.values()) == pytest.approx(0.6)
+    assert high < 0.6
+
+
+@pytest.mark.parametrize(
+    ("block", "message"),
+    [
+        ({"linkage": "ackermann"}, "steering.axle.wheels: expected the wheels a ackermann "
+                                   "linkage turns, got none"),
+        ({"wheels": ["front_left", "front_right"]},
+         "steering.axle.wheels: expected linkage: ackermann with a list of wheels"),
+        ({"wheels": ["front_left"], "linkage": "ackermann"},
+         "expected a list of two or more of this robot's steered wheels"),
+        ({"wheels": ["front_left", "rear_left"], "linkage": "ackermann"},
+         "wheel 'rear_left' is not steered (a fixed wheel)"),
+        ({"wheels": ["front_left", "front_right"], "linkage": "sideways"},
+         "steering.axle.linkage: expected one of 'direct', 'ackermann', got 'sideways'"),
+    ],
+)
+def test_linkage_errors(block: dict[str, Any], message: str) -> None:
+    doc = _doc(ACKERMANN)
+    doc["steering"] = {"axle": {"driver": "odrive", "node_id": 3, "max_rpm": 3000, **block}}
+    with pytest.raises(ConfigError) as info:
+        parse_config(doc, "robot.yaml")
+    assert message in str(info.value)
+
+
+def test_linkage_needs_one_axle_and_less_than_a_quarter_turn() -> None:
+    doc = _doc()
+    del doc["steering_defaults"]
+    doc["steering"] = {"pair": {"driver": "odrive", "node_id": 9, "max_rpm": 3000,
+                                "wheels": ["front_left", "rear_left"], "linkage": "ackermann"}}
+    with pytest.raises(ConfigError, match="expected wheels of one axle ahead of or behind"):
+        parse_config(doc, "robot.yaml")
+    doc["steering"]["pair"]["wheels"] = ["front_left", "front_right"]
+    with pytest.raises(ConfigError, match=r"steers to 3\.14159 rad; an Ackermann linkage turns "
+                                          r"its wheels less than pi/2 either way"):
+        parse_config(doc, "robot.yaml")
+    doc = _doc(ACKERMANN)
+    doc["steering"] = {"front_left": {"driver": "odrive", "node_id": 9, "max_rpm": 3000},
+                       "pair": {"driver": "odrive", "node_id": 10, "max_rpm": 3000,
+                                "wheels": ["front_left", "front_right"], "linkage": "ackermann"}}
+    with pytest.raises(ConfigError, match=r"wheel 'front_left' is already turned by "
+                                          r"steering\.front_left"):
+        parse_config(doc, "robot.yaml")
+
+
+def test_ackermann_turns_both_wheels_through_one_actuator(channel: str) -> None:
+    cfg = virtual_config(ACKERMANN, channel, rate_hz=100.0)
+    with Rig(cfg) as rig:
+        rig.enable()
+        rig.advance(2.0, lambda r: r.send_can_twist(Twist(0.5, 0.0, 0.3)))
+        (sim,) = _steer_sims(rig)
+        want = cfg.model.ik(Twist(0.5, 0.0, 0.3)).steer_rad
+        truth = rig.truth_steer()
+        measured = rig.gw.drives.measured_steer(rig.gw.prev.steer_rad)
+        for i in (cfg.model.index("front_left"), cfg.model.index("front_right")):
+            assert truth[i] == pytest.approx(want[i], abs=1e-3)
+            assert measured[i] == pytest.approx(want[i], abs=1e-3)
+        assert sim.steer_rad == pytest.approx(math.atan(0.65 * 0.3 / 0.5), abs=1e-3)
+        assert rig.gw.state is GatewayState.RUNNING, rig.gw.supervisor.reason

@@ -63,6 +63,7 @@ def command(ctx: click.Context, config_path: str | None) -> None:
             f"  {', '.join(a.steers)}: {a.driver} node {a.node_id}, gear {a.gear_ratio:g}, "
             f"zero at {a.zero_rad:g} rad, max {a.max_rpm:g} rpm ({rate:.4g} rpm of the wheel's "
             f"plane)" + (", inverted" if a.invert else "")
+            + (", through an Ackermann linkage" if a.linkage == "ackermann" else "")
         )
     lim = cfg.limits
     click.echo(
