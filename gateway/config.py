@@ -418,7 +418,7 @@ def _limit_steer_rates(wheels: list[Wheel], steering: tuple[MotorConfig, ...]) -
     (``max_rpm`` through ``gear_ratio``) of the actuator that turns the wheel."""
     limit: dict[str, float] = {}
     for a in steering:
-        rate = STEER_RATE_SHARE * a.max_rpm * 2.0 * math.pi / 60.0 / a.gear_ratio
+        rate = STEER_RATE_SHARE * a.max_wheel_rad_s  # max_rpm through gear_ratio
         for name in a.steers:
             limit[name] = rate
     return [

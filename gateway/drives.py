@@ -180,22 +180,19 @@ class DriveSet:
 
     def feedback_by_wheel(self) -> list[WheelFeedback | None]:
         """The latest feedback of every wheel in model order (``None``: passive or none yet)."""
-        n = len(self.config.motors)
-        out: list[WheelFeedback | None] = [None] * n
-        for drv, idx in self.groups:
-            for k, i in enumerate(idx):
-                if i < n:
-                    out[i] = drv.feedback(k)
-        return out
+        out = self._slot_feedback()
+        return out[: len(self.config.motors)] if self.steered_by else out
 
     def steer_feedback(self) -> list[WheelFeedback | None]:
         """The latest feedback of every steering actuator (``None``: none yet)."""
-        n = len(self.config.motors)
-        out: list[WheelFeedback | None] = [None] * len(self.steered_by)
+        return self._slot_feedback()[len(self.config.motors):]
+
+    def _slot_feedback(self) -> list[WheelFeedback | None]:
+        """The latest feedback of every setpoint slot (the wheels, then the actuators)."""
+        out: list[WheelFeedback | None] = [None] * (len(self.config.motors) + len(self.steered_by))
         for drv, idx in self.groups:
             for k, i in enumerate(idx):
-                if i >= n:
-                    out[i - n] = drv.feedback(k)
+                out[i] = drv.feedback(k)
         return out
 
     def measured_steer(

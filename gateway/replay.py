@@ -168,10 +168,9 @@ class Replay:
         covered = {name for a in config.steering for name in a.steers}
         measured = bool(covered) and covered >= {w.name for w in self.model.wheels if w.steered}
         self._subset = None if measured else fixed_subset(config)
-        steered = any(w.steered for w in self.model.wheels) and not measured
         if measured:
             self.steering = SteeringSource.ACTUATORS
-        elif not steered:
+        elif not any(w.steered for w in self.model.wheels):
             self.steering = SteeringSource.NONE
         elif self._subset is not None:
             self.steering = SteeringSource.FIXED_WHEELS
@@ -179,7 +178,10 @@ class Replay:
             self.steering = SteeringSource.NEUTRAL
         self.odometry = Odometry(self._subset[1] if self._subset else self.model)
         self._steer: tuple[float | None, ...] = self.model.neutral_steer
-        self._wg = WgCodec(config.loop.can_ids) if steered and self._subset is None else None
+        # Angles from the gateway's own twist frames, when the log has them.
+        self._wg = (
+            WgCodec(config.loop.can_ids) if self.steering is SteeringSource.NEUTRAL else None
+        )
         self._velocity_id = (config.loop.can_ids.odom_velocity, config.loop.can_ids.extended)
         # Wheels whose feedback must be there before the first update (a later first sample
         # would leave an interval with too few wheels to solve).

@@ -58,7 +58,7 @@ def command(ctx: click.Context, config_path: str | None) -> None:
     if cfg.steering:
         click.echo("steering:")
     for a in cfg.steering:
-        rate = rad_s_to_rpm(a.max_rpm * 2.0 * math.pi / 60.0 / a.gear_ratio)
+        rate = rad_s_to_rpm(a.max_wheel_rad_s)  # through gear_ratio: of the wheel's plane
         click.echo(
             f"  {', '.join(a.steers)}: {a.driver} node {a.node_id}, gear {a.gear_ratio:g}, "
             f"zero at {a.zero_rad:g} rad, max {a.max_rpm:g} rpm ({rate:.4g} rpm of the wheel's "
