@@ -98,11 +98,15 @@ _PLAUSIBLE_S = 1.0
 
 
 def drain(
-    bus: can.BusABC, limit: int = 10_000, timestamp_s: float | None = None
+    bus: can.BusABC,
+    limit: int = 10_000,
+    timestamp_s: float | None = None,
+    odd: list[can.Message] | None = None,
 ) -> list[Frame]:
     """Every frame waiting in ``bus``'s receive queue.
 
-    Error frames are skipped (they carry no data for the drivers).
+    Error frames and CAN FD frames are not returned (they carry nothing for the drivers,
+    which speak classic CAN); they go to ``odd`` when given, for the bus's health.
 
     :param timestamp_s: the receive time to stamp on every frame (simulated time in tests).
         When omitted, each frame keeps the time python-can stamped on it (the kernel's receive
@@ -127,7 +131,9 @@ def drain(
                 msg = recv(0.0)
                 if msg is None:
                     break
-            if msg.is_error_frame:
+            if msg.is_error_frame or msg.is_fd:
+                if odd is not None:
+                    odd.append(msg)
                 continue
             if timestamp_s is not None:
                 stamp = timestamp_s

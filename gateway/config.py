@@ -36,8 +36,6 @@ from pathlib import Path
 from types import MappingProxyType
 from typing import TYPE_CHECKING
 
-import yaml
-
 from gateway.config_keys import (
     BUS_KEYS,
     CAN_ID_KEYS,
@@ -59,6 +57,7 @@ from gateway.options import OptionSpec, validate_block
 from gateway.registry import get_driver_class, valid_drivers
 from gateway.types import MotorConfig, MotorRole
 from gateway.wgproto import CanIds
+from gateway.yaml_text import MAX_BYTES, load_yaml, read_text
 
 if TYPE_CHECKING:
     from collections.abc import Mapping
@@ -69,6 +68,7 @@ __all__ = [
     "BusConfig",
     "GatewayConfig",
     "LoopConfig",
+    "client_socket_path",
     "default_socket_path",
     "load_config",
     "parse_config",
@@ -96,6 +96,23 @@ def default_socket_path() -> str:
     return str(Path(tempfile.gettempdir()) / f"wheelgate-{os.getuid()}.sock")
 
 
+#: Where the systemd unit's daemon listens (``RuntimeDirectory=wheelgate``).
+SERVICE_SOCKET = Path("/run/wheelgate/wheelgate.sock")
+
+
+def client_socket_path() -> str:
+    """The socket a client talks to when none is given: ``$WHEELGATE_SOCKET``, else the
+    service's ``/run/wheelgate/wheelgate.sock`` when it exists (a member of the group
+    ``wheelgate`` can reach it but not write the directory), else
+    :func:`default_socket_path`."""
+    env = os.environ.get("WHEELGATE_SOCKET")
+    if env:
+        return env
+    if SERVICE_SOCKET.exists():
+        return str(SERVICE_SOCKET)
+    return default_socket_path()
+
+
 def load_config(
     path: str | Path | None = None, overrides: Mapping[str, object] | None = None
 ) -> GatewayConfig:
@@ -112,22 +129,12 @@ def load_config(
     else:
         source = str(path)
         try:
-            text = Path(path).read_text("utf-8")
+            with Path(path).open("rb") as f:
+                data = f.read(MAX_BYTES + 1)
         except OSError as err:
             raise ConfigError(f"{source}: cannot read the file: {err.strerror}") from err
-        except UnicodeDecodeError as err:
-            raise ConfigError(
-                f"{source}: expected UTF-8 text, got byte {err.object[err.start]:#04x} at "
-                f"offset {err.start}"
-            ) from err
-    try:
-        raw = yaml.safe_load(text)
-    except yaml.YAMLError as err:
-        raise ConfigError(f"{source}: not valid YAML: {err}") from err
-    except RecursionError as err:
-        raise ConfigError(
-            f"{source}: expected YAML of modest depth, got nesting too deep"
-        ) from err
+        text = read_text(data, source)
+    raw = load_yaml(text, source)
     return parse_config(raw, source, overrides)
 
 
@@ -195,9 +202,16 @@ def parse_config(
     name = raw.get("name", Path(source).stem if source != DEFAULT_NAME else "default")
     if not isinstance(name, str):
         raise ConfigError(f"{source}: name: expected str, got {name!r}")
+    warnings = []
+    if loop.socket_mode & 0o002:
+        warnings.append(
+            f"{source}: gateway.socket_mode: {loop.socket_mode:#o} makes the control socket "
+            f"writable by every local user, who could then drive the robot; expected 0o660 "
+            f"(the owner and the group wheelgate), with socket_uids for finer control"
+        )
     return GatewayConfig(
         source, name, str(drive), MappingProxyType(geometry), model, motors, limits, bus, loop,
-        steering,
+        steering, tuple(warnings),
     )
 
 

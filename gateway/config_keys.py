@@ -93,6 +93,11 @@ GATEWAY_KEYS: Mapping[str, OptionSpec] = MappingProxyType({
     "feedback_recovery": OptionSpec(str, "auto", choices=("auto", "manual")),
     "fault_action": OptionSpec(str, "zero", choices=("zero", "disarm")),
     "enable_on_start": OptionSpec(bool, True),
+    "estop_release": OptionSpec(str, "socket", choices=("socket", "any"),
+                                help="who may release an e-stop: the control socket only, or "
+                                     "also a CAN twist frame's ENABLE flag"),
+    "state_file": OptionSpec(str, "", help="the e-stop latch file; empty: $STATE_DIRECTORY/"
+                                           "estop, else ~/.local/state/wheelgate/"),
     "enable_timeout_s": OptionSpec(float, 5.0, minimum=0.1),
     "odom_rate_hz": OptionSpec(float, 50.0, minimum=0.1, maximum=1000.0),
     "status_rate_hz": OptionSpec(float, 10.0, minimum=0.1, maximum=1000.0),

@@ -50,7 +50,11 @@ class LoopConfig:
     :param feedback_recovery: after a motor fault or lost feedback, ``"auto"`` re-enables when
         every motor is healthy again, ``"manual"`` waits for an explicit enable.
     :param fault_action: on a fault, ``"zero"`` commands zero speed, ``"disarm"`` also disarms.
-    :param enable_on_start: enable the drives when the daemon starts.
+    :param enable_on_start: enable the drives when the daemon starts (never out of a latched
+        e-stop).
+    :param estop_release: who may release an e-stop: ``"socket"`` (the control socket's
+        ``enable`` only) or ``"any"`` (also a CAN twist frame's ENABLE flag).
+    :param state_file: the e-stop latch file (empty: see :mod:`gateway.latch`).
     :param enable_timeout_s: how long the drives may take to enable.
     :param odom_rate_hz: odometry publishing rate (CAN and socket).
     :param status_rate_hz: status publishing rate.
@@ -77,6 +81,8 @@ class LoopConfig:
     feedback_recovery: str = "auto"
     fault_action: str = "zero"
     enable_on_start: bool = True
+    estop_release: str = "socket"
+    state_file: str = ""
     enable_timeout_s: float = 5.0
     odom_rate_hz: float = 50.0
     status_rate_hz: float = 10.0
@@ -116,6 +122,8 @@ class GatewayConfig:
     :param loop: the daemon's settings.
     :param steering: the steering actuators (``steering:`` blocks), each naming the wheels it
         turns; steered wheels without one are steered outside the gateway.
+    :param warnings: what is allowed but probably wrong (``check`` prints them, ``run`` logs
+        them at start).
     """
 
     source: str
@@ -128,6 +136,7 @@ class GatewayConfig:
     bus: BusConfig
     loop: LoopConfig = field(default_factory=LoopConfig)
     steering: tuple[MotorConfig, ...] = ()
+    warnings: tuple[str, ...] = ()
 
     @property
     def wheels(self) -> tuple[Wheel, ...]:

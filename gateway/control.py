@@ -148,6 +148,9 @@ class Supervisor:
         #: Counters of what happened, by kind.
         self.counts = {"infeasible": 0, "projected": 0, "rejected": 0, "faults": 0,
                        "cmd_timeouts": 0, "estops": 0}
+        #: Whether the bus can carry frames (``False`` from bus-off until the controller
+        #: reports that it is back): automatic recovery waits for it.
+        self.bus_ok = True
         self._timed_out = False
         self._pending_enable = False
         self._fault_s = 0.0
@@ -215,8 +218,8 @@ class Supervisor:
         self.faulted = ()
 
     def disable(self) -> None:
-        """Ramp to zero and disarm."""
-        if self.state is not GatewayState.STOPPING:
+        """Ramp to zero and disarm (an e-stop stays latched: only enable releases it)."""
+        if self.state not in (GatewayState.STOPPING, GatewayState.ESTOP):
             self.state = GatewayState.DISABLED
         self.target = ZERO
 
@@ -306,6 +309,7 @@ class Supervisor:
             and self.cfg.feedback_recovery == "auto"
             and statuses
             and not any(s.state is DriveState.OFFLINE for s in statuses)
+            and self.bus_ok
             and self._auto_attempts < AUTO_RETRIES
             and now_s - self._fault_s >= AUTO_RETRY_DELAY_S * (self._auto_attempts + 1)
             and not (self.host_speed_loop and self.fault_code is ErrorCode.TRACKING_ERROR)
@@ -342,6 +346,23 @@ class Supervisor:
         self.reason = "; ".join(parts)
         self.fault_code = code
         return Fault(code, self.reason)
+
+    def bus_fault(self, message: str, names: Sequence[str] = ()) -> Fault | None:
+        """The bus cannot carry the commands (bus-off, a command that does not go out): a
+        fault with ``message`` while the motors are enabled or enabling, else nothing.
+
+        :param names: the motors the message is about, when it names any.
+        """
+        if self.state not in (GatewayState.RUNNING, GatewayState.ENABLING):
+            return None
+        self.counts["faults"] += 1
+        self._fault_s = self._now_hint
+        self.state = GatewayState.FAULT
+        self.target = ZERO
+        self.faulted = tuple(names)
+        self.reason = message
+        self.fault_code = ErrorCode.BUS_ERROR
+        return Fault(ErrorCode.BUS_ERROR, message)
 
     def decide(self, now_s: float) -> Decision:
         """The command for this cycle."""

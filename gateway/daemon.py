@@ -11,6 +11,7 @@ bus in the same process.
 from __future__ import annotations
 
 import dataclasses
+import faulthandler
 import logging
 import math
 import select
@@ -24,6 +25,7 @@ import can
 from gateway.config import default_socket_path
 from gateway.control import Accepted, Source
 from gateway.errors import GatewayError
+from gateway.latch import EstopLatch, latch_path
 from gateway.loop import Gateway
 from gateway.protocol import (
     CommandRequest,
@@ -43,7 +45,7 @@ from gateway.sdnotify import SystemdNotifier
 from gateway.server import ControlServer
 from gateway.simbus import SimulatedControllers
 from gateway.timing import MissProbe, Scheduler, realtime_setup
-from gateway.types import ErrorCode, Frame, GatewayState
+from gateway.types import DriveState, ErrorCode, Frame, GatewayState
 
 if TYPE_CHECKING:
     from types import FrameType
@@ -55,6 +57,20 @@ log = logging.getLogger(__name__)
 
 #: How long the shutdown keeps polling so multi-step disarm sequences finish (s).
 SHUTDOWN_GRACE_S = 0.3
+
+#: Every signal whose default action ends the process and that Python can catch: each one
+#: stops the daemon the way SIGTERM does (zero, disarm, socket file removed, exit 0).  SIGHUP
+#: included: wheelgate has no reload (a changed configuration means a restart, which re-checks
+#: the controllers); SIGABRT included: systemd's watchdog sends it to a stalled loop, and once
+#: the loop moves again the motors get their zero.  SIGPIPE stays ignored (Python's default:
+#: a client that went away is an error on its socket, not a signal).  SIGKILL cannot be caught:
+#: the controllers' own command timeouts stop the motors then.
+STOP_SIGNALS: tuple[signal.Signals, ...] = tuple(
+    getattr(signal, name) for name in (
+        "SIGTERM", "SIGINT", "SIGHUP", "SIGQUIT", "SIGABRT", "SIGUSR1", "SIGUSR2", "SIGALRM",
+        "SIGVTALRM", "SIGPROF", "SIGXCPU", "SIGXFSZ", "SIGIO", "SIGPWR", "SIGSTKFLT",
+    ) if hasattr(signal, name)
+)
 
 
 class Daemon:
@@ -83,6 +99,8 @@ class Daemon:
         self.config = config
         self.notifier = notifier if notifier is not None else SystemdNotifier.from_env()
         self._stop = False
+        #: The name of the signal that stopped the daemon, if one did.
+        self.stop_signal = ""
         self._closers: list[Any] = []
         self.writer: can.Listener | None = None
         try:
@@ -109,6 +127,8 @@ class Daemon:
             self.close()
             raise
         self.socket_path = path
+        #: The e-stop latch on disk (see :mod:`gateway.latch`).
+        self.latch = EstopLatch(latch_path(config.loop.state_file, config.name))
         self._ready = False
         self._state = GatewayState.DISABLED
         self._pending_twists: list[float] = []
@@ -182,6 +202,7 @@ class Daemon:
             sup.stop(now_s)
         elif request.op is Op.ESTOP:
             sup.estop("e-stop requested on the control socket")
+            self.latch.set(sup.reason)
         elif request.op is Op.ENABLE:
             sup.enable(now_s)
         elif request.op is Op.DISABLE:
@@ -197,14 +218,23 @@ class Daemon:
     # ----------------------------------------------------------------- loop
 
     def request_stop(self, signum: int = 0, frame: FrameType | None = None) -> None:
-        """Ask the loop to stop (signal handler)."""
+        """Ask the loop to stop (signal handler: every signal of :data:`STOP_SIGNALS`)."""
+        if signum and not self._stop:
+            self.stop_signal = signal.Signals(signum).name
         self._stop = True
 
     def run(self, max_cycles: int | None = None) -> int:
-        """Run until SIGTERM/SIGINT (or ``max_cycles``); return the exit status."""
+        """Run until a signal of :data:`STOP_SIGNALS` (or ``max_cycles``); return the exit
+        status."""
         main_thread = threading.current_thread() is threading.main_thread()
-        signals = (signal.SIGTERM, signal.SIGINT) if main_thread else ()
+        signals = STOP_SIGNALS if main_thread else ()
         old = {s: signal.signal(s, self.request_stop) for s in signals}
+        if main_thread and not faulthandler.is_enabled():
+            # After the handlers above, so that a fatal signal's traceback (SIGSEGV, a SIGABRT
+            # from systemd's watchdog: where the loop was stuck) is written and the Python
+            # handler still runs (faulthandler chains to the handler it found).
+            faulthandler.enable(all_threads=True)
+            self._closers.append(faulthandler.disable)
         try:
             self.rt_notes = realtime_setup(
                 self.config.loop.rt_priority or None,
@@ -220,16 +250,27 @@ class Daemon:
                 # the loop has it: a SCHED_OTHER thread preempted while it holds the GIL would
                 # stall the FIFO loop thread for as long as the scheduler keeps it waiting.
                 self.sim.start()
-            if self.config.loop.enable_on_start:
+            latched = self.latch.read()
+            if latched is not None:
+                # Never out of an e-stop by a restart: only an explicit enable releases it.
+                self.gateway.supervisor.estop(latched)
+                self._state = GatewayState.ESTOP
+                log.warning("starting e-stopped: %s; send enable to release it (%s)", latched,
+                            self.latch.path)
+            elif self.config.loop.enable_on_start:
                 self.gateway.supervisor.enable(time.monotonic())
-            else:
-                self._mark_ready()
+            # Ready once the bus and the socket are up, whatever the motors do: with their
+            # power off at boot, the drives enable when they answer (STATUS= says so), and
+            # `systemctl start` does not wait for them.
+            self._mark_ready()
             cycles = 0
             while not self._stop and (max_cycles is None or cycles < max_cycles):
                 self.step(time.monotonic())
                 cycles += 1
                 self._wait()
         finally:
+            if self.stop_signal:
+                log.warning("%s: stopping (zero and disarm for every motor)", self.stop_signal)
             self.shutdown()
             for s, handler in old.items():
                 signal.signal(s, handler)
@@ -249,9 +290,12 @@ class Daemon:
                 self.server.publish(Topic(topic), event(topic, payload))
         gw.outbox.clear()
         if gw.state is not self._state:
+            if gw.state is GatewayState.ESTOP:
+                self.latch.set(gw.supervisor.reason)  # from CAN, or anything but the socket
+            elif self._state is GatewayState.ESTOP:
+                self.latch.clear()  # only an explicit enable leaves ESTOP
             self._state = gw.state
-            reason = gw.supervisor.reason
-            text = gw.state.name + (f": {reason}" if reason else "")
+            text = self._status_text()
             self.notifier.status(text)
             log.info("state %s", text)
         if gw.state is GatewayState.RUNNING and not self._ready:
@@ -261,6 +305,21 @@ class Daemon:
             self._next_watchdog = now_s + self._watchdog_s
         self.scheduler.timer.record_cost(time.perf_counter() - start)
 
+    def _status_text(self) -> str:
+        """The state for systemd's ``STATUS=``, with what the daemon waits for."""
+        gw = self.gateway
+        reason = gw.supervisor.reason
+        text = gw.state.name + (f": {reason}" if reason else "")
+        if gw.state is GatewayState.ENABLING:
+            return text + ": waiting for the motors to enable"
+        if gw.state is GatewayState.FAULT and self.config.loop.feedback_recovery == "auto":
+            offline = [s.name for s in gw.drives.status(time.monotonic())
+                       if s.state is DriveState.OFFLINE]
+            if offline:
+                text += (f" (waiting for motors: {', '.join(offline)} silent; the drives are "
+                         f"enabled again once every motor answers)")
+        return text
+
     def _healthy(self) -> bool:
         """Whether to feed the systemd watchdog: the loop runs (we are in it) and the bus
         takes frames; a wedged bus ends in a restart instead of a zombie daemon."""
@@ -268,7 +327,7 @@ class Daemon:
 
     def _mark_ready(self) -> None:
         self._ready = True
-        self.notifier.ready(f"{self.gateway.state.name}; socket {self.socket_path}")
+        self.notifier.ready(f"{self._status_text()}; socket {self.socket_path}")
 
     def _wait(self) -> None:
         """Serve the socket until the next deadline: poll while whole milliseconds remain

@@ -24,7 +24,8 @@ import logging
 import time
 from typing import TYPE_CHECKING
 
-from gateway.bus_edge import BusEdge
+from gateway.bus_edge import BusEdge, bus_options
+from gateway.bus_health import BusErrorState
 from gateway.control import Accepted, Rejection, Source, Supervisor
 from gateway.drives import DriveSet
 from gateway.errors import DecodeError, GatewayError, KinematicsError
@@ -48,6 +49,7 @@ if TYPE_CHECKING:
 
     from gateway.config import GatewayConfig
     from gateway.kinematics import IkResult, LimitReport
+    from gateway.monitor.labels import FrameLabeler
 
 log = logging.getLogger(__name__)
 
@@ -83,9 +85,19 @@ class Gateway(BusEdge):
         self.timer = timer if timer is not None else LoopTimer(config.loop.rate_hz)
         self.record = record
         self.stamp_with_cycle_time = stamp_with_cycle_time
+        self.period_s = 1.0 / config.loop.rate_hz
+        self._bus_failures = 0
+        self._since_reopen = 0
+        #: Event counters for status reports.
+        self.counts = {
+            "cycles": 0, "frames_sent": 0, "frames_received": 0, "send_failures": 0,
+            "bus_reopens": 0, "can_twists": 0, "can_duplicates": 0, "can_lost": 0,
+            "bad_can_twists": 0, "errors_reported": 0, "odometry_errors": 0,
+        }
+        self._setup_edge(bus_options(config.bus.interface, None))
         self._own_bus = bus is None
         self.bus = bus if bus is not None else self._open()
-        self.period_s = 1.0 / config.loop.rate_hz
+        self._labeler: FrameLabeler | None = None
         self.prev: IkResult = self.model.ik(Twist())
         self._driven = tuple(i for i, m in enumerate(config.motors) if m is not None)
         # The wheel each motor's name stands for (a steering actuator: its first wheel), for
@@ -107,19 +119,14 @@ class Gateway(BusEdge):
         #: ``time.perf_counter()`` when the last cycle's burst of wheel frames was sent (before
         #: odometry and publishing): where the daemon's twist-to-frames latency ends.
         self.burst_sent_s = 0.0
+        #: The longest time between two cycles' bursts (s): a loop stalled for seconds shows
+        #: here as seconds, whatever the deadline statistics make of the skipped deadlines.
+        self.burst_gap_max_s = 0.0
         self._next_odom_s = 0.0
         self._next_status_s = 0.0
         self._odom_stamp = -1.0
         self._status_counter = 0
         self._error_count = 0
-        self._bus_failures = 0
-        self._since_reopen = 0
-        #: Event counters for status reports.
-        self.counts = {
-            "cycles": 0, "frames_sent": 0, "frames_received": 0, "send_failures": 0,
-            "bus_reopens": 0, "can_twists": 0, "can_duplicates": 0, "can_lost": 0,
-            "bad_can_twists": 0, "errors_reported": 0, "odometry_errors": 0,
-        }
         #: Frames seen per (arbitration ID, extended, transmitted), for monitors.
         self.id_counts: collections.Counter[tuple[int, bool, bool]] = collections.Counter()
         #: Nominal bits of every frame sent and received (bus load = rate / bitrate).
@@ -157,6 +164,13 @@ class Gateway(BusEdge):
         if duplicate:
             return
         if cmd.flags & TwistFlags.ENABLE:
+            if (self.supervisor.state is GatewayState.ESTOP
+                    and self.config.loop.estop_release == "socket"):
+                self.report_error(
+                    ErrorCode.ESTOP, "an e-stop is released only by an enable on the control "
+                    "socket (gateway.estop_release: socket); the CAN ENABLE flag was ignored",
+                    out, twist_counter=cmd.counter)
+                return
             self.supervisor.enable(now_s)
             return
         if cmd.flags & TwistFlags.STOP:
@@ -222,6 +236,11 @@ class Gateway(BusEdge):
                 else:
                     drives.on_frame(frame)
         sup = self.supervisor
+        if self.starved is not None or self.bus_state_change is not None:
+            self._bus_trouble(out)
+        elif (self.bus_errors.state is BusErrorState.BUS_OFF
+              and sup.state in (GatewayState.ENABLING, GatewayState.RUNNING)):
+            self._bus_trouble(out, BusErrorState.BUS_OFF)
         speeds = self.prev.wheel_rad_s
         if not self._all_driven:
             speeds = tuple(speeds[i] for i in self._driven)
@@ -262,8 +281,11 @@ class Gateway(BusEdge):
             out.extend(self.drives.disable(now_s))
         out.extend(self.drives.poll(now_s))
         self.prev = result
-        self.send(out)
-        self.burst_sent_s = time.perf_counter()
+        self.send(out, now_s)
+        sent = time.perf_counter()
+        if self.burst_sent_s and sent - self.burst_sent_s > self.burst_gap_max_s:
+            self.burst_gap_max_s = sent - self.burst_sent_s
+        self.burst_sent_s = sent
         self._integrate()
         self._publish(now_s)
 
@@ -316,7 +338,44 @@ class Gateway(BusEdge):
             frames.append(self.wg.encode_status(self.status_report()))
             self.outbox.append(("status", {"state": self.supervisor.state,
                                            "reason": self.supervisor.reason}))
-        self.send(frames)
+        self.send(frames, now_s, tracked=False)
+
+    def _bus_trouble(self, out: list[Frame], change: BusErrorState | None = None) -> None:
+        """Act on what the bus reported: bus-off, or a command that does not go out, is a
+        fault that names it; leaving bus-off lets the recovery go on."""
+        if change is None:
+            change, self.bus_state_change = self.bus_state_change, None
+        starved, self.starved = self.starved, None
+        sup = self.supervisor
+        bus = self.config.bus
+        messages: list[tuple[str, tuple[str, ...]]] = []
+        if change is BusErrorState.BUS_OFF:
+            sup.bus_ok = False
+            messages.append((
+                f"CAN bus-off on {bus.interface}:{bus.channel} ({self.bus_errors.last}): the "
+                f"CAN controller stopped sending after too many transmit errors; check the "
+                f"wiring, termination and bitrate of every node (the kernel restarts it with "
+                f"'ip link set {bus.channel} type can restart-ms 100')", ()))
+        elif change is not None:
+            sup.bus_ok = True
+        if starved is not None:
+            can_id, extended, n = starved
+            if self._labeler is None:
+                from gateway.monitor.labels import FrameLabeler  # noqa: PLC0415 - rare path
+
+                self._labeler = FrameLabeler(self.config)
+            label = self._labeler.label_id(can_id, extended)
+            messages.append((
+                f"the frame {label.text} (ID 0x{can_id:X}) has not gone out for {n} cycles: the "
+                f"CAN transmit queue stays full (the bus is slower than the commands: check the "
+                f"bitrate, the interface's txqueuelen and the bus load)",
+                tuple(w for w in label.wheels if w in self._wheel_of)))
+        for message, wheels in messages:
+            fault = sup.bus_fault(message, wheels)
+            if fault is not None:
+                log.error("fault: %s", message)
+                self.report_error(fault.code, message, out,
+                                  wheel=wheels[0] if wheels else None)
 
     # ----------------------------------------------------------------- reports
 
@@ -333,7 +392,7 @@ class Gateway(BusEdge):
             flags |= StatusFlags.SPEED_LIMITED
         if sup.counts["projected"]:
             flags |= StatusFlags.PROJECTED
-        if self._bus_failures:
+        if self._bus_failures or self.bus_errors.state is not BusErrorState.ACTIVE:
             flags |= StatusFlags.BUS_ERRORS_RECENT
         self._status_counter = (self._status_counter + 1) & 0xFF
         return StatusReport(

@@ -35,7 +35,8 @@ def status_dict(daemon: Daemon, now_s: float) -> dict[str, object]:
         type(drv).__name__: dict(drv.rejected) for drv, _ in gw.drives.groups if drv.rejected
     }
     limit = gw.limit_report
-    timing = dataclasses.asdict(daemon.scheduler.timer.snapshot())
+    timing = {**dataclasses.asdict(daemon.scheduler.timer.snapshot()),
+              "burst_gap_max_ms": gw.burst_gap_max_s * 1000.0}
     return {
         "robot": gw.config.name,
         "state": sup.state,
@@ -65,6 +66,9 @@ def status_dict(daemon: Daemon, now_s: float) -> dict[str, object]:
             "channel": gw.config.bus.channel,
             "bitrate": gw.config.bus.bitrate,
             "healthy": gw.bus_healthy,
+            "error_state": gw.bus_errors.state.value,
+            "error_frames": dict(gw.bus_errors.counts),
+            "last_error_frame": gw.bus_errors.last,
             "bits": gw.bits,
             "time_s": now_s,
             "frames": [

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+import os
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -37,6 +38,14 @@ def _no_leaked_buses() -> Iterator[None]:
     for name in leaked:
         virtual.channels.pop(name, None)
     assert not leaked, f"virtual bus channels left open: {sorted(map(str, leaked))}"
+
+
+@pytest.fixture(autouse=True)
+def _own_state_directory(tmp_path_factory: pytest.TempPathFactory,
+                         monkeypatch: pytest.MonkeyPatch) -> None:
+    """Every test gets a state directory of its own (the e-stop latch lives there), and so do
+    the daemons it starts as subprocesses: no latch leaks from one test into another."""
+    monkeypatch.setenv("STATE_DIRECTORY", str(tmp_path_factory.mktemp("state")))
 
 
 @pytest.fixture
@@ -78,3 +87,49 @@ def daemon(sock_path: str, channel: str) -> Iterator[Daemon]:
     yield d
     d.request_stop()
     thread.join(timeout=10)
+
+
+#: The kernel CAN interface of the ``socketcan`` tier (a vcan, or a real bus with nothing else
+#: on it: the tier's tests send on it).
+VCAN = os.environ.get("WHEELGATE_TEST_VCAN", "vcan0")
+
+
+def socketcan_missing(name: str = VCAN) -> str | None:
+    """Why the ``socketcan`` tier cannot run here (``None``: it can)."""
+    import socket
+
+    try:
+        s = socket.socket(socket.AF_CAN, socket.SOCK_RAW, socket.CAN_RAW)
+    except (AttributeError, OSError) as err:
+        return (f"this kernel has no SocketCAN (AF_CAN: {err}); on Linux: sudo modprobe vcan "
+                f"&& sudo ip link add {name} type vcan && sudo ip link set {name} up")
+    try:
+        s.bind((name,))
+    except OSError as err:
+        return (f"no CAN interface {name!r} ({err}); create it: sudo ip link add {name} type vcan "
+                f"&& sudo ip link set {name} up, or name another in WHEELGATE_TEST_VCAN")
+    finally:
+        s.close()
+    flags = Path(f"/sys/class/net/{name}/flags")
+    if flags.exists() and not int(flags.read_text(), 16) & 0x1:
+        return f"CAN interface {name!r} is down: sudo ip link set {name} up"
+    return None
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Skip the ``socketcan`` tier, with the reason, where there is no kernel CAN interface."""
+    tier = [item for item in items if item.get_closest_marker("socketcan")]
+    if not tier:
+        return
+    why = socketcan_missing()
+    if why is None:
+        return
+    skip = pytest.mark.skip(reason=f"socketcan tier: {why}")
+    for item in tier:
+        item.add_marker(skip)
+
+
+@pytest.fixture
+def vcan() -> str:
+    """The kernel CAN interface of the ``socketcan`` tier (tests carrying the mark only)."""
+    return VCAN

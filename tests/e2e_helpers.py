@@ -11,6 +11,7 @@ import can
 from gateway.bus import drain, send_frames
 from gateway.config import GatewayConfig, load_config
 from gateway.daemon import Daemon
+from gateway.errors import BusError
 from gateway.kinematics import Odometry
 from gateway.kinematics.limits import speed_scale
 from gateway.loop import Gateway
@@ -59,8 +60,12 @@ class Rig:
         else:
             self.gw = Gateway(config, stamp_with_cycle_time=True)
         self.sims = self.gw.drives.simulators()
-        self.ctl = SimulatedControllers(self.sims, config.bus.channel)
-        self.pilot = can.Bus(interface="virtual", channel=config.bus.channel)
+        # The simulators and the pilot join the gateway's bus: the virtual one, or a kernel
+        # interface in the socketcan tier.
+        self.ctl = SimulatedControllers(self.sims, config.bus.channel, config.bus.interface)
+        self.pilot = can.Bus(interface=config.bus.interface, channel=config.bus.channel)
+        #: Simulator steps whose frames the bus refused (a full transmit queue in the tier).
+        self.sim_send_failures = 0
         self.t = 0.0
         self.period = 1.0 / config.loop.rate_hz
         self.truth = Odometry(config.model)
@@ -120,7 +125,10 @@ class Rig:
                 self.gw.cycle(self.t)
             for k in range(self.sim_steps):
                 ts = self.t + (k + 1) * self.period / self.sim_steps
-                self.ctl.step(ts)
+                try:
+                    self.ctl.step(ts)
+                except BusError:
+                    self.sim_send_failures += 1  # as a device whose transmit buffer is full
                 self.truth.update(self.truth_positions(), ts, self.truth_steer())
             self.t += self.period
 
@@ -207,6 +215,13 @@ class SocketPilot:
 
     def close(self) -> None:
         self.sock.close()
+
+
+def error_frame(can_id: int, data: bytes = bytes(8)) -> can.Message:
+    """A SocketCAN error frame of class ``can_id`` (``linux/can/error.h``), as the kernel
+    delivers them; python-can's virtual bus passes them on like any frame."""
+    return can.Message(arbitration_id=can_id, data=data, is_error_frame=True,
+                       is_extended_id=False)
 
 
 def errors_on_can(rig: Rig) -> list[ErrorReport]:

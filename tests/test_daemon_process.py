@@ -15,6 +15,7 @@ import can
 import pytest
 
 from gateway.client import ControlClient
+from tests.conftest import CONFIG_DIR
 
 if TYPE_CHECKING:
     from collections.abc import Iterator
@@ -49,7 +50,10 @@ def read_notify(sock: socket.socket, until: bytes, timeout_s: float) -> list[byt
     return got
 
 
-@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT])
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT, signal.SIGHUP,
+                                    signal.SIGQUIT, signal.SIGABRT, signal.SIGUSR1,
+                                    signal.SIGUSR2])
+@pytest.mark.timeout(60)
 def test_signal_sends_zero_and_disarm_then_exits_0(
     signum: int, sock_path: str, tmp_path: Path, notify_socket: tuple[socket.socket, str]
 ) -> None:
@@ -66,7 +70,11 @@ def test_signal_sends_zero_and_disarm_then_exits_0(
         before = read_notify(nsock, b"READY=1", 30.0)
         assert before and before[-1].startswith(b"READY=1"), (before, proc.poll())
         with ControlClient(sock_path) as client:
-            assert client.request({"op": "status"})["state"] == "running"
+            # READY=1 comes with the bus and the socket up; the drives enable just after.
+            end = time.monotonic() + 10
+            while client.request({"op": "status"})["state"] != "running":
+                assert time.monotonic() < end, "the drives did not enable"
+                time.sleep(0.05)
             for _ in range(10):
                 assert client.request({"op": "twist", "vx": 0.4, "wz": 0.5})["ok"]
                 time.sleep(0.05)
@@ -101,3 +109,38 @@ def test_signal_sends_zero_and_disarm_then_exits_0(
         idle = [i for i, m in enumerate(sent)
                 if m.arbitration_id == state_id and bytes(m.data[:4]) == b"\x01\x00\x00\x00"]
         assert idle and idle[-1] > last_moving, f"node {node} was not disarmed at the end"
+    assert not os.path.exists(sock_path), "the socket file was left behind"
+    if signum not in (signal.SIGTERM, signal.SIGINT):
+        assert f"{signal.Signals(signum).name}: stopping" in err.decode()
+
+
+@pytest.mark.timeout(60)
+def test_ready_with_the_motors_unpowered_and_the_status_says_what_it_waits_for(
+    sock_path: str, tmp_path: Path, notify_socket: tuple[socket.socket, str]
+) -> None:
+    """systemd must not wait for the motors: READY=1 once the bus and the socket are up, the
+    state in STATUS=, and the drives enable when the motors answer."""
+    nsock, npath = notify_socket
+    cfg = tmp_path / "robot.yaml"
+    cfg.write_text((CONFIG_DIR / "turtlebot3_burger.yaml").read_text()
+                   + "\ngateway:\n  enable_timeout_s: 0.5\n")
+    env = {**os.environ, "NOTIFY_SOCKET": npath}
+    # No --sim: nothing answers on this virtual bus, as with the motors' power off.
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "gateway", "--interface", "virtual", "--channel",
+         f"unpowered-{os.getpid()}", "run",
+         "-c", str(cfg), "--socket", sock_path],
+        env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+    )
+    try:
+        ready = read_notify(nsock, b"READY=1", 30.0)
+        assert any(m.startswith(b"READY=1") for m in ready), (ready, proc.poll())
+        assert any(b"ENABLING" in m and b"waiting for the motors" in m for m in ready), ready
+        later = read_notify(nsock, b"waiting for motors", 10.0)
+        assert any(b"STATUS=FAULT" in m and b"waiting for motors: left, right silent" in m
+                   for m in later), later
+        with ControlClient(sock_path) as client:
+            assert client.request({"op": "status"})["state"] == "fault"
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        proc.communicate(timeout=10)

@@ -77,6 +77,7 @@ from can.interfaces.virtual import VirtualBus
 from drivers.dji import DjiSimulator
 from drivers.odrive.enums import AxisState, CmdId
 from gateway.bus import send_frames
+from gateway.bus_edge import UNSENT_FAULT_CYCLES
 from gateway.config import load_config
 from gateway.control import AUTO_RETRIES, AUTO_RETRY_DELAY_S
 from gateway.sim import DeviceSimulator, SimFault
@@ -623,19 +624,19 @@ def test_bus_refusing_sends_loop_goes_on_drives_fall_back(
     assert gw.counts["send_failures"] >= len(samples)
     assert gw.counts["bus_reopens"] >= 1
     truth = [abs(s.wheel_velocity_rad_s) for s in run.rig.drive_sims]
-    if run.key == "odrive":  # the axis watchdog (0.5 s) disarms and latches an error
-        fault = next(s for s in samples if s.state is GatewayState.FAULT)
-        assert "WATCHDOG_TIMER_EXPIRED" in fault.reason
-        assert all(v == 0.0 for s in samples if s.t >= fault.t for v in s.speeds)
+    # The commands stopped going out: a bus fault that names the first frame left out.
+    fault = next(s for s in samples if s.state is GatewayState.FAULT)
+    assert f"has not gone out for {UNSENT_FAULT_CYCLES} cycles" in fault.reason
+    assert gw.supervisor.fault_code is ErrorCode.BUS_ERROR
+    assert fault.t - samples[0].t <= (UNSENT_FAULT_CYCLES + 2) * run.rig.period
+    assert all(v == 0.0 for s in samples if s.t >= fault.t for v in s.speeds)
+    if run.key in ("odrive", "vesc"):
+        # Nothing reaches the controllers: their own command timeouts stop the wheels (the
+        # ODrive axis watchdog, 0.5 s; the VESC's timeout_msec).
         assert max(truth) < 0.1
-    elif run.key == "vesc":
-        # timeout_msec releases the motor and STATUS carries no fault, but the wheels stop
-        # while commanded to turn: the tracking check reports it.
-        fault = next(s for s in samples if s.state is GatewayState.FAULT)
-        assert "does not follow its command" in fault.reason
-        assert max(truth) < 0.1
-    else:  # DJI has no command timeout; this CiA 402 drive has no RPDO timeout set
-        assert run.state is GatewayState.RUNNING
+    else:
+        # DJI has no command timeout, and this CiA 402 drive has no RPDO timeout set: the
+        # gateway's zero cannot reach them, and they keep turning on the last command.
         assert min(truth) > 1.0
     run.until(GatewayState.RUNNING, within_s=2.0)
     run.drive(1.0)

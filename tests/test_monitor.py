@@ -351,7 +351,8 @@ def test_status_monitor_rates_from_successive_replies() -> None:
     assert (fr.driver, fr.state, fr.velocity_rad_s) == ("odrive", "enabled", 2.0)
     assert fr.motor_rpm == pytest.approx(-2.0 * 10 * RPM)
     assert dict(snap.errors) == {"rejected by odrive": 3, "send failures": 2,
-                                 "bus reopens": 0, "bad can twists": 1}
+                                 "frames unsent": 0, "receive failures": 0,
+                                 "bus reopens": 0, "bad can twists": 1, "fd frames ignored": 0}
     # The window slides: the reply at 10 s is dropped once the one at 11 s is 2 s old.
     mon.update(daemon_status(13.0, 400, 400 * STD8_NOMINAL,
                              worst_bits=400 * STD8_WORST, healthy=False))

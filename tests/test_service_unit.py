@@ -12,6 +12,7 @@ from pathlib import Path
 
 import pytest
 
+from gateway.config import load_config
 from tests.conftest import CONFIG_DIR
 
 UNIT = CONFIG_DIR / "wheelgate.service"
@@ -104,6 +105,7 @@ def test_parser_reads_systemd_syntax() -> None:
         ("KillSignal", "SIGTERM"),
         ("RuntimeDirectory", "wheelgate"),
         ("RuntimeDirectoryMode", "0750"),
+        ("StateDirectory", "wheelgate"),
         ("User", "wheelgate"),
         ("Group", "wheelgate"),
     ],
@@ -139,7 +141,10 @@ def test_can_link_setup_is_offered_commented_and_privileged(unit: Unit) -> None:
     pre = unit.commented_values("Service", "ExecStartPre")
     argvs = [shlex.split(line) for line in pre]
     assert all(argv[0] == "+/usr/sbin/ip" for argv in argvs), pre
-    assert ["link", "set", "can0", "up", "type", "can", "bitrate", "500000", "restart-ms",
+    # The bitrate of the shipped configuration the README installs (python-can does not set
+    # it on SocketCAN: a mismatch is a silent bus).
+    bitrate = str(load_config(CONFIG_DIR / "mecanum.yaml").bus.bitrate)
+    assert ["link", "set", "can0", "up", "type", "can", "bitrate", bitrate, "restart-ms",
             "100"] in [argv[1:] for argv in argvs]
     assert ["link", "set", "can0", "txqueuelen", "1000"] in [argv[1:] for argv in argvs]
 

@@ -490,3 +490,22 @@ def test_everything_refused_still_returns(monkeypatch: pytest.MonkeyPatch) -> No
     notes = realtime_setup(priority=10, cpu=0, lock_memory=True)
     assert [n.split(" ")[0] for n in notes] == ["gc:", "SCHED_FIFO", "pinning", "mlockall"]
     assert all("refused" in n or "unavailable" in n for n in notes[1:])
+
+
+def test_the_longest_gap_between_bursts_tells_a_stall_as_it_was(channel: str) -> None:
+    """A loop held up for a while shows that while in the status's timing, whatever the
+    deadline statistics make of the deadlines it skipped."""
+    import time
+
+    from gateway.loop import Gateway
+    from tests.e2e_helpers import virtual_config
+
+    gw = Gateway(virtual_config(None, channel, rate_hz=100.0))
+    try:
+        for k in range(5):
+            gw.cycle(k * 0.01)
+        time.sleep(0.3)  # the stall (at least this long: a lower bound, not a timing test)
+        gw.cycle(0.05)
+        assert gw.burst_gap_max_s >= 0.3
+    finally:
+        gw.close()

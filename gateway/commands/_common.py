@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING, Any
 
 import click
 
-from gateway.config import GatewayConfig, default_socket_path, load_config
+from gateway.config import GatewayConfig, client_socket_path, load_config
 
 if TYPE_CHECKING:
     from gateway.errors import InfeasibleTwistError
@@ -30,7 +30,7 @@ def socket_for(ctx: click.Context, config_path: str | None, socket_path: str | N
         cfg = load(ctx, config_path)
         if cfg.loop.socket:
             return cfg.loop.socket
-    return default_socket_path()
+    return client_socket_path()
 
 
 def twist_options(func: Any) -> Any:

@@ -71,4 +71,6 @@ def command(ctx: click.Context, config_path: str | None) -> None:
         f"linear {_num(lim.max_linear_m_s)} m/s, angular {_num(lim.max_angular_rad_s)} rad/s"
     )
     click.echo(f"bus:      {cfg.bus.interface}:{cfg.bus.channel} at {cfg.bus.bitrate} bit/s")
-    click.echo("ok")
+    for warning in cfg.warnings:
+        click.echo(f"warning:  {warning}")
+    click.echo("ok" if not cfg.warnings else f"ok, with {len(cfg.warnings)} warning(s)")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import threading
 
 import click
@@ -9,6 +10,8 @@ import click
 from gateway.cli import config_option
 from gateway.commands._common import load
 from gateway.daemon import Daemon
+
+log = logging.getLogger("gateway.run")
 
 
 @click.command()
@@ -33,6 +36,8 @@ def command(
     """Run the gateway: twists in, wheel frames out, odometry back (SIGTERM or Ctrl-C stops
     it, leaving every motor at zero and disarmed)."""
     cfg = load(ctx, config_path)
+    for warning in cfg.warnings:
+        log.warning("%s", warning)
     daemon = Daemon(cfg, sim=sim, record=record, socket_path=socket_path)
     click.echo(
         f"wheelgate: {cfg.name} ({cfg.drive}, {cfg.model.n} wheels) on "

@@ -59,8 +59,19 @@ def command(
     click.echo(f"timing: {t['cycles']} cycles, {t['missed']} missed{why}; lateness p50/p99/max "
                f"{t['lateness_p50_us']:.0f}/{t['lateness_p99_us']:.0f}/{t['lateness_max_us']:.0f} "
                f"us; cost p50/p99/max {t['cost_p50_us']:.0f}/{t['cost_p99_us']:.0f}/"
-               f"{t['cost_max_us']:.0f} us")
+               f"{t['cost_max_us']:.0f} us"
+               + (f"; longest gap between bursts {t['burst_gap_max_ms']:.1f} ms"
+                  if "burst_gap_max_ms" in t else ""))
     counters = {k: v for k, v in reply["counters"].items() if v and k != "rejected_frames"}
     click.echo("counters: " + ", ".join(f"{k}={v}" for k, v in sorted(counters.items())))
+    bus = reply.get("bus") or {}
+    if "error_state" in bus:  # daemons before the bus's health was reported do not send it
+        errors = {k: v for k, v in bus["error_frames"].items() if v and k != "error_frames"}
+        click.echo(f"bus: {bus['interface']}:{bus['channel']} controller {bus['error_state']}"
+                   f"{'' if bus['healthy'] else ' (unhealthy: frames do not go out)'}; "
+                   f"{bus['error_frames'].get('error_frames', 0)} error frames"
+                   + (" (" + ", ".join(f"{k}={v}" for k, v in sorted(errors.items())) + ")"
+                      if errors else "")
+                   + (f", last: {bus['last_error_frame']}" if bus.get("last_error_frame") else ""))
     if reply.get("last_error"):
         click.echo(f"last error: {reply['last_error']['message']}")

@@ -299,7 +299,12 @@ class StatusMonitor:
             by_driver[name] = by_driver.get(name, 0) + sum(reasons.values())
         out = [(f"rejected by {name}", n) for name, n in by_driver.items()]
         out += [(name.replace("_", " "), int(counters.get(name, 0)))
-                for name in ("send_failures", "bus_reopens", "bad_can_twists")]
+                for name in ("send_failures", "frames_unsent", "receive_failures",
+                             "bus_reopens", "bad_can_twists", "fd_frames_ignored")]
+        bus_errors = (self._status.get("bus") or {}).get("error_frames") or {}
+        out += [(f"error frames: {name.replace('_', ' ')}" if name != "error_frames"
+                 else "error frames", int(n))
+                for name, n in bus_errors.items() if n or name in ("error_frames", "bus_off")]
         return tuple(out)
 
     def _notes(self) -> tuple[str, ...]:
@@ -308,8 +313,12 @@ class StatusMonitor:
         if robot is not None and robot != self.config.name:
             notes.append(f"the daemon runs robot {robot!r} but names come from "
                          f"{self.config.name!r}: pass the daemon's config with -c")
-        if self._status.get("bus", {}).get("healthy") is False:
+        bus = self._status.get("bus") or {}
+        if bus.get("healthy") is False:
             notes.append("the daemon reports its CAN bus as unhealthy")
+        if bus.get("error_state", "active") != "active":
+            notes.append(f"CAN controller {str(bus['error_state']).replace('_', '-')}: "
+                         f"{bus.get('last_error_frame') or 'no detail'}")
         if self._status.get("reason"):
             notes.append(f"gateway: {self._status['reason']}")
         return tuple(notes)
