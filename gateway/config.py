@@ -50,6 +50,7 @@ from gateway.config_keys import (
 )
 from gateway.config_types import BusConfig, GatewayConfig, LoopConfig
 from gateway.errors import ConfigError, DriverNotFoundError, KinematicsError
+from gateway.filters import own_id_collisions
 from gateway.kinematics import PRESETS, Limits, RobotModel, Wheel, WheelType
 from gateway.kinematics.model import validate_wheel
 from gateway.linkage import virtual_angle
@@ -209,10 +210,28 @@ def parse_config(
             f"writable by every local user, who could then drive the robot; expected 0o660 "
             f"(the owner and the group wheelgate), with socket_uids for finer control"
         )
-    return GatewayConfig(
+    config = GatewayConfig(
         source, name, str(drive), MappingProxyType(geometry), model, motors, limits, bus, loop,
         steering, tuple(warnings),
     )
+    _check_own_ids(config)
+    return config
+
+
+def _check_own_ids(config: GatewayConfig) -> None:
+    """The gateway's own CAN IDs must not be any controller's (:func:`own_id_collisions`).
+
+    :raises ConfigError: naming every collision and the fix.
+    """
+    from gateway.drives import DriveSet  # noqa: PLC0415 - the drivers load after the config
+
+    collisions = own_id_collisions(config, DriveSet(config))
+    if collisions:
+        raise ConfigError(
+            f"{config.source}: " + "; ".join(collisions)
+            + ". Expected the gateway's own identifiers (gateway.can_ids, defaults 0x100 to "
+            "0x104) apart from every controller's: choose other can_ids or other node IDs"
+        )
 
 
 def _motor_path(drive: object, index: int, name: str) -> str:

@@ -26,6 +26,7 @@ __all__ = ["MotorDriver", "OptionSpec"]
 if TYPE_CHECKING:
     from collections.abc import Mapping, Sequence
 
+    from gateway.filters import CanFilter
     from gateway.sim import DeviceSimulator
     from gateway.types import Frame
 
@@ -153,6 +154,17 @@ class MotorDriver(abc.ABC):
         :return: whether the frame belonged to this driver.  Malformed frames of this protocol
             are counted in :attr:`rejected` and never raise.
         """
+
+    def receive_filters(self) -> tuple[CanFilter, ...] | None:
+        """The identifiers this driver's :meth:`on_frame` takes (feedback, replies, the
+        controllers' own messages), as receive filters: the kernel drops everything else
+        before the gateway sees it (:mod:`gateway.filters`).
+
+        Every frame :meth:`on_frame` would claim must pass them; the built-in drivers are
+        checked for that against random frames.  ``None`` (the default) declares nothing:
+        the gateway then opens its bus unfiltered.
+        """
+        return None
 
     def preview_command(self, wheel_rad_s: Sequence[float]) -> list[Frame]:
         """The frames :meth:`command` would send for these setpoints from a freshly

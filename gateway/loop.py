@@ -29,6 +29,7 @@ from gateway.bus_health import BusErrorState
 from gateway.control import Accepted, Rejection, Source, Supervisor
 from gateway.drives import DriveSet
 from gateway.errors import DecodeError, GatewayError, KinematicsError
+from gateway.filters import gateway_filters
 from gateway.kinematics import Odometry, apply_limits
 from gateway.timing import LoopTimer
 from gateway.types import ConstraintCode, ErrorCode, Frame, GatewayState, Twist
@@ -94,7 +95,13 @@ class Gateway(BusEdge):
             "bus_reopens": 0, "can_twists": 0, "can_duplicates": 0, "can_lost": 0,
             "bad_can_twists": 0, "errors_reported": 0, "odometry_errors": 0,
         }
-        self._setup_edge(bus_options(config.bus.interface, None))
+        #: The identifiers the gateway consumes (``None``: a driver does not say).
+        self.receive_filters = gateway_filters(config, self.drives)
+        self._setup_edge(bus_options(
+            config.bus.interface,
+            None if self.receive_filters is None
+            else [f.as_python_can() for f in self.receive_filters],
+        ))
         self._own_bus = bus is None
         self.bus = bus if bus is not None else self._open()
         self._labeler: FrameLabeler | None = None

@@ -157,3 +157,21 @@ def test_can_fd_frames_are_ignored_and_counted(rig: Rig, vcan: str) -> None:
     assert rig.gw.counts["fd_frames_ignored"] >= 2  # 0x7A0 may be kept out by the filters
     assert rig.gw.counts["bad_can_twists"] == 0
     assert state(rig) is GatewayState.RUNNING
+
+
+def test_kernel_filters_keep_foreign_traffic_out_of_the_process(rig: Rig, vcan: str) -> None:
+    """The gateway's socket is opened with filters for exactly what it consumes: a flood of
+    foreign frames never reaches it (the drain sees only its drives' feedback)."""
+    assert rig.gw.receive_filters is not None
+    before = rig.gw.counts["frames_received"]
+    flood = subprocess.Popen(["cangen", vcan, "-g", "0.2", "-I", "7A0", "-L", "8", "-n", "5000"])
+    try:
+        drive(rig, 1.0)
+    finally:
+        flood.wait(timeout=60)
+    received = {(i, e) for (i, e, tx) in rig.gw.id_counts if not tx}
+    assert (0x7A0, False) not in received
+    assert all(rig.gw.receive_filters and any(f.matches(i, e) for f in rig.gw.receive_filters)
+               for i, e in received), received
+    assert rig.gw.counts["frames_received"] > before  # the drives' feedback still comes
+    assert state(rig) is GatewayState.RUNNING

@@ -307,7 +307,7 @@ def test_frames_preview_includes_steering() -> None:
     frames = DriveSet(cfg).preview(result.wheel_rad_s, result.steer_rad)
     kinds = sorted((f.arbitration_id >> 5, f.arbitration_id & 0x1F) for f in frames)
     assert kinds == [(n, CmdId.SET_INPUT_VEL) for n in (1, 2, 3, 4)] + [
-        (n, CmdId.SET_INPUT_POS) for n in (5, 6, 7, 8)]
+        (n, CmdId.SET_INPUT_POS) for n in (5, 6, 7, 9)]
     pos = [OdriveCodec().decode_command(f) for f in frames if f.arbitration_id & 0x1F == 0xC]
     for cmd, angle in zip(pos, result.steer_rad, strict=True):
         assert isinstance(cmd, SetInputPos) and angle is not None
@@ -347,11 +347,11 @@ def test_cli_frames_and_check_show_the_actuators(runner: CliRunner) -> None:
     assert frames.stdout.split() == [
         "02D#CA43CE4000000000", "04D#CA43CE4000000000", "06D#CA43CE4000000000",
         "08D#CA43CE4000000000", "0AC#CDCC4C4000000000", "0CC#CDCC4C4000000000",
-        "0EC#CDCC4C4000000000", "10C#CDCC4C4000000000",
+        "0EC#CDCC4C4000000000", "12C#CDCC4C4000000000",
     ]
     check = runner.invoke(main, ["check", "-c", str(SWERVE)])
     assert check.exit_code == 0, check.output
-    assert ("  rear_right: odrive node 8, gear 12.8, zero at 0 rad, max 3000 rpm (234.4 rpm of "
+    assert ("  rear_right: odrive node 9, gear 12.8, zero at 0 rad, max 3000 rpm (234.4 rpm of "
             "the wheel's plane)") in check.stdout
 
 

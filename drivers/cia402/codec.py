@@ -268,6 +268,8 @@ class Cia402Codec(MotorCodec[Cia402Message]):
             self._rx[CobBase.EMCY + node_id] = (node_id, _Kind.EMCY)
             self._rx[CobBase.SDO_TX + node_id] = (node_id, _Kind.SDO)
             self._rx[CobBase.HEARTBEAT + node_id] = (node_id, _Kind.HEARTBEAT)
+        #: Every COB-ID :meth:`decode` takes (TPDOs, EMCY, SDO responses, heartbeats).
+        self.received_ids: frozenset[int] = frozenset(self._rx)
         #: node ID -> command RPDO COB-ID (every cycle sends one per node).
         self._rpdo_ids = {
             node_id: rpdo_cob_id(layout.rpdo, node_id) for node_id, layout in self.nodes.items()

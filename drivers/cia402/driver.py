@@ -77,6 +77,7 @@ from drivers.cia402.sim import Cia402Simulator
 from drivers.cia402.steps import configuration_steps
 from gateway.driver import MotorDriver, OptionSpec
 from gateway.errors import DecodeError, EncodeError
+from gateway.filters import CanFilter
 from gateway.types import DriveFault, DriveState, WheelFeedback
 
 if TYPE_CHECKING:
@@ -306,6 +307,11 @@ class Cia402Driver(MotorDriver):
         ):
             out.append(self._sync(now_s))
         return out
+
+    def receive_filters(self) -> tuple[CanFilter, ...]:
+        """The COB-IDs of our nodes that the codec decodes: the feedback TPDOs, EMCY, SDO
+        responses and heartbeats (11-bit, exact)."""
+        return tuple(CanFilter.exact(i, False) for i in sorted(self.codec.received_ids))
 
     def on_frame(self, frame: Frame) -> bool:
         """Take a frame: TPDO feedback, heartbeat, EMCY or SDO response of one of our nodes."""

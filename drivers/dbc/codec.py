@@ -155,6 +155,9 @@ class DbcCodec(MotorCodec[tuple[DbcReading, ...]]):
             self._add(self._rx, b, Role.POSITION, b.position)
             if b.fault is not None:
                 self._add(self._rx, b, Role.FAULT, b.fault)
+        #: (frame ID, extended) of every feedback message :meth:`decode` takes.
+        self.received_ids: frozenset[tuple[int, bool]] = frozenset(
+            (i, bool(g.message.is_extended_frame)) for i, g in self._rx.items())
         both = sorted(set(self._tx) & set(self._rx))
         if both:
             raise ConfigError(

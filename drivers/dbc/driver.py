@@ -72,6 +72,7 @@ from drivers.dbc.options import OPTIONS, UnitConversion, motor_where, parse_opti
 from drivers.dbc.sim import DbcSimulator
 from gateway.driver import MotorDriver
 from gateway.errors import DecodeError, EncodeError
+from gateway.filters import CanFilter
 from gateway.types import WheelFeedback
 
 if TYPE_CHECKING:
@@ -186,6 +187,10 @@ class DbcDriver(MotorDriver):
                 )
             commands[m.node_id] = self._units[i].wheel_to_command(value) if self._armed[i] else 0.0
         return list(self.codec.encode_command(commands, self._armed_map()))
+
+    def receive_filters(self) -> tuple[CanFilter, ...]:
+        """The feedback messages of the motors' DBC bindings (exact frame IDs and types)."""
+        return tuple(CanFilter.exact(i, ext) for i, ext in sorted(self.codec.received_ids))
 
     def on_frame(self, frame: Frame) -> bool:
         """Take feedback; malformed frames of configured messages are counted, never raised."""

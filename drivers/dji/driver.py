@@ -73,6 +73,7 @@ from drivers.dji.position import STEERING_OPTIONS, PositionLoop, power_up_positi
 from drivers.dji.sim import DjiSimulator
 from gateway.driver import MotorDriver, OptionSpec
 from gateway.errors import ConfigError, DecodeError, EncodeError
+from gateway.filters import CanFilter
 from gateway.types import DriveFault, DriveState, WheelFeedback
 
 if TYPE_CHECKING:
@@ -290,6 +291,10 @@ class DjiDriver(MotorDriver):
             speed = target if loop is None else loop.speed_target(target - m.zero_rad, 0.0, 0.0)
             currents.append(pi.preview(speed))
         return list(self.codec.encode_command(self._raw_currents(currents)))
+
+    def receive_filters(self) -> tuple[CanFilter, ...]:
+        """The feedback identifiers of the configured ESCs (``0x200 + ESC ID``, 11-bit)."""
+        return tuple(CanFilter.exact(i, False) for i in sorted(self._feedback_index))
 
     def on_frame(self, frame: Frame) -> bool:
         """Take a feedback frame of a configured ESC (others are not this driver's).

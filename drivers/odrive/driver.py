@@ -59,6 +59,7 @@ from drivers.odrive.options import OPTIONS, bus_settings
 from drivers.odrive.sim import OdriveSimulator
 from gateway.driver import MotorDriver, OptionSpec
 from gateway.errors import ConfigError, DecodeError, EncodeError, IllegalTransitionError
+from gateway.filters import EXT_MASK, STD_MASK, CanFilter
 from gateway.types import DriveFault, DriveState, WheelFeedback
 
 if TYPE_CHECKING:
@@ -310,6 +311,13 @@ class OdriveDriver(MotorDriver):
         self._enable_sent_s[i] = now_s
         log.info('ODrive node %d ("%s"): enable attempt %d', m.node_id, m.wheel, self._attempts[i])
         return self._arm_frames(i, now_s)
+
+    def receive_filters(self) -> tuple[CanFilter, ...]:
+        """Every CANSimple message of our nodes (``node_id << 5 | cmd``, any command): the
+        replies and cyclic messages, and the command frames ``on_frame`` ignores."""
+        ext = self._extended_id
+        mask = (EXT_MASK if ext else STD_MASK) & ~CMD_MASK
+        return tuple(CanFilter(m.node_id << CMD_BITS, mask, ext) for m in self.motors)
 
     def on_frame(self, frame: Frame) -> bool:
         """Take a heartbeat, encoder estimate or error reply of one of our axes.

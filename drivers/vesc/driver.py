@@ -55,6 +55,7 @@ from drivers.vesc.codec import (
 from drivers.vesc.sim import VescSimulator
 from gateway.driver import MotorDriver, OptionSpec
 from gateway.errors import ConfigError, DecodeError, EncodeError
+from gateway.filters import CanFilter
 from gateway.types import DriveState, WheelFeedback
 
 if TYPE_CHECKING:
@@ -275,6 +276,11 @@ class VescDriver(MotorDriver):
             if track.status_s is None or track.status5_s is None:
                 self._hint(i, now_s)  # (once both streams were seen, it has nothing to say)
         return out
+
+    def receive_filters(self) -> tuple[CanFilter, ...]:
+        """Every extended frame whose low byte is one of our controller IDs (``packet << 8 |
+        id``): the status packets it uses and the ones it claims."""
+        return tuple(CanFilter(m.node_id, 0x1FFF00FF, True) for m in self.motors)
 
     def on_frame(self, frame: Frame) -> bool:
         """Take the frames this driver's VESCs send (STATUS, STATUS_5 used; others claimed).
