@@ -32,6 +32,7 @@ COMMANDS: dict[str, str] = {
     "jog": "jog",
     "monitor": "monitor",
     "odom": "odom",
+    "sim": "sim",
 }
 
 EXIT_ERROR = 1

@@ -18,7 +18,7 @@ from gateway.errors import BusError
 from gateway.lifecycle import Closing
 
 if TYPE_CHECKING:
-    from collections.abc import Sequence
+    from collections.abc import Callable, Sequence
 
     from gateway.sim import DeviceSimulator
 
@@ -49,6 +49,12 @@ class SimulatedControllers(Closing):
         self._lock = threading.Lock()
         #: Errors the background thread met (it keeps running).
         self.errors = 0
+        #: Steps the background thread made, and how many of them started a period or more
+        #: late (the simulators then ran on, their motors integrated over the longer step).
+        self.steps = 0
+        self.late_steps = 0
+        #: Called with the step's time after every step, under the lock (ground truth).
+        self.on_step: Callable[[float], None] | None = None
         self.bus = open_bus(interface, channel, **bus_kwargs)
         self._open = True
 
@@ -64,6 +70,8 @@ class SimulatedControllers(Closing):
                     out.extend(sim.handle(frame, now_s))
             for sim in self.simulators:
                 out.extend(sim.tick(now_s))
+            if self.on_step is not None:
+                self.on_step(now_s)
             return send_frames(self.bus, out)
 
     def start(self) -> SimulatedControllers:
@@ -73,11 +81,20 @@ class SimulatedControllers(Closing):
             self._thread.start()
         return self
 
+    def snapshot(self, read: Callable[[], Any]) -> Any:
+        """``read()`` under the lock: a consistent view of the simulators from another thread."""
+        with self._lock:
+            return read()
+
     def _run(self) -> None:
         deadline = time.monotonic()
         while not self._stop.is_set():
+            now = time.monotonic()
+            self.steps += 1
+            if now - deadline >= self.period_s:
+                self.late_steps += 1
             try:
-                self.step(time.monotonic())
+                self.step(now)
             except BusError as err:
                 self.errors += 1
                 log.warning("simulated controllers: %s", err)
@@ -86,6 +103,10 @@ class SimulatedControllers(Closing):
             if delay < -10 * self.period_s:
                 deadline = time.monotonic()
             self._stop.wait(max(delay, 0.0))
+
+    def is_alive(self) -> bool:
+        """Whether the background thread runs."""
+        return self._thread is not None and self._thread.is_alive()
 
     def close(self) -> None:
         """The same as :meth:`shutdown`."""

@@ -15,6 +15,15 @@ if TYPE_CHECKING:
     from gateway.types import Twist
 
 
+#: What to do instead of a ``virtual`` bus when processes must share it.
+VIRTUAL_HINT = (
+    "to share a bus between processes, use a kernel one: sudo modprobe vcan && sudo ip link add "
+    "vcan0 type vcan && sudo ip link set vcan0 up, then give every command "
+    "--interface socketcan --channel vcan0 (see 'A real kernel bus without hardware' in the "
+    "README)"
+)
+
+
 def load(ctx: click.Context, path: str | None) -> GatewayConfig:
     """The configuration at ``path`` with the root group's bus overrides."""
     obj = ctx.find_root().obj or {}

@@ -33,10 +33,12 @@ import can
 import click
 
 from gateway.bus import open_bus, to_frame
+from gateway.bus_edge import bus_options
+from gateway.bus_health import CLASS_COUNTERS, ErrorFrame
 from gateway.candump import CandumpError, parse_line
 from gateway.cli import config_option, json_option
 from gateway.client import ClientError, ControlClient
-from gateway.commands._common import load, socket_for
+from gateway.commands._common import VIRTUAL_HINT, load, socket_for
 from gateway.monitor import WINDOW_S, BusMonitor, StatusMonitor, render, snapshot_json
 
 if TYPE_CHECKING:
@@ -194,7 +196,12 @@ def watch_log(cfg: GatewayConfig, path: str, screen: Screen, period: float, wind
 def watch_bus(cfg: GatewayConfig, screen: Screen, period: float, window: float,
               once: bool) -> None:
     """Listen on the configured bus (never sending) through a :class:`BusMonitor`."""
-    bus = open_bus(cfg.bus.interface, cfg.bus.channel)
+    if cfg.bus.interface == "virtual":
+        click.echo(f"monitor: the bus is python-can's virtual one ({cfg.bus.channel}), which "
+                   f"exists only inside one process: this monitor will see nothing of a gateway "
+                   f"or of 'wheelgate sim' running elsewhere. Watch the daemon instead (without "
+                   f"--bus), or {VIRTUAL_HINT}", err=True)
+    bus = open_bus(cfg.bus.interface, cfg.bus.channel, **bus_options(cfg.bus.interface, None))
     try:
         start = time.monotonic()
         mon = BusMonitor(cfg, window, source=f"bus {cfg.bus.interface}:{cfg.bus.channel}",
@@ -219,6 +226,12 @@ def watch_bus(cfg: GatewayConfig, screen: Screen, period: float, window: float,
             t = time.monotonic()
             if msg.is_error_frame:
                 mon.count("bus error frames")
+                error = ErrorFrame.decode(msg.arbitration_id, bytes(msg.data))
+                for flag, name in CLASS_COUNTERS.items():
+                    if error.classes & flag:
+                        mon.count(f"error frames: {name.replace('_', ' ')}")
+            elif msg.is_fd:
+                mon.count("CAN FD frames (ignored)")
             else:
                 mon.feed(to_frame(msg, t), t)
         screen.final(mon.snapshot(time.monotonic()))
