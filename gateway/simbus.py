@@ -55,6 +55,8 @@ class SimulatedControllers(Closing):
         self.late_steps = 0
         #: Called with the step's time after every step, under the lock (ground truth).
         self.on_step: Callable[[float], None] | None = None
+        #: What ended the background thread, if anything but :meth:`shutdown` did.
+        self.failure: BaseException | None = None
         self.bus = open_bus(interface, channel, **bus_kwargs)
         self._open = True
 
@@ -87,6 +89,13 @@ class SimulatedControllers(Closing):
             return read()
 
     def _run(self) -> None:
+        try:
+            self._loop()
+        except BaseException as err:
+            self.failure = err
+            raise
+
+    def _loop(self) -> None:
         deadline = time.monotonic()
         while not self._stop.is_set():
             now = time.monotonic()
@@ -105,7 +114,8 @@ class SimulatedControllers(Closing):
             self._stop.wait(max(delay, 0.0))
 
     def is_alive(self) -> bool:
-        """Whether the background thread runs."""
+        """Whether the background thread runs (see :attr:`failure` when it stopped by
+        itself)."""
         return self._thread is not None and self._thread.is_alive()
 
     def close(self) -> None:

@@ -4,15 +4,18 @@ Where the gateway's odometry is computed from the encoder frames it receives, th
 computed from the simulators' exact shaft angles (and the steering actuators' exact angles),
 every simulator step, by an odometry of its own: what the robot really did.  ``wheelgate sim``
 reports it, so a gateway in another process can be checked against it, and the end-to-end
-tests compare the two.  Pure: the caller passes the times.
+tests compare the two.  A robot with steered wheels that no simulated actuator turns has a
+truth only when its other wheels fix the twist on their own, as in a replayed log
+(:func:`gateway.replay_steering.fixed_subset`).  Pure: the caller passes the times.
 """
 
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from gateway.kinematics import Odometry
+from gateway.replay_steering import fixed_subset
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -42,16 +45,25 @@ class SimTruth:
         self.actuators = [(k, config.steering.index(s.motor))
                           for k, s in enumerate(self.sims) if s.motor.steering]
         actuated = {i for _, a in self.actuators for i in drives.steered_by[a]}
-        #: Steered wheels that no actuator turns: their angle is not simulated, so the truth
-        #: is unknown for a robot that has any.
+        #: Steered wheels that no actuator turns (castors, wheels steered outside the
+        #: gateway): their angle is not simulated.
         self.unsimulated = tuple(w.name for i, w in enumerate(config.model.wheels)
                                  if w.steered and i not in actuated)
-        self.odometry = Odometry(config.model)
+        #: With such wheels, the wheels that are not steered when they fix the twist on their
+        #: own (the differential drive with a castor): the truth is then theirs, exactly.
+        self.fixed: tuple[int, ...] | None = None
+        model = config.model
+        if self.unsimulated:
+            subset = fixed_subset(config)
+            if subset is not None:
+                self.fixed, model = subset
+        self.odometry = Odometry(model)
 
     @property
     def available(self) -> bool:
-        """Whether the pose can be known (every steered wheel has a simulated actuator)."""
-        return not self.unsimulated
+        """Whether the pose can be known: every steered wheel has a simulated actuator, or the
+        wheels that are not steered fix the twist without them."""
+        return not self.unsimulated or self.fixed is not None
 
     def positions(self) -> list[float | None]:
         """Every wheel's true angle (model order; ``None``: passive)."""
@@ -69,45 +81,61 @@ class SimTruth:
 
     def update(self, now_s: float) -> None:
         """Integrate the motion since the last update (call it after every simulator step)."""
-        if self.available:
+        if self.fixed is not None:
+            positions = self.positions()
+            self.odometry.update([positions[i] for i in self.fixed], now_s)
+        elif not self.unsimulated:
             self.odometry.update(self.positions(), now_s, self.steer())
 
     def snapshot(self, t_s: float, steps: int = 0, late_steps: int = 0) -> dict[str, object]:
-        """The state as a JSON-able mapping (the ``state`` line of ``wheelgate sim``)."""
+        """The state as a JSON-able mapping (the ``state`` line of ``wheelgate sim``).
+
+        Per device: ``armed``; ``wheel_rad_s`` and ``wheel_rad``, its output shaft's speed and
+        angle (the motor's through gear ratio and sign: a wheel's, or a steering actuator's
+        shaft); ``steer_rad``, a steering actuator's steering angle (``None`` for a drive
+        motor).  ``pose`` and ``distance`` are ``None`` when the truth is not
+        :attr:`available`.
+        """
         st = self.odometry.state
         devices = []
         for sim in self.sims:
             m = sim.motor
             devices.append({
-                "name": m.wheel, "driver": m.driver, "node_id": m.node_id,
-                "armed": sim.model.armed,
-                "wheel_rad_s": None if m.steering else sim.wheel_velocity_rad_s,
-                "wheel_rad": None if m.steering else sim.wheel_position_rad,
-                "steer_rad": sim.steer_rad if m.steering else None,
+                "name": m.wheel, "node_id": m.node_id, "armed": sim.model.armed,
+                "wheel_rad_s": sim.wheel_velocity_rad_s + 0.0,
+                "wheel_rad": sim.wheel_position_rad + 0.0,
+                "steer_rad": sim.steer_rad + 0.0 if m.steering else None,
             })
         return {
             "t": t_s,
-            "pose": ({"x": st.pose.x_m, "y": st.pose.y_m, "theta": st.pose.theta_rad}
-                     if self.available else None),
+            "pose": ({"x": st.pose.x_m + 0.0, "y": st.pose.y_m + 0.0,
+                      "theta": st.pose.theta_rad + 0.0} if self.available else None),
             "distance": st.distance_m if self.available else None,
             "steps": steps, "late_steps": late_steps, "devices": devices,
         }
 
 
-def state_line(state: dict[str, object]) -> str:
-    """One compact line of a :meth:`SimTruth.snapshot`."""
+def state_line(state: dict[str, Any], prefix: str = "sim") -> str:
+    """One compact line of a :meth:`SimTruth.snapshot`: time, pose (``unknown`` without the
+    truth), then per device its wheel speed, or a steering actuator's angle, and whether it
+    is armed."""
     pose = state["pose"]
-    head = f"sim t={state['t']:.1f}s"
-    if isinstance(pose, dict):
-        head += (f" pose x={pose['x']:+.3f} y={pose['y']:+.3f} "
-                 f"th={math.degrees(pose['theta']):+.1f}deg")
+    head = f"{prefix} t={state['t']:.1f}s pose "
+    if pose is None:
+        head += "unknown"
+    else:
+        head += (f"x={_zero(pose['x'], 3):+.3f} y={_zero(pose['y'], 3):+.3f} "
+                 f"th={_zero(math.degrees(pose['theta']), 1):+.1f}deg")
     parts = [head]
-    devices = state["devices"]
-    assert isinstance(devices, list)
-    for d in devices:
+    for d in state["devices"]:
         if d["steer_rad"] is not None:
-            value = f"{round(math.degrees(d['steer_rad']), 1) + 0.0:+.1f}deg"
+            value = f"{_zero(math.degrees(d['steer_rad']), 1):+.1f}deg"
         else:
-            value = f"{round(d['wheel_rad_s'], 2) + 0.0:+.2f} rad/s"
+            value = f"{_zero(d['wheel_rad_s'], 2):.2f} rad/s"
         parts.append(f"{d['name']} {value} {'armed' if d['armed'] else 'idle'}")
     return " | ".join(parts)
+
+
+def _zero(value: float, digits: int) -> float:
+    """``value`` rounded, without the minus sign of a negative zero (``-0.00``)."""
+    return round(value, digits) + 0.0

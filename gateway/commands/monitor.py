@@ -38,7 +38,7 @@ from gateway.bus_health import CLASS_COUNTERS, ErrorFrame
 from gateway.candump import CandumpError, parse_line
 from gateway.cli import config_option, json_option
 from gateway.client import ClientError, ControlClient
-from gateway.commands._common import VIRTUAL_HINT, load, socket_for
+from gateway.commands._common import load, socket_for
 from gateway.monitor import WINDOW_S, BusMonitor, StatusMonitor, render, snapshot_json
 
 if TYPE_CHECKING:
@@ -193,14 +193,30 @@ def watch_log(cfg: GatewayConfig, path: str, screen: Screen, period: float, wind
     screen.final(mon.snapshot(0.0 if t is None else t))
 
 
+def virtual_bus_note(channel: str) -> str:
+    """What ``monitor --bus`` says up front on a ``virtual`` bus: why it sees nothing of other
+    processes, and how to watch a gateway and its controllers anyway."""
+    kernel = "wheelgate --interface socketcan --channel vcan0"
+    return (
+        f"monitor: the bus is python-can's virtual one (channel {channel!r}), which exists only "
+        f"inside one process: this monitor sees nothing of a gateway ('wheelgate run --sim') or "
+        f"of simulated controllers ('wheelgate sim') running in another process.\n"
+        f"  To watch them, run the gateway and 'wheelgate sim' on a kernel bus:\n"
+        f"    sudo modprobe vcan && sudo ip link add vcan0 type vcan && "
+        f"sudo ip link set vcan0 up\n"
+        f"    {kernel} sim\n"
+        f"    {kernel} run\n"
+        f"    {kernel} monitor --bus    (or: candump vcan0)\n"
+        f"  or watch the daemon through its socket: wheelgate monitor (without --bus).\n"
+        f"  Listening on the virtual bus anyway."
+    )
+
+
 def watch_bus(cfg: GatewayConfig, screen: Screen, period: float, window: float,
               once: bool) -> None:
     """Listen on the configured bus (never sending) through a :class:`BusMonitor`."""
     if cfg.bus.interface == "virtual":
-        click.echo(f"monitor: the bus is python-can's virtual one ({cfg.bus.channel}), which "
-                   f"exists only inside one process: this monitor will see nothing of a gateway "
-                   f"or of 'wheelgate sim' running elsewhere. Watch the daemon instead (without "
-                   f"--bus), or {VIRTUAL_HINT}", err=True)
+        click.echo(virtual_bus_note(cfg.bus.channel), err=True)
     bus = open_bus(cfg.bus.interface, cfg.bus.channel, **bus_options(cfg.bus.interface, None))
     try:
         start = time.monotonic()

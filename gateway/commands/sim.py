@@ -8,29 +8,107 @@ would (they then stop by their own command timeouts, or do not).  The simulators
 the devices' state at power-on and follow their protocols' device side.  The process also
 integrates the robot's true pose from the simulated shafts (:mod:`gateway.simtruth`) and
 reports it in its state lines: every ``--every`` seconds, on SIGUSR1, and on Enter when stdin
-is a terminal.  SIGINT or SIGTERM stops it with a last state line; the exit status is 0.
+is a terminal.  SIGINT or SIGTERM (or SIGHUP) stops it with a last state line; the exit status
+is 0.
+
+Output, one line each (``--json``: one JSON object each):
+
+* per device: ``sim: NAME DRIVER node ID (drive motor|steering actuator)``;
+  ``{"event": "device", "name", "driver", "node_id", "role": "drive"|"steer"}``;
+* then ``sim: ready: N devices on INTERFACE:CHANNEL, stepping at RATE Hz (...)``;
+  ``{"event": "ready", "interface", "channel", "devices", "rate_hz"}``.  A robot with steered
+  wheels that no simulated actuator turns, and whose other wheels do not fix the twist on
+  their own, has no true pose: the text line says which wheels, the JSON object adds
+  ``"truth": false`` and ``"unsimulated": [wheel names]``, and the state lines report the
+  pose as unknown (``null``);
+* state lines (:func:`gateway.simtruth.state_line`; JSON: ``"event": "state"`` and the
+  fields of :meth:`gateway.simtruth.SimTruth.snapshot`), the last one prefixed
+  ``sim stopped:`` (``"event": "stopped"``).
 """
 
 from __future__ import annotations
 
 import json
+import os
 import select
 import signal
 import sys
 import threading
 import time
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import click
 
 from gateway.cli import config_option
 from gateway.commands._common import VIRTUAL_HINT, load
 from gateway.drives import DriveSet
+from gateway.errors import BusError, GatewayError
 from gateway.simbus import SimulatedControllers
 from gateway.simtruth import SimTruth, state_line
 
 if TYPE_CHECKING:
+    from collections.abc import Sequence
     from types import FrameType
+
+    from gateway.config import GatewayConfig
+    from gateway.sim import DeviceSimulator
+
+#: What the ready line tells an operator about the keys and signals.
+CONTROLS = "SIGUSR1 or Enter: state line; Ctrl-C: stop"
+
+
+def announce_lines(cfg: GatewayConfig, sims: Sequence[DeviceSimulator], truth: SimTruth,
+                   rate_hz: float, as_json: bool) -> list[str]:
+    """The lines printed once the simulators run: one per device, then the ready line."""
+    lines = []
+    for sim in sims:
+        m = sim.motor
+        if as_json:
+            lines.append(json.dumps({"event": "device", "name": m.wheel, "driver": m.driver,
+                                     "node_id": m.node_id,
+                                     "role": "steer" if m.steering else "drive"}))
+        else:
+            role = "steering actuator" if m.steering else "drive motor"
+            lines.append(f"sim: {m.wheel} {m.driver} node {m.node_id} ({role})")
+    if as_json:
+        ready: dict[str, Any] = {"event": "ready", "interface": cfg.bus.interface,
+                                 "channel": cfg.bus.channel, "devices": len(sims),
+                                 "rate_hz": rate_hz}
+        if not truth.available:
+            ready.update(truth=False, unsimulated=list(truth.unsimulated))
+        lines.append(json.dumps(ready))
+    else:
+        note = ("" if truth.available else
+                f"; no true pose: wheel(s) {', '.join(truth.unsimulated)} steered without a "
+                f"steering actuator")
+        lines.append(f"sim: ready: {len(sims)} devices on {cfg.bus.interface}:"
+                     f"{cfg.bus.channel}, stepping at {rate_hz:g} Hz{note} ({CONTROLS})")
+    return lines
+
+
+def report_line(event: str, state: dict[str, Any], as_json: bool) -> str:
+    """A state line (``event`` ``"state"``) or the last one (``"stopped"``)."""
+    if as_json:
+        return json.dumps({"event": event, **state})
+    return state_line(state, "sim stopped:" if event == "stopped" else "sim")
+
+
+def open_controllers(cfg: GatewayConfig, sims: Sequence[DeviceSimulator],
+                     rate_hz: float) -> SimulatedControllers:
+    """The simulators on the configuration's bus.
+
+    :raises BusError: naming the bus, with what to check.
+    """
+    try:
+        return SimulatedControllers(sims, cfg.bus.channel, interface=cfg.bus.interface,
+                                    rate_hz=rate_hz)
+    except BusError as err:
+        hint = ""
+        if cfg.bus.interface == "socketcan":
+            hint = (f"; expected an existing CAN interface {cfg.bus.channel!r} that is up "
+                    f"('ip link show {cfg.bus.channel}'; without hardware: sudo modprobe vcan "
+                    f"&& sudo ip link add vcan0 type vcan && sudo ip link set vcan0 up)")
+        raise BusError(f"wheelgate sim: {err}{hint}") from err
 
 
 @click.command()
@@ -50,19 +128,14 @@ def command(ctx: click.Context, config_path: str | None, rate_hz: float, every_s
     drives = DriveSet(cfg)
     sims = drives.simulators()
     truth = SimTruth(cfg, drives, sims)
-    ctl = SimulatedControllers(sims, cfg.bus.channel, interface=cfg.bus.interface,
-                               rate_hz=rate_hz)
+    ctl = open_controllers(cfg, sims, rate_hz)
     ctl.on_step = truth.update
     start = time.monotonic()
 
     def emit(event: str) -> None:
         state = ctl.snapshot(lambda: truth.snapshot(time.monotonic() - start, ctl.steps,
                                                      ctl.late_steps))
-        if as_json:
-            click.echo(json.dumps({"event": event, **state}))
-        else:
-            line = state_line(state)
-            click.echo(f"sim stopped: {line}" if event == "stopped" else line)
+        click.echo(report_line(event, state, as_json))
         sys.stdout.flush()
 
     stop = threading.Event()
@@ -80,47 +153,35 @@ def command(ctx: click.Context, config_path: str | None, rate_hz: float, every_s
                                                (signal.SIGUSR1, on_usr1))}
     try:
         ctl.start()
-        for sim in sims:
-            m = sim.motor
-            role = "steer" if m.steering else "drive"
-            if as_json:
-                click.echo(json.dumps({"event": "device", "name": m.wheel, "driver": m.driver,
-                                       "node_id": m.node_id, "role": role}))
-            else:
-                click.echo(f"sim: {m.wheel} {m.driver} node {m.node_id} "
-                           f"({'steering actuator' if m.steering else 'drive motor'})")
-        bus = f"{cfg.bus.interface}:{cfg.bus.channel}"
-        if as_json:
-            click.echo(json.dumps({"event": "ready", "interface": cfg.bus.interface,
-                                   "channel": cfg.bus.channel, "devices": len(sims),
-                                   "rate_hz": rate_hz, "truth": truth.available}))
-        else:
-            note = ("" if truth.available else
-                    f"; no true pose: {', '.join(truth.unsimulated)} steered without an actuator")
-            click.echo(f"sim: ready: {len(sims)} devices on {bus}, stepping at {rate_hz:g} Hz"
-                       f"{note} (SIGUSR1 or Enter: state line; Ctrl-C: stop)")
+        for line in announce_lines(cfg, sims, truth, rate_hz, as_json):
+            click.echo(line)
+        sys.stdout.flush()
         if cfg.bus.interface == "virtual":
             click.echo(f"sim: note: python-can's virtual bus exists only inside this process, so "
                        f"no gateway elsewhere hears these devices; {VIRTUAL_HINT}", err=True)
-        sys.stdout.flush()
-        tty = sys.stdin.isatty()
+        keys = sys.stdin.fileno() if sys.stdin is not None and sys.stdin.isatty() else None
         next_s = time.monotonic() + every_s if every_s > 0 else float("inf")
         while not stop.is_set():
             timeout = max(0.0, min(next_s - time.monotonic(), 0.2))
-            if tty:
-                ready, _, _ = select.select([sys.stdin], [], [], timeout)
-                if ready and sys.stdin.readline() is not None:
-                    wanted.set()
+            if keys is not None:
+                ready, _, _ = select.select([keys], [], [], timeout)
+                if ready:
+                    typed = os.read(keys, 4096)
+                    if typed:
+                        wanted.set()
+                    else:
+                        keys = None  # end of input (Ctrl-D): only the signals are left
             else:
                 stop.wait(timeout)
             if wanted.is_set():
                 wanted.clear()
                 emit("state")
             if time.monotonic() >= next_s:
-                next_s += every_s
+                next_s = max(next_s + every_s, time.monotonic())
                 emit("state")
-            if ctl.errors and not ctl.is_alive():
-                break
+            if not ctl.is_alive():
+                raise GatewayError(f"wheelgate sim: the simulator thread stopped: "
+                                   f"{ctl.failure!r}")
         emit("stopped")
     finally:
         ctl.shutdown()

@@ -1,0 +1,182 @@
+"""The ``socketcan`` tier's harness: ``wheelgate sim`` and ``wheelgate run`` as two processes
+on a kernel CAN interface, recorded with ``candump``, driven through the control socket and
+through CAN twist frames.
+
+The tier runs in CI inside an emulated VM about 14 times slower than the host, so the test
+configurations lower the loop rate and lengthen every liveness and enable timeout; the checks
+judge what reached the bus and the simulated wheels, never how fast.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import select
+import signal
+import subprocess
+import sys
+import time
+from typing import IO, TYPE_CHECKING, Any
+
+import yaml
+
+from gateway.client import ControlClient
+
+if TYPE_CHECKING:
+    from pathlib import Path
+
+#: Generous bounds for the emulated VM: process start (imports take ~10 s there), enabling.
+START_S = 180.0
+
+
+def tier_config(source: Path, dest: Path, rate_hz: float = 100.0,
+                liveness_s: float = 3.0) -> Path:
+    """A shipped configuration made fit for the tier: a lower loop rate, long liveness and
+    enable timeouts, a longer command timeout, no tracking-error check (it judges speed under
+    a CPU 14 times slower), written to ``dest``.
+
+    :param liveness_s: the motors' liveness timeout.  A speed loop closed on the host (DJI)
+        integrates over at most this long between two feedback frames: keep it short there.
+    """
+    raw: dict[str, Any] = yaml.safe_load(source.read_text())
+    gateway = raw.setdefault("gateway", {})
+    gateway.update(rate_hz=rate_hz, enable_timeout_s=60.0, cmd_timeout_s=1.5,
+                   tracking_time_s=0.0, odom_rate_hz=20.0, status_rate_hz=5.0)
+    for block in ("motor_defaults", "steering_defaults"):
+        if block in raw or (block == "steering_defaults" and "steering" in raw):
+            raw.setdefault(block, {})["liveness_s"] = liveness_s
+    if "motor_defaults" not in raw:
+        raw["motor_defaults"] = {"liveness_s": liveness_s}
+    # A DBC file is named relative to the configuration: keep pointing at the shipped one.
+    for block in (raw.get("motor_defaults"), *(raw.get("motors") or {}).values()):
+        if isinstance(block, dict) and isinstance(block.get("dbc"), str):
+            block["dbc"] = str((source.parent / block["dbc"]).resolve())
+    dest.write_text(yaml.safe_dump(raw, sort_keys=False))
+    return dest
+
+
+class Lines:
+    """JSON lines of a child's stdout, read with a timeout."""
+
+    def __init__(self, stream: IO[bytes]) -> None:
+        self.fd = stream.fileno()
+        self.buf = b""
+
+    def next(self, timeout_s: float) -> dict[str, Any]:
+        end = time.monotonic() + timeout_s
+        while b"\n" not in self.buf:
+            ready, _, _ = select.select([self.fd], [], [], max(end - time.monotonic(), 0.0))
+            if not ready:
+                raise AssertionError(f"no line within {timeout_s} s")
+            chunk = os.read(self.fd, 65536)
+            if not chunk:
+                raise AssertionError("the process closed its output")
+            self.buf += chunk
+        line, self.buf = self.buf.split(b"\n", 1)
+        parsed: dict[str, Any] = json.loads(line)
+        return parsed
+
+
+class Session:
+    """``wheelgate sim`` and ``wheelgate run`` on ``vcan``, and optionally ``candump -L``.
+
+    :param config: the tier configuration.
+    :param vcan: the kernel CAN interface.
+    :param sock: the control socket (on a tmpfs: not on the VM's shared folder).
+    :param record: where ``candump -L`` writes the session, if wanted.
+    :param sim_rate_hz: the simulators' step rate.
+    """
+
+    def __init__(self, config: Path, vcan: str, sock: str, record: Path | None = None,
+                 sim_rate_hz: float = 1000.0) -> None:
+        self.config, self.vcan, self.sock = config, vcan, sock
+        root = [sys.executable, "-m", "gateway", "--interface", "socketcan", "--channel", vcan]
+        self.procs: dict[str, subprocess.Popen[bytes]] = {}
+        self._files: list[IO[bytes]] = []
+        if record is not None:
+            out = record.open("wb")
+            self._files.append(out)
+            self.procs["candump"] = subprocess.Popen(["candump", "-L", vcan], stdout=out,
+                                                     stderr=subprocess.PIPE)
+        self.procs["sim"] = subprocess.Popen(
+            [*root, "sim", "-c", str(config), "--json", "--every", "0", "--rate",
+             str(sim_rate_hz)],
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+        self.procs["run"] = subprocess.Popen(
+            [*root, "run", "-c", str(config), "--socket", sock],
+            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+        stdout = self.procs["sim"].stdout
+        assert stdout is not None
+        self.sim_out = Lines(stdout)
+
+    def __enter__(self) -> Session:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def tails(self) -> str:
+        """The stderr of every process that has ended (for failure messages)."""
+        out = []
+        for name, proc in self.procs.items():
+            if proc.poll() is not None and proc.stderr is not None:
+                out.append(f"--- {name} (exit {proc.returncode}):\n"
+                           + proc.stderr.read().decode(errors="replace")[-3000:])
+        return "\n".join(out)
+
+    def wait_ready(self) -> None:
+        """Until the simulators announced themselves and the gateway is RUNNING."""
+        end = time.monotonic() + START_S
+        while (line := self.sim_out.next(START_S))["event"] != "ready":
+            pass
+        assert line["devices"] > 0
+        while not os.path.exists(self.sock):
+            assert time.monotonic() < end and self.procs["run"].poll() is None, self.tails()
+            time.sleep(0.2)
+        while (state := self.request({"op": "status"})["state"]) != "running":
+            assert time.monotonic() < end, f"gateway state {state}\n{self.tails()}"
+            time.sleep(0.2)
+
+    def request(self, req: dict[str, Any]) -> dict[str, Any]:
+        with ControlClient(self.sock, timeout_s=30.0) as client:
+            reply: dict[str, Any] = client.request(req)
+        return reply
+
+    def truth(self) -> dict[str, Any]:
+        """The simulators' true state (SIGUSR1 -> a state line)."""
+        self.procs["sim"].send_signal(signal.SIGUSR1)
+        while (line := self.sim_out.next(60.0))["event"] != "state":
+            pass
+        return line
+
+    def odometry(self) -> dict[str, Any]:
+        status = self.request({"op": "status"})
+        odo: dict[str, Any] = status["odometry"]
+        return odo
+
+    def close(self) -> None:
+        """Stop the gateway, then the simulators and candump (killed if they linger)."""
+        for name in ("run", "sim", "candump"):
+            proc = self.procs.get(name)
+            if proc is None or proc.poll() is not None:
+                continue
+            proc.send_signal(signal.SIGTERM)
+            try:
+                proc.wait(timeout=60)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+        for proc in self.procs.values():
+            for stream in (proc.stdout, proc.stderr):
+                if stream is not None:
+                    stream.close()
+        for f in self._files:
+            f.close()
+
+
+def pose_error(odo: dict[str, Any], truth: dict[str, Any]) -> float:
+    """The distance between the gateway's pose and the true one, m (heading as arc at 1 m)."""
+    pose = truth["pose"]
+    return math.hypot(odo["x"] - pose["x"], odo["y"] - pose["y"]) + abs(
+        math.remainder(odo["theta"] - pose["theta"], math.tau))
