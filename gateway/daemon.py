@@ -340,9 +340,17 @@ class Daemon:
         ``select`` on the server's descriptor, which wakes for a request at once, where the
         server offers one (``fileno()``), else a plain sleep.  The last pass, at the deadline,
         hands this cycle every request that arrived meanwhile.
+
+        Every poll until the next cycle's draws on one budget, begun here where the server
+        offers one (:meth:`ControlServer.begin_cycle`): however fast clients send, this wait
+        serves at most one cycle's share of requests, and the rest waits, unread, for later
+        cycles.
         """
         sched = self.scheduler
         spin = sched.spin_s
+        begin_cycle = getattr(self.server, "begin_cycle", None)
+        if begin_cycle is not None:
+            begin_cycle(sched.period_s)
         probe = self.miss_probe
         if probe is not None:
             probe.before_wait()

@@ -25,6 +25,7 @@ if TYPE_CHECKING:
 
     from gateway.config import GatewayConfig
     from gateway.driver import MotorDriver
+    from gateway.filters import CanFilter
     from gateway.sim import DeviceSimulator
     from gateway.types import Frame, MotorConfig, MotorStatus, WheelFeedback
 
@@ -162,6 +163,25 @@ class DriveSet:
             if drv.on_frame(frame):
                 return True
         return False
+
+    def receive_filters(self) -> tuple[CanFilter, ...] | None:
+        """The receive filters of every driver (:meth:`MotorDriver.receive_filters`), in
+        driver order without repeats: whatever :meth:`on_frame` would give a driver passes.
+
+        :return: ``None`` if a driver does not declare what it takes (:meth:`undeclared`):
+            it needs every frame of the bus.
+        """
+        out: dict[CanFilter, None] = {}
+        for drv, _ in self.groups:
+            declared = drv.receive_filters()
+            if declared is None:
+                return None
+            out.update(dict.fromkeys(declared))
+        return tuple(out)
+
+    def undeclared(self) -> list[str]:
+        """The class names of the drivers that do not declare the identifiers they take."""
+        return [type(drv).__name__ for drv, _ in self.groups if drv.receive_filters() is None]
 
     def status(self, now_s: float) -> list[MotorStatus]:
         """Every motor's status: the drive motors in model order of their wheels, then the

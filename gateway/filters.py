@@ -49,9 +49,11 @@ class CanFilter:
         """A filter for exactly one identifier."""
         return cls(can_id, EXT_MASK if extended else STD_MASK, extended)
 
-    def matches(self, arbitration_id: int, extended: bool) -> bool:
-        """Whether a frame with this identifier passes."""
-        return extended == self.extended and not (self.can_id ^ arbitration_id) & self.can_mask
+    def matches(self, arbitration_id: int, is_extended_id: bool) -> bool:
+        """Whether a frame with this identifier and identifier type passes (data and remote
+        frames alike: python-can leaves the RTR bit out of the kernel's mask)."""
+        return (is_extended_id == self.extended
+                and not (self.can_id ^ arbitration_id) & self.can_mask)
 
     def as_python_can(self) -> dict[str, int | bool]:
         """The filter as python-can's ``can_filters`` takes it."""
@@ -62,30 +64,30 @@ class CanFilter:
         return f"{self.can_id:0{width}X}/{self.can_mask:0{width}X}{'x' if self.extended else ''}"
 
 
-def matches_any(filters: Iterable[CanFilter], arbitration_id: int, extended: bool) -> bool:
+def matches_any(filters: Iterable[CanFilter], arbitration_id: int, is_extended_id: bool) -> bool:
     """Whether a frame passes any of ``filters``."""
-    return any(f.matches(arbitration_id, extended) for f in filters)
+    return any(f.matches(arbitration_id, is_extended_id) for f in filters)
 
 
 def gateway_filters(config: GatewayConfig, drives: DriveSet) -> tuple[CanFilter, ...] | None:
-    """Every identifier the gateway consumes: its drivers' feedback and its twist input.
+    """Every identifier the gateway consumes: its drivers' feedback and replies
+    (:meth:`~gateway.drives.DriveSet.receive_filters`) and, with ``gateway.can_input``, the
+    twist command (``gateway.can_ids.twist``).
 
     :return: ``None`` when a driver does not declare what it takes (a plug-in written before
         the declaration): the bus is then opened unfiltered, and a warning names the driver.
     """
-    out: list[CanFilter] = []
-    for drv, _ in drives.groups:
-        declared = drv.receive_filters()
-        if declared is None:
-            log.warning("driver %s does not declare the CAN IDs it takes (receive_filters): the "
-                        "bus is opened without kernel receive filters", type(drv).__name__)
-            return None
-        out.extend(declared)
+    declared = drives.receive_filters()
+    if declared is None:
+        log.warning("driver %s does not declare the CAN IDs it takes (receive_filters): the "
+                    "bus is opened without kernel receive filters",
+                    ", ".join(drives.undeclared()))
+        return None
     ids = config.loop.can_ids
-    if config.loop.can_input:
-        out.append(CanFilter.exact(ids.twist, ids.extended))
-    seen: set[CanFilter] = set()
-    return tuple(f for f in out if not (f in seen or seen.add(f)))  # type: ignore[func-returns-value]
+    if not config.loop.can_input:
+        return declared
+    twist = CanFilter.exact(ids.twist, ids.extended)
+    return declared if twist in declared else (*declared, twist)
 
 
 def own_id_collisions(config: GatewayConfig, drives: DriveSet) -> list[str]:

@@ -264,7 +264,7 @@ def test_too_long_message_is_reported_and_skipped(server: ControlServer, sock_pa
             "id": None,
             "error": {
                 "code": "bad_command",
-                "message": "message too long: expected at most 4096 bytes, got more",
+                "message": "message too long: expected at most 1024 bytes, got more",
             },
         }
         assert raw.line() == {"ok": True, "id": 2, "op": "status"}
@@ -607,7 +607,9 @@ def test_unknown_client_ids_are_ignored(server: ControlServer) -> None:
     assert server.counters == ServerCounters()
 
 
-def test_a_thousand_clients_at_once_are_served_or_refused(sock_path: Path) -> None:
+def test_a_thousand_clients_at_once_displace_the_oldest_silent_ones(sock_path: Path) -> None:
+    """Each connection beyond max_clients closes the oldest that has sent nothing yet: the
+    last 600 are served, the first 400 were displaced (counted as refused)."""
     soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
     need = 3000
     if soft < need:
@@ -616,18 +618,18 @@ def test_a_thousand_clients_at_once_are_served_or_refused(sock_path: Path) -> No
         resource.setrlimit(resource.RLIMIT_NOFILE, (need, hard))
     try:
         before = open_fds()
-        served, refused, counters = _thousand_clients(sock_path, total=1000, max_clients=600)
+        served, counters = _thousand_clients(sock_path, total=1000, max_clients=600)
         assert open_fds() == before
     finally:
         resource.setrlimit(resource.RLIMIT_NOFILE, (soft, hard))
-    assert (served, refused) == (600, 400)
-    assert (counters.accepted, counters.refused) == (600, 400)
+    assert served == list(range(400, 1000))
+    assert (counters.accepted, counters.refused, counters.evicted) == (1000, 400, 0)
 
 
-def _thousand_clients(
-    path: Path, total: int, max_clients: int
-) -> tuple[int, int, ServerCounters]:
-    served = refused = 0
+def _thousand_clients(path: Path, total: int, max_clients: int) -> tuple[list[int], ServerCounters]:
+    """Connect ``total`` clients one after the other, then send a status request on each:
+    the indices of those answered."""
+    served: list[int] = []
     clients: list[socket.socket] = []
     with ControlServer(path, max_clients=max_clients) as srv:
         try:
@@ -637,6 +639,10 @@ def _thousand_clients(
                     clients.append(sock)
                     sock.settimeout(WAIT_S)
                     sock.connect(str(path))
+                deadline = time.monotonic() + WAIT_S
+                while srv.counters.accepted < total:  # all accepted before anyone sends
+                    assert time.monotonic() < deadline, f"accepted only {srv.counters}"
+                    time.sleep(0.01)
                 for index, sock in enumerate(clients):
                     with contextlib.suppress(BrokenPipeError, ConnectionResetError):
                         sock.sendall(b'{"op":"status","id":%d}\n' % index)
@@ -647,14 +653,12 @@ def _thousand_clients(
                             data += chunk
                     if data:
                         assert json.loads(data) == {"ok": True, "id": index, "op": "status"}
-                        served += 1
-                    else:
-                        refused += 1
+                        served.append(index)
         finally:
             for sock in clients:
                 sock.close()
         counters = srv.counters
-    return served, refused, counters
+    return served, counters
 
 
 def test_running_out_of_file_descriptors_pauses_accepting(
@@ -678,6 +682,190 @@ def test_running_out_of_file_descriptors_pauses_accepting(
     finally:
         for sock in clients:
             sock.close()
+
+
+# -- budgets, timeouts and eviction ----------------------------------------------------------
+
+
+def lines(op: str, count: int, start: int = 0) -> bytes:
+    return b"".join(b'{"op":"%s","id":%d}\n' % (op.encode(), k) for k in range(start, count))
+
+
+def ids(events: Events) -> list[object]:
+    """The request ids of ``events`` (a parse error's when it could be read)."""
+    return [item.request_id if isinstance(item, ProtocolError) else item.id for _, item in events]
+
+
+def test_a_poll_takes_at_most_its_budget_round_robin(
+    server: ControlServer, sock_path: Path
+) -> None:
+    with raw_client(sock_path) as flood, raw_client(sock_path) as other:
+        flood.send(lines("stop", 200))
+        other.send(b'{"op":"estop","id":"e"}\n')
+        batches: list[Events] = []
+        while sum(map(len, batches)) < 201:
+            assert len(batches) < 50, f"only {sum(map(len, batches))} requests in 50 polls"
+            batches.append(server.poll(0.05))
+        first = next(batch for batch in batches if batch)
+    assert max(map(len, batches)) == ControlServer.ROUND_REQUESTS
+    # One line per client per turn: the other client's estop is not behind the flood.
+    assert CommandRequest(Op.ESTOP, "e") in [item for _, item in first[:2]]
+    flood_ids = [rid for batch in batches for rid in ids(batch) if rid != "e"]
+    assert flood_ids == list(range(200))
+    assert server.counters.deferred >= 3
+
+
+def test_a_cycle_budget_spans_its_polls_and_the_rest_waits_unread(
+    server: ControlServer, sock_path: Path
+) -> None:
+    with raw_client(sock_path) as raw:
+        raw.send(lines("stop", 100))
+        server.begin_cycle(0.005)  # 12,800 requests/s: 64 in this cycle, whatever the polls
+        taken = poll_until(server, bool, "the first requests")
+        for _ in range(3):
+            taken += server.poll(0.0)
+        assert len(taken) == 64
+        cpu = time.thread_time()
+        assert server.poll(0.1) == []  # the rest waits unread: a real wait, no spin
+        assert time.thread_time() - cpu < 0.05
+        server.begin_cycle(0.005)
+        taken += poll_until(server, lambda ev: len(ev) >= 36, "the rest")
+    assert ids(taken) == list(range(100))
+
+
+def test_costly_ops_wait_for_their_allowance_without_holding_up_others(
+    server: ControlServer, sock_path: Path
+) -> None:
+    with raw_client(sock_path) as monitor, raw_client(sock_path) as pilot:
+        monitor.send(lines("status", 3) + b'{"op":"stop","id":3}\n')
+        pilot.send(b'{"op":"twist","vx":0.1,"id":"t"}\n{"op":"estop","id":"e"}\n')
+        cycles = []
+        for _ in range(4):
+            server.begin_cycle(0.005)  # status and estop: 200/s each, one per cycle
+            taken: Events = []
+            for _ in range(3):
+                taken += server.poll(0.02)
+            cycles.append(set(ids(taken)))
+    # The monitor's statuses come one per cycle, its stop behind them; the pilot's twist and
+    # estop are not held up by them.
+    assert cycles == [{0, "t", "e"}, {1}, {2, 3}, set()]
+
+
+def test_a_full_server_closes_the_longest_idle_client_for_a_new_one(sock_path: Path) -> None:
+    def connected(count: int) -> None:
+        poll_until(srv, lambda ev: srv.counters.accepted == count, f"connection {count}")
+
+    def answered(raw: RawClient, rid: int) -> None:
+        raw.send(b'{"op":"stop","id":%d}\n' % rid)
+        assert ids(poll_until(srv, bool, f"request {rid}")) == [rid]
+
+    with (
+        ControlServer(sock_path, max_clients=3) as srv,
+        raw_client(sock_path) as silent,
+        raw_client(sock_path) as older,
+        raw_client(sock_path) as newer,
+    ):
+        connected(3)
+        answered(older, 2)
+        answered(newer, 3)
+        with raw_client(sock_path) as fourth:
+            connected(4)  # closes the one that never sent a line
+            assert silent.at_eof()
+            assert (srv.counters.refused, srv.counters.evicted) == (1, 0)
+            answered(fourth, 4)
+            with raw_client(sock_path) as fifth:
+                connected(5)  # nobody silent: closes the one idle longest
+                assert older.at_eof()
+                assert (srv.counters.refused, srv.counters.evicted) == (1, 1)
+                answered(fifth, 5)
+                answered(newer, 6)
+                assert srv.counters.clients == 3
+
+
+def test_idle_and_half_line_clients_are_closed_subscribers_and_talkers_kept(
+    sock_path: Path,
+) -> None:
+    with ControlServer(sock_path, idle_timeout_s=0.5, partial_timeout_s=0.5) as srv:
+        with (
+            raw_client(sock_path) as idle,
+            raw_client(sock_path) as half,
+            raw_client(sock_path) as listener,
+            raw_client(sock_path) as talker,
+        ):
+            half.send(b'{"op":"st')
+            listener.send(b'{"op":"subscribe","topics":["error"],"id":1}\n')
+            end = time.monotonic() + 1.5
+            while time.monotonic() < end:
+                talker.send(b"\n")  # a blank line is a sign of life too
+                for cid, item in srv.poll(0.05):
+                    srv.reply(cid, respond(srv, cid, item))
+            assert idle.at_eof()
+            assert half.at_eof()
+            assert listener.line()["topics"] == ["error"]
+            counters = srv.counters
+    assert (counters.idle_timeouts, counters.partial_timeouts, counters.clients) == (1, 1, 2)
+    assert counters.dropped_partial == 0  # closed by the server, not a disconnect
+
+
+def test_a_client_that_does_not_read_its_replies_is_slowed_not_dropped(sock_path: Path) -> None:
+    count = 400
+    with (
+        ControlServer(sock_path, max_pending_bytes_per_client=16384) as srv,
+        raw_client(sock_path) as raw,
+    ):
+        raw.send(lines("status", count))
+        answered = 0
+        received: list[int] = []
+
+        def serve(seconds: float) -> None:
+            """Poll and answer (and flush) until every reply has been read, or ``seconds``."""
+            nonlocal answered
+            end = time.monotonic() + seconds
+            while time.monotonic() < end and len(received) < count:
+                for cid, item in srv.poll(0.01):
+                    assert isinstance(item, CommandRequest)
+                    srv.reply(cid, reply_ok(item.id, {"pad": "x" * 2000}))
+                    answered += 1
+
+        serve(0.5)
+        # The kernel's buffer and 8 KiB of queue filled up: its requests are no longer read.
+        assert 0 < answered < count
+
+        def drain() -> None:
+            while len(received) < count:
+                received.append(raw.line()["id"])
+
+        reader = threading.Thread(target=drain, name="test-drain", daemon=True)
+        reader.start()
+        serve(WAIT_S)
+        reader.join(WAIT_S)
+        assert received == list(range(count))
+        assert (srv.counters.slow_disconnects, srv.counters.clients) == (0, 1)
+
+
+def test_all_subscribers_queues_together_are_capped(
+    sock_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    with (
+        ControlServer(sock_path) as srv,
+        raw_client(sock_path) as first,
+        raw_client(sock_path) as second,
+    ):
+        srv.MAX_PENDING_BYTES_TOTAL = 48 * 1024  # less than one client's own 64 KiB
+        first.send(b'{"op":"subscribe","topics":["status"]}\n')
+        second.send(b'{"op":"subscribe","topics":["status"]}\n')
+        for cid, item in poll_until(srv, lambda ev: len(ev) == 2, "the subscriptions"):
+            srv.reply(cid, respond(srv, cid, item))
+        data = event(Topic.STATUS, {"pad": "x" * 1000})
+        published = 0
+        while srv.counters.slow_disconnects == 0:  # neither reads
+            srv.publish(Topic.STATUS, data)
+            published += 1
+            assert published < 5000, "no subscriber was disconnected"
+        assert srv.counters.clients == 1
+    assert "bytes of output pending for all clients, no room for more (at most 49152)" in (
+        caplog.text
+    )
 
 
 # -- client errors ---------------------------------------------------------------------------

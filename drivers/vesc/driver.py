@@ -70,6 +70,8 @@ log = logging.getLogger(__name__)
 _UNUSED_STATUS = frozenset(
     {CanPacketId.STATUS_2, CanPacketId.STATUS_3, CanPacketId.STATUS_4, CanPacketId.STATUS_6}
 )
+#: Every status packet :meth:`VescDriver.on_frame` takes, in packet order.
+_RECEIVED_STATUS = tuple(sorted({CanPacketId.STATUS, CanPacketId.STATUS_5, *_UNUSED_STATUS}))
 
 
 @dataclass(frozen=True, slots=True)
@@ -278,9 +280,17 @@ class VescDriver(MotorDriver):
         return out
 
     def receive_filters(self) -> tuple[CanFilter, ...]:
-        """Every extended frame whose low byte is one of our controller IDs (``packet << 8 |
-        id``): the status packets it uses and the ones it claims."""
-        return tuple(CanFilter(m.node_id, 0x1FFF00FF, True) for m in self.motors)
+        """What :meth:`on_frame` takes, as 29-bit filters (``packet << 8 | controller ID``):
+        per controller, STATUS and STATUS_5 (used) and STATUS_2/3/4/6 (claimed), exact; and
+        every PONG, whatever pinger's ID is in its low byte (the answering controller is in
+        the payload, so the identifier cannot tell ours from another's; PONGs answer a PING,
+        which the gateway never sends, so they are rare).  A command another master sends one
+        of our controllers does not pass."""
+        return (
+            *(CanFilter.exact(packet << 8 | m.node_id, True)
+              for m in self.motors for packet in _RECEIVED_STATUS),
+            CanFilter(CanPacketId.PONG << 8, 0x1FFFFF00, True),
+        )
 
     def on_frame(self, frame: Frame) -> bool:
         """Take the frames this driver's VESCs send (STATUS, STATUS_5 used; others claimed).

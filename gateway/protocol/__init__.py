@@ -1,7 +1,8 @@
 """The control-socket protocol: JSON lines in, JSON lines out.  Pure: no I/O, no clock.
 
 Every message is one JSON object on one line (UTF-8, ``\\n``-terminated, at most
-:data:`MAX_MESSAGE_BYTES` bytes without the newline; a trailing ``\\r`` is tolerated).  Requests::
+:data:`MAX_MESSAGE_BYTES` bytes without the newline -- the control server takes at most
+:data:`MAX_REQUEST_BYTES` by default; a trailing ``\\r`` is tolerated).  Requests::
 
     {"op": "twist", "vx": 0.1, "vy": 0.0, "wz": 0.2, "id": 7}   -> TwistRequest
     {"op": "stop"} / "estop" / "enable" / "disable" / "status"  -> CommandRequest
@@ -34,6 +35,7 @@ from __future__ import annotations
 from gateway.protocol.messages import (
     MAX_ID_CHARS,
     MAX_MESSAGE_BYTES,
+    MAX_REQUEST_BYTES,
     MAX_TWIST_COMPONENT,
     CommandRequest,
     Op,
@@ -59,6 +61,7 @@ from gateway.protocol.replies import (
 __all__ = [
     "MAX_ID_CHARS",
     "MAX_MESSAGE_BYTES",
+    "MAX_REQUEST_BYTES",
     "MAX_TWIST_COMPONENT",
     "CommandRequest",
     "LineFramer",

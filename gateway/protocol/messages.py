@@ -19,8 +19,14 @@ if TYPE_CHECKING:
 
     from gateway.types import Twist
 
-#: Longest accepted message in bytes, newline excluded.
+#: Longest accepted message in bytes, newline excluded: the protocol's ceiling.
 MAX_MESSAGE_BYTES = 4096
+#: The control server's default line limit, newline excluded.  The longest request
+#: ``json.dumps`` writes is 899 bytes (``reset_odometry`` with three 17-digit floats and a
+#: 64-character id of astral-plane characters, each escaped as two ``\uXXXX``); a typical one is
+#: under 100.  Only padding makes one longer: extra whitespace, long-winded numbers, a topic
+#: repeated.
+MAX_REQUEST_BYTES = 1024
 #: Longest accepted string request id, in characters.
 MAX_ID_CHARS = 64
 #: Largest accepted twist component magnitude (m/s or rad/s); larger is surely a mistake.

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections import deque
 from typing import TYPE_CHECKING, Any
 
 from gateway.kinematics.odometry import Pose
@@ -189,8 +190,15 @@ class LineFramer:
 
     A line is what precedes a ``\\n``, without it and without one trailing ``\\r``.  A line
     longer than ``max_bytes`` yields one :class:`ProtocolError` (``"message too long: ..., got
-    more"``) -- as soon as the buffered part exceeds the limit, before its newline arrives -- and
-    the rest of it is skipped up to its newline, so memory stays bounded by ``max_bytes``.
+    more"``) -- as soon as its unfinished part exceeds the limit, before its newline arrives --
+    and is never held whole: what of it was buffered is dropped at once and the rest skipped up
+    to its newline.  So the framer holds at most ``max_bytes + 1`` bytes of an unfinished line
+    plus the complete lines not yet taken: no more than one :meth:`push` brought, for a reader
+    that pushes only once :meth:`pop` has returned ``None``.
+
+    Lines are taken one at a time -- :meth:`push` what was received, then :meth:`pop` until it
+    returns ``None`` -- so that a reader can leave some for later and receive nothing more
+    meanwhile; :meth:`feed` does both at once.
 
     >>> framer = LineFramer(8)
     >>> framer.feed(b'{"a":1}\\r\\n{"b"'), framer.feed(b':2}\\n'), framer.pending
@@ -199,40 +207,111 @@ class LineFramer:
     :param max_bytes: longest accepted line in bytes.
     """
 
-    __slots__ = ("_buf", "_discarding", "max_bytes")
+    __slots__ = ("_buf", "_discarding", "_errors", "_made", "_tail", "_taken", "max_bytes")
 
     def __init__(self, max_bytes: int = MAX_MESSAGE_BYTES) -> None:
         self.max_bytes = max_bytes
+        #: Complete lines not yet taken (each with its newline), then the unfinished one.
         self._buf = bytearray()
+        self._tail = 0  # where the unfinished line starts in _buf
         self._discarding = False  # inside a too-long line, skipping to its newline
+        #: The sequence numbers of the too-long lines not yet reported.
+        self._errors: deque[int] = deque()
+        self._made = 0  # lines (too-long ones included) completed so far
+        self._taken = 0  # ... and handed out by pop()
 
     @property
     def pending(self) -> int:
         """Bytes of an unfinished line held (0 while skipping a too-long one)."""
-        return len(self._buf)
+        return len(self._buf) - self._tail
+
+    @property
+    def in_line(self) -> bool:
+        """Whether the stream stopped in the middle of a line (held, or being skipped)."""
+        return self._discarding or len(self._buf) > self._tail
+
+    @property
+    def ready(self) -> bool:
+        """Whether :meth:`pop` has a line (or a too-long error) to give."""
+        return self._made > self._taken
+
+    def push(self, data: bytes) -> None:
+        """Take the next bytes of the stream (their complete lines wait for :meth:`pop`)."""
+        size_in = len(data)
+        pos = 0
+        if size_in and (self._discarding or len(self._buf) > self._tail):
+            pos = self._step(data, 0)  # finish the line in progress first
+        if pos >= size_in:
+            return
+        rest = data[pos:] if pos else data
+        if max(map(len, rest.split(b"\n"))) <= self.max_bytes:
+            # No line in it is too long (the common case): take it whole, at C speed.
+            last = rest.rfind(b"\n") + 1
+            buf = self._buf
+            if last:
+                buf += rest[:last]
+                self._made += rest.count(b"\n", 0, last)
+                self._tail = len(buf)
+            buf += rest[last:]
+            return
+        while pos < size_in:
+            pos = self._step(data, pos)
+
+    def _step(self, data: bytes, pos: int) -> int:
+        """Take ``data`` from ``pos`` up to its next newline included (or to its end); return
+        where the rest starts."""
+        newline = data.find(b"\n", pos)
+        if self._discarding:
+            if newline < 0:
+                return len(data)
+            self._discarding = False
+            return newline + 1
+        buf = self._buf
+        limit = self.max_bytes + 1  # + 1: room for a "\\r" before the "\\n"
+        end = len(data) if newline < 0 else newline
+        size = len(buf) - self._tail + end - pos
+        if size > limit or (
+            size == limit and newline >= 0 and (data[end - 1] if end > pos else buf[-1]) != 0x0D
+        ):
+            del buf[self._tail :]  # never held whole: what was buffered of it goes now
+            self._errors.append(self._made)
+            self._made += 1
+            if newline < 0:
+                self._discarding = True
+                return len(data)
+            return newline + 1
+        if newline < 0:
+            buf += memoryview(data)[pos:]
+            return len(data)
+        buf += memoryview(data)[pos : newline + 1]
+        self._tail = len(buf)
+        self._made += 1
+        return newline + 1
+
+    def pop(self) -> bytes | ProtocolError | None:
+        """The next complete line (or the error that stands for a too-long one), in stream
+        order; ``None`` when every complete line has been taken."""
+        if self._errors and self._errors[0] == self._taken:
+            self._errors.popleft()
+            self._taken += 1
+            return self._error()
+        if not self._tail:
+            return None
+        buf = self._buf
+        newline = buf.find(b"\n", 0, self._tail)
+        end = newline - 1 if newline > 0 and buf[newline - 1] == 0x0D else newline
+        line = bytes(buf[:end])
+        del buf[: newline + 1]
+        self._tail -= newline + 1
+        self._taken += 1
+        return line
 
     def feed(self, data: bytes) -> list[bytes | ProtocolError]:
-        """Take the next bytes of the stream; return the lines they complete, in order."""
+        """:meth:`push` the next bytes of the stream; return every line now complete, in order."""
+        self.push(data)
         out: list[bytes | ProtocolError] = []
-        start = 0
-        if self._discarding:
-            start = data.find(b"\n") + 1
-            if not start:
-                return out
-            self._discarding = False
-        buf = self._buf
-        search = len(buf)
-        buf += memoryview(data)[start:]
-        begin = 0
-        while (newline := buf.find(b"\n", search)) >= 0:
-            end = newline - 1 if newline > begin and buf[newline - 1] == 0x0D else newline
-            out.append(bytes(buf[begin:end]) if end - begin <= self.max_bytes else self._error())
-            begin = search = newline + 1
-        del buf[:begin]
-        if len(buf) > self.max_bytes + 1:  # + 1: room for a "\r" before the "\n"
-            buf.clear()
-            self._discarding = True
-            out.append(self._error())
+        while (item := self.pop()) is not None:
+            out.append(item)
         return out
 
     def _error(self) -> ProtocolError:
