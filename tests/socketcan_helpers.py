@@ -57,16 +57,17 @@ def tier_config(source: Path, dest: Path, rate_hz: float = 100.0,
 
 
 class Lines:
-    """JSON lines of a child's stdout, read with a timeout."""
+    """Lines of a child's stdout (JSON or text), read without blocking past a timeout."""
 
     def __init__(self, stream: IO[bytes]) -> None:
         self.fd = stream.fileno()
         self.buf = b""
 
-    def next(self, timeout_s: float) -> dict[str, Any]:
+    def text(self, timeout_s: float) -> str:
         end = time.monotonic() + timeout_s
         while b"\n" not in self.buf:
-            ready, _, _ = select.select([self.fd], [], [], max(end - time.monotonic(), 0.0))
+            left = end - time.monotonic()
+            ready, _, _ = select.select([self.fd], [], [], max(left, 0.0))
             if not ready:
                 raise AssertionError(f"no line within {timeout_s} s")
             chunk = os.read(self.fd, 65536)
@@ -74,7 +75,10 @@ class Lines:
                 raise AssertionError("the process closed its output")
             self.buf += chunk
         line, self.buf = self.buf.split(b"\n", 1)
-        parsed: dict[str, Any] = json.loads(line)
+        return line.decode()
+
+    def next(self, timeout_s: float) -> dict[str, Any]:
+        parsed: dict[str, Any] = json.loads(self.text(timeout_s))
         return parsed
 
 

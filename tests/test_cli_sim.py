@@ -7,12 +7,10 @@ import dataclasses
 import json
 import math
 import os
-import select
 import signal
 import subprocess
 import sys
-import time
-from typing import IO, TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any
 
 import pytest
 
@@ -26,6 +24,7 @@ from gateway.simtruth import SimTruth, state_line
 from gateway.types import Twist
 from tests.conftest import CONFIG_DIR
 from tests.e2e_helpers import Rig, path_legs, virtual_config
+from tests.socketcan_helpers import Lines
 
 if TYPE_CHECKING:
     from pathlib import Path
@@ -138,32 +137,6 @@ def test_announce_lines_name_every_device_then_the_bus(channel: str) -> None:
         {"event": "ready", "interface": "virtual", "channel": channel, "devices": 3,
          "rate_hz": 250.0},
     ]
-
-
-class Lines:
-    """Lines of a child's stdout, read without blocking past a timeout."""
-
-    def __init__(self, stream: IO[bytes]) -> None:
-        self.fd = stream.fileno()
-        self.buf = b""
-
-    def text(self, timeout_s: float) -> str:
-        end = time.monotonic() + timeout_s
-        while b"\n" not in self.buf:
-            left = end - time.monotonic()
-            ready, _, _ = select.select([self.fd], [], [], max(left, 0.0))
-            if not ready:
-                raise AssertionError(f"no line from wheelgate sim within {timeout_s} s")
-            chunk = os.read(self.fd, 65536)
-            if not chunk:
-                raise AssertionError("wheelgate sim closed its output")
-            self.buf += chunk
-        line, self.buf = self.buf.split(b"\n", 1)
-        return line.decode()
-
-    def next(self, timeout_s: float) -> dict[str, Any]:
-        parsed: dict[str, Any] = json.loads(self.text(timeout_s))
-        return parsed
 
 
 def sim_command(channel: str, *args: str) -> list[str]:
