@@ -17,14 +17,12 @@ import signal
 import subprocess
 import sys
 import time
-from typing import IO, TYPE_CHECKING, Any
+from pathlib import Path
+from typing import IO, Any
 
 import yaml
 
 from gateway.client import ControlClient
-
-if TYPE_CHECKING:
-    from pathlib import Path
 
 #: Generous bounds for the emulated VM: process start (imports take ~10 s there), enabling.
 START_S = 180.0
@@ -95,6 +93,9 @@ class Session:
     def __init__(self, config: Path, vcan: str, sock: str, record: Path | None = None,
                  sim_rate_hz: float = 1000.0) -> None:
         self.config, self.vcan, self.sock = config, vcan, sock
+        # Every process's stderr goes to a file: a pipe nobody reads would block a process that
+        # logs more than the pipe holds (a gateway warning about a slow bus, say).
+        self.logs = {name: Path(f"{sock}.{name}.err") for name in ("candump", "sim", "run")}
         root = [sys.executable, "-m", "gateway", "--interface", "socketcan", "--channel", vcan]
         self.procs: dict[str, subprocess.Popen[bytes]] = {}
         self._files: list[IO[bytes]] = []
@@ -102,14 +103,14 @@ class Session:
             out = record.open("wb")
             self._files.append(out)
             self.procs["candump"] = subprocess.Popen(["candump", "-L", vcan], stdout=out,
-                                                     stderr=subprocess.PIPE)
+                                                     stderr=self._err("candump"))
         self.procs["sim"] = subprocess.Popen(
             [*root, "sim", "-c", str(config), "--json", "--every", "0", "--rate",
              str(sim_rate_hz)],
-            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+            stdout=subprocess.PIPE, stderr=self._err("sim"))
         self.procs["run"] = subprocess.Popen(
             [*root, "run", "-c", str(config), "--socket", sock],
-            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+            stdout=subprocess.DEVNULL, stderr=self._err("run"))
         stdout = self.procs["sim"].stdout
         assert stdout is not None
         self.sim_out = Lines(stdout)
@@ -120,13 +121,17 @@ class Session:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
+    def _err(self, name: str) -> IO[bytes]:
+        f = self.logs[name].open("wb")
+        self._files.append(f)
+        return f
+
     def tails(self) -> str:
-        """The stderr of every process that has ended (for failure messages)."""
+        """The tail of every process's stderr (for failure messages)."""
         out = []
         for name, proc in self.procs.items():
-            if proc.poll() is not None and proc.stderr is not None:
-                out.append(f"--- {name} (exit {proc.returncode}):\n"
-                           + proc.stderr.read().decode(errors="replace")[-3000:])
+            text = self.logs[name].read_bytes().decode(errors="replace")[-3000:]
+            out.append(f"--- {name} (exit {proc.poll()}):\n{text}")
         return "\n".join(out)
 
     def wait_ready(self) -> None:
