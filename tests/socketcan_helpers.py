@@ -29,7 +29,7 @@ START_S = 180.0
 
 
 def tier_config(source: Path, dest: Path, rate_hz: float = 100.0,
-                liveness_s: float = 3.0) -> Path:
+                liveness_s: float = 3.0, driver: str = "") -> Path:
     """A shipped configuration made fit for the tier: a lower loop rate, long liveness and
     enable timeouts, a longer command timeout, no tracking-error check (it judges speed under
     a CPU 14 times slower), written to ``dest``.
@@ -46,6 +46,8 @@ def tier_config(source: Path, dest: Path, rate_hz: float = 100.0,
             raw.setdefault(block, {})["liveness_s"] = liveness_s
     if "motor_defaults" not in raw:
         raw["motor_defaults"] = {"liveness_s": liveness_s}
+    if driver:  # the drive motors on another protocol than the shipped one
+        raw["motor_defaults"]["driver"] = driver
     # A DBC file is named relative to the configuration: keep pointing at the shipped one.
     for block in (raw.get("motor_defaults"), *(raw.get("motors") or {}).values()):
         if isinstance(block, dict) and isinstance(block.get("dbc"), str):
