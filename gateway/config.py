@@ -55,6 +55,7 @@ from gateway.kinematics import PRESETS, Limits, RobotModel, Wheel, WheelType
 from gateway.kinematics.model import validate_wheel
 from gateway.linkage import virtual_angle
 from gateway.options import OptionSpec, validate_block
+from gateway.protection import Guard, WatchdogPolicy, check_timeout
 from gateway.registry import get_driver_class, valid_drivers
 from gateway.types import MotorConfig, MotorRole
 from gateway.wgproto import CanIds
@@ -62,6 +63,8 @@ from gateway.yaml_text import MAX_BYTES, load_yaml, read_text
 
 if TYPE_CHECKING:
     from collections.abc import Mapping
+
+    from gateway.drives import DriveSet
 
 __all__ = [
     "DEFAULT_NAME",
@@ -214,18 +217,47 @@ def parse_config(
         source, name, str(drive), MappingProxyType(geometry), model, motors, limits, bus, loop,
         steering, tuple(warnings),
     )
-    _check_own_ids(config)
-    return config
+    from gateway.drives import DriveSet  # noqa: PLC0415 - the drivers load after the config
+
+    drives = DriveSet(config)
+    _check_own_ids(config, drives)
+    more = _check_protection(config, drives)
+    return dataclasses.replace(config, warnings=(*config.warnings, *more)) if more else config
 
 
-def _check_own_ids(config: GatewayConfig) -> None:
+def _check_protection(config: GatewayConfig, drives: DriveSet) -> list[str]:
+    """Every motor's controller-side protection (:mod:`gateway.protection`) against the policy.
+
+    :return: warnings: a motor with no known protection, a timeout too short for the loop.
+    :raises ConfigError: with ``controller_watchdog: required``, for a motor whose protocol
+        could set its watchdog over CAN but whose configuration does not say how.
+    """
+    warnings = []
+    period = 1.0 / config.loop.rate_hz
+    for label, prot in drives.protections():
+        where = f"{config.source}: {label}"
+        if prot.guard is Guard.UNSTATED:
+            if prot.configurable and config.loop.controller_watchdog is WatchdogPolicy.REQUIRED:
+                raise ConfigError(
+                    f"{where}: controller watchdog {prot.how}, and gateway.controller_watchdog "
+                    f"is required; fix: {prot.fix} (or controller_watchdog: warn, to arm "
+                    f"without it)"
+                )
+            warnings.append(f"{where}: controller watchdog {prot.how}; fix: {prot.fix}")
+        elif prot.guard is Guard.NONE:
+            warnings.append(f"{where}: controller watchdog {prot.describe()}")
+        problem = check_timeout(prot, period, where)
+        if problem:
+            warnings.append(problem)
+    return warnings
+
+
+def _check_own_ids(config: GatewayConfig, drives: DriveSet) -> None:
     """The gateway's own CAN IDs must not be any controller's (:func:`own_id_collisions`).
 
     :raises ConfigError: naming every collision and the fix.
     """
-    from gateway.drives import DriveSet  # noqa: PLC0415 - the drivers load after the config
-
-    collisions = own_id_collisions(config, DriveSet(config))
+    collisions = own_id_collisions(config, drives)
     if collisions:
         raise ConfigError(
             f"{config.source}: " + "; ".join(collisions)
@@ -570,9 +602,11 @@ def _loop(raw: object, source: str) -> LoopConfig:
             f"{source}: gateway.odom_rate_hz: expected at most rate_hz ({v['rate_hz']}), "
             f"got {v['odom_rate_hz']}"
         )
-    fields = {k: x for k, x in v.items() if k not in ("can_ids", "socket_uids")}
+    skip = ("can_ids", "socket_uids", "controller_watchdog")
+    fields = {k: x for k, x in v.items() if k not in skip}
     return LoopConfig(
         **fields,  # type: ignore[arg-type]
         socket_uids=tuple(uids),
         can_ids=can_ids,
+        controller_watchdog=WatchdogPolicy(v["controller_watchdog"]),
     )

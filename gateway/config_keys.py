@@ -98,6 +98,10 @@ GATEWAY_KEYS: Mapping[str, OptionSpec] = MappingProxyType({
                                      "also a CAN twist frame's ENABLE flag"),
     "state_file": OptionSpec(str, "", help="the e-stop latch file; empty: $STATE_DIRECTORY/"
                                            "estop, else ~/.local/state/wheelgate/"),
+    "controller_watchdog": OptionSpec(
+        str, "required", choices=("required", "warn"),
+        help="a controller-side watchdog the protocol can set over CAN but that is not "
+             "confirmed: refuse to arm the motor (required) or arm it with a warning (warn)"),
     "enable_timeout_s": OptionSpec(float, 5.0, minimum=0.1),
     "odom_rate_hz": OptionSpec(float, 50.0, minimum=0.1, maximum=1000.0),
     "status_rate_hz": OptionSpec(float, 10.0, minimum=0.1, maximum=1000.0),

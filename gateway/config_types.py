@@ -15,6 +15,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
+from gateway.protection import WatchdogPolicy
 from gateway.tracking import DEFAULT_LIMITS, TrackingLimits
 from gateway.wgproto import CanIds
 
@@ -55,6 +56,8 @@ class LoopConfig:
     :param estop_release: who may release an e-stop: ``"socket"`` (the control socket's
         ``enable`` only) or ``"any"`` (also a CAN twist frame's ENABLE flag).
     :param state_file: the e-stop latch file (empty: see :mod:`gateway.latch`).
+    :param controller_watchdog: what happens when a controller-side watchdog the protocol can
+        set over CAN is not confirmed (:class:`gateway.protection.WatchdogPolicy`).
     :param enable_timeout_s: how long the drives may take to enable.
     :param odom_rate_hz: odometry publishing rate (CAN and socket).
     :param status_rate_hz: status publishing rate.
@@ -83,6 +86,7 @@ class LoopConfig:
     enable_on_start: bool = True
     estop_release: str = "socket"
     state_file: str = ""
+    controller_watchdog: WatchdogPolicy = WatchdogPolicy.REQUIRED
     enable_timeout_s: float = 5.0
     odom_rate_hz: float = 50.0
     status_rate_hz: float = 10.0

@@ -15,13 +15,26 @@ from __future__ import annotations
 
 import abc
 import collections
+import logging
 from typing import TYPE_CHECKING, ClassVar
 
 from gateway.errors import ConfigError, DecodeError
 from gateway.options import OptionSpec, validate_block
+from gateway.protection import Guard, Protection, ProtectionState, WatchdogPolicy
 from gateway.types import DriveFault, DriveState, MotorConfig, MotorStatus, WheelFeedback
 
-__all__ = ["MotorDriver", "OptionSpec"]
+__all__ = ["CONTROLLER_TIMEOUT_OPTION", "MotorDriver", "OptionSpec"]
+
+#: The common ``controller_timeout_s`` key of protocols that cannot set their controller's
+#: timeout over CAN: the timeout that was set with the vendor's tool, as a statement.
+CONTROLLER_TIMEOUT_OPTION = OptionSpec(
+    float,
+    0.0,
+    minimum=0.0,
+    maximum=60.0,
+    help="the command timeout set on the controller with the vendor's tool (s), after which "
+    "it stops the motor by itself; 0: not stated",
+)
 
 if TYPE_CHECKING:
     from collections.abc import Mapping, Sequence
@@ -29,6 +42,8 @@ if TYPE_CHECKING:
     from gateway.filters import CanFilter
     from gateway.sim import DeviceSimulator
     from gateway.types import Frame
+
+log = logging.getLogger(__name__)
 
 
 class MotorDriver(abc.ABC):
@@ -55,6 +70,15 @@ class MotorDriver(abc.ABC):
     #: :attr:`~gateway.types.MotorRole.STEER`): armed in position control, commanded with a
     #: steering angle, reporting that angle (absolute, from ``zero_rad``) as feedback.
     STEERING: ClassVar[bool] = False
+    #: The protocol's name in messages about controller-side protection.
+    PROTOCOL: ClassVar[str] = "CAN"
+    #: What the controller does when its stated timeout expires (:meth:`protection`).
+    TIMEOUT_ACTION: ClassVar[str] = "as configured on the controller"
+    #: How to set the controller's timeout, for the warning when it is not stated.
+    TIMEOUT_FIX: ClassVar[str] = (
+        "set a command timeout on the controller with its vendor's tool and state it as "
+        "controller_timeout_s"
+    )
 
     def __init__(self, motors: Sequence[MotorConfig]) -> None:
         self.motors: tuple[MotorConfig, ...] = tuple(motors)
@@ -78,6 +102,11 @@ class MotorDriver(abc.ABC):
         self._faults: list[DriveFault] = [DriveFault.NONE] * n
         self._detail: list[str] = [""] * n
         self._armed: list[bool] = [False] * n
+        #: Per motor, why its controller-side protection failed under REQUIRED ("" if not).
+        self._protection_failed: list[str] = [""] * n
+        #: What to do when a protection this driver configures is not confirmed; the drive
+        #: set passes the configuration's ``gateway.controller_watchdog``.
+        self.watchdog_policy = WatchdogPolicy.REQUIRED
         #: Frames of this protocol that were rejected, by reason.
         self.rejected: collections.Counter[str] = collections.Counter()
         #: The detail of the last rejection of each reason (the counter's keys are a fixed
@@ -186,6 +215,65 @@ class MotorDriver(abc.ABC):
     def make_simulator(cls, motor: MotorConfig) -> DeviceSimulator:
         """A device simulator that speaks the device side of this protocol for ``motor``."""
 
+    # ----------------------------------------------------------------- protection
+
+    def protection(self, index: int) -> Protection:
+        """Motor ``index``'s controller-side protection (:mod:`gateway.protection`).
+
+        The default is for protocols that cannot set a timeout over CAN: :attr:`Guard.STATED`
+        from the motor's ``controller_timeout_s`` key (:data:`CONTROLLER_TIMEOUT_OPTION`),
+        else :attr:`Guard.UNSTATED` with :attr:`TIMEOUT_FIX`.  Drivers that configure it
+        themselves, or whose controllers have none, override this.
+        """
+        stated = self.motors[index].options.get("controller_timeout_s")
+        if isinstance(stated, (int, float)) and not isinstance(stated, bool) and stated > 0:
+            return Protection(
+                Guard.STATED,
+                float(stated),
+                self.TIMEOUT_ACTION,
+                "set on the controller outside wheelgate; stated by controller_timeout_s "
+                "(not verifiable over CAN)",
+            )
+        return Protection(
+            Guard.UNSTATED,
+            None,
+            "unknown",
+            f"not stated: nothing known stops this {self.PROTOCOL} motor if wheelgate dies",
+            self.TIMEOUT_FIX,
+        )
+
+    def protection_state(self, index: int) -> ProtectionState:
+        """Where the configuring of motor ``index``'s protection stands (drivers with
+        :attr:`Guard.CONFIGURED` protection override this)."""
+        return ProtectionState.NOT_APPLICABLE
+
+    def protection_fault(self, index: int, why: str) -> None:
+        """Record that motor ``index``'s protection could not be confirmed: a FAULT
+        (:attr:`DriveFault.WATCHDOG`) naming the motor, the protocol and the fix under
+        :attr:`WatchdogPolicy.REQUIRED`; a warning under :attr:`WatchdogPolicy.WARN`.
+
+        The fault stays, whatever the controller reports, until
+        :meth:`clear_protection_fault` (a new enable).
+        """
+        m = self.motors[index]
+        fix = self.protection(index).fix
+        text = (
+            f"motor {m.wheel!r} ({self.PROTOCOL} node {m.node_id}): controller watchdog not "
+            f"confirmed: {why}" + (f"; fix: {fix}" if fix else "")
+        )
+        if self.watchdog_policy is WatchdogPolicy.REQUIRED:
+            log.error("%s; not arming it (gateway.controller_watchdog: required)", text)
+            self._protection_failed[index] = text
+            self.set_fault(index, self._faults[index], self._detail[index])
+        else:
+            log.warning("%s; arming it anyway (gateway.controller_watchdog: warn)", text)
+
+    def clear_protection_fault(self, index: int) -> None:
+        """Forget motor ``index``'s protection fault (a new enable tries again)."""
+        if self._protection_failed[index]:
+            self._protection_failed[index] = ""
+            self.set_fault(index, self._faults[index] & ~DriveFault.WATCHDOG, "")
+
     # ----------------------------------------------------------------- shared state
 
     def reject(self, reason: str, err: DecodeError | None = None) -> None:
@@ -203,7 +291,12 @@ class MotorDriver(abc.ABC):
         self._feedback[index] = feedback
 
     def set_fault(self, index: int, faults: DriveFault, detail: str = "") -> None:
-        """Record the fault flags (``DriveFault.NONE`` clears) of motor ``index``."""
+        """Record the fault flags (``DriveFault.NONE`` clears) of motor ``index``; a
+        protection fault (:meth:`protection_fault`) stays in them."""
+        failed = self._protection_failed[index]
+        if failed:
+            faults |= DriveFault.WATCHDOG
+            detail = failed if not detail or detail == failed else f"{failed}; {detail}"
         self._faults[index] = faults
         self._detail[index] = detail
 

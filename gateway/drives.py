@@ -26,6 +26,7 @@ if TYPE_CHECKING:
     from gateway.config import GatewayConfig
     from gateway.driver import MotorDriver
     from gateway.filters import CanFilter
+    from gateway.protection import Protection
     from gateway.sim import DeviceSimulator
     from gateway.types import Frame, MotorConfig, MotorStatus, WheelFeedback
 
@@ -56,6 +57,8 @@ class DriveSet:
             )
             for name, idx in groups.items()
         )
+        for drv, _ in self.groups:
+            drv.watchdog_policy = config.loop.controller_watchdog
         index = config.model.index
         #: Per steering actuator, the model indices of the wheels it turns.
         self.steered_by: tuple[tuple[int, ...], ...] = tuple(
@@ -182,6 +185,15 @@ class DriveSet:
     def undeclared(self) -> list[str]:
         """The class names of the drivers that do not declare the identifiers they take."""
         return [type(drv).__name__ for drv, _ in self.groups if drv.receive_filters() is None]
+
+    def protections(self) -> list[tuple[str, Protection]]:
+        """Every motor's controller-side protection (:mod:`gateway.protection`), labelled
+        ``motor 'wheel' (driver node N)``, in the drivers' order."""
+        return [
+            (f"motor {m.wheel!r} ({m.driver} node {m.node_id})", drv.protection(i))
+            for drv, _ in self.groups
+            for i, m in enumerate(drv.motors)
+        ]
 
     def status(self, now_s: float) -> list[MotorStatus]:
         """Every motor's status: the drive motors in model order of their wheels, then the

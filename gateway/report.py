@@ -18,6 +18,15 @@ def status_dict(daemon: Daemon, now_s: float) -> dict[str, object]:
     """Everything a status request returns: state, motors, odometry, counters, timing."""
     gw = daemon.gateway
     sup = gw.supervisor
+    protection = {
+        m.wheel: {
+            "guard": drv.protection(i).guard.value,
+            "timeout_s": drv.protection(i).timeout_s,
+            "state": drv.protection_state(i).value,
+        }
+        for drv, _ in gw.drives.groups
+        for i, m in enumerate(drv.motors)
+    }
     motors = []
     for st in gw.drives.status(now_s):
         fb = st.feedback
@@ -30,6 +39,7 @@ def status_dict(daemon: Daemon, now_s: float) -> dict[str, object]:
             "feedback_age_s": _finite(st.feedback_age_s),
             "position_rad": None if fb is None else fb.position_rad,
             "velocity_rad_s": None if fb is None else fb.velocity_rad_s,
+            "controller_stop": protection.get(st.name),
         })
     rejected = {
         type(drv).__name__: dict(drv.rejected) for drv, _ in gw.drives.groups if drv.rejected

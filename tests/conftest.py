@@ -22,6 +22,11 @@ DATA_DIR = Path(__file__).resolve().parent / "data"
 
 _counter = itertools.count()
 
+#: The ODrive watchdog's endpoint IDs of the simulated ODrive (firmware "0.0.0", which no real
+#: ODrive reports), as the shipped configurations name them: test configurations on ODrive 0.6
+#: take them so the gateway sets the watchdog, as ``controller_watchdog: required`` demands.
+SIM_ODRIVE_ENDPOINTS = {"fw_version": "0.0.0", "enable_watchdog": 1, "watchdog_timeout": 2}
+
 
 @pytest.fixture
 def channel(request: pytest.FixtureRequest) -> str:

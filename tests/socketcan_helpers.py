@@ -47,7 +47,10 @@ def tier_config(source: Path, dest: Path, rate_hz: float = 100.0,
     if "motor_defaults" not in raw:
         raw["motor_defaults"] = {"liveness_s": liveness_s}
     if driver:  # the drive motors on another protocol than the shipped one
-        raw["motor_defaults"]["driver"] = driver
+        defaults = raw["motor_defaults"]
+        for key in ("firmware", "watchdog_endpoints", "flat_endpoints", "controller_timeout_s"):
+            defaults.pop(key, None)  # the shipped protocol's own keys
+        defaults["driver"] = driver
     # A DBC file is named relative to the configuration: keep pointing at the shipped one.
     for block in (raw.get("motor_defaults"), *(raw.get("motors") or {}).values()):
         if isinstance(block, dict) and isinstance(block.get("dbc"), str):

@@ -10,7 +10,7 @@ import yaml
 
 from gateway.config import DEFAULT_NAME, BusConfig, LoopConfig, load_config, parse_config
 from gateway.errors import ConfigError
-from tests.conftest import CONFIG_DIR
+from tests.conftest import CONFIG_DIR, SIM_ODRIVE_ENDPOINTS
 
 if TYPE_CHECKING:
     from pathlib import Path
@@ -64,7 +64,8 @@ def test_motor_defaults_merge_and_limits() -> None:
 BASE = {
     "drive": "differential",
     "geometry": {"wheel_radius": 0.05, "track": 0.3},
-    "motor_defaults": {"driver": "odrive", "max_rpm": 3000},
+    "motor_defaults": {"driver": "odrive", "max_rpm": 3000,
+                       "watchdog_endpoints": SIM_ODRIVE_ENDPOINTS},
     "motors": {"left": {"node_id": 1}, "right": {"node_id": 2}},
 }
 

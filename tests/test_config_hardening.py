@@ -85,8 +85,10 @@ def test_a_world_writable_socket_is_warned_about(tmp_path: Path, runner: CliRunn
     assert result.exit_code == 0, result.output
     assert "gateway.socket_mode: 0o777 makes the control socket writable by every local user" \
         in result.output
-    assert "ok, with 1 warning(s)" in result.output
-    assert not load_config(CONFIG_DIR / "mecanum.yaml").warnings
+    # One more than the shipped robot's own (its DJI ESCs have no controller-side stop).
+    own = load_config(CONFIG_DIR / "mecanum.yaml").warnings
+    assert not any("socket_mode" in w for w in own)
+    assert f"ok, with {len(own) + 1} warning(s)" in result.output
 
 
 def test_every_shipped_config_still_loads() -> None:

@@ -11,7 +11,7 @@ import itertools
 import logging
 import math
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 import can
 import cantools
@@ -634,9 +634,19 @@ def test_bus_drive_fault_recover_silence(channel: str, firmware: str) -> None:
         assert r.state(0) is DriveState.DISABLED
 
 
+#: The watchdog's endpoint IDs the 0.6 tests name (the simulator's; real ones come from the
+#: firmware's flat_endpoints.json).
+ENDPOINTS = {"fw_version": "0.6.10", "enable_watchdog": 201, "watchdog_timeout": 200}
+
+
 @pytest.mark.parametrize(("firmware", "bit"), [("0.5", 0x800), ("0.6", 0x01000000)])
 def test_bus_watchdog(channel: str, firmware: str, bit: int) -> None:
-    with rig(channel, [OdriveSimulator(motor(3, firmware=firmware))]) as r:
+    if firmware == "0.5":
+        # A 0.5 axis whose watchdog was set and saved with odrivetool, as the block states.
+        m = motor(3, firmware=firmware, controller_timeout_s=0.5)
+    else:  # the gateway sets it over CAN on an axis at factory settings
+        m = motor(3, firmware=firmware, controller_timeout_s=0.5, watchdog_endpoints=ENDPOINTS)
+    with rig(channel, [cast("OdriveSimulator", OdriveDriver.make_simulator(m))]) as r:
         r.send(r.drv.enable(r.t))
         r.speeds = [1.0]
         r.run(1.0)  # velocity commands at 100 Hz keep feeding the watchdog

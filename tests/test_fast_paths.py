@@ -34,7 +34,7 @@ from gateway.kinematics.odometry import Pose, _advance, compose, se2_exp
 from gateway.loop import Gateway
 from gateway.sdnotify import SystemdNotifier
 from gateway.types import DriveFault, Frame, GatewayState, Twist
-from tests.conftest import CONFIG_DIR
+from tests.conftest import CONFIG_DIR, SIM_ODRIVE_ENDPOINTS
 from tests.e2e_helpers import Rig, virtual_config
 
 if TYPE_CHECKING:
@@ -178,9 +178,11 @@ def test_drive_set_status_in_model_order_across_drivers() -> None:
         "motor_defaults": {"gear_ratio": 10.0, "max_rpm": 3000},
         "motors": {
             "front_left": {"driver": "vesc", "node_id": 1, "pole_pairs": 7},
-            "front_right": {"driver": "odrive", "node_id": 2},
+            "front_right": {"driver": "odrive", "node_id": 2,
+                            "watchdog_endpoints": SIM_ODRIVE_ENDPOINTS},
             "rear_left": {"driver": "vesc", "node_id": 3, "pole_pairs": 7},
-            "rear_right": {"driver": "odrive", "node_id": 4},
+            "rear_right": {"driver": "odrive", "node_id": 4,
+                           "watchdog_endpoints": SIM_ODRIVE_ENDPOINTS},
         },
         "bus": {"interface": "virtual", "channel": "unused"},
     }

@@ -49,7 +49,7 @@ from gateway.drives import DriveSet
 from gateway.errors import DecodeError
 from gateway.types import Frame, MotorConfig
 from gateway.wgproto import CanIds, WgCodec
-from tests.conftest import CONFIG_DIR, DATA_DIR
+from tests.conftest import CONFIG_DIR, DATA_DIR, SIM_ODRIVE_ENDPOINTS
 
 if TYPE_CHECKING:
     from collections.abc import Callable
@@ -60,12 +60,15 @@ if TYPE_CHECKING:
 
 FUZZ = settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
+#: 0.5 has no parameter access: its watchdog is stated, not written.
+NO_ENDPOINTS = {"watchdog_endpoints": {}}
 #: Case name -> (shipped config, keys merged into its ``motor_defaults``).
 CASES: dict[str, tuple[str, dict[str, object]]] = {
     "odrive-0.6": ("turtlebot3_burger.yaml", {}),
-    "odrive-0.5": ("turtlebot3_burger.yaml", {"firmware": "0.5"}),
+    "odrive-0.5": ("turtlebot3_burger.yaml", {"firmware": "0.5", **NO_ENDPOINTS}),
     "odrive-0.6-ext": ("turtlebot3_burger.yaml", {"extended_id": True}),
-    "odrive-0.5-ext": ("turtlebot3_burger.yaml", {"firmware": "0.5", "extended_id": True}),
+    "odrive-0.5-ext": ("turtlebot3_burger.yaml",
+                       {"firmware": "0.5", "extended_id": True, **NO_ENDPOINTS}),
     "vesc": ("differential_tub.yaml", {}),
     "cia402": ("synchro.yaml", {}),
     "dji-c620": ("mecanum.yaml", {}),
@@ -460,7 +463,8 @@ def test_mixed_bus_frames_of_the_other_id_type_reach_their_driver() -> None:
     doc["motor_defaults"] = {"gear_ratio": 1.0, "max_rpm": 61}
     doc["motors"] = {
         "left": {"driver": "dji", "node_id": 1, "esc": "c620"},
-        "right": {"driver": "odrive", "node_id": 16, "extended_id": True, "invert": True},
+        "right": {"driver": "odrive", "node_id": 16, "extended_id": True, "invert": True,
+                  "watchdog_endpoints": SIM_ODRIVE_ENDPOINTS},
     }
     drives = DriveSet(parse_config(doc, str(path)))
     (dji, _), (odrive, _) = drives.groups

@@ -30,7 +30,7 @@ from gateway.kinematics import Odometry
 from gateway.linkage import virtual_angle
 from gateway.sim import SimFault
 from gateway.types import ErrorCode, GatewayState, MotorConfig, MotorRole, Twist
-from tests.conftest import CONFIG_DIR
+from tests.conftest import CONFIG_DIR, SIM_ODRIVE_ENDPOINTS
 from tests.e2e_helpers import Rig, errors_on_can, virtual_config
 
 if TYPE_CHECKING:
@@ -123,7 +123,8 @@ def test_synchro_group_takes_one_actuator() -> None:
     doc["steering"] = {member: {"driver": "odrive", "node_id": 20, "max_rpm": 100}}
     with pytest.raises(ConfigError, match="steered together with its group 'synchro'"):
         parse_config(doc, "robot.yaml")
-    doc["steering"] = {"synchro": {"driver": "odrive", "node_id": 20, "max_rpm": 100}}
+    doc["steering"] = {"synchro": {"driver": "odrive", "node_id": 20, "max_rpm": 100,
+                                   "watchdog_endpoints": SIM_ODRIVE_ENDPOINTS}}
     cfg = parse_config(doc, "robot.yaml")
     (actuator,) = cfg.steering
     assert actuator.steers == tuple(w.name for w in cfg.wheels)

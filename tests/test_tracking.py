@@ -16,6 +16,7 @@ from gateway.kinematics import PRESETS, RobotModel
 from gateway.tracking import RUNAWAY_WEIGHT_MAX, TrackingFault, TrackingLimits, TrackingMonitor
 from gateway.types import DriveFault, DriveState, ErrorCode, GatewayState, MotorStatus, Twist
 from gateway.types import WheelFeedback as Fb
+from tests.conftest import SIM_ODRIVE_ENDPOINTS
 
 LIMITS = TrackingLimits(tolerance_rad_s=1.0, tolerance_ratio=0.1, time_s=0.5)
 DT = 0.01
@@ -233,7 +234,8 @@ def test_supervisor_without_commands_skips_the_check() -> None:
 def robot(gateway: dict[str, object]) -> dict[str, object]:
     """A differential robot's raw config with this ``gateway:`` block."""
     return {"drive": "differential", "geometry": {"wheel_radius": 0.05, "track": 0.3},
-            "motor_defaults": {"driver": "odrive", "max_rpm": 3000},
+            "motor_defaults": {"driver": "odrive", "max_rpm": 3000,
+                               "watchdog_endpoints": SIM_ODRIVE_ENDPOINTS},
             "motors": {"left": {"node_id": 1}, "right": {"node_id": 2}}, "gateway": gateway}
 
 

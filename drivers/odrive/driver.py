@@ -16,6 +16,10 @@ Per motor, the driver
   never cleared automatically;
 * disarms with Set_Input_Vel 0 then Set_Axis_State IDLE;
 * streams Set_Input_Vel every cycle, which also feeds the axis watchdog;
+* on firmware 0.6 with the watchdog's endpoint IDs, sets the axis watchdog over CAN before
+  arming (Get_Version, RxSdo writes, TxSdo read-back; :mod:`drivers.odrive.watchdog`) and arms
+  only once it reads back as written (``gateway.controller_watchdog: warn`` arms anyway, with
+  a warning); on 0.5 the motor block states the watchdog set with odrivetool;
 * is alive while both heartbeats and encoder estimates are younger than ``liveness_s``
   (heartbeats give the state, estimates the odometry);
 * reports FAULT with the decoded flag names when the heartbeat carries an axis error (0.5: also
@@ -44,7 +48,7 @@ import math
 from typing import TYPE_CHECKING, ClassVar, cast
 
 from drivers.odrive.codec import OdriveCodec
-from drivers.odrive.enums import AxisState, CmdId, ControlMode, InputMode
+from drivers.odrive.enums import AxisState, CmdId, ControlMode, Firmware, InputMode
 from drivers.odrive.faults import error_query_adds_detail, error_reply_detail, heartbeat_faults
 from drivers.odrive.messages import (
     CMD_BITS,
@@ -57,9 +61,20 @@ from drivers.odrive.messages import (
 )
 from drivers.odrive.options import OPTIONS, bus_settings
 from drivers.odrive.sim import OdriveSimulator
+from drivers.odrive.watchdog import (
+    DEFAULT_TIMEOUT_S,
+    RX_SDO,
+    TX_SDO,
+    Step,
+    WatchdogSetup,
+    endpoints_from_options,
+    parse_sdo,
+    parse_version,
+)
 from gateway.driver import MotorDriver, OptionSpec
 from gateway.errors import ConfigError, DecodeError, EncodeError, IllegalTransitionError
 from gateway.filters import EXT_MASK, STD_MASK, CanFilter
+from gateway.protection import Guard, Protection, ProtectionState, WatchdogPolicy
 from gateway.types import DriveFault, DriveState, WheelFeedback
 
 if TYPE_CHECKING:
@@ -94,6 +109,10 @@ class OdriveDriver(MotorDriver):
     ENABLE_GRACE_S: ClassVar[float] = 0.3
     #: Steering actuators: position control with Set_Input_Pos.
     STEERING: ClassVar[bool] = True
+    PROTOCOL: ClassVar[str] = "ODrive"
+    TIMEOUT_ACTION: ClassVar[str] = (
+        "latches WATCHDOG_TIMER_EXPIRED and goes IDLE: the motor coasts"
+    )
 
     def __init__(self, motors: Sequence[MotorConfig]) -> None:
         super().__init__(motors)
@@ -128,11 +147,83 @@ class OdriveDriver(MotorDriver):
         self._axis_detail = [""] * n
         self._error_detail = [""] * n
         self._error_request_due = [False] * n
+        #: Per motor, the 0.6 watchdog setup (``None``: 0.5, or no endpoint IDs given), and
+        #: whether its arming waits for it.
+        self._stated_s = [float(cast("float", o["controller_timeout_s"])) for o in opts]
+        self._wd = [self._watchdog_setup(m, o) for m, o in zip(self.motors, opts, strict=True)]
+        self._arm_waits = [False] * n
+        #: Frames to send at the next poll (the setup's answers to replies).
+        self._queued: list[Frame] = []
         #: (node ID, gear ratio, sign, speed bound in rad/s) per motor, for :meth:`command`.
         self._cmd = tuple(
             (m.node_id, m.gear_ratio, m.sign, m.max_wheel_rad_s * (1.0 + 1e-12))
             for m in self.motors
         )
+
+    def _watchdog_setup(self, m: MotorConfig, o: Mapping[str, object]) -> WatchdogSetup | None:
+        where = f"motor {m.wheel!r}"
+        endpoints = endpoints_from_options(o, where, str(o["config_dir"]))
+        if endpoints is None:
+            return None
+        if self.codec.firmware is not Firmware.V0_6:
+            raise ConfigError(
+                f"{where}: flat_endpoints/watchdog_endpoints: expected firmware 0.6 (0.5 has "
+                f"no parameter access over CAN: set the watchdog with odrivetool and state "
+                f"controller_timeout_s), got firmware {self.codec.firmware.value}"
+            )
+        timeout = cast("float", o["controller_timeout_s"]) or DEFAULT_TIMEOUT_S
+        arb = self.codec.arbitration_id
+        return WatchdogSetup(
+            endpoints, timeout, arb(m.node_id, RX_SDO), arb(m.node_id, CmdId.GET_VERSION),
+            self._extended_id,
+        )
+
+    def protection(self, index: int) -> Protection:
+        """0.6 with endpoint IDs: CONFIGURED; otherwise STATED by ``controller_timeout_s``
+        (set with odrivetool or the web GUI) or UNSTATED (see :mod:`drivers.odrive.watchdog`)."""
+        wd, m, stated = self._wd[index], self.motors[index], self._stated_s[index]
+        if wd is not None:
+            ep = wd.endpoints
+            return Protection(
+                Guard.CONFIGURED, wd.timeout_s, self.TIMEOUT_ACTION,
+                f"axis watchdog written over CAN (RxSdo endpoints {ep.timeout_id}, "
+                f"{ep.enable_id} of firmware {ep.fw_version}) and read back before arming",
+            )
+        v06 = self.codec.firmware is Firmware.V0_6
+        if stated > 0 and not v06:
+            return Protection(
+                Guard.STATED, stated, self.TIMEOUT_ACTION,
+                "axis watchdog set with odrivetool (0.5 cannot set it over CAN); stated by "
+                "controller_timeout_s, not verifiable over CAN",
+            )
+        axis = f"odrv.axis0 of node {m.node_id}"
+        if v06:
+            return Protection(
+                Guard.UNSTATED, stated or None, "unknown",
+                "not set over CAN: the motor block names no endpoint IDs (flat_endpoints or "
+                "watchdog_endpoints)" + (
+                    f"; controller_timeout_s {stated:g} s is not confirmed" if stated else ""
+                ),
+                "give flat_endpoints: the flat_endpoints.json of the axis' firmware release "
+                "(https://docs.odriverobotics.com/releases/firmware)",
+                configurable=True,
+            )
+        return Protection(
+            Guard.UNSTATED, None, "unknown",
+            "not stated: an ODrive's watchdog is off from the factory",
+            f"in odrivetool: {axis}.config.watchdog_timeout = 0.25, "
+            f"{axis}.config.enable_watchdog = True, save_configuration(); then state "
+            "controller_timeout_s: 0.25",
+        )
+
+    def protection_state(self, index: int) -> ProtectionState:
+        """NOT_APPLICABLE without a 0.6 setup; else PENDING, CONFIRMED or FAILED."""
+        wd = self._wd[index]
+        if wd is None:
+            return ProtectionState.NOT_APPLICABLE
+        if wd.step is Step.CONFIRMED:
+            return ProtectionState.CONFIRMED
+        return ProtectionState.FAILED if wd.step is Step.FAILED else ProtectionState.PENDING
 
     @classmethod
     def node_id_range(cls, options: Mapping[str, object] | None = None) -> tuple[int, int]:
@@ -142,8 +233,16 @@ class OdriveDriver(MotorDriver):
 
     @classmethod
     def make_simulator(cls, motor: MotorConfig) -> DeviceSimulator:
-        """An :class:`~drivers.odrive.sim.OdriveSimulator` for ``motor``."""
-        return OdriveSimulator(motor)
+        """An :class:`~drivers.odrive.sim.OdriveSimulator` for ``motor``, as the motor block
+        says it was configured: at factory settings (watchdog off) with the 0.6 endpoint IDs
+        it names, or with the watchdog it states (``controller_timeout_s``) saved."""
+        o = cls.validate_options(motor.options, f"motor {motor.wheel!r}")
+        endpoints = endpoints_from_options(o, f"motor {motor.wheel!r}", str(o["config_dir"]))
+        if endpoints is not None:
+            return OdriveSimulator(motor, endpoints=endpoints)
+        return OdriveSimulator(
+            motor, watchdog_timeout_s=cast("float", o["controller_timeout_s"])
+        )
 
     # ----------------------------------------------------------------- state
 
@@ -181,8 +280,11 @@ class OdriveDriver(MotorDriver):
             (a new state request would abort it); no frame is sent then.
         """
         frames: list[Frame] = []
-        for i in range(len(self.motors)):
-            frames.extend(self._arm_frames(i, now_s))
+        arm = [self._arm_frames(i, now_s) for i in range(len(self.motors))]  # may raise
+        for i, wd in enumerate(self._wd):
+            self.clear_protection_fault(i)
+            self._arm_waits[i] = wd is not None
+            frames.extend(arm[i] if wd is None else wd.start(now_s))
         for i in range(len(self.motors)):
             self._enabling[i] = True
             self._enable_sent_s[i] = now_s
@@ -207,6 +309,7 @@ class OdriveDriver(MotorDriver):
         frames: list[Frame] = []
         for i, m in enumerate(self.motors):
             self._enabling[i] = False
+            self._arm_waits[i] = False
             frames.extend(
                 self.codec.make_transition(m.node_id, self._axis_state[i], AxisState.IDLE)
             )
@@ -279,16 +382,46 @@ class OdriveDriver(MotorDriver):
 
     def poll(self, now_s: float) -> list[Frame]:
         """RTR encoder requests (``encoder_request: rtr``), error queries and enable retries."""
-        frames: list[Frame] = []
+        frames, self._queued = self._queued, []
         for i, m in enumerate(self.motors):
+            if self._arm_waits[i]:
+                frames.extend(self._watchdog_step(i, now_s))
             if self._rtr[i]:
                 frames.append(self.codec.make_request(m.node_id, CmdId.GET_ENCODER_ESTIMATES))
             if self._error_request_due[i]:
                 self._error_request_due[i] = False
                 frames.append(self.codec.make_request(m.node_id, CmdId.GET_ERROR))
-            if self._enabling[i] and now_s - self._enable_sent_s[i] >= self.ENABLE_RETRY_S:
+            if (
+                self._enabling[i]
+                and not self._arm_waits[i]
+                and now_s - self._enable_sent_s[i] >= self.ENABLE_RETRY_S
+            ):
                 frames.extend(self._retry_enable(i, now_s))
         return frames
+
+    def _watchdog_step(self, i: int, now_s: float) -> list[Frame]:
+        """Drive motor ``i``'s watchdog setup; arm it once confirmed (or failed, under
+        ``controller_watchdog: warn``)."""
+        wd = self._wd[i]
+        assert wd is not None
+        frames = wd.poll(now_s)
+        if wd.step is Step.CONFIRMED:
+            m = self.motors[i]
+            log.info(
+                'ODrive node %d ("%s"): watchdog %g s confirmed; arming',
+                m.node_id, m.wheel, wd.timeout_s,
+            )
+        elif wd.step is Step.FAILED:
+            self.protection_fault(i, wd.why)
+            if self.watchdog_policy is not WatchdogPolicy.WARN:
+                self._arm_waits[i] = self._enabling[i] = False
+                return frames
+        else:
+            return frames
+        self._arm_waits[i] = False
+        self._enable_sent_s[i] = now_s
+        self._attempts[i] = 1
+        return [*frames, *self._arm_frames(i, now_s)]
 
     def _retry_enable(self, i: int, now_s: float) -> tuple[Frame, ...]:
         m = self.motors[i]
@@ -337,6 +470,10 @@ class OdriveDriver(MotorDriver):
         if i is None:
             return False
         cmd = arb & CMD_MASK
+        if cmd in (CmdId.GET_VERSION, TX_SDO) and not frame.is_remote_frame:
+            if self.codec.firmware is Firmware.V0_6:
+                self._on_setup_reply(i, cmd, frame)
+                return True
         try:
             if frame.is_remote_frame:
                 msg = None
@@ -358,6 +495,30 @@ class OdriveDriver(MotorDriver):
         elif frame.is_remote_frame and not self._own_request(i, cmd):
             self.reject("remote frame where data expected")
         return True
+
+    def _on_setup_reply(self, i: int, cmd: int, frame: Frame) -> None:
+        """A Get_Version or TxSdo data frame of axis ``i`` (0.6): to its watchdog setup."""
+        wd = self._wd[i]
+        if wd is None or frame.dlc == 0:
+            return  # no setup, or a Get_Version request (another host's)
+        if cmd == CmdId.GET_VERSION:
+            version = parse_version(frame.data)
+            if version is None:
+                self.reject("malformed", DecodeError(
+                    f"Expected 8 bytes in Get_Version of ODrive node {self.motors[i].node_id}, "
+                    f"but got {frame.dlc}."
+                ))
+                return
+            self._queued.extend(wd.on_version(*version, frame.timestamp_s))
+            return
+        reply = parse_sdo(frame.data)
+        if reply is None:
+            self.reject("malformed", DecodeError(
+                f"Expected at least 4 bytes in TxSdo of ODrive node {self.motors[i].node_id}, "
+                f"but got {frame.dlc}."
+            ))
+            return
+        wd.on_tx_sdo(reply[1], reply[2])
 
     def _own_request(self, i: int, cmd: int) -> bool:
         """Whether this driver itself sends RTR frames with ``cmd`` (their echo is no error)."""

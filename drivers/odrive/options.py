@@ -42,6 +42,29 @@ OPTIONS: dict[str, OptionSpec] = {
         choices=("cyclic", "rtr"),
         help="cyclic encoder estimates, or an RTR request on every poll",
     ),
+    "controller_timeout_s": OptionSpec(
+        float,
+        0.0,
+        minimum=0.0,
+        maximum=60.0,
+        help="the axis watchdog timeout (s): on 0.6 written over CAN and read back (0: "
+        "0.25 s); on 0.5 a statement of what odrivetool set (0: not stated)",
+    ),
+    "flat_endpoints": OptionSpec(
+        str,
+        "",
+        help="0.6: the firmware's flat_endpoints.json (from docs.odriverobotics.com/releases/"
+        "firmware), for the watchdog's endpoint IDs",
+    ),
+    "watchdog_endpoints": OptionSpec(
+        dict,
+        {},
+        help="0.6: {fw_version, enable_watchdog, watchdog_timeout[, hw_version]}: the "
+        "watchdog's endpoint IDs of that firmware version, instead of flat_endpoints",
+    ),
+    "config_dir": OptionSpec(
+        str, "", help="directory a relative flat_endpoints starts from; '' = current directory"
+    ),
     "liveness_s": OptionSpec(
         float,
         MotorDriver.DEFAULT_LIVENESS_S,

@@ -18,9 +18,17 @@ Modelled behaviour:
   the axis follows Set_Input_Pos with its speed feed-forward (the model's position loop) and,
   when armed, first holds where it stands (0.5 ``Axis::run_closed_loop_control_loop`` sets the
   input position to the estimate);
-* watchdog: any frame addressed to the axis feeds it (0.5 ``do_command`` calls
-  ``watchdog_feed()`` first); ``watchdog_timeout_s`` without one in CLOSED_LOOP_CONTROL latches
-  WATCHDOG_TIMER_EXPIRED and disarms;
+* watchdog: **off, as from the factory** (``axis.config.enable_watchdog`` false), unless the
+  simulator is built with ``watchdog_timeout_s`` (a device configured and saved with
+  odrivetool) or the gateway enables it over CAN (0.6).  0.5: any frame addressed to the axis
+  feeds it (``do_command`` calls ``watchdog_feed()`` first); 0.6 (closed firmware): only
+  Set_Input_Pos/Vel/Torque and Set_Axis_State feed it, the stricter reading of the official
+  ``can_watchdog.py`` example.  Expired in CLOSED_LOOP_CONTROL, it latches
+  WATCHDOG_TIMER_EXPIRED and disarms (the motor coasts);
+* 0.6 parameter access, for the watchdog's two endpoints only (``endpoints``, the IDs the
+  motor block names): Get_Version answers with the endpoints' firmware and hardware version,
+  RxSdo reads answer with TxSdo, writes are taken without an answer (firmware before 0.6.11);
+  other endpoints get no answer;
 * an injected FAULT latches DRV_FAULT (0.6) or MOTOR_FAILED + motor DRV_FAULT (0.5) and
   disarms; Clear_Errors clears, but latches again at once while the injected cause remains;
 * Estop latches ESTOP_REQUESTED and disarms;
@@ -32,6 +40,7 @@ from __future__ import annotations
 
 import logging
 import math
+import struct
 from typing import TYPE_CHECKING
 
 from drivers.odrive.codec import OdriveCodec
@@ -58,12 +67,22 @@ from drivers.odrive.messages import (
     SetInputPos,
     SetInputVel,
 )
+from drivers.odrive.watchdog import (
+    OPCODE_READ,
+    OPCODE_WRITE,
+    RX_SDO,
+    TX_SDO,
+    parse_sdo,
+    version_reply,
+)
 from gateway.errors import DecodeError
 from gateway.sim import DeviceSimulator, SimFault
+from gateway.types import Frame
 
 if TYPE_CHECKING:
+    from drivers.odrive.watchdog import WatchdogEndpoints
     from gateway.sim import MotorModel
-    from gateway.types import Frame, MotorConfig
+    from gateway.types import MotorConfig
 
 log = logging.getLogger(__name__)
 
@@ -75,7 +94,10 @@ class OdriveSimulator(DeviceSimulator):
 
     :param motor: the motor block (``firmware`` and ``extended_id`` keys select the codec).
     :param model: the motor physics; a default model when omitted.
-    :param watchdog_timeout_s: axis watchdog timeout (s); 0 disables it.
+    :param watchdog_timeout_s: the axis watchdog as saved on the device (s); 0 (the factory
+        setting) leaves it off.
+    :param endpoints: 0.6: the watchdog's endpoint IDs and the firmware version the axis
+        reports (``None``: no parameter access is simulated).
     :param heartbeat_period_s: heartbeat period (s).
     :param encoder_period_s: encoder-estimates period (s); 0 disables the cyclic stream.
     :param initial_position_turns: position estimate at start (turns).
@@ -87,7 +109,8 @@ class OdriveSimulator(DeviceSimulator):
         motor: MotorConfig,
         model: MotorModel | None = None,
         *,
-        watchdog_timeout_s: float = 0.5,
+        watchdog_timeout_s: float = 0.0,
+        endpoints: WatchdogEndpoints | None = None,
         heartbeat_period_s: float = 0.1,
         encoder_period_s: float = 0.01,
         initial_position_turns: float = 0.0,
@@ -95,7 +118,10 @@ class OdriveSimulator(DeviceSimulator):
     ) -> None:
         super().__init__(motor, model)
         self.codec = OdriveCodec.from_options(motor.options)
+        #: ``axis.config.watchdog_timeout`` (s) and ``enable_watchdog``.
         self.watchdog_timeout_s = watchdog_timeout_s
+        self.watchdog_enabled = watchdog_timeout_s > 0.0
+        self.endpoints = endpoints
         self.heartbeat_period_s = heartbeat_period_s
         self.encoder_period_s = encoder_period_s
         self.initial_position_turns = initial_position_turns
@@ -133,7 +159,13 @@ class OdriveSimulator(DeviceSimulator):
         ids = self.codec.split_id(frame)
         if ids is None or ids[0] != self.node_id:
             return []
-        self._last_fed_s = now_s
+        v06 = self.codec.firmware is Firmware.V0_6
+        if not v06:
+            self._last_fed_s = now_s
+        elif self.endpoints is not None and ids[1] in (CmdId.GET_VERSION, RX_SDO):
+            return self._parameter_access(frame, ids[1])
+        if v06 and ids[1] in _FEEDS_06:
+            self._last_fed_s = now_s
         try:
             cmd = self.codec.decode_command(frame)
         except DecodeError as err:
@@ -163,7 +195,7 @@ class OdriveSimulator(DeviceSimulator):
         fed = self._last_fed_s
         if (
             closed_loop
-            and self.watchdog_timeout_s > 0.0
+            and self.watchdog_enabled
             and fed is not None
             and now_s - fed > self.watchdog_timeout_s
         ):
@@ -266,6 +298,39 @@ class OdriveSimulator(DeviceSimulator):
             self.node_id, self.position_turns, self.model.velocity_rad_s / TAU
         )
 
+    def _parameter_access(self, frame: Frame, cmd: int) -> list[Frame]:
+        """Get_Version and RxSdo for the watchdog's endpoints (0.6)."""
+        ep = self.endpoints
+        assert ep is not None
+        arb = self.codec.arbitration_id
+        ext = self.codec.extended_id
+        if cmd == CmdId.GET_VERSION:
+            if frame.dlc != 0:
+                return []  # not a request
+            reply = version_reply(ep.fw_version, ep.hw_version)
+            return [Frame(arb(self.node_id, CmdId.GET_VERSION), reply, ext)]
+        sdo = parse_sdo(frame.data)
+        if sdo is None:
+            return []
+        opcode, endpoint, value = sdo
+        if endpoint not in (ep.enable_id, ep.timeout_id):
+            return []
+        fmt = "<?" if endpoint == ep.enable_id else "<f"
+        if opcode == OPCODE_WRITE:
+            if len(value) < struct.calcsize(fmt):
+                return []
+            (x,) = struct.unpack_from(fmt, value)
+            if endpoint == ep.enable_id:
+                self.watchdog_enabled = bool(x)
+            else:
+                self.watchdog_timeout_s = float(x)
+            return []
+        if opcode != OPCODE_READ:
+            return []
+        current = self.watchdog_enabled if endpoint == ep.enable_id else self.watchdog_timeout_s
+        head = struct.pack("<BHB", OPCODE_READ, endpoint, 0)
+        return [Frame(arb(self.node_id, TX_SDO), head + struct.pack(fmt, current), ext)]
+
     def _answer(self, cmd: CmdId) -> list[Frame]:
         if cmd == CmdId.HEARTBEAT:
             return [self._heartbeat()]
@@ -279,6 +344,17 @@ class OdriveSimulator(DeviceSimulator):
             )
             return [self.codec.make_error_status(status)]
         return []
+
+
+#: The 0.6 commands that feed the watchdog in this model (see the module docstring).
+_FEEDS_06 = frozenset(
+    {
+        CmdId.SET_INPUT_POS,
+        CmdId.SET_INPUT_VEL,
+        CmdId.SET_INPUT_TORQUE,
+        CmdId.SET_AXIS_STATE,
+    }
+)
 
 
 def _next_due(previous: float | None, now_s: float, period_s: float) -> float:

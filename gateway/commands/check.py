@@ -8,6 +8,7 @@ import click
 
 from gateway.cli import config_option
 from gateway.commands._common import load, rad_s_to_rpm
+from gateway.drives import DriveSet
 from gateway.kinematics import PRESETS
 
 
@@ -71,6 +72,12 @@ def command(ctx: click.Context, config_path: str | None) -> None:
         f"linear {_num(lim.max_linear_m_s)} m/s, angular {_num(lim.max_angular_rad_s)} rad/s"
     )
     click.echo(f"bus:      {cfg.bus.interface}:{cfg.bus.channel} at {cfg.bus.bitrate} bit/s")
+    click.echo(
+        f"controller-side stop when wheelgate dies (controller_watchdog: "
+        f"{cfg.loop.controller_watchdog.value}):"
+    )
+    for label, prot in DriveSet(cfg).protections():
+        click.echo(f"  {label}: {prot.describe()}")
     for warning in cfg.warnings:
         click.echo(f"warning:  {warning}")
     click.echo("ok" if not cfg.warnings else f"ok, with {len(cfg.warnings)} warning(s)")

@@ -10,6 +10,7 @@ import click
 from gateway.cli import config_option
 from gateway.commands._common import load
 from gateway.daemon import Daemon
+from gateway.drives import DriveSet
 
 log = logging.getLogger("gateway.run")
 
@@ -38,6 +39,8 @@ def command(
     cfg = load(ctx, config_path)
     for warning in cfg.warnings:
         log.warning("%s", warning)
+    for label, prot in DriveSet(cfg).protections():
+        log.info("controller-side stop of %s: %s", label, prot.describe())
     daemon = Daemon(cfg, sim=sim, record=record, socket_path=socket_path)
     click.echo(
         f"wheelgate: {cfg.name} ({cfg.drive}, {cfg.model.n} wheels) on "

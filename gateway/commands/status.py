@@ -42,8 +42,14 @@ def command(
     width = max([12, *(len(str(m["name"])) for m in reply["motors"])])
     for m in reply["motors"]:
         age = m["feedback_age_s"]
+        stop = m.get("controller_stop")  # daemons before issue 14 do not send it
+        guard = ""
+        if stop:
+            timeout = stop["timeout_s"]
+            guard = f"stop {stop['guard']}" + (f" {timeout:g} s" if timeout else "") + (
+                f" ({stop['state']})" if stop["state"] != "not applicable" else "")
         click.echo(f"  {m['name']:<{width}} node {m['node_id']:<4} {m['state']:<9} "
-                   f"age {'-' if age is None else f'{age * 1000:.1f} ms':>9}  "
+                   f"age {'-' if age is None else f'{age * 1000:.1f} ms':>9}  {guard:<30} "
                    f"{', '.join(m['faults']) or 'no faults'} {m['detail']}")
     tr = reply.get("tracking")
     if tr:  # daemons before the tracking check do not send it
