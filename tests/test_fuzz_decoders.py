@@ -61,7 +61,7 @@ if TYPE_CHECKING:
 FUZZ = settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
 #: 0.5 has no parameter access: its watchdog is stated, not written.
-NO_ENDPOINTS = {"watchdog_endpoints": {}}
+NO_ENDPOINTS: dict[str, object] = {"watchdog_endpoints": {}}
 #: Case name -> (shipped config, keys merged into its ``motor_defaults``).
 CASES: dict[str, tuple[str, dict[str, object]]] = {
     "odrive-0.6": ("turtlebot3_burger.yaml", {}),
