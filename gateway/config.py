@@ -245,7 +245,8 @@ def _check_protection(config: GatewayConfig, drives: DriveSet) -> list[str]:
                 )
             warnings.append(f"{where}: controller watchdog {prot.how}; fix: {prot.fix}")
         elif prot.guard is Guard.NONE:
-            warnings.append(f"{where}: controller watchdog {prot.describe()}")
+            fix = f"; fix: {prot.fix}" if prot.fix else ""
+            warnings.append(f"{where}: controller watchdog {prot.describe()}{fix}")
         problem = check_timeout(prot, period, where)
         if problem:
             warnings.append(problem)

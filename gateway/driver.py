@@ -107,6 +107,9 @@ class MotorDriver(abc.ABC):
         #: What to do when a protection this driver configures is not confirmed; the drive
         #: set passes the configuration's ``gateway.controller_watchdog``.
         self.watchdog_policy = WatchdogPolicy.REQUIRED
+        #: Commands this driver sent that the controller will not follow as given, by reason
+        #: (e.g. a VESC speed below its minimum ERPM); shown in ``status``.
+        self.command_counts: collections.Counter[str] = collections.Counter()
         #: Frames of this protocol that were rejected, by reason.
         self.rejected: collections.Counter[str] = collections.Counter()
         #: The detail of the last rejection of each reason (the counter's keys are a fixed
@@ -241,6 +244,13 @@ class MotorDriver(abc.ABC):
             f"not stated: nothing known stops this {self.PROTOCOL} motor if wheelgate dies",
             self.TIMEOUT_FIX,
         )
+
+    def uncontrolled_band(self, index: int) -> tuple[float, float] | None:
+        """The wheel speeds (rad/s, ``(low, high)``: every ``low < |speed| < high``) that motor
+        ``index``'s controller does not speed-control (a VESC below its minimum ERPM stops the
+        motor instead); ``None`` (the default) for none.  ``ik`` and ``check`` report it and
+        the tracking check expects a stopped wheel there."""
+        return None
 
     def protection_state(self, index: int) -> ProtectionState:
         """Where the configuring of motor ``index``'s protection stands (drivers with

@@ -195,6 +195,16 @@ class DriveSet:
             for i, m in enumerate(drv.motors)
         ]
 
+    def uncontrolled_bands(self) -> list[tuple[float, float] | None]:
+        """Per wheel (model order; ``None`` for a passive wheel or none), the speeds its
+        controller does not speed-control (:meth:`MotorDriver.uncontrolled_band`)."""
+        out: list[tuple[float, float] | None] = [None] * len(self.config.motors)
+        for drv, idx in self.groups:
+            for i, slot in enumerate(idx):  # the driver's motors are its slots, in order
+                if slot < len(out):
+                    out[slot] = drv.uncontrolled_band(i)
+        return out
+
     def status(self, now_s: float) -> list[MotorStatus]:
         """Every motor's status: the drive motors in model order of their wheels, then the
         steering actuators in the order of the ``steering:`` blocks."""

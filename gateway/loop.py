@@ -79,6 +79,7 @@ class Gateway(BusEdge):
         self.model = config.model
         self.drives = DriveSet(config)
         self.supervisor = Supervisor(self.model, config.loop, self.drives.host_speed_loop)
+        self.supervisor.tracking.dead_bands = self.drives.uncontrolled_bands()
         self.odometry = Odometry(self.model)
         self.wg = WgCodec(config.loop.can_ids)
         self.counter = CounterTracker()

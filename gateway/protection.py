@@ -67,8 +67,8 @@ class Protection:
     """One motor's controller-side protection.
 
     :param guard: how it is known.
-    :param timeout_s: the controller acts this long after the last command frame (``None``:
-        unknown or never).
+    :param timeout_s: the controller acts this long after wheelgate falls silent (its last
+        command or, for CiA 402, its last heartbeat; ``None``: unknown or never).
     :param action: what the controller then does, e.g. ``"goes IDLE (the motor coasts)"``.
     :param how: where it lives and how it is set, e.g. ``"axis watchdog, written over CAN
         (RxSdo endpoints 154, 153) and read back"``.
@@ -90,7 +90,7 @@ class Protection:
         if self.guard is Guard.NONE:
             return f"NONE: {self.how}"
         when = "?" if self.timeout_s is None else f"{self.timeout_s:g} s"
-        head = f"{self.guard.value}: stops {when} after the last command ({self.action}); "
+        head = f"{self.guard.value}: stops {when} after wheelgate falls silent ({self.action}); "
         return head + self.how
 
 

@@ -44,6 +44,11 @@ def status_dict(daemon: Daemon, now_s: float) -> dict[str, object]:
     rejected = {
         type(drv).__name__: dict(drv.rejected) for drv, _ in gw.drives.groups if drv.rejected
     }
+    not_followed = {
+        type(drv).__name__: dict(drv.command_counts)
+        for drv, _ in gw.drives.groups
+        if drv.command_counts
+    }
     limit = gw.limit_report
     timing = {**dataclasses.asdict(daemon.scheduler.timer.snapshot()),
               "burst_gap_max_ms": gw.burst_gap_max_s * 1000.0}
@@ -65,7 +70,8 @@ def status_dict(daemon: Daemon, now_s: float) -> dict[str, object]:
             "steer_worst_ratio": sup.steer_tracking.worst_ratio,
         },
         "odometry": gw.odometry_dict(),
-        "counters": {**gw.counts, **sup.counts, "rejected_frames": rejected},
+        "counters": {**gw.counts, **sup.counts, "rejected_frames": rejected,
+                     "commands_not_followed": not_followed},
         "socket": {"path": daemon.socket_path,
                    **dataclasses.asdict(daemon.server.counters)},
         "timing": timing,

@@ -134,6 +134,10 @@ class TrackingMonitor:
         #: The largest error / window ratio seen so far (above 1: a wheel left its window), to
         #: tune the window against a real robot.
         self.worst_ratio = 0.0
+        #: Per wheel, the speeds its controller does not speed-control (``(low, high)`` rad/s,
+        #: :meth:`gateway.driver.MotorDriver.uncontrolled_band`; ``None``: none): a command
+        #: there is checked as zero, which is what the controller does with it.
+        self.dead_bands: Sequence[tuple[float, float] | None] = ()
 
     def reset(self) -> None:
         """Forget every wheel's history (the drives stopped following commands)."""
@@ -179,7 +183,12 @@ class TrackingMonitor:
         peak, before = self._peak, self._peak_before
         abs_tol, ratio = limits.tolerance_rad_s, limits.tolerance_ratio
         fault: TrackingFault | None = None
-        for i, (cmd, fb) in enumerate(zip(command_rad_s, feedback, strict=True)):
+        bands = self.dead_bands
+        for i, (command, fb) in enumerate(zip(command_rad_s, feedback, strict=True)):
+            band = bands[i] if i < len(bands) else None
+            # In a band the controller does not speed-control, it stops the motor instead.
+            in_band = band is not None and band[0] < abs(command) < band[1]
+            cmd = 0.0 if in_band else command
             size = abs(cmd)
             peak[i] = max(peak[i], size)
             if fb is None:

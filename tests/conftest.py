@@ -71,6 +71,19 @@ def sock_path() -> Iterator[str]:
 
 
 @pytest.fixture
+def sock_dir() -> Iterator[Path]:
+    """A folder on a tmpfs for the control socket of the ``socketcan`` tier (not the VM's
+    shared folder: Unix sockets do not work there)."""
+    import shutil
+    import tempfile
+
+    base = "/run" if os.access("/run", os.W_OK) else None
+    folder = Path(tempfile.mkdtemp(prefix="wgt", dir=base))
+    yield folder
+    shutil.rmtree(folder, ignore_errors=True)
+
+
+@pytest.fixture
 def daemon(sock_path: str, channel: str) -> Iterator[Daemon]:
     """A gateway daemon for the TurtleBot3 config with simulated controllers, running in a
     thread on ``sock_path``; stopped (zero and disarm) at the end."""

@@ -46,11 +46,20 @@ def tier_config(source: Path, dest: Path, rate_hz: float = 100.0,
             raw.setdefault(block, {})["liveness_s"] = liveness_s
     if "motor_defaults" not in raw:
         raw["motor_defaults"] = {"liveness_s": liveness_s}
+    # The controllers' own timeouts (a watchdog the gateway sets, or a stated one): 1 s, since
+    # the gateway's cycles in the VM are late by tens of milliseconds at times.  (DJI ESCs have
+    # none.)
+    blocks = [raw.get("motor_defaults"), raw.get("steering_defaults"),
+              *(raw.get("steering") or {}).values()]
+    for block in blocks:
+        if isinstance(block, dict) and "controller_timeout_s" in block:
+            block["controller_timeout_s"] = max(float(block["controller_timeout_s"]), 1.0)
     if driver:  # the drive motors on another protocol than the shipped one
         defaults = raw["motor_defaults"]
         for key in ("firmware", "watchdog_endpoints", "flat_endpoints", "controller_timeout_s"):
             defaults.pop(key, None)  # the shipped protocol's own keys
         defaults["driver"] = driver
+        defaults["controller_timeout_s"] = 1.0
     # A DBC file is named relative to the configuration: keep pointing at the shipped one.
     for block in (raw.get("motor_defaults"), *(raw.get("motors") or {}).values()):
         if isinstance(block, dict) and isinstance(block.get("dbc"), str):

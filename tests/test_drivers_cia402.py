@@ -57,7 +57,13 @@ from drivers.cia402.sdo import (
     parse_sdo_response,
 )
 from drivers.cia402.sequence import NodeSequencer, Phase
-from drivers.cia402.steps import NmtStep, SdoExpectStep, SdoWriteStep, configuration_steps
+from drivers.cia402.steps import (
+    NmtStep,
+    SdoExpectStep,
+    SdoVerifyStep,
+    SdoWriteStep,
+    configuration_steps,
+)
 from gateway.errors import ConfigError, DecodeError, EncodeError, IllegalTransitionError
 from gateway.registry import get_driver_class
 from gateway.types import DriveFault, Frame, MotorConfig
@@ -387,10 +393,19 @@ def test_path_toward_enabled(start: State) -> None:
 
 @pytest.mark.parametrize(("current", "target"), list(ALLOWED), ids=str)
 def test_simulator_obeys_table(current: State, target: State) -> None:
+    """Each transition's controlword takes the simulated drive there once the transition's
+    delay has passed, as a device confirms a transition when it is done."""
     sim = Cia402Simulator(MotorConfig("x", "cia402", 3))
+    if current is State.QUICK_STOP_ACTIVE:
+        sim.od.set(0x605A, 6)  # transition 16 only with quick stop option codes 5 to 8
     sim.state = current
     reply = sim.handle(make_sdo_download(3, 0x6040, 0, controlword_for(current, target), U16), 0.0)
     assert reply == [make_sdo_download_ack(3, 0x6040, 0)]
+    delay = sim.timing.delay(target)
+    assert delay > 0.0
+    sim.handle(make_sdo_upload(3, 0x6041, 0), 0.5 * delay)  # (an upload advances its clock)
+    assert sim.state is current
+    sim.handle(make_sdo_upload(3, 0x6041, 0), delay)
     assert sim.state is target
 
 
@@ -410,6 +425,14 @@ def test_configuration_steps_sync() -> None:
     assert (0x1800, 1, 0x80000183) in writes and (0x1801, 1, 0x80000283) in writes
     assert (0x1017, 0, 100) in writes and (0x6060, 0, 3) in writes
     assert not any(w[0] in (0x1802, 0x1803) and w[1] == 5 for w in writes)
+    # the controller-side protection: written after 0x1017, read back, all before 0x6060
+    order = [(type(s).__name__, s.index) for s in steps
+             if isinstance(s, (SdoWriteStep, SdoVerifyStep)) and s.index in
+             (0x1017, 0x1016, 0x6007, 0x6060)]
+    assert order == [("SdoWriteStep", 0x1017), ("SdoWriteStep", 0x1016),
+                     ("SdoWriteStep", 0x6007), ("SdoVerifyStep", 0x1016),
+                     ("SdoVerifyStep", 0x6007), ("SdoWriteStep", 0x6060)]
+    assert (0x1016, 1, 0x007F00C8) in writes and (0x6007, 0, 3) in writes
 
 
 def test_configuration_steps_event_driven() -> None:

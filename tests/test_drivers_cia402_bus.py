@@ -87,9 +87,10 @@ def benches(channel: str) -> Iterator[Callable[..., Bench]]:
     """A maker of benches on ``channel``, shutting every bench down at the end."""
     made: list[Bench] = []
 
-    def make(motors: Sequence[MotorConfig], **sim_kwargs: object) -> Bench:
+    def make(motors: Sequence[MotorConfig], sim_class: type[Cia402Simulator] = Cia402Simulator,
+             **sim_kwargs: object) -> Bench:
         drv = Cia402Driver(motors)
-        sims = [Cia402Simulator(m, **sim_kwargs) for m in motors]  # type: ignore[arg-type]
+        sims = [sim_class(m, **sim_kwargs) for m in motors]  # type: ignore[arg-type]
         ctl = SimulatedControllers(sims, channel)
         try:
             gw = can.Bus(interface="virtual", channel=channel)
@@ -228,7 +229,9 @@ def test_statusword_fault_without_emcy(bench: Callable[..., Bench]) -> None:
 
 
 def test_silence_goes_offline_and_back(bench: Callable[..., Bench]) -> None:
-    b = bench([LEFT])
+    # A SILENT simulator hears nothing either, the gateway's heartbeat included: a consumer
+    # time (1 s) longer than the 0.3 s of silence keeps the drive from stopping by itself.
+    b = bench([dataclasses.replace(LEFT, options={"controller_timeout_s": 1.0})])
     assert b.enable([0.0])
     b.sims[0].inject(SimFault.SILENT)
     b.run(0.2, [0.0])
@@ -380,7 +383,10 @@ def test_our_sdo_client_frames_against_canopen_server(channel: str) -> None:
 
 
 def test_canopen_client_against_our_simulator(channel: str) -> None:
-    sim = Cia402Simulator(LEFT)
+    # An instant device: canopen's client reads 0x6061 and 0x6041 right after each write,
+    # within the few ms a drive takes to switch (the driver waits; this client does not).
+    sim = Cia402Simulator(LEFT, state_delay_s=0.0, switch_on_delay_s=0.0, enable_delay_s=0.0,
+                          mode_switch_delay_s=0.0)
     net = canopen.Network()
     net.NOTIFIER_CYCLE = 0.02
     with SimulatedControllers([sim], channel) as ctl:

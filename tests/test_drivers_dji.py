@@ -64,7 +64,7 @@ def motor(
         gear_ratio=ratio,
         invert=invert,
         max_rpm=20000.0,
-        options={"esc": esc, **options},
+        options={"esc": esc, "no_controller_stop": "acknowledged", **options},
     )
 
 
@@ -302,7 +302,8 @@ def test_pi_output_within_limit(
 def test_registry_and_options() -> None:
     assert get_driver_class("dji") is DjiDriver
     assert DjiDriver.NODE_ID_RANGE == (1, 8)
-    opts = DjiDriver.validate_options({}, "robot.yaml: wheels[0].motor")
+    ack = {"no_controller_stop": "acknowledged"}
+    opts = DjiDriver.validate_options(ack, "robot.yaml: wheels[0].motor")
     assert opts == {
         "esc": "c620",
         "kp": 0.1,
@@ -310,6 +311,7 @@ def test_registry_and_options() -> None:
         "max_current_a": 0.0,
         "liveness_s": 0.1,
         "max_temp_c": 80.0,
+        "no_controller_stop": "acknowledged",
     }
     assert DjiDriver([motor(1)]).liveness_s == 0.1
 

@@ -159,8 +159,9 @@ def test_status_round_trip(node_id: int, erpm: int, current_a: float, duty: floa
     got = decode(make_status(node_id, erpm, current_a, duty))
     assert isinstance(got, VescStatus)
     assert (got.node_id, got.erpm) == (node_id, erpm)
-    assert abs(got.current_a - current_a) <= 0.05 + 1e-9
-    assert abs(got.duty - duty) <= 0.0005 + 1e-9
+    # Truncated toward zero, as the firmware's (int16_t) casts.
+    assert round(got.current_a * 10) == math.trunc(current_a * 10)
+    assert round(got.duty * 1000) == math.trunc(duty * 1000)
 
 
 @given(node_id=st.integers(0, 255), tacho=I32, v_in=st.floats(-3276.8, 3276.7))
@@ -168,7 +169,14 @@ def test_status5_round_trip(node_id: int, tacho: int, v_in: float) -> None:
     got = decode(make_status5(node_id, tacho, v_in))
     assert isinstance(got, VescStatus5)
     assert (got.node_id, got.tachometer) == (node_id, tacho)
-    assert abs(got.v_in_v - v_in) <= 0.05 + 1e-9
+    assert round(got.v_in_v * 10) == math.trunc(v_in * 10)
+
+
+def test_device_side_truncates_like_the_firmware() -> None:
+    # comm_can_send_status1/5 (vedderb/bldc comm/comm_can.c) cast with (int32_t) and
+    # (int16_t): toward zero, where rounding would give one LSB more (701, -13, 500, 246).
+    assert make_status(23, 700.9, -1.29, 0.4999) == ext(0x917, "000002BCFFF401F3")
+    assert make_status5(23, 0, 24.59) == ext(0x1B17, "0000000000F50000")
 
 
 @given(to_id=st.integers(0, 255), node_id=st.integers(0, 255), hw=st.sampled_from(HwType))
@@ -268,10 +276,18 @@ def test_registry_entry() -> None:
 
 def test_validate_options_fills_defaults() -> None:
     got = VescDriver.validate_options({"pole_pairs": 7}, "robot.yaml: wheels[0].motor")
-    defaults = {"command_period_s": 0.02, "timeout_s": 0.5, "liveness_s": 0.25}
+    defaults = {
+        "command_period_s": 0.02,
+        "controller_timeout_s": 0.0,  # not stated
+        "status_rate_hz": 0.0,  # not stated
+        "min_erpm": 900.0,  # the factory's s_pid_min_erpm
+        "liveness_s": 0.25,
+    }
     assert got == {"pole_pairs": 7, **defaults}
-    got = VescDriver.validate_options({"pole_pairs": 7, "command_period_s": 0.249}, "w")
-    assert got["command_period_s"] == 0.249  # just below timeout_s / 2
+    got = VescDriver.validate_options({"pole_pairs": 7, "command_period_s": 0.499}, "w")
+    assert got["command_period_s"] == 0.499  # just below half the factory 1 s
+    got = VescDriver.validate_options({"pole_pairs": 7, "status_rate_hz": 8}, "w")
+    assert got["status_rate_hz"] == 8.0  # two periods: exactly the 0.25 s liveness
 
 
 @pytest.mark.parametrize(
@@ -281,12 +297,26 @@ def test_validate_options_fills_defaults() -> None:
         ({"pole_pairs": 0}, "w.pole_pairs: expected at least 1"),
         ({"pole_pairs": 7.0}, "w.pole_pairs: expected int"),
         ({"pole_pairs": 7, "poles": 14}, "w.poles: unknown key"),
-        ({"pole_pairs": 7, "timeout_s": 0}, "w.timeout_s: expected at least"),
         (
-            {"pole_pairs": 7, "command_period_s": 0.25},  # exactly timeout_s / 2
-            "w.command_period_s: expected less than timeout_s / 2 = 0.25 s",
+            {"pole_pairs": 7, "timeout_s": 0.5},
+            "w.timeout_s: renamed controller_timeout_s (the timeout set in VESC Tool",
         ),
-        ({"pole_pairs": 7, "timeout_s": 1.0, "command_period_s": 0.6}, "timeout_s / 2 = 0.5"),
+        ({"pole_pairs": 7, "controller_timeout_s": -1}, "w.controller_timeout_s: expected at"),
+        (
+            {"pole_pairs": 7, "command_period_s": 0.5},  # exactly half the factory 1 s
+            "w.command_period_s: expected less than half the VESC's timeout (the factory 1 s, "
+            "as controller_timeout_s is not stated) = 0.5 s",
+        ),
+        (
+            {"pole_pairs": 7, "controller_timeout_s": 0.5, "command_period_s": 0.25},
+            "(controller_timeout_s 0.5 s) = 0.25 s",
+        ),
+        (
+            {"pole_pairs": 7, "status_rate_hz": 5},
+            "w.liveness_s: expected at least two status periods at status_rate_hz 5 (0.4 s)",
+        ),
+        ({"pole_pairs": 7, "status_rate_hz": 20000}, "w.status_rate_hz: expected at most"),
+        ({"pole_pairs": 7, "min_erpm": -1}, "w.min_erpm: expected at least 0"),
     ],
 )
 def test_validate_options_rejects(raw: dict[str, object], message: str) -> None:
@@ -300,7 +330,8 @@ def test_validate_options_rejects(raw: dict[str, object], message: str) -> None:
         [motor(255)],  # broadcast
         [motor(-1)],
         [motor(23), motor(23, wheel="right")],
-        [motor(23, command_period_s=0.3)],
+        [motor(23, command_period_s=0.5)],
+        [motor(23, controller_timeout_s=0.2, command_period_s=0.1)],
         [MotorConfig(wheel="left", driver="vesc", node_id=23)],  # no pole_pairs
     ],
 )
@@ -494,8 +525,8 @@ def test_missing_status_frames_log_a_hint_once(caplog: pytest.LogCaptureFixture)
         drv.poll(1.1)
         drv.poll(1.2)
     assert len(caplog.records) == 1
-    assert "no STATUS_5 frames" in caplog.records[0].getMessage()
-    assert "can_status_msgs_r1" in caplog.records[0].getMessage()
+    assert "no STATUS_5 received" in caplog.records[0].getMessage()
+    assert "Can Messages Rate 1" in caplog.records[0].getMessage()
 
 
 # ============================================================================ simulator alone

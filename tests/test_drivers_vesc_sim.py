@@ -22,6 +22,7 @@ from drivers.vesc.codec import (
     make_set_rpm,
     wrap_int32,
 )
+from drivers.vesc.settings import STATUS_1, STATUS_5
 from gateway.bus import drain, send_frames
 from gateway.errors import ConfigError
 from gateway.sim import SimFault
@@ -33,6 +34,14 @@ if TYPE_CHECKING:
     from collections.abc import Iterator, Sequence
 
 I32 = st.integers(-(2**31), 2**31 - 1)
+#: A speed command above the factory s_pid_min_erpm (900), so the speed controller runs.
+ERPM = 1400
+#: STATUS and STATUS_5 on: a factory VESC sends no status (test_vesc_protection.py).
+STATUS_ON = STATUS_1 | STATUS_5
+#: How far a reported wheel speed at gear 1 may be from the command (rad/s): SET_RPM rounds
+#: to one eRPM (half of one off), and STATUS truncates toward zero, as the firmware's
+#: (int32_t) cast does (up to one more).
+ERPM_LSB = 1.5 * 2 * math.pi / 60 / PP
 
 
 def mode_of(sim: VescSimulator) -> SimMode:
@@ -41,6 +50,7 @@ def mode_of(sim: VescSimulator) -> SimMode:
 
 
 def sim_for(**kwargs: object) -> VescSimulator:
+    """A simulated VESC 23 at factory settings, but for ``kwargs``."""
     return VescSimulator(motor(23), **kwargs)  # type: ignore[arg-type]
 
 
@@ -58,7 +68,7 @@ def test_sim_answers_ping() -> None:
 
 
 def test_sim_status_rate_and_layout() -> None:
-    sim = sim_for(status_rate_hz=50.0, initial_tacho=-5, v_in_v=36.0)
+    sim = sim_for(status_msgs=STATUS_ON, status_rate_hz=50.0, initial_tacho=-5, v_in_v=36.0)
     frames = [f for k in range(1000) for f in sim.tick(k * 0.001)]
     decoded = [decode(f) for f in frames]
     assert sum(isinstance(d, VescStatus) for d in decoded) == 50
@@ -74,7 +84,7 @@ def run_sim(sim: VescSimulator, start: float, stop: float, dt: float = 0.001) ->
 
 def test_sim_releases_motor_after_its_timeout() -> None:
     sim = sim_for(timeout_s=0.5)
-    sim.handle(make_set_rpm(23, 700), 0.0)
+    sim.handle(make_set_rpm(23, ERPM), 0.0)
     assert mode_of(sim) == SimMode.SPEED
     run_sim(sim, 0.0, 0.5)
     assert sim.model.armed
@@ -83,8 +93,11 @@ def test_sim_releases_motor_after_its_timeout() -> None:
     assert not sim.model.armed
 
 
-def test_sim_timeout_defaults_to_motor_option() -> None:
-    assert VescSimulator(motor(23, timeout_s=1.0)).timeout_s == 1.0
+def test_sim_timeout_is_the_factory_one_or_the_stated_one() -> None:
+    assert VescSimulator(motor(23, controller_timeout_s=0.3)).timeout_s == 1.0  # not read here
+    sim = VescDriver.make_simulator(motor(23, controller_timeout_s=0.3))
+    assert isinstance(sim, VescSimulator)
+    assert sim.timeout_s == 0.3
 
 
 @pytest.mark.parametrize(
@@ -95,12 +108,12 @@ def test_sim_timeout_defaults_to_motor_option() -> None:
         (make_set_current(23, 5.0), SimMode.CURRENT),
         (make_set_current_brake(23, 5.0), SimMode.BRAKE),
         (make_set_current_brake(23, 0.0), SimMode.RELEASED),
-        (make_set_rpm(255, 700), SimMode.SPEED),  # broadcast
+        (make_set_rpm(255, ERPM), SimMode.SPEED),  # broadcast
     ],
 )
 def test_sim_command_modes(frame: Frame, mode: SimMode) -> None:
     sim = sim_for()
-    sim.handle(make_set_rpm(23, -350), 0.0)
+    sim.handle(make_set_rpm(23, -ERPM), 0.0)
     run_sim(sim, 0.0, 0.2)
     sim.handle(frame, 0.2)
     assert mode_of(sim) == mode
@@ -108,7 +121,7 @@ def test_sim_command_modes(frame: Frame, mode: SimMode) -> None:
 
 
 def test_sim_current_mode_accelerates_and_reports_current() -> None:
-    sim = sim_for()
+    sim = sim_for(status_msgs=STATUS_ON)
     sim.tick(0.0)
     sim.handle(make_set_current(23, 4.0), 0.0)
     run_sim(sim, 0.0, 0.1)
@@ -127,20 +140,20 @@ def test_sim_ignores_malformed_and_foreign_commands() -> None:
 
 def test_sim_fault_ignores_commands_then_clears_itself() -> None:
     sim = sim_for(fault_stop_s=0.5, timeout_s=1.0)
-    sim.handle(make_set_rpm(23, 700), 0.0)
+    sim.handle(make_set_rpm(23, ERPM), 0.0)
     run_sim(sim, 0.0, 0.1)
     sim.inject(SimFault.FAULT)
     assert mode_of(sim) == SimMode.RELEASED
     t = 0.1
     for _ in range(4):
-        sim.handle(make_set_rpm(23, 700), t)
+        sim.handle(make_set_rpm(23, ERPM), t)
         assert mode_of(sim) == SimMode.RELEASED  # ignored
         t = run_sim(sim, t, t + 0.1)
     assert sim.faults & SimFault.FAULT
     t = run_sim(sim, t, t + 0.11)
     assert not sim.faults & SimFault.FAULT  # cleared itself after fault_stop_s
     assert mode_of(sim) == SimMode.RELEASED  # until the next command
-    sim.handle(make_set_rpm(23, 700), t)
+    sim.handle(make_set_rpm(23, ERPM), t)
     assert mode_of(sim) == SimMode.SPEED
 
 
@@ -155,7 +168,7 @@ def test_sim_tachometer_counts_whole_60_degree_steps() -> None:
 def test_sim_tachometer_wraps() -> None:
     sim = sim_for(initial_tacho=2**31 - 3)
     assert sim.tachometer == 2**31 - 3
-    sim.handle(make_set_rpm(23, 700), 0.0)
+    sim.handle(make_set_rpm(23, ERPM), 0.0)
     run_sim(sim, 0.0, 0.1)
     assert sim.tachometer < 0  # wrapped through 0x80000000
     revs = sim.model.position_rad / (2 * math.pi)
@@ -231,13 +244,21 @@ def rig(channel: str, motors: list[MotorConfig], sims: list[VescSimulator]) -> I
         gw.shutdown()
 
 
+def kind_vesc(m: MotorConfig, **kwargs: object) -> VescSimulator:
+    """A kinder VESC than the factory's, as these protocol tests need: STATUS and STATUS_5 on
+    (none from the factory) and ``s_pid_min_erpm`` 0 (900 from the factory), so the wheels
+    can be driven slowly; the motor block states ``min_erpm: 0`` to match.  The factory
+    settings are tested in test_vesc_protection.py."""
+    return VescSimulator(m, status_msgs=STATUS_ON, min_erpm=0.0, **kwargs)  # type: ignore[arg-type]
+
+
 def two_wheels() -> tuple[list[MotorConfig], list[VescSimulator]]:
-    left = motor(23, wheel="left")
-    right = motor(24, wheel="right", gear_ratio=2.0, invert=True)
+    left = motor(23, wheel="left", min_erpm=0.0)
+    right = motor(24, wheel="right", gear_ratio=2.0, invert=True, min_erpm=0.0)
     # Both counters start next to the int32 wrap, on the side they will run towards.
     sims = [
-        VescSimulator(left, initial_tacho=2**31 - 20),
-        VescSimulator(right, initial_tacho=-(2**31) + 20),
+        kind_vesc(left, initial_tacho=2**31 - 20),
+        kind_vesc(right, initial_tacho=-(2**31) + 20),
     ]
     return [left, right], sims
 
@@ -252,7 +273,7 @@ def test_drive_and_odometry_across_the_wrap(channel: str) -> None:
         assert r.states() == [DriveState.ENABLING] * 2
         r.run(1.0, [6.0, 6.0])
         assert r.states() == [DriveState.ENABLED] * 2
-        assert r.velocities() == pytest.approx([6.0, 6.0], abs=0.01)
+        assert r.velocities() == pytest.approx([6.0, 6.0], abs=ERPM_LSB)
         assert [s.wheel_velocity_rad_s for s in sims] == pytest.approx([6.0, 6.0], abs=0.01)
         assert sims[0].tachometer < 0 < sims[1].tachometer  # both wrapped
         r.run(0.5, [0.0, 0.0])
@@ -273,7 +294,7 @@ def test_lost_status5_stream_goes_offline_and_odometry_catches_up(channel: str) 
         sims[0].inject(SimFault.DROP)
         r.run(0.4, [-4.0, 4.0])
         assert r.states() == [DriveState.OFFLINE, DriveState.ENABLED]
-        assert r.velocities() == pytest.approx([-4.0, 4.0], abs=0.01)  # STATUS still arrives
+        assert r.velocities() == pytest.approx([-4.0, 4.0], abs=ERPM_LSB)  # STATUS arrives
         sims[0].clear(SimFault.DROP)
         r.run(0.3, [0.0, 0.0])
         assert r.states() == [DriveState.ENABLED] * 2
@@ -294,8 +315,9 @@ def test_silence_goes_offline_and_recovers(channel: str) -> None:
         r.run(0.1, [3.0, 3.0])
         assert r.states() == [DriveState.OFFLINE, DriveState.ENABLED]
         assert r.drv.status(r.t)[0].state == DriveState.OFFLINE
-        r.run(0.3, [3.0, 3.0])
-        # The silent device heard nothing either, so its own timeout released the motor.
+        r.run(0.8, [3.0, 3.0])
+        # The silent device heard nothing either, so its own (factory, 1 s) timeout released
+        # the motor.
         assert mode_of(sims[0]) == SimMode.RELEASED
         sims[0].clear(SimFault.SILENT)
         r.run(0.5, [3.0, 3.0])
@@ -319,12 +341,15 @@ def test_fault_releases_motor_and_clears_itself(channel: str) -> None:
         assert r.states() == [DriveState.ENABLED] * 2
         r.run(0.6, [5.0, 5.0])  # fault_stop_s = 0.5 s has passed: the stream drives again
         assert not sims[0].faults & SimFault.FAULT
-        assert r.velocities() == pytest.approx([5.0, 5.0], abs=0.01)
+        assert r.velocities() == pytest.approx([5.0, 5.0], abs=ERPM_LSB)
 
 
 def test_keepalive_and_device_timeout(channel: str) -> None:
-    left = motor(23, timeout_s=0.5)
-    sim = VescSimulator(left)
+    # Built as the motor block states the VESC was set up: a 0.5 s timeout, status at 50 Hz,
+    # and (kinder than the factory) s_pid_min_erpm 0 for the slow 5 rad/s.
+    left = motor(23, controller_timeout_s=0.5, status_rate_hz=50.0, min_erpm=0.0)
+    sim = VescDriver.make_simulator(left)
+    assert isinstance(sim, VescSimulator)
     with rig(channel, [left], [sim]) as r:
         r.send(r.drv.enable(r.t))
         r.send(r.drv.command([5.0], r.t))

@@ -462,7 +462,8 @@ def test_mixed_bus_frames_of_the_other_id_type_reach_their_driver() -> None:
     doc = yaml.safe_load(path.read_text("utf-8"))
     doc["motor_defaults"] = {"gear_ratio": 1.0, "max_rpm": 61}
     doc["motors"] = {
-        "left": {"driver": "dji", "node_id": 1, "esc": "c620"},
+        "left": {"driver": "dji", "node_id": 1, "esc": "c620",
+                 "no_controller_stop": "acknowledged"},
         "right": {"driver": "odrive", "node_id": 16, "extended_id": True, "invert": True,
                   "watchdog_endpoints": SIM_ODRIVE_ENDPOINTS},
     }

@@ -261,10 +261,11 @@ def test_motors_that_do_not_report_arming_show_online() -> None:
     cfg = config_at("differential_tub.yaml")
     session = Session(cfg)
     mon = BusMonitor(cfg)
-    feed_all(mon, session.run(1.5, [1.0, 1.0]))
+    # 4 rad/s: above the VESCs' minimum ERPM (900, 2.69 rad/s at these wheels).
+    feed_all(mon, session.run(1.5, [4.0, 4.0]))
     snap = mon.snapshot(session.t)
     assert [(m.driver, m.state) for m in snap.motors] == [("vesc", "online")] * 2
-    assert motor(snap, "left").velocity_rad_s == pytest.approx(1.0, abs=0.01)
+    assert motor(snap, "left").velocity_rad_s == pytest.approx(4.0, abs=0.01)
     assert motor(snap, "left").feedback_age_s is not None
 
 

@@ -288,7 +288,7 @@ def test_check_prints_every_motors_protection(runner: CliRunner) -> None:
         result.output
     )
     assert (
-        "motor 'left' (odrive node 1): configured: stops 0.25 s after the last command "
+        "motor 'left' (odrive node 1): configured: stops 0.25 s after wheelgate falls silent "
         "(latches WATCHDOG_TIMER_EXPIRED and goes IDLE: the motor coasts); axis watchdog "
         "written over CAN (RxSdo endpoints 2, 1 of firmware 0.0.0) and read back before arming"
     ) in result.output

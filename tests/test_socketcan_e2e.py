@@ -18,7 +18,6 @@ import os
 import subprocess
 import sys
 import time
-from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import can
@@ -33,7 +32,7 @@ from tests.e2e_helpers import Rig, path_legs
 from tests.socketcan_helpers import Session, pose_error, tier_config
 
 if TYPE_CHECKING:
-    from collections.abc import Iterator
+    from pathlib import Path
 
 pytestmark = [pytest.mark.socketcan, pytest.mark.timeout(600)]
 
@@ -65,18 +64,6 @@ ROBOTS = {
     "dbc": "example_dbc.yaml",
     "steered": "ackermann.yaml",
 }
-
-
-@pytest.fixture
-def sock_dir() -> Iterator[Path]:
-    """A folder on a tmpfs for the control socket (not the VM's shared folder)."""
-    import shutil
-    import tempfile
-
-    base = "/run" if os.access("/run", os.W_OK) else None
-    folder = Path(tempfile.mkdtemp(prefix="wgt", dir=base))
-    yield folder
-    shutil.rmtree(folder, ignore_errors=True)
 
 
 def drive_square(session: Session, config_path: Path, vcan: str, speed: float) -> None:

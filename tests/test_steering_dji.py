@@ -44,6 +44,8 @@ if TYPE_CHECKING:
 
 TWO_PI = 2.0 * math.pi
 COUNT_RAD = TWO_PI / COUNTS_PER_REV
+#: Every DJI motor block acknowledges that the ESC has no stop of its own.
+ACK = {"no_controller_stop": "acknowledged"}
 
 
 def steer(
@@ -63,7 +65,9 @@ def steer(
         gear_ratio=ratio,
         invert=invert,
         max_rpm=max_rpm,
-        options=MappingProxyType(DjiDriver.validate_options({"esc": esc, **options}, "t")),
+        options=MappingProxyType(
+            DjiDriver.validate_options({"esc": esc, **ACK, **options}, "t")
+        ),
         role=MotorRole.STEER,
         zero_rad=zero_rad,
         steers=("front_left",),
@@ -77,7 +81,9 @@ def drive(node_id: int = 1, **options: object) -> MotorConfig:
         node_id=node_id,
         gear_ratio=M3508_GEAR_RATIO,
         max_rpm=9000.0,
-        options=MappingProxyType(DjiDriver.validate_options({"esc": "c620", **options}, "t")),
+        options=MappingProxyType(
+            DjiDriver.validate_options({"esc": "c620", **ACK, **options}, "t")
+        ),
     )
 
 
@@ -133,8 +139,8 @@ def test_power_up_position_nearest_turn(count: int, zero_rad: float, turns: int)
 
 def test_steering_keys_only_where_given() -> None:
     assert DjiDriver.STEERING is True
-    assert "steer_kp" not in DjiDriver.validate_options({}, "w")
-    opts = DjiDriver.validate_options({"steer_kp": 20, "steer_kd": 1}, "w")
+    assert "steer_kp" not in DjiDriver.validate_options(ACK, "w")
+    opts = DjiDriver.validate_options({"steer_kp": 20, "steer_kd": 1, **ACK}, "w")
     assert (opts["steer_kp"], opts["steer_kd"]) == (20.0, 1.0)
     drv = DjiDriver([steer(steer_kp=20.0), steer(node_id=6)])
     assert drv._position[0] == PositionLoop(20.0, 0.7, 3000.0 * TWO_PI / 60.0)
@@ -412,6 +418,7 @@ def test_swerve_config_with_dji_steering() -> None:
         "gear_ratio": 72.0,  # the M2006's 36:1 and a 2:1 belt to the module
         "max_rpm": 15000,
         "zero_rad": 1.5,
+        **ACK,
     }
     doc["steering"] = {
         "front_left": {"node_id": 1, "steer_kp": 30},

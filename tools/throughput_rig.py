@@ -36,10 +36,14 @@ TWIST = Twist(0.3, 0.1, 0.2)
 
 #: Motor blocks per protocol, on the same mecanum robot.
 PROTOCOLS: dict[str, dict[str, object]] = {
-    "odrive": {"driver": "odrive", "firmware": "0.6", "gear_ratio": 10.0, "max_rpm": 3000},
+    # The simulator's watchdog endpoints, as in the shipped configurations.
+    "odrive": {"driver": "odrive", "firmware": "0.6", "gear_ratio": 10.0, "max_rpm": 3000,
+               "watchdog_endpoints": {"fw_version": "0.0.0", "enable_watchdog": 1,
+                                      "watchdog_timeout": 2}},
     "vesc": {"driver": "vesc", "pole_pairs": 7, "gear_ratio": 10.0, "max_rpm": 3000},
     "cia402": {"driver": "cia402", "gear_ratio": 10.0, "max_rpm": 3000},
-    "dji": {"driver": "dji", "esc": "c620", "gear_ratio": 19.203208556149733, "max_rpm": 9000},
+    "dji": {"driver": "dji", "esc": "c620", "gear_ratio": 19.203208556149733, "max_rpm": 9000,
+            "no_controller_stop": "acknowledged"},
     # The shipped example's controller (config/example_dbc.yaml), geared as the others.
     "dbc": {
         **yaml.safe_load((ROOT / "config" / "example_dbc.yaml").read_text())["motor_defaults"],

@@ -5,9 +5,15 @@ actuators in cyclic synchronous position mode.
 * :mod:`~drivers.cia402.faults`: SDO abort codes, EMCY codes, error register.
 * :mod:`~drivers.cia402.codec`: pure frame builders and parsers (:class:`Cia402Codec`).
 * :mod:`~drivers.cia402.options`: the protocol keys of a motor block.
+* :mod:`~drivers.cia402.steps`: what is written into a node before it starts, as data.
 * :mod:`~drivers.cia402.sequence`: the non-blocking enable and stop sequence of one node.
+* :mod:`~drivers.cia402.protection`: controller-side protection: the gateway's heartbeat, each
+  drive's heartbeat consumer (0x1016) and abort connection option code (0x6007).
+* :mod:`~drivers.cia402.targets`: the command RPDOs' targets (velocity, CSP position).
 * :mod:`~drivers.cia402.driver`: :class:`Cia402Driver`, one instance per bus.
-* :mod:`~drivers.cia402.sim`: :class:`Cia402Simulator`, a simulated drive.
+* :mod:`~drivers.cia402.sim`: :class:`Cia402Simulator`, a simulated drive, with its object
+  dictionary (:mod:`~drivers.cia402.sim_od`) and device control
+  (:mod:`~drivers.cia402.sim_device`, :mod:`~drivers.cia402.sim_control`).
 
 Reference: CiA 301 / CiA 402 (https://www.can-cia.org/can-knowledge/cia402-series) and
 ``/work/shared/specs/can-protocols.md`` section 3.

@@ -24,41 +24,24 @@ SYNC (0x080) goes out once per bus: after the RPDOs of every :meth:`command` cal
 drives), so TPDO feedback and liveness never stop.
 
 **Steering actuators** (:attr:`Cia402Driver.STEERING`) run in cyclic synchronous position mode
-(CSP, 0x6060 = 8; drive motors stay in profile velocity, 3), with the target position 0x607A
-in place of 0x60FF in their command RPDO (6040 + 607A), in position units (``counts_per_rev``
-per motor turn).  CSP rather than profile position (PP, 1) because this driver streams one
-setpoint per node every cycle, each followed by one SYNC, and that is the contract of CSP
-(CiA 402-2, "cyclic synchronous position mode": the drive takes a new 0x607A at every SYNC and
-interpolates over the cycle; synchronous RPDOs, transmission type 1, apply at the SYNC).  PP
-takes a new setpoint only through the controlword handshake: bit 4 "new setpoint" rising edge
-(with bit 5 "change set immediately"), wait for statusword bit 12 "setpoint acknowledge", clear
-bit 4, wait for bit 12 to clear.  That is a statusword round trip through a TPDO per setpoint,
-so at best one setpoint every other cycle (fewer with feedback latency), an edge-sensitive state
-per node that a lost RPDO or TPDO stalls, and a profile the drive re-plans at every setpoint.
-CSP has no handshake: a lost RPDO just repeats the previous target.  What CSP asks of the
-master, the driver does: the RPDOs must be synchronous (``sync: false`` is refused for a
-steering actuator); the target must be a trajectory the drive can follow, so each cycle's
-target moves from the previous one by at most ``max_rpm`` times the time since it (at most
-:attr:`Cia402Driver.SLEW_MAX_DT_S`), starting from the measured position; and the drive follows
-0x607A from the moment it reaches OPERATION ENABLED, so the enable walk sends the measured
-position as the target (:mod:`drivers.cia402.sequence`).  A steering actuator's stop is SHUTDOWN
-at once.  Its feedback is absolute in the drive's frame: the first 0x6064 after the driver
-starts (or after a boot-up) is taken as is, and later ones unwrapped modulo 2^32, so the angle
-stays right across the int32 wrap.
+(CSP, 0x6060 = 8) with the target position 0x607A in their command RPDO; why CSP, and how each
+cycle's target is built, is in :mod:`drivers.cia402.targets`.  A steering actuator's stop is
+SHUTDOWN at once.
 
-Reference: CiA 301 and CiA 402 (https://www.can-cia.org/can-knowledge/cia402-series),
-``/work/shared/specs/can-protocols.md`` section 3.
+**Controller-side protection** (:mod:`drivers.cia402.protection`): :meth:`Cia402Driver.poll`
+sends the gateway's heartbeat; the enable sequence writes each drive's heartbeat consumer
+(0x1016:01) and abort connection option code (0x6007) and reads both back before NMT start.
+
+Reference: CiA 301 and CiA 402 (https://www.can-cia.org/can-knowledge/cia402-series).
 """
 
 from __future__ import annotations
 
 import logging
-import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, ClassVar
 
 from drivers.cia402.codec import (
-    INT32_RANGE,
     Cia402Codec,
     Emergency,
     FeedbackKind,
@@ -66,40 +49,35 @@ from drivers.cia402.codec import (
     PdoFeedback,
     make_sync,
     position_to_raw,
-    velocity_to_raw,
 )
 from drivers.cia402.enums import CobBase, Controlword, NmtState, State
 from drivers.cia402.faults import describe_emcy, emcy_faults, is_error_reset
 from drivers.cia402.options import DEFAULT_LIVENESS_S, OPTIONS, NodeOptions
+from drivers.cia402.protection import FIX, HostHeartbeat, describe, host_settings
 from drivers.cia402.sdo import SdoResponse
 from drivers.cia402.sequence import NodeSequencer, Phase
 from drivers.cia402.sim import Cia402Simulator
 from drivers.cia402.steps import configuration_steps
+from drivers.cia402.targets import raw_targets, target_counts, wrap_delta
 from gateway.driver import MotorDriver, OptionSpec
-from gateway.errors import DecodeError, EncodeError
+from gateway.errors import DecodeError
 from gateway.filters import CanFilter
+from gateway.protection import ProtectionState, WatchdogPolicy
 from gateway.types import DriveFault, DriveState, WheelFeedback
 
 if TYPE_CHECKING:
     from collections.abc import Mapping, Sequence
 
+    from gateway.protection import Protection
     from gateway.types import Frame, MotorConfig
+
+__all__ = ["Cia402Driver", "wrap_delta"]
 
 log = logging.getLogger(__name__)
 
 _ENABLING = frozenset({Phase.CONFIGURING, Phase.AWAIT_STATUS, Phase.WALKING})
-_INT32_SPAN = 1 << 32
 #: The controlword of every command RPDO, as a plain int (make_rpdo's quick check).
 _ENABLE_OPERATION = int(Controlword.ENABLE_OPERATION)
-
-
-def wrap_delta(previous: int, current: int) -> int:
-    """Signed difference of two int32 counter readings, modulo 2^32.
-
-    >>> wrap_delta(0x7FFFFFFF, -0x80000000)
-    1
-    """
-    return (current - previous + (1 << 31)) % _INT32_SPAN - (1 << 31)
 
 
 @dataclass(slots=True)
@@ -128,7 +106,8 @@ class Cia402Driver(MotorDriver):
     position mode), one instance per bus.
 
     :param motors: the motors, each with ``driver: cia402`` and a node ID 1..127.
-    :raises ConfigError: for a bad option, a node ID out of range or used twice.
+    :raises ConfigError: for a bad option, a node ID out of range or used twice, motors that
+        disagree on the gateway's heartbeat, or a drive with the gateway's node ID.
     """
 
     OPTIONS: ClassVar[Mapping[str, OptionSpec]] = OPTIONS
@@ -142,11 +121,15 @@ class Cia402Driver(MotorDriver):
     #: Longest time one cycle's steering target may advance over (s): a late or resumed cycle
     #: does not turn into a jump the drive cannot follow.
     SLEW_MAX_DT_S: ClassVar[float] = 0.05
+    PROTOCOL: ClassVar[str] = "CiA 402"
+    TIMEOUT_FIX: ClassVar[str] = FIX
 
     def __init__(self, motors: Sequence[MotorConfig]) -> None:
         super().__init__(motors)
         opts = [NodeOptions.from_motor(m) for m in self.motors]
         pairs = list(zip(self.motors, opts, strict=True))
+        #: The gateway's heartbeat, which every drive's consumer (0x1016) watches.
+        self.host = HostHeartbeat(host_settings(self.motors, opts))
         self.codec = Cia402Codec({m.node_id: o.layout for m, o in pairs})
         #: Whether this driver produces SYNC (any motor with ``sync: true``).
         self.sync_enabled = any(o.sync for o in opts)
@@ -163,6 +146,8 @@ class Cia402Driver(MotorDriver):
         self._last_sync_s: float | None = None
         #: Each motor's ``max_wheel_rad_s`` (a computed property), for :meth:`command`.
         self._limits = tuple(m.max_wheel_rad_s for m in self.motors)
+        #: Each motor's options, and whether it is a steering actuator, for :meth:`command`.
+        self._kinds = tuple((node.opts, node.steer) for node in self._nodes)
         #: Each motor's (sign, gear ratio, zero), for the feedback's motor-to-wheel conversion
         #: (``zero_rad`` of a steering actuator, 0 for a drive motor).
         self._wheel_side = tuple(
@@ -174,10 +159,13 @@ class Cia402Driver(MotorDriver):
     def enable(self, now_s: float) -> list[Frame]:
         """Start the enable sequence of every node that is not already armed."""
         out: list[Frame] = []
+        required = self.watchdog_policy is WatchdogPolicy.REQUIRED
         for i, node in enumerate(self._nodes):
             if node.seq.phase is not Phase.ARMED:
                 node.boot_restarts = 0
                 node.restart_pending = False
+                self.clear_protection_fault(i)
+                node.seq.protection_required = required
                 out += node.seq.start(now_s)
             self._refresh(i)
         return out
@@ -234,52 +222,15 @@ class Cia402Driver(MotorDriver):
         return out
 
     def _raws(self, wheel_rad_s: Sequence[float]) -> list[int]:
-        """Every motor's RPDO target: velocity units, or a steering actuator's target position
-        for the angle itself (int32, wrapped).
+        """Every motor's RPDO target (:func:`~drivers.cia402.targets.raw_targets`).
 
         :raises EncodeError: as :meth:`command`.
         """
-        if len(wheel_rad_s) != len(self.motors):
-            raise EncodeError(
-                f"Expected {len(self.motors)} wheel speeds, but got {len(wheel_rad_s)}."
-            )
-        raws: list[int] = []
-        lo, hi = INT32_RANGE
-        for m, node, limit, w in zip(self.motors, self._nodes, self._limits, wheel_rad_s,
-                                     strict=True):
-            if node.steer:
-                raws.append(position_to_raw(self._target_counts(m, node, w),
-                                            f"target position for node {m.node_id}"))
-                continue
-            if not math.isfinite(w) or abs(w) > limit * (1.0 + 1e-9):
-                raise EncodeError(
-                    f'Expected velocity for node {m.node_id} ("{m.wheel}") between '
-                    f"{-limit:.4g} and {limit:.4g} rad/s, but got {w!r}."
-                )
-            units = node.opts.rad_s_to_units(m.wheel_to_motor_rad_s(w))
-            raw = round(units) if math.isfinite(units) else None
-            if raw is None or not lo <= raw <= hi:
-                # velocity_to_raw raises; its message is only built on this path.
-                raw = velocity_to_raw(units, f"target velocity for node {m.node_id}")
-            raws.append(raw)
-        return raws
-
-    @staticmethod
-    def _target_counts(m: MotorConfig, node: _Node, angle: float) -> float:
-        """The target position (counts, unwrapped) of steering angle ``angle`` (rad).
-
-        :raises EncodeError: if the angle is not finite.
-        """
-        if not math.isfinite(angle):
-            raise EncodeError(
-                f'Expected a finite steering angle in rad for node {m.node_id} ("{m.wheel}"), '
-                f"but got {angle!r}."
-            )
-        return node.opts.rad_to_counts(m.steer_to_motor_rad(angle))
+        return raw_targets(self.motors, self._kinds, self._limits, wheel_rad_s)
 
     def _slew_to(self, i: int, node: _Node, angle: float, now_s: float) -> int:
         """This cycle's target position of armed steering actuator ``i`` (int32, wrapped)."""
-        target = self._target_counts(self.motors[i], node, angle)
+        target = target_counts(self.motors[i], node.opts, angle)
         if node.setpoint is None:  # just armed: start where the drive stands
             node.setpoint, node.setpoint_s = float(node.counts), now_s
         dt = min(max(now_s - node.setpoint_s, 0.0), self.SLEW_MAX_DT_S)
@@ -289,8 +240,9 @@ class Cia402Driver(MotorDriver):
         return position_to_raw(node.setpoint, f"target position for node {node.seq.node_id}")
 
     def poll(self, now_s: float) -> list[Frame]:
-        """Enable/stop sequence steps, deadlines, and the fallback SYNC."""
-        out: list[Frame] = []
+        """The gateway's heartbeat when due, enable/stop sequence steps, deadlines, and the
+        fallback SYNC."""
+        out = self.host.poll(now_s)
         for i, node in enumerate(self._nodes):
             if node.restart_pending:
                 node.restart_pending = False
@@ -300,6 +252,7 @@ class Cia402Driver(MotorDriver):
             out += node.seq.poll(now_s)
             if was is not Phase.ARMED and node.seq.phase is Phase.ARMED:
                 node.emcy = None  # the drive reached OPERATION ENABLED: no fault is active
+            self._check_protection(i)
             self._refresh(i)
         if self.sync_enabled and (
             self._last_sync_s is None
@@ -321,7 +274,8 @@ class Cia402Driver(MotorDriver):
             self.reject("malformed CiA 402 frame", err)
             i = self.index_of(frame.arbitration_id - CobBase.SDO_TX)
             if i is not None and not frame.is_extended_id:
-                self._nodes[i].seq.on_sdo_error(err)
+                self._nodes[i].seq.on_sdo_error(err, frame.timestamp_s)
+                self._check_protection(i)
                 self._refresh(i)
             return True
         if msg is None:
@@ -338,8 +292,10 @@ class Cia402Driver(MotorDriver):
             self._on_heartbeat(i, msg)
         elif isinstance(msg, Emergency):
             self._on_emcy(i, msg)
-        elif isinstance(msg, SdoResponse) and not node.seq.on_sdo(msg, now_s):
-            self.reject("unexpected SDO response")
+        elif isinstance(msg, SdoResponse):
+            if not node.seq.on_sdo(msg, now_s):
+                self.reject("unexpected SDO response")
+            self._check_protection(i)
         self._refresh(i)
         return True
 
@@ -347,6 +303,23 @@ class Cia402Driver(MotorDriver):
     def make_simulator(cls, motor: MotorConfig) -> Cia402Simulator:
         """A simulated CiA 402 drive for ``motor``."""
         return Cia402Simulator(motor)
+
+    # ----------------------------------------------------------------- protection
+
+    def protection(self, index: int) -> Protection:
+        """:attr:`~gateway.protection.Guard.CONFIGURED`: the drive's heartbeat consumer and
+        abort connection option (:mod:`drivers.cia402.protection`)."""
+        return describe(self._nodes[index].opts)
+
+    def protection_state(self, index: int) -> ProtectionState:
+        """PENDING until 0x1016:01 and 0x6007 read back as written (CONFIRMED), FAILED if
+        not."""
+        return self._nodes[index].seq.protection
+
+    def _check_protection(self, i: int) -> None:
+        why = self._nodes[i].seq.take_protection_error()
+        if why:
+            self.protection_fault(i, why)
 
     # ----------------------------------------------------------------- state
 
@@ -413,6 +386,8 @@ class Cia402Driver(MotorDriver):
         node.nmt = msg.state
         seq = node.seq
         if msg.state is NmtState.BOOT_UP:
+            if seq.protection is ProtectionState.CONFIRMED:
+                seq.protection = ProtectionState.PENDING  # the drive forgot its consumer
             # The counter may restart: a drive motor continues from the current angle, a
             # steering actuator takes the next position as absolute (and not as a target).
             node.last_raw = None
@@ -461,7 +436,8 @@ class Cia402Driver(MotorDriver):
         flags, detail = DriveFault.NONE, ""
         emcy_text = "" if emcy is None else describe_emcy(emcy.code, emcy.register, emcy.data)
         if seq.phase is Phase.FAILED:
-            flags, detail = seq.error_flags, seq.error
+            # A failed protection: the base's text (protection_fault) names the fix too.
+            flags, detail = seq.error_flags, "" if seq.halted_by_protection else seq.error
             if emcy is not None and emcy_text not in detail:
                 flags |= emcy_faults(emcy.code, emcy.register)
                 detail = f"{detail}; last {emcy_text}"

@@ -182,18 +182,26 @@ class ObjectIndex(enum.IntEnum):
 
     DEVICE_TYPE = 0x1000
     ERROR_REGISTER = 0x1001
+    #: CiA 301: consumer heartbeat time, sub 1..n = watched node (bits 23..16) + ms (15..0).
+    CONSUMER_HEARTBEAT_TIME = 0x1016
     PRODUCER_HEARTBEAT_TIME = 0x1017
     RPDO_COMMUNICATION = 0x1400
     RPDO_MAPPING = 0x1600
     TPDO_COMMUNICATION = 0x1800
     TPDO_MAPPING = 0x1A00
+    #: CiA 402: what the drive does on a connection abort (a heartbeat event among them).
+    ABORT_CONNECTION_OPTION_CODE = 0x6007
     CONTROLWORD = 0x6040
     STATUSWORD = 0x6041
+    #: CiA 402: how QUICK STOP ACTIVE stops the motor and where it goes then.
+    QUICK_STOP_OPTION_CODE = 0x605A
     MODES_OF_OPERATION = 0x6060
     MODES_OF_OPERATION_DISPLAY = 0x6061
     POSITION_ACTUAL_VALUE = 0x6064
     VELOCITY_ACTUAL_VALUE = 0x606C
     TARGET_POSITION = 0x607A
+    PROFILE_DECELERATION = 0x6084
+    QUICK_STOP_DECELERATION = 0x6085
     TARGET_VELOCITY = 0x60FF
     SUPPORTED_DRIVE_MODES = 0x6502
 

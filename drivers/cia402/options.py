@@ -14,6 +14,12 @@ the wheel, ``zero_rad`` (steering actuators) to the steering angle.
 A drive motor runs in profile velocity mode (3), a steering actuator in cyclic synchronous
 position mode (8), which takes its target at every SYNC: ``sync: false`` is refused for it
 (:mod:`drivers.cia402.driver` gives the reasons for the mode).
+
+Controller-side protection (:mod:`drivers.cia402.protection`): the gateway produces a heartbeat
+as NMT node ``host_node_id`` every ``host_heartbeat_s``; each drive's heartbeat consumer
+(CiA 301 object 0x1016) watches it with the consumer time ``controller_timeout_s``, and the
+drive's abort connection option code (CiA 402 object 0x6007) says what it does when the
+heartbeat stops: ``abort_connection_option`` 3 (quick stop) or 2 (disable voltage).
 """
 
 from __future__ import annotations
@@ -35,6 +41,18 @@ _INT32_LIMIT = float(1 << 31)
 
 #: Default liveness timeout (s): feedback TPDOs run at the loop rate, heartbeats every 100 ms.
 DEFAULT_LIVENESS_S = 0.25
+
+#: The gateway's own NMT node ID by default: the highest, which drives rarely take.
+DEFAULT_HOST_NODE_ID = 127
+#: The gateway's heartbeat period by default (s).
+DEFAULT_HOST_HEARTBEAT_S = 0.05
+#: Each drive's heartbeat consumer time by default (s): four host heartbeat periods.
+DEFAULT_CONTROLLER_TIMEOUT_S = 0.2
+#: Abort connection option codes (0x6007) the gateway writes: 2 disable voltage, 3 quick stop.
+ABORT_CONNECTION_OPTIONS = (2, 3)
+#: The consumer time must be at least this many host heartbeat periods (CiA 301 leaves the
+#: margin to the integrator; a late heartbeat must not trip the drive).
+MIN_TIMEOUT_PERIODS = 2.0
 
 #: Every protocol key of a ``driver: cia402`` motor block.
 OPTIONS: dict[str, OptionSpec] = {
@@ -67,6 +85,27 @@ OPTIONS: dict[str, OptionSpec] = {
     "tpdo_velocity": OptionSpec(
         int, 4, minimum=1, maximum=4, help="TPDO number for statusword + velocity"
     ),
+    "host_node_id": OptionSpec(
+        int, DEFAULT_HOST_NODE_ID, minimum=1, maximum=127,
+        help="the gateway's own NMT node ID: it sends its heartbeat on 0x700 + this ID, which "
+        "each drive's heartbeat consumer (0x1016) watches; no drive may use it",
+    ),
+    "host_heartbeat_s": OptionSpec(
+        float, DEFAULT_HOST_HEARTBEAT_S, minimum=0.001, maximum=10.0,
+        help="period of the gateway's heartbeat (s), sent while its loop runs",
+    ),
+    "controller_timeout_s": OptionSpec(
+        float, DEFAULT_CONTROLLER_TIMEOUT_S, minimum=0.002, maximum=65.535,
+        help="heartbeat consumer time written to the drive's 0x1016:01 (s, whole ms): without "
+        "the gateway's heartbeat for this long the drive acts on abort_connection_option; at "
+        "least twice host_heartbeat_s",
+    ),
+    "abort_connection_option": OptionSpec(
+        int, 3, choices=ABORT_CONNECTION_OPTIONS,
+        help="abort connection option code written to 0x6007: 3 quick stop (the drive's quick "
+        "stop option code 0x605A, by default a ramp to standstill), 2 disable voltage (the "
+        "motor coasts)",
+    ),
 }
 
 
@@ -90,6 +129,19 @@ class NodeOptions:
     #: Mode of operation written to 0x6060: profile velocity for a drive motor, cyclic
     #: synchronous position for a steering actuator.
     mode: OperationMode = OperationMode.PROFILE_VELOCITY
+    #: The gateway's own NMT node ID (its heartbeat: 0x700 + this).
+    host_node_id: int = DEFAULT_HOST_NODE_ID
+    #: The gateway's heartbeat period (s).
+    host_heartbeat_s: float = DEFAULT_HOST_HEARTBEAT_S
+    #: The heartbeat consumer time written to 0x1016:01 (s, a whole number of ms).
+    controller_timeout_s: float = DEFAULT_CONTROLLER_TIMEOUT_S
+    #: The abort connection option code written to 0x6007.
+    abort_connection_option: int = 3
+
+    @property
+    def consumer_time_ms(self) -> int:
+        """:attr:`controller_timeout_s` in whole milliseconds (0x1016 bits 15..0)."""
+        return round(self.controller_timeout_s * 1000.0)
 
     @property
     def position_mode(self) -> bool:
@@ -101,8 +153,9 @@ class NodeOptions:
         """Validate ``motor.options`` (and, for a steering actuator, ``zero_rad``).
 
         :raises ConfigError: for an unknown key, a bad value, both feedback TPDOs on one PDO
-            number, or a steering actuator with ``sync: false`` or a ``zero_rad`` outside the
-            drive's int32 position range.
+            number, a ``controller_timeout_s`` shorter than two ``host_heartbeat_s`` or not a
+            whole number of milliseconds, or a steering actuator with ``sync: false`` or a
+            ``zero_rad`` outside the drive's int32 position range.
         """
         where = f"wheel {motor.wheel!r} (node {motor.node_id})"
         opts = _Options.validate_options(motor.options, where)
@@ -117,6 +170,19 @@ class NodeOptions:
                 f"({layout.tpdo_position}), got {layout.tpdo_velocity}"
             )
         counts_per_rev = int(opts["counts_per_rev"])  # type: ignore[call-overload]
+        period = float(opts["host_heartbeat_s"])  # type: ignore[arg-type]
+        timeout = float(opts["controller_timeout_s"])  # type: ignore[arg-type]
+        if timeout < MIN_TIMEOUT_PERIODS * period - 1e-12:
+            raise ConfigError(
+                f"{where}.controller_timeout_s: expected at least {MIN_TIMEOUT_PERIODS:g} x "
+                f"host_heartbeat_s ({MIN_TIMEOUT_PERIODS * period:g} s), or one late heartbeat "
+                f"of the gateway stops the drive; got {timeout:g}"
+            )
+        if abs(timeout * 1000.0 - round(timeout * 1000.0)) > 1e-6:
+            raise ConfigError(
+                f"{where}.controller_timeout_s: expected a whole number of milliseconds (0x1016 "
+                f"counts in ms), got {timeout!r}"
+            )
         mode = OperationMode.PROFILE_VELOCITY
         if motor.steering:
             mode = OperationMode.CYCLIC_SYNCHRONOUS_POSITION
@@ -141,6 +207,10 @@ class NodeOptions:
             liveness_s=float(opts["liveness_s"]),  # type: ignore[arg-type]
             layout=layout,
             mode=mode,
+            host_node_id=int(opts["host_node_id"]),  # type: ignore[call-overload]
+            host_heartbeat_s=period,
+            controller_timeout_s=timeout,
+            abort_connection_option=int(opts["abort_connection_option"]),  # type: ignore[call-overload]
         )
 
     def rpm_to_units(self, motor_rpm: float) -> float:

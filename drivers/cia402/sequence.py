@@ -13,6 +13,16 @@ OPERATION ENABLED, so the walk sends no controlword until that position is known
 drive is enabled on the spot where it stands.  Its stop is SHUTDOWN at once (released where it
 stands): statusword bit 12 means "follows the target" in CSP, not "speed 0".
 
+The controller-side protection steps (:func:`~drivers.cia402.steps.protection_steps`: the
+heartbeat consumer 0x1016:01 and the abort connection option code 0x6007, written, then read
+back) come before NMT start, so before any controlword.  :attr:`NodeSequencer.protection` says
+where they stand; when one fails (an abort, no answer within :attr:`NodeSequencer.SDO_TIMEOUT_S`,
+a read-back other than written) the driver learns why from
+:meth:`NodeSequencer.take_protection_error`, and the sequence either ends there
+(:attr:`NodeSequencer.protection_required`, ``controller_watchdog: required``: the drive stays
+pre-operational, no controlword reaches it) or skips the rest of the protection and goes on
+(``warn``).
+
 Nothing here blocks or reads the clock: the driver passes ``now_s`` and sends what comes back.
 """
 
@@ -34,8 +44,9 @@ from drivers.cia402.enums import (
 )
 from drivers.cia402.faults import sdo_abort_text
 from drivers.cia402.sdo import make_sdo_download, make_sdo_upload
-from drivers.cia402.steps import NmtStep, SdoExpectStep, SdoWriteStep
+from drivers.cia402.steps import NmtStep, SdoExpectStep, SdoVerifyStep, SdoWriteStep
 from gateway.errors import DecodeError
+from gateway.protection import ProtectionState
 from gateway.types import DriveFault
 
 if TYPE_CHECKING:
@@ -131,6 +142,17 @@ class NodeSequencer:
         self._edges = 0
         self._cw_sent_s = float("-inf")
         self._last_cw: int | None = None
+        self._has_protection = any(getattr(st, "protection", False) for st in steps)
+        #: Where the controller-side protection stands (NOT_APPLICABLE without its steps).
+        self.protection = (ProtectionState.PENDING if self._has_protection
+                           else ProtectionState.NOT_APPLICABLE)
+        #: Whether a failed protection ends the sequence (``controller_watchdog: required``);
+        #: if not, the sequence skips the rest of the protection and goes on.
+        self.protection_required = True
+        #: Whether the sequence ended because the protection failed (:attr:`error` then only
+        #: repeats what :meth:`take_protection_error` gave the driver).
+        self.halted_by_protection = False
+        self._protection_error = ""
 
     # ----------------------------------------------------------------- inputs
 
@@ -138,6 +160,9 @@ class NodeSequencer:
         """Begin (or restart) the enable sequence."""
         self.phase = Phase.CONFIGURING
         self.error, self.error_flags = "", DriveFault.NONE
+        self.halted_by_protection, self._protection_error = False, ""
+        if self._has_protection:
+            self.protection = ProtectionState.PENDING
         self._i, self._awaiting, self._retry_s = 0, False, now_s
         self._step_s = now_s
         self._edge, self._edges = None, 0
@@ -175,38 +200,47 @@ class NodeSequencer:
         """Take an SDO response; ``False`` if none was expected (late or foreign)."""
         step = self.steps[self._i] if self._i < len(self.steps) else None
         if (self.phase is not Phase.CONFIGURING or not self._awaiting
-                or not isinstance(step, (SdoWriteStep, SdoExpectStep))
+                or not isinstance(step, (SdoWriteStep, SdoExpectStep, SdoVerifyStep))
                 or (resp.index, resp.subindex) != (step.index, step.subindex)):
             return False
         self._awaiting = False
         where = f"0x{step.index:04X}:{step.subindex:02X} ({step.what})"
         if resp.command is ServerCommand.ABORT:
             verb = f"write of {step.value} to" if isinstance(step, SdoWriteStep) else "read of"
-            self.fail(f"SDO {verb} {where} aborted: {sdo_abort_text(resp.abort_code)}",
-                      DriveFault.COMMUNICATION)
+            self._step_failed(step, f"SDO {verb} {where} aborted: "
+                              f"{sdo_abort_text(resp.abort_code)}", DriveFault.COMMUNICATION, now_s)
         elif isinstance(step, SdoWriteStep):
             if resp.command is not ServerCommand.INITIATE_DOWNLOAD:
-                self.fail(f"expected a download confirmation for {where}, got {resp.command.name}",
-                          DriveFault.COMMUNICATION)
+                self._step_failed(step, f"expected a download confirmation for {where}, got "
+                                  f"{resp.command.name}", DriveFault.COMMUNICATION, now_s)
             else:
                 self._advance(now_s)
         else:
             try:
                 value = resp.value(step.dtype)
             except DecodeError as err:
-                self.fail(str(err), DriveFault.COMMUNICATION)
+                self._step_failed(step, str(err), DriveFault.COMMUNICATION, now_s)
                 return True
             self._last_read = value
             if value == step.expected:
                 self._advance(now_s)
+            elif isinstance(step, SdoVerifyStep):
+                self._step_failed(step, f"{where} reads {value} after the write of "
+                                  f"{step.expected}", DriveFault.CONTROLLER, now_s)
             else:
                 self._retry_s = now_s + self.EXPECT_RETRY_S
         return True
 
-    def on_sdo_error(self, err: DecodeError) -> None:
+    def on_sdo_error(self, err: DecodeError, now_s: float) -> None:
         """A malformed SDO response arrived while one was expected."""
         if self.phase is Phase.CONFIGURING and self._awaiting:
-            self.fail(str(err), DriveFault.COMMUNICATION)
+            self._awaiting = False
+            self._step_failed(self.steps[self._i], str(err), DriveFault.COMMUNICATION, now_s)
+
+    def take_protection_error(self) -> str:
+        """Why the protection failed since the last call ("" if it did not)."""
+        why, self._protection_error = self._protection_error, ""
+        return why
 
     # ----------------------------------------------------------------- periodic
 
@@ -241,6 +275,29 @@ class NodeSequencer:
         self._retry_s = now_s
         self._step_s = now_s
         self._last_read = None
+        if (self.protection is ProtectionState.PENDING
+                and getattr(self.steps[self._i - 1], "protection", False)
+                and not any(getattr(st, "protection", False) for st in self.steps[self._i:])):
+            self.protection = ProtectionState.CONFIRMED
+            log.info("%s: heartbeat consumer and abort connection option read back as written",
+                     self.label)
+
+    def _step_failed(self, step: Step, message: str, flags: DriveFault, now_s: float) -> None:
+        """A configuration step failed: the sequence ends, unless it is a protection step
+        and the protection is not required (then its other steps are skipped)."""
+        if not getattr(step, "protection", False):
+            self.fail(message, flags)
+            return
+        self.protection, self._protection_error = ProtectionState.FAILED, message
+        if self.protection_required:  # (the driver logs it, with the fix)
+            self.phase, self.halted_by_protection = Phase.FAILED, True
+            self.error = f"{self.label}: controller watchdog not confirmed: {message}"
+            self.error_flags = DriveFault.WATCHDOG
+            return
+        while self._i < len(self.steps) and getattr(self.steps[self._i], "protection", False):
+            self._i += 1
+        self._awaiting, self._last_read = False, None
+        self._retry_s = self._step_s = now_s
 
     def _issue(self, now_s: float) -> list[Frame]:
         out: list[Frame] = []
@@ -274,10 +331,12 @@ class NodeSequencer:
             if now_s - self._sent_s > self.SDO_TIMEOUT_S:
                 op = (f"write of {step.value} to" if isinstance(step, SdoWriteStep)
                       else "read of")
-                return self.fail(
-                    f"no SDO response within {self.SDO_TIMEOUT_S:g} s to the {op} "
+                self._awaiting = False
+                self._step_failed(
+                    step, f"no SDO response within {self.SDO_TIMEOUT_S:g} s to the {op} "
                     f"0x{step.index:04X}:{step.subindex:02X} ({step.what})",
-                    DriveFault.COMMUNICATION)
+                    DriveFault.COMMUNICATION, now_s)
+                return self._issue(now_s) if self.phase is Phase.CONFIGURING else []
             return []
         if now_s >= self._retry_s:
             return self._issue(now_s)

@@ -14,7 +14,24 @@ instead, under the same conditions, with the position loop of :class:`~gateway.s
 position, as a drive compares target and actual position.  Statusword bit 12 is "speed 0" in
 mode 3 and "follows the target" in mode 8.  For a steering actuator the position frame of
 0x6064 is the model's (``initial_position`` 0), since ``zero_rad`` is given in it.
-Reference: CiA 301 and CiA 402; ``/work/shared/specs/can-protocols.md`` section 3.
+
+Like a device, and unlike a test double, it takes time (:mod:`drivers.cia402.sim_control`):
+a commanded state transition shows in the statusword only after its delay (``state_delay_s``,
+``switch_on_delay_s``, ``enable_delay_s``), a new mode in 0x6061 after ``mode_switch_delay_s``.
+QUICK STOP ACTIVE follows the quick stop option code 0x605A (ramp on 0x6084 or 0x6085, then
+SWITCH ON DISABLED, or stay).
+
+**At factory settings it keeps turning when its master dies**: its heartbeat consumer 0x1016:01
+is 0 (not used), so nothing watches the master, and the last target velocity stays.  Once a
+master writes a consumer entry, the drive watches that node's heartbeat (0x700 + node) from the
+first one after the write; when it is missing for longer than the consumer time, it sends EMCY
+0x8130 and acts on its abort connection option code 0x6007 (factory value 1): 1 fault (the
+motor coasts), 2 disable voltage (SWITCH ON DISABLED: the motor coasts), 3 quick stop (as
+0x605A says; from READY TO SWITCH ON or SWITCHED ON: SWITCH ON DISABLED), 0 nothing.  The NMT
+state does not change (0x1029 error behaviour, not modelled, as "no state change"), so TPDOs on
+SYNC go on showing the stop.
+
+Reference: CiA 301 and CiA 402 (https://www.can-cia.org/can-knowledge/cia402-series).
 """
 
 from __future__ import annotations
@@ -23,7 +40,7 @@ import logging
 import math
 from typing import TYPE_CHECKING
 
-from drivers.cia402.codec import make_emcy, make_heartbeat
+from drivers.cia402.codec import make_heartbeat
 from drivers.cia402.enums import (
     ClientCommand,
     CobBase,
@@ -43,9 +60,15 @@ from drivers.cia402.sdo import (
     make_sdo_upload_response,
     parse_sdo_request,
 )
+from drivers.cia402.sim_control import (
+    HeartbeatConsumer,
+    QuickStopRamp,
+    Timing,
+)
+from drivers.cia402.sim_device import POWERED, DriveControl
 from drivers.cia402.sim_od import SimObjectDictionary
 from gateway.errors import DecodeError
-from gateway.sim import DeviceSimulator, SimFault
+from gateway.sim import DeviceSimulator
 from gateway.types import Frame
 
 if TYPE_CHECKING:
@@ -57,7 +80,8 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 _OPERATING = frozenset({State.OPERATION_ENABLED, State.QUICK_STOP_ACTIVE})
-_POWERED = frozenset({State.READY_TO_SWITCH_ON, State.SWITCHED_ON, *_OPERATING})
+#: The default delays of commanded transitions (:class:`Timing`, assumptions).
+_TIMING = Timing()
 
 
 def _wrap32(value: int) -> int:
@@ -68,7 +92,7 @@ def _clamp32(value: int) -> int:
     return max(-(1 << 31), min((1 << 31) - 1, value))
 
 
-class Cia402Simulator(DeviceSimulator):
+class Cia402Simulator(DriveControl, DeviceSimulator):
     """The device side of one CiA 402 drive in profile velocity mode.
 
     :param motor: the motor block (node ID, ``velocity_factor``, ``counts_per_rev``).
@@ -79,8 +103,16 @@ class Cia402Simulator(DeviceSimulator):
         RPDO came for this long; ``None`` disables the watchdog.
     :param supported_modes: 0x6502; writing an unsupported 0x6060 is aborted.  ``None``:
         modes 1, 3, 4, 6, 7 (0x6D), plus 8 (0x80, CSP) for a steering actuator.
-    :param mode_switch_delay_s: 0x6061 follows 0x6060 after this delay.
+    :param mode_switch_delay_s: 0x6061 follows 0x6060 after this delay (assumed: a few ms).
+    :param state_delay_s: a commanded state transition shows after this delay, unless one
+        of the two below applies (assumed: 2 ms, two cycles of a 1 kHz state machine).
+    :param switch_on_delay_s: the same into SWITCHED ON (power stage on; assumed: 10 ms).
+    :param enable_delay_s: the same into OPERATION ENABLED (brake release; assumed: 30 ms).
+    :param decelerations_rpm_s: 0x6084 (profile deceleration) and 0x6085 (quick stop
+        deceleration) at power-up, in motor RPM per second (manufacturer-specific; assumed).
     :param missing_objects: indices to leave out of the dictionary (SDO abort 0x06020000).
+    :param ignored_writes: indices whose SDO writes the device confirms but does not take (a
+        firmware that keeps its own value), for tests of the read-back.
     :param fault_code: EMCY code sent on an injected :attr:`SimFault.FAULT`.
     :param fault_register: error register sent with it.
     """
@@ -89,7 +121,10 @@ class Cia402Simulator(DeviceSimulator):
         self, motor: MotorConfig, model: MotorModel | None = None, *,
         initial_position: int = 0, heartbeat_ms: int = 0,
         command_timeout_s: float | None = None, supported_modes: int | None = None,
-        mode_switch_delay_s: float = 0.0, missing_objects: Iterable[int] = (),
+        mode_switch_delay_s: float = 0.005, state_delay_s: float = _TIMING.state_s,
+        switch_on_delay_s: float = _TIMING.switch_on_s, enable_delay_s: float = _TIMING.enable_s,
+        decelerations_rpm_s: tuple[float, float] = (5000.0, 10000.0),
+        missing_objects: Iterable[int] = (), ignored_writes: Iterable[int] = (),
         fault_code: int = 0x2310, fault_register: int = 0x03,
     ) -> None:
         super().__init__(motor, model)
@@ -98,13 +133,16 @@ class Cia402Simulator(DeviceSimulator):
         self.initial_position = _wrap32(initial_position)
         self.command_timeout_s = command_timeout_s
         self.mode_switch_delay_s = mode_switch_delay_s
+        self.timing = Timing(state_delay_s, switch_on_delay_s, enable_delay_s)
+        self.ignored_writes = frozenset(ignored_writes)
         self.fault_code, self.fault_register = fault_code, fault_register
         if supported_modes is None:
             supported_modes = 0x6D | (
                 supported_mode_bit(OperationMode.CYCLIC_SYNCHRONOUS_POSITION)
                 if motor.steering else 0)
+        decel = tuple(round(self.opts.rpm_to_units(r)) for r in decelerations_rpm_s)
         self.od = SimObjectDictionary(self.node_id, heartbeat_ms, supported_modes,
-                                      missing_objects)
+                                      missing_objects, (decel[0], decel[1]))
         #: Counters for assertions: SYNCs seen, RPDOs applied, SDO aborts sent, bad PDOs.
         self.syncs = self.rpdos = self.aborts = self.pdo_errors = 0
         self._now = 0.0
@@ -138,10 +176,15 @@ class Cia402Simulator(DeviceSimulator):
         self._reset_comm_state()
         self._controlword = 0
         self._mode_due: tuple[int, float] | None = None
+        #: A commanded transition under way: (target state, when it shows).
+        self._transition: tuple[State, float] | None = None
+        self._ramp: QuickStopRamp | None = None
         self._error_register = 0
         self._last_rpdo_s: float | None = None
 
     def _reset_comm_state(self) -> None:
+        #: The heartbeat consumer (0x1016:01), which reset communication clears too.
+        self.consumer = HeartbeatConsumer()
         self._pending: dict[int, bytes] = {}
         self._emcy_out: list[Frame] = []
         self._last_hb_s: float | None = None
@@ -151,7 +194,7 @@ class Cia402Simulator(DeviceSimulator):
 
     def _statusword(self) -> int:
         sw = int(self.state) | StatuswordBit.REMOTE
-        if self.state in _POWERED:
+        if self.state in POWERED:
             sw |= StatuswordBit.VOLTAGE_ENABLED
         if self.state is State.SWITCH_ON_DISABLED:
             sw |= StatuswordBit.QUICK_STOP
@@ -170,6 +213,9 @@ class Cia402Simulator(DeviceSimulator):
 
     def _refresh(self) -> None:
         od = self.od
+        due = self._transition
+        if due is not None and self._now >= due[1] - 1e-12:
+            self._enter(due[0])
         if self._mode_due is not None and self._now >= self._mode_due[1]:
             od.set(0x6061, self._mode_due[0])
             self._mode_due = None
@@ -179,45 +225,6 @@ class Cia402Simulator(DeviceSimulator):
         od.set(0x1001, self._error_register)
 
     # ----------------------------------------------------------------- CiA 402 device control
-
-    def _apply_controlword(self, cw: int) -> None:
-        rising_reset = bool(cw & 0x80) and not self._controlword & 0x80
-        self._controlword = cw
-        st = self.state
-        if st is State.FAULT:
-            if rising_reset and not self.faults & SimFault.FAULT:
-                self.state = State.SWITCH_ON_DISABLED  # transition 15
-                self._error_register = 0
-                self._emcy_out.append(make_emcy(self.node_id, 0x0000, 0))
-            return
-        if st in (State.FAULT_REACTION_ACTIVE, State.NOT_READY_TO_SWITCH_ON):
-            return
-        switch_on, voltage, no_qs, enable_op = (bool(cw & b) for b in (0x1, 0x2, 0x4, 0x8))
-        if not voltage:  # disable voltage: 7, 9, 10, 12
-            self.state = State.SWITCH_ON_DISABLED
-        elif not no_qs:  # quick stop: 11, or 7 / 10
-            if st is State.OPERATION_ENABLED:
-                self.state = State.QUICK_STOP_ACTIVE
-            elif st in (State.READY_TO_SWITCH_ON, State.SWITCHED_ON):
-                self.state = State.SWITCH_ON_DISABLED
-        elif not switch_on:  # shutdown: 2, 6, 8
-            if st in (State.SWITCH_ON_DISABLED, State.SWITCHED_ON, State.OPERATION_ENABLED):
-                self.state = State.READY_TO_SWITCH_ON
-        elif not enable_op:  # switch on / disable operation: 3, 5
-            if st in (State.READY_TO_SWITCH_ON, State.OPERATION_ENABLED):
-                self.state = State.SWITCHED_ON
-        elif st in (State.READY_TO_SWITCH_ON, State.SWITCHED_ON, State.QUICK_STOP_ACTIVE):
-            self.state = State.OPERATION_ENABLED  # enable operation: 3+4, 4, 16
-        if self.state is State.OPERATION_ENABLED and st is not State.OPERATION_ENABLED:
-            self._last_rpdo_s = self._now
-
-    def _raise_fault(self, code: int, register: int) -> None:
-        if self.state in (State.FAULT, State.FAULT_REACTION_ACTIVE):
-            return
-        log.info("simulated node %d: fault, EMCY 0x%04X", self.node_id, code)
-        self.state = State.FAULT_REACTION_ACTIVE
-        self._error_register = register
-        self._emcy_out.append(make_emcy(self.node_id, code, register))
 
     def _on_fault(self) -> None:
         self._raise_fault(self.fault_code, self.fault_register)
@@ -230,6 +237,8 @@ class Cia402Simulator(DeviceSimulator):
                 self._apply_controlword(value)
             elif index == ObjectIndex.MODES_OF_OPERATION:
                 self._mode_due = (value, self._now + self.mode_switch_delay_s)
+            elif index == ObjectIndex.CONSUMER_HEARTBEAT_TIME:
+                self.consumer.configure(value)
         return abort
 
     # ----------------------------------------------------------------- frames in
@@ -241,6 +250,9 @@ class Cia402Simulator(DeviceSimulator):
         cob = frame.arbitration_id
         if cob == CobBase.NMT:
             return self._on_nmt(frame)
+        if cob & 0x780 == CobBase.HEARTBEAT:  # another node's heartbeat (error control)
+            self.consumer.on_heartbeat(frame, now_s)
+            return []
         if self.nmt is NmtState.STOPPED:
             return []
         if cob == CobBase.SDO_RX + self.node_id:
@@ -290,6 +302,8 @@ class Cia402Simulator(DeviceSimulator):
         if req.command is ClientCommand.ABORT:
             return []
         if req.command is ClientCommand.INITIATE_DOWNLOAD:
+            if req.index in self.ignored_writes:
+                return [make_sdo_download_ack(n, req.index, req.subindex)]
             abort = self._write(req.index, req.subindex, req.data, sdo=True)
             if abort is None:
                 return [make_sdo_download_ack(n, req.index, req.subindex)]
@@ -363,6 +377,10 @@ class Cia402Simulator(DeviceSimulator):
             self._raise_fault(0x8250, ErrorRegister.GENERIC | ErrorRegister.COMMUNICATION)
         self._refresh()
         model = self.model
+        if self.state is State.QUICK_STOP_ACTIVE:
+            self._quick_stop()
+            return
+        self._ramp = None
         model.armed = self.state in _OPERATING
         mode = self.od.get(0x6061)
         follow = self._following()
@@ -372,10 +390,6 @@ class Cia402Simulator(DeviceSimulator):
         model.target_position_rad = None  # velocity mode, or stopping
         target = self.od.get(0x60FF) if follow and mode == OperationMode.PROFILE_VELOCITY else 0
         model.target_rad_s = self.opts.units_to_rad_s(target)
-
-    def _following(self) -> bool:
-        """Whether the motor follows the target: OPERATION ENABLED and halt (bit 8) clear."""
-        return self.state is State.OPERATION_ENABLED and not self._controlword & 0x100
 
     def _target_position_rad(self) -> float:
         """0x607A as a model position: the int32 target modulo 2^32 from where the motor is."""
@@ -390,6 +404,8 @@ class Cia402Simulator(DeviceSimulator):
         if self._boot_pending:
             self._boot_pending = False
             out.append(make_heartbeat(self.node_id, NmtState.BOOT_UP))
+        if self.consumer.expired(now_s):
+            self._connection_lost()
         self._step_states()
         if self.nmt is not NmtState.STOPPED:
             out += self._emcy_out

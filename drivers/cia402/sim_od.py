@@ -1,11 +1,26 @@
 """The object dictionary of the simulated CiA 402 drive, with CiA 301 write rules.
 
-It holds the objects the gateway touches (0x1000, 0x1001, 0x1017, PDO parameters
-0x1400-0x1403 / 0x1600-0x1603 / 0x1800-0x1803 / 0x1A00-0x1A03, and 0x6040, 0x6041, 0x6060,
-0x6061, 0x6064, 0x606C, 0x607A, 0x60FF, 0x6502) and refuses what a real device refuses, with
-the SDO abort code CiA 301 gives: unknown object or subindex, read-only, wrong length, a mapping
-change while the PDO is valid or before its count is cleared, an unmappable object or more than
-64 bits, a COB-ID change of a valid PDO, an unsupported mode of operation.
+It holds the objects the gateway touches (0x1000, 0x1001, 0x1016, 0x1017, PDO parameters
+0x1400-0x1403 / 0x1600-0x1603 / 0x1800-0x1803 / 0x1A00-0x1A03, and 0x6007, 0x6040, 0x6041,
+0x605A, 0x6060, 0x6061, 0x6064, 0x606C, 0x607A, 0x6084, 0x6085, 0x60FF, 0x6502) and refuses
+what a real device refuses, with the SDO abort code CiA 301 gives: unknown object or subindex,
+read-only, wrong length, a mapping change while the PDO is valid or before its count is
+cleared, an unmappable object or more than 64 bits, a COB-ID change of a valid PDO, an
+unsupported mode of operation, a heartbeat consumer entry with reserved bits or a node ID
+beyond 127, an abort connection option or quick stop option code the device does not have
+(0x06090030 "value range of parameter exceeded"), a deceleration of 0 (0x06090032).
+
+Factory values of the protection objects:
+
+* 0x1016 consumer heartbeat time: one entry (sub 0 = 1), sub 1 = 0, "not used" (CiA 301):
+  the drive watches nobody until a master writes it;
+* 0x6007 abort connection option code: 1, fault signal, the CiA 402 profile's default (as,
+  e.g., Bonfiglioli's "Vectron Active Cube CM-CAN" manual, chapter "Operational behavior on
+  bus failure", gives it: "1 - Error ... (factory setting)");
+* 0x605A quick stop option code: 2, quick-stop ramp then SWITCH ON DISABLED (Beckhoff AX8000
+  object description 0x605A: default 2);
+* 0x6084 profile deceleration, 0x6085 quick stop deceleration: manufacturer-specific; here
+  5000 and 10000 RPM/s at the motor, in device velocity units per second (assumptions).
 
 The default PDO mapping is deliberately not the gateway's (Faulhaber-like: RPDO3 = 6040 + 60FF,
 TPDO3 = 6041 + 606C, RPDO4/TPDO4 off), so a driver that does not remap fails the tests.
@@ -32,7 +47,17 @@ if TYPE_CHECKING:
     from collections.abc import Iterable
 
 _U8, _U16, _U32 = DataType.UNSIGNED8, DataType.UNSIGNED16, DataType.UNSIGNED32
-_I8, _I32 = DataType.INTEGER8, DataType.INTEGER32
+_I8, _I16, _I32 = DataType.INTEGER8, DataType.INTEGER16, DataType.INTEGER32
+
+#: Abort connection option codes (0x6007) the simulated drive has: 0 no action, 1 fault
+#: signal, 2 disable voltage, 3 quick stop (CiA 402; negative codes are manufacturer-specific).
+ABORT_OPTIONS = range(4)
+#: Quick stop option codes (0x605A) the simulated drive has (CiA 402: 0 to 8).
+QUICK_STOP_OPTIONS = range(9)
+#: Factory value of 0x6007: 1, fault signal (the profile's default).
+FACTORY_ABORT_OPTION = 1
+#: Factory value of 0x605A: 2, quick-stop ramp, then SWITCH ON DISABLED.
+FACTORY_QUICK_STOP_OPTION = 2
 
 #: Default mappings of PDO 1..4 (entries ``index << 16 | sub << 8 | bits``).
 _RPDO_DEFAULTS: tuple[tuple[int, ...], ...] = (
@@ -58,14 +83,18 @@ class SimObjectDictionary:
     :param heartbeat_ms: 0x1017 at power-up.
     :param supported_modes: 0x6502.
     :param missing: indices to leave out.
+    :param decelerations: 0x6084 (profile deceleration) and 0x6085 (quick stop deceleration)
+        at power-up, device velocity units per second.
     """
 
     def __init__(self, node_id: int, heartbeat_ms: int, supported_modes: int,
-                 missing: Iterable[int] = ()) -> None:
+                 missing: Iterable[int] = (), decelerations: tuple[int, int] = (5000, 10000),
+                 ) -> None:
         self.node_id = node_id
         self.heartbeat_ms = heartbeat_ms
         self.supported_modes = supported_modes
         self.missing = frozenset(missing)
+        self.decelerations = decelerations
         self.entries = self.defaults()
 
     def defaults(self) -> dict[tuple[int, int], Entry]:
@@ -73,14 +102,20 @@ class SimObjectDictionary:
         od: dict[tuple[int, int], Entry] = {
             (0x1000, 0): Entry(_U32, 0x00020192, writable=False),
             (0x1001, 0): Entry(_U8, 0, writable=False),
+            (0x1016, 0): Entry(_U8, 1, writable=False),
+            (0x1016, 1): Entry(_U32, 0),
             (0x1017, 0): Entry(_U16, self.heartbeat_ms),
+            (0x6007, 0): Entry(_I16, FACTORY_ABORT_OPTION),
             (0x6040, 0): Entry(_U16, 0, mappable=True),
             (0x6041, 0): Entry(_U16, 0, writable=False, mappable=True),
+            (0x605A, 0): Entry(_I16, FACTORY_QUICK_STOP_OPTION),
             (0x6060, 0): Entry(_I8, OperationMode.PROFILE_POSITION, mappable=True),
             (0x6061, 0): Entry(_I8, OperationMode.PROFILE_POSITION, False, True),
             (0x6064, 0): Entry(_I32, 0, writable=False, mappable=True),
             (0x606C, 0): Entry(_I32, 0, writable=False, mappable=True),
             (0x607A, 0): Entry(_I32, 0, mappable=True),
+            (0x6084, 0): Entry(_U32, self.decelerations[0]),
+            (0x6085, 0): Entry(_U32, self.decelerations[1]),
             (0x60FF, 0): Entry(_I32, 0, mappable=True),
             (0x6502, 0): Entry(_U32, self.supported_modes, writable=False),
         }
@@ -151,6 +186,17 @@ class SimObjectDictionary:
         return value, None
 
     def _check(self, index: int, sub: int, value: int, entry: Entry) -> SdoAbortCode | None:
+        if index == ObjectIndex.CONSUMER_HEARTBEAT_TIME:
+            node, time_ms = (value >> 16) & 0xFF, value & 0xFFFF
+            reserved = value >> 24
+            bad_node = time_ms != 0 and not 1 <= node <= 127
+            return SdoAbortCode.INVALID_VALUE if reserved or bad_node else None
+        if index == ObjectIndex.ABORT_CONNECTION_OPTION_CODE:
+            return None if value in ABORT_OPTIONS else SdoAbortCode.INVALID_VALUE
+        if index == ObjectIndex.QUICK_STOP_OPTION_CODE:
+            return None if value in QUICK_STOP_OPTIONS else SdoAbortCode.INVALID_VALUE
+        if index in (ObjectIndex.PROFILE_DECELERATION, ObjectIndex.QUICK_STOP_DECELERATION):
+            return SdoAbortCode.VALUE_TOO_LOW if value == 0 else None
         if index == ObjectIndex.MODES_OF_OPERATION:
             try:
                 mode = OperationMode(value)

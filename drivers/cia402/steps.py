@@ -3,7 +3,9 @@
 :func:`configuration_steps` lists the steps in order: NMT pre-operational; the command RPDO
 and the two feedback TPDOs remapped by SDO, each switched off through COB-ID bit 31 while its
 mapping changes; the unused TPDOs switched off; transmission types (1 = every SYNC, or 255 =
-event-driven with an event timer); the producer heartbeat time (0x1017); the mode of operation
+event-driven with an event timer); the producer heartbeat time (0x1017); the controller-side
+protection (the heartbeat consumer 0x1016:01 and the abort connection option code 0x6007,
+written and then read back, :mod:`drivers.cia402.protection`); the mode of operation
 (3, profile velocity, for a drive motor; 8, cyclic synchronous position, for a steering actuator)
 and a read-back of 0x6061 until it says so (``canopen``'s ``op_mode`` setter only logs a failed
 switch); NMT start.  A steering actuator's command RPDO carries the target position (0x607A)
@@ -57,13 +59,18 @@ class NmtStep:
 
 @dataclass(frozen=True, slots=True)
 class SdoWriteStep:
-    """Write one object by expedited SDO download and wait for the confirmation."""
+    """Write one object by expedited SDO download and wait for the confirmation.
+
+    :param protection: part of the controller-side protection: a failure is reported as
+        such (:class:`~drivers.cia402.sequence.NodeSequencer` and ``controller_watchdog``).
+    """
 
     index: int
     subindex: int
     value: int
     dtype: DataType
     what: str
+    protection: bool = False
 
 
 @dataclass(frozen=True, slots=True)
@@ -77,7 +84,20 @@ class SdoExpectStep:
     what: str
 
 
-Step = NmtStep | SdoWriteStep | SdoExpectStep
+@dataclass(frozen=True, slots=True)
+class SdoVerifyStep:
+    """Read one object back once by SDO upload: it must equal ``expected`` (the value just
+    written), else the step fails.  Only the controller-side protection uses it."""
+
+    index: int
+    subindex: int
+    expected: int
+    dtype: DataType
+    what: str
+    protection: bool = True
+
+
+Step = NmtStep | SdoWriteStep | SdoExpectStep | SdoVerifyStep
 
 
 def _pdo_steps(
@@ -106,11 +126,34 @@ def _pdo_steps(
     return steps
 
 
+def consumer_entry(host_node_id: int, time_ms: int) -> int:
+    """A heartbeat consumer entry (0x1016 sub 1..n, CiA 301): the watched node's ID in bits
+    23..16, the consumer time in ms in bits 15..0 (0: the entry is not used)."""
+    return (host_node_id << 16) | time_ms
+
+
+def protection_steps(opts: NodeOptions) -> list[Step]:
+    """The controller-side protection: 0x1016:01 (watch the gateway's heartbeat) and 0x6007
+    (abort connection option code) written by expedited SDO, then both read back."""
+    entry = consumer_entry(opts.host_node_id, opts.consumer_time_ms)
+    consumer = (ObjectIndex.CONSUMER_HEARTBEAT_TIME, 1, entry, DataType.UNSIGNED32,
+                "heartbeat consumer time")
+    option = (ObjectIndex.ABORT_CONNECTION_OPTION_CODE, 0, opts.abort_connection_option,
+              DataType.INTEGER16, "abort connection option code")
+    return [
+        SdoWriteStep(*consumer, protection=True),
+        SdoWriteStep(*option, protection=True),
+        SdoVerifyStep(*consumer),
+        SdoVerifyStep(*option),
+    ]
+
+
 def configuration_steps(node_id: int, opts: NodeOptions) -> tuple[Step, ...]:
     """Everything written into a node before NMT start, in order, ending with NMT start.
 
     :param node_id: the node (1..127).
-    :param opts: its options (PDO numbers, SYNC or event-driven, heartbeat time, mode).
+    :param opts: its options (PDO numbers, SYNC or event-driven, heartbeat time, protection,
+        mode).
     """
     lay = opts.layout
     tx_type = TransmissionType.SYNC_EVERY if opts.sync else TransmissionType.EVENT_PROFILE
@@ -130,9 +173,10 @@ def configuration_steps(node_id: int, opts: NodeOptions) -> tuple[Step, ...]:
                 ObjectIndex.TPDO_COMMUNICATION + number - 1, PdoParameter.COB_ID,
                 PDO_COB_INVALID | tpdo_cob_id(number, node_id), DataType.UNSIGNED32,
                 f"TPDO{number} COB-ID, switch off (unused)"))
+    steps.append(SdoWriteStep(ObjectIndex.PRODUCER_HEARTBEAT_TIME, 0, opts.heartbeat_ms,
+                              DataType.UNSIGNED16, "producer heartbeat time"))
+    steps += protection_steps(opts)
     steps += [
-        SdoWriteStep(ObjectIndex.PRODUCER_HEARTBEAT_TIME, 0, opts.heartbeat_ms,
-                     DataType.UNSIGNED16, "producer heartbeat time"),
         SdoWriteStep(ObjectIndex.MODES_OF_OPERATION, 0, opts.mode, DataType.INTEGER8,
                      f"modes of operation = {MODE_TEXT[opts.mode]}"),
         SdoExpectStep(ObjectIndex.MODES_OF_OPERATION_DISPLAY, 0, opts.mode,

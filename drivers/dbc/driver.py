@@ -58,6 +58,13 @@ command instead of a velocity command, e.g. an ODrive axis through the official 
 
 Its position is absolute in the controller's frame (``zero_rad`` is defined there): the first
 sample is taken as it is, and counter wrap-around is undone from there on.
+
+**When wheelgate dies** only the controller's own command timeout stops the motor, and a DBC
+file does not say which parameter sets it, so wheelgate cannot set or read it: the motor block
+states what was set with the vendor's tool, ``controller_timeout_s: 0.2``
+(:attr:`~gateway.protection.Guard.STATED`); without it ``wheelgate check`` and the start-up log
+warn (:attr:`~gateway.protection.Guard.UNSTATED`).  The simulator stops its motor that long
+after the last command frame, and holds the last command for ever when none is stated.
 """
 
 from __future__ import annotations
@@ -103,6 +110,14 @@ class DbcDriver(MotorDriver):
     OPTIONS: ClassVar[Mapping[str, OptionSpec]] = OPTIONS
     NODE_ID_RANGE: ClassVar[tuple[int, int]] = (0, 0x7FF)
     STEERING: ClassVar[bool] = True
+    PROTOCOL: ClassVar[str] = "DBC"
+    TIMEOUT_ACTION: ClassVar[str] = (
+        "whatever the controller's firmware does when its command timeout expires"
+    )
+    TIMEOUT_FIX: ClassVar[str] = (
+        "set a command timeout on the controller with its vendor's tool (a DBC file does not "
+        "say how) and state it as controller_timeout_s in the motor block"
+    )
 
     def __init__(self, motors: Sequence[MotorConfig]) -> None:
         super().__init__(motors)
@@ -209,7 +224,8 @@ class DbcDriver(MotorDriver):
 
     @classmethod
     def make_simulator(cls, motor: MotorConfig) -> DbcSimulator:
-        """A generic simulator of ``motor`` that speaks its DBC messages."""
+        """A generic simulator of ``motor`` that speaks its DBC messages and stops the motor
+        ``controller_timeout_s`` after the last command, if the block states one (else never)."""
         return DbcSimulator(motor)
 
     # ----------------------------------------------------------------- internals

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 from types import MappingProxyType
 from typing import TYPE_CHECKING
 
+from gateway.driver import CONTROLLER_TIMEOUT_OPTION
 from gateway.errors import ConfigError
 from gateway.options import OptionSpec, validate_block
 from gateway.types import MotorRole
@@ -118,6 +119,9 @@ OPTIONS: dict[str, OptionSpec] = {
     "liveness_s": OptionSpec(
         float, 0.25, minimum=0.001, help="feedback older than this marks the motor OFFLINE (s)"
     ),
+    # The controller's own stop when wheelgate dies: a DBC names no timeout parameter, so the
+    # block states what was set with the vendor's tool (0: not stated, a warning).
+    "controller_timeout_s": CONTROLLER_TIMEOUT_OPTION,
 }
 
 
@@ -164,6 +168,7 @@ class DbcOptions:
     fault_message: str
     fault_signal: str
     liveness_s: float
+    controller_timeout_s: float
 
 
 def parse_options(

@@ -11,8 +11,14 @@ Device behaviour: with an enable signal configured the motor is disarmed until t
 arrives, and the disable value disarms it; without one it follows commands from the start.  An
 injected ``SimFault.FAULT`` disarms the motor and reports ``fault_code`` in the fault signal;
 the code stays latched until the fault is cleared in the simulator *and* (with an enable
-signal) the enable value arrives again.  With ``command_timeout_s`` set, the motor stops when
-no command arrives for that long.
+signal) the enable value arrives again.
+
+**Command timeout.**  The simulator stands for the user's controller, which has whatever the
+motor block states was set on it: with ``controller_timeout_s`` (the controller's own timeout,
+set with the vendor's tool), the motor stops (target speed 0) when no command frame arrives for
+that long, and follows the next command again.  With none stated, nothing is known to stop the
+real controller, so the simulator assumes the worst and holds the last command for ever: it is
+never kinder than what the configuration states.  ``command_timeout_s`` overrides the block.
 
 A steering actuator (``motor.steering``) follows the position command instead: each value sets
 ``model.target_position_rad`` (the model's position loop), once position control is selected,
@@ -48,7 +54,8 @@ class DbcSimulator(DeviceSimulator):
     :param model: the motor physics; a default model when omitted.
     :param rate_hz: how often the feedback message(s) are sent (Hz, > 0).
     :param initial_raw: raw position signal value at motor angle 0.
-    :param command_timeout_s: stop after this long without a command (s); 0 = never.
+    :param command_timeout_s: stop after this long without a command (s); 0 = never;
+        ``None`` (default): the block's ``controller_timeout_s``, i.e. never when not stated.
     :param fault_code: raw value of the fault signal while a fault is latched (non-zero).
     :raises ConfigError: as :class:`drivers.dbc.DbcDriver` for a bad motor block.
     :raises ValueError: for a rate that is not positive or a zero fault code.
@@ -61,7 +68,7 @@ class DbcSimulator(DeviceSimulator):
         *,
         rate_hz: float = 100.0,
         initial_raw: int | float = 0,
-        command_timeout_s: float = 0.0,
+        command_timeout_s: float | None = None,
         fault_code: int = 1,
     ) -> None:
         super().__init__(motor, model)
@@ -76,7 +83,10 @@ class DbcSimulator(DeviceSimulator):
         self.units = UnitConversion.build(motor, opts)
         self.period_s = 1.0 / rate_hz
         self.initial_raw = initial_raw
-        self.command_timeout_s = command_timeout_s
+        #: Stop after this long without a command frame (s); 0: never.
+        self.command_timeout_s = (
+            opts.controller_timeout_s if command_timeout_s is None else command_timeout_s
+        )
         self.fault_code = fault_code
         pos = self.binding.position
         self._wrap_bits = 0 if pos.is_float else (opts.position_wrap_bits or pos.signal.length)

@@ -7,6 +7,8 @@ CAN_receive.{h,c}``) and ``specs/can-protocols.md`` section 4.
 * :mod:`drivers.dji.codec`: the pure wire format (frame IDs, field tables, unwrapping);
 * :mod:`drivers.dji.pi`: the pure rotor-speed PI controller;
 * :mod:`drivers.dji.position`: the pure position loop of a steering actuator;
+* :mod:`drivers.dji.protection`: what stops the ESC when wheelgate dies (nothing known), and the
+  ``no_controller_stop: acknowledged`` every motor block must carry;
 * :mod:`drivers.dji.driver`: :class:`DjiDriver`, the stateful driver;
 * :mod:`drivers.dji.sim`: :class:`DjiSimulator`, a simulated ESC with a current-driven motor.
 """

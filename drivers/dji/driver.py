@@ -22,7 +22,9 @@ Things the protocol does not have, and what the driver does instead:
   only): above ``max_temp_c`` the motor goes to FAULT (``DriveFault.OVER_TEMPERATURE``) and is
   disarmed; the flag clears once the temperature is back at or below
   ``max_temp_c - TEMP_HYSTERESIS_C``, and :meth:`~DjiDriver.enable` re-arms it;
-* ``0x700`` (quick ID setting) is never sent.
+* ``0x700`` (quick ID setting) is never sent;
+* **no known command timeout**: the ESC is assumed to hold its last current, so every motor
+  block must say ``no_controller_stop: acknowledged`` (:mod:`drivers.dji.protection`).
 
 **Steering actuators** (``STEERING``): the ESC has no position mode either, so a steering
 actuator gets a host-side cascade every cycle: the position loop of
@@ -44,7 +46,8 @@ rotor turns and nothing detects it.  Turns made while feedback is lost are lost 
 Motor-block keys (``OPTIONS``): ``esc`` (``"c620"`` default, or ``"c610"``), ``kp`` (A per rad/s
 of **rotor** speed error, default 0.1), ``ki`` (A per rad of integrated rotor speed error,
 default 1.0), ``max_current_a`` (0 = the ESC's full scale: 20 A C620, 10 A C610),
-``liveness_s`` (0.1, the same for every motor of the bus) and ``max_temp_c`` (80 degC); for a
+``liveness_s`` (0.1, the same for every motor of the bus), ``max_temp_c`` (80 degC) and the
+required ``no_controller_stop: acknowledged``; for a
 steering actuator only (an error in a drive motor's block) ``steer_kp`` (default 35 1/s) and
 ``steer_kd`` (default 0.7), see :data:`drivers.dji.position.STEERING_OPTIONS`.
 The common ``gear_ratio`` must be set to the gearbox ratio: 3591/187 (~19.2032) for the M3508,
@@ -70,6 +73,8 @@ from drivers.dji.codec import (
 )
 from drivers.dji.pi import SpeedPi
 from drivers.dji.position import STEERING_OPTIONS, PositionLoop, power_up_position_rad
+from drivers.dji.protection import ACK_KEY, ACK_OPTION, ACTION, check_acknowledged
+from drivers.dji.protection import protection as dji_protection
 from drivers.dji.sim import DjiSimulator
 from gateway.driver import MotorDriver, OptionSpec
 from gateway.errors import ConfigError, DecodeError, EncodeError
@@ -80,6 +85,7 @@ if TYPE_CHECKING:
     from collections.abc import Mapping, Sequence
 
     from drivers.dji.codec import EscModel
+    from gateway.protection import Protection
     from gateway.types import Frame, MotorConfig
 
 log = logging.getLogger(__name__)
@@ -99,8 +105,9 @@ class DjiDriver(MotorDriver):
     """Host-side speed control of up to eight C620 / C610 ESCs on one bus.
 
     :param motors: the motors, ``node_id`` = ESC ID 1..8 (set with the ESC's button).
-    :raises ConfigError: for a bad option, a repeated ESC ID, a current limit above the ESC's
-        full scale, or different ``liveness_s`` values.
+    :raises ConfigError: for a bad option, a motor block without ``no_controller_stop:
+        acknowledged``, a repeated ESC ID, a current limit above the ESC's full scale, or
+        different ``liveness_s`` values.
     """
 
     OPTIONS: ClassVar[Mapping[str, OptionSpec]] = MappingProxyType(
@@ -123,6 +130,7 @@ class DjiDriver(MotorDriver):
             "max_temp_c": OptionSpec(
                 float, 80.0, minimum=0.0, maximum=255.0, help="C620 over-temperature limit (degC)"
             ),
+            ACK_KEY: ACK_OPTION,
             **STEERING_OPTIONS,
         }
     )
@@ -130,6 +138,8 @@ class DjiDriver(MotorDriver):
     DEFAULT_LIVENESS_S: ClassVar[float] = 0.1
     HOST_SPEED_LOOP: ClassVar[bool] = True
     STEERING: ClassVar[bool] = True
+    PROTOCOL: ClassVar[str] = "DJI"
+    TIMEOUT_ACTION: ClassVar[str] = ACTION
 
     def __init__(self, motors: Sequence[MotorConfig]) -> None:
         super().__init__(motors)
@@ -195,9 +205,12 @@ class DjiDriver(MotorDriver):
         to a drive motor, whose block must not carry them; a steering actuator without them
         gets their defaults when the driver is built.
 
-        :raises ConfigError: for an unknown key, or a bad value.
+        :raises ConfigError: for an unknown key, a bad value, or a block without
+            ``no_controller_stop: acknowledged``
+            (:func:`drivers.dji.protection.check_acknowledged`).
         """
         out = super().validate_options(raw, where)
+        check_acknowledged(out, where)
         for key in STEERING_OPTIONS:
             if key not in raw:
                 del out[key]
@@ -319,8 +332,14 @@ class DjiDriver(MotorDriver):
 
     @classmethod
     def make_simulator(cls, motor: MotorConfig) -> DjiSimulator:
-        """A simulated ESC with a current-driven motor for ``motor``."""
+        """A simulated ESC with a current-driven motor for ``motor``: it holds its last current
+        for ever, as the real one is assumed to (:mod:`drivers.dji.protection`)."""
         return DjiSimulator(motor)
+
+    def protection(self, index: int) -> Protection:
+        """:attr:`~gateway.protection.Guard.NONE`: the ESC has no known command timeout and is
+        assumed to hold its last current (:mod:`drivers.dji.protection`)."""
+        return dji_protection(self.motors[index])
 
     # ----------------------------------------------------------------- read-outs
 

@@ -11,9 +11,13 @@ What the simulated ESC does:
 * emits feedback every ``feedback_period_s`` (1 ms by default): the rotor angle quantised to
   13 bits (``floor``), the rotor speed rounded to whole rpm, the applied current and the
   temperature (0 on a C610, which does not report one);
-* **command timeout**: the spec (section 8) says the ESC has none and holds its last set point,
-  so ``command_timeout_s`` defaults to ``None`` (hold, the worst case for the gateway).  Give a
-  number to model an ESC that zeroes its output after that long without a command frame;
+* **no command timeout**: no public source says what a C620 / C610 does when the command
+  frames stop, so wheelgate assumes the worst, that it holds its last current for ever
+  (:mod:`drivers.dji.protection`), and the simulator does the same: it is never kinder than the
+  assumption, so no test can pass because a simulated ESC stopped a wheel that a real one might
+  not.  ``command_timeout_s`` defaults to ``None`` (hold) and no configuration sets it
+  (:meth:`drivers.dji.DjiDriver.make_simulator` never does); a test may give a number to
+  model an ESC that zeroes its output after that long without a command frame;
 * injected ``SimFault.FAULT`` reports ``fault_temperature_c`` and switches the output off (the
   ESC protecting itself); clearing it restores the normal temperature, and the next command
   frame switches the output on again (DJI has no clear command);
@@ -119,7 +123,7 @@ class DjiSimulator(DeviceSimulator):
     :param model: motor physics; :meth:`DjiMotorModel.for_esc` when omitted.
     :param feedback_period_s: feedback interval (s), 1 ms like the real ESC.
     :param command_timeout_s: zero the output after this long without a command frame;
-        ``None`` (default) holds the last set point, as the spec says the ESC does.
+        ``None`` (default) holds the last set point for ever, as the real ESC is assumed to.
     :param temperature_c: temperature reported while healthy (degC).
     :param fault_temperature_c: temperature reported while ``SimFault.FAULT`` is injected.
     :param initial_position_rad: rotor angle at start (rad), e.g. just below a 13-bit wrap;

@@ -501,24 +501,22 @@ class OdriveDriver(MotorDriver):
         wd = self._wd[i]
         if wd is None or frame.dlc == 0:
             return  # no setup, or a Get_Version request (another host's)
+        node = self.motors[i].node_id
         if cmd == CmdId.GET_VERSION:
             version = parse_version(frame.data)
-            if version is None:
-                self.reject("malformed", DecodeError(
-                    f"Expected 8 bytes in Get_Version of ODrive node {self.motors[i].node_id}, "
-                    f"but got {frame.dlc}."
-                ))
+            if version is not None:
+                self._queued.extend(wd.on_version(*version, frame.timestamp_s))
                 return
-            self._queued.extend(wd.on_version(*version, frame.timestamp_s))
-            return
-        reply = parse_sdo(frame.data)
-        if reply is None:
-            self.reject("malformed", DecodeError(
-                f"Expected at least 4 bytes in TxSdo of ODrive node {self.motors[i].node_id}, "
-                f"but got {frame.dlc}."
-            ))
-            return
-        wd.on_tx_sdo(reply[1], reply[2])
+            expected = "8 bytes in Get_Version"
+        else:
+            reply = parse_sdo(frame.data)
+            if reply is not None:
+                wd.on_tx_sdo(reply[1], reply[2])
+                return
+            expected = "at least 4 bytes in TxSdo"
+        self.reject("malformed", DecodeError(
+            f"Expected {expected} of ODrive node {node}, but got {frame.dlc}."
+        ))
 
     def _own_request(self, i: int, cmd: int) -> bool:
         """Whether this driver itself sends RTR frames with ``cmd`` (their echo is no error)."""

@@ -14,7 +14,9 @@ implementation ``comm/comm_can.c`` (``decode_msg``, ``comm_can_send_status1..6``
 
 Everything here is pure: no I/O, no clock.  Host side: :func:`make_command` (and its
 ``make_set_*`` shorthands), :func:`make_ping`, :func:`decode`.  Device side (the simulator):
-:func:`decode_command`, :func:`make_status`, :func:`make_status5`, :func:`make_pong`.
+:func:`decode_command`, :func:`make_status`, :func:`make_status5`, :func:`make_pong`.  The host
+side rounds a command's value to the field; the device side truncates toward zero, as the
+firmware's casts do.
 """
 
 from __future__ import annotations
@@ -343,7 +345,9 @@ def decode_command(frame: Frame) -> VescCommand | VescPing | None:
 
 
 def _fixed(value: float, scale: float, *, name: str, node_id: int, lo: int, hi: int) -> int:
-    raw = round(value * scale) if math.isfinite(value) else None
+    # Truncated toward zero, as the firmware's C casts do (``(int16_t)(current * 1e1)`` in
+    # ``comm_can_send_status1``): a device-side field is up to one LSB below the value.
+    raw = math.trunc(value * scale) if math.isfinite(value) else None
     if raw is None or not lo <= raw <= hi:
         raise EncodeError(
             f"Expected {name} for VESC {node_id} between {lo / scale:g} and {hi / scale:g}, "
@@ -352,8 +356,10 @@ def _fixed(value: float, scale: float, *, name: str, node_id: int, lo: int, hi: 
     return raw
 
 
-def make_status(node_id: int, erpm: int, current_a: float, duty: float) -> Frame:
-    """STATUS as a controller sends it.
+def make_status(node_id: int, erpm: float, current_a: float, duty: float) -> Frame:
+    """STATUS as a controller sends it: every field truncated toward zero, as
+    ``comm_can_send_status1`` casts (``(int32_t)rpm``, ``(int16_t)(current * 1e1)``,
+    ``(int16_t)(duty * 1e3)``).
 
     :raises EncodeError: if a value does not fit its field.
     """
@@ -366,7 +372,8 @@ def make_status(node_id: int, erpm: int, current_a: float, duty: float) -> Frame
 
 
 def make_status5(node_id: int, tachometer: int, v_in_v: float) -> Frame:
-    """STATUS_5 as a controller sends it (bytes 6-7 reserved, zero).
+    """STATUS_5 as a controller sends it (bytes 6-7 reserved, zero); the voltage truncated
+    toward zero, as ``comm_can_send_status5`` casts (``(int16_t)(v_in * 1e1)``).
 
     :raises EncodeError: if a value does not fit its field.
     """

@@ -11,19 +11,33 @@ Behaviour that follows from the protocol:
   enabled; :meth:`disable` sends SET_CURRENT 0, which releases the motor (below
   ``cc_min_current`` the firmware stops switching), and stops the stream.  A motor reads
   ENABLING after :meth:`enable` until both status frames have arrived again, then ENABLED.
-* **Keep-alive.**  The VESC releases the motor when no command arrives for its own
-  ``timeout_msec`` (``timeout_s`` here; firmware default 1 s, the doc says 0.5 s, so set it to
-  what the device is configured to).  :meth:`command` sends SET_RPM on every call.
-  :meth:`poll` resends the last command once ``command_period_s`` has passed since the last
-  send, so a caller that ticks :meth:`poll` at :attr:`VescDriver.keepalive_period_s` keeps the
-  motor running even when commands come slower.  If neither is called within ``timeout_s``
-  (the gateway stalled or died), the VESC stops the motor by itself, which is the fail-safe we
-  want.  ``command_period_s < timeout_s / 2`` is enforced so that one lost frame cannot release
+* **Controller-side protection (stated).**  The VESC releases the motor, which coasts, when no
+  command arrives for its app configuration's ``timeout_msec`` (VESC Tool: App Settings >
+  General > Timeout; 1000 ms from the factory, ``applications/appconf_default.h``; brake
+  current ``timeout_brake_current``, 0 A; ``timeout.c``).  It is written only with the whole
+  app configuration, not by a simple CAN command, so wheelgate can neither set nor read it:
+  the configuration states it as ``controller_timeout_s`` (:meth:`protection`: STATED, or
+  UNSTATED with a warning when 0, the default).
+* **Keep-alive.**  :meth:`command` sends SET_RPM on every call.  :meth:`poll` resends the last
+  command once ``command_period_s`` has passed since the last send, so a caller that ticks
+  :meth:`poll` at :attr:`VescDriver.keepalive_period_s` keeps the motor running even when
+  commands come slower.  If neither is called within the VESC's timeout (the gateway stalled
+  or died), the VESC stops the motor by itself.  ``command_period_s`` must be less than half
+  that timeout (the stated one, else the factory 1 s) so that one lost frame cannot release
   the motor.
+* **Minimum ERPM.**  Below ``s_pid_min_erpm`` (``min_erpm``, 900 from the factory) a VESC does
+  not speed-control: a stopped motor stays stopped, a running one brakes to a stop
+  (:mod:`drivers.vesc.min_erpm`).  Such commands go out as they are -- the device's own
+  setting decides, and a statement the gateway cannot verify must not stop a wheel the device
+  would drive -- and are counted (:attr:`command_counts` ``below_min_erpm``) and logged at
+  most once per 5 s.  :meth:`uncontrolled_band` gives the wheel speeds concerned.
 * **Feedback.**  Velocity comes from STATUS (eRPM), position from the STATUS_5 tachometer
   (6 steps per electrical revolution, int32, unwrapped modulo 2**32 so odometry is exact to one
-  step).  Both streams are needed; the VESC sends neither until ``can_status_msgs_r1`` is set in
-  VESC Tool (App Settings, General), so the driver logs a hint when they do not come.
+  step).  Both streams are needed; the VESC sends neither until they are ticked in VESC Tool
+  (App Settings > General: Can Messages Rate 1, Status 1 and Status 5; ``can_status_msgs_r1``
+  bits 0 and 4; none from the factory, and the motor setup wizard ticks Status 1 to 4 only).
+  A motor missing a stream says so in its status detail, and the driver logs it once after
+  enable.  ``status_rate_hz`` states the rate that was set (Can Status Rate 1).
 * **Faults.**  The simple status frames carry no fault code (that takes COMM_GET_VALUES over
   the multi-frame buffer protocol, not implemented).  A VESC fault releases the motor, makes the
   firmware ignore commands for ``m_fault_stop_time_ms`` and then clears itself; the gateway sees
@@ -35,10 +49,11 @@ Behaviour that follows from the protocol:
 
 from __future__ import annotations
 
+import collections
+import dataclasses
 import logging
 import math
 from dataclasses import dataclass
-from types import MappingProxyType
 from typing import TYPE_CHECKING, ClassVar, cast
 
 from drivers.vesc.codec import (
@@ -52,15 +67,32 @@ from drivers.vesc.codec import (
     make_set_rpm,
     wrap_int32,
 )
+from drivers.vesc.min_erpm import BELOW_MIN_ERPM, BandWatch, uncontrolled_band
+from drivers.vesc.settings import (
+    FACTORY_STATUS_MSGS,
+    FACTORY_STATUS_RATE_HZ,
+    FACTORY_TIMEOUT_S,
+    OPTIONS,
+    STATUS_1,
+    STATUS_5,
+    TIMEOUT_ACTION,
+    TIMEOUT_FIX,
+    UNSTATED_HOW,
+    check_options,
+    check_validated,
+    missing_status,
+)
 from drivers.vesc.sim import VescSimulator
-from gateway.driver import MotorDriver, OptionSpec
-from gateway.errors import ConfigError, DecodeError, EncodeError
+from gateway.driver import MotorDriver
+from gateway.errors import DecodeError, EncodeError
 from gateway.filters import CanFilter
+from gateway.protection import Guard, Protection
 from gateway.types import DriveState, WheelFeedback
 
 if TYPE_CHECKING:
     from collections.abc import Mapping, Sequence
 
+    from gateway.options import OptionSpec
     from gateway.sim import DeviceSimulator
     from gateway.types import Frame, MotorConfig
 
@@ -78,8 +110,8 @@ _RECEIVED_STATUS = tuple(sorted({CanPacketId.STATUS, CanPacketId.STATUS_5, *_UNU
 class _Options:
     pole_pairs: int
     command_period_s: float
-    timeout_s: float
     liveness_s: float
+    min_erpm: float
 
 
 @dataclass(slots=True)
@@ -105,33 +137,16 @@ class VescDriver(MotorDriver):
     :raises ConfigError: for a node ID outside 0..254, a node ID used twice, or bad options.
     """
 
-    OPTIONS: ClassVar[Mapping[str, OptionSpec]] = MappingProxyType(
-        {
-            "pole_pairs": OptionSpec(
-                int, minimum=1, help="motor pole pairs (poles / 2); eRPM = RPM * pole_pairs"
-            ),
-            "command_period_s": OptionSpec(
-                float,
-                0.02,
-                minimum=0.001,
-                help="resend the last command at least this often (s); < timeout_s / 2",
-            ),
-            "timeout_s": OptionSpec(
-                float,
-                0.5,
-                minimum=0.01,
-                help="the VESC's own command timeout, App Settings > General > Timeout (s); "
-                "0 (timeout off) is refused",
-            ),
-            "liveness_s": OptionSpec(
-                float, 0.25, minimum=0.001, help="status frames older than this: OFFLINE (s)"
-            ),
-        }
-    )
+    OPTIONS: ClassVar[Mapping[str, OptionSpec]] = OPTIONS
     #: VESC controller IDs; 255 is broadcast.
     NODE_ID_RANGE: ClassVar[tuple[int, int]] = (0, 254)
     #: After :meth:`enable`, how long status frames may be missing before the hint is logged.
     STATUS_HINT_AFTER_S: ClassVar[float] = 1.0
+    PROTOCOL: ClassVar[str] = "VESC"
+    TIMEOUT_ACTION: ClassVar[str] = TIMEOUT_ACTION
+    TIMEOUT_FIX: ClassVar[str] = TIMEOUT_FIX
+    #: Seconds between two log lines about commands below ``min_erpm``.
+    BAND_LOG_EVERY_S: ClassVar[float] = 5.0
 
     def __init__(self, motors: Sequence[MotorConfig]) -> None:
         super().__init__(motors)
@@ -143,8 +158,8 @@ class VescDriver(MotorDriver):
                 _Options(
                     pole_pairs=cast("int", raw["pole_pairs"]),
                     command_period_s=cast("float", raw["command_period_s"]),
-                    timeout_s=cast("float", raw["timeout_s"]),
                     liveness_s=cast("float", raw["liveness_s"]),
+                    min_erpm=cast("float", raw["min_erpm"]),
                 )
             )
         self._opts: tuple[_Options, ...] = tuple(opts)
@@ -154,31 +169,64 @@ class VescDriver(MotorDriver):
             for m, o in zip(self.motors, self._opts, strict=True)
         )
         self._node_ids = tuple(m.node_id for m in self.motors)
+        self._min_erpm = tuple(o.min_erpm for o in self._opts)
         self._track = [_Track() for _ in self.motors]
         self._enabled = False
         self._enabled_at_s: float | None = None
+        #: Commands sent that the VESC does not follow as given, by reason (``below_min_erpm``:
+        #: SET_RPM nonzero and below ``min_erpm``, counted once per :meth:`command`).
+        self.command_counts: collections.Counter[str] = collections.Counter()
+        self._band_watch = BandWatch(self.BAND_LOG_EVERY_S)
+        for i in range(len(self.motors)):
+            self._say_missing_status(i)
 
     @classmethod
     def validate_options(cls, raw: Mapping[str, object], where: str) -> dict[str, object]:
-        """Validate the protocol keys and check ``command_period_s < timeout_s / 2``.
+        """Validate the protocol keys (:mod:`drivers.vesc.settings`); check
+        ``command_period_s`` against the VESC's timeout and ``liveness_s`` against the stated
+        status rate.
 
-        :raises ConfigError: for an unknown, missing or bad key, or a keep-alive period too
-            long for the VESC's timeout.
+        :raises ConfigError: for an unknown, missing or bad key (``timeout_s`` with its new
+            name), a keep-alive period too long for the VESC's timeout, or a liveness time
+            shorter than two status periods.
         """
+        check_options(raw, where)
         out = super().validate_options(raw, where)
-        period = cast("float", out["command_period_s"])
-        timeout = cast("float", out["timeout_s"])
-        if not period < timeout / 2.0:
-            raise ConfigError(
-                f"{where}.command_period_s: expected less than timeout_s / 2 = {timeout / 2:g} s "
-                f"(one lost frame must not let the VESC release the motor), got {period!r}"
-            )
+        check_validated(out, where)
         return out
 
     @classmethod
     def make_simulator(cls, motor: MotorConfig) -> DeviceSimulator:
-        """A :class:`~drivers.vesc.sim.VescSimulator` for ``motor``."""
-        return VescSimulator(motor)
+        """A :class:`~drivers.vesc.sim.VescSimulator` for ``motor``, as the motor block says
+        the device was set up in VESC Tool: its stated timeout (``controller_timeout_s``, else
+        the factory 1 s), status messages (STATUS and STATUS_5 at ``status_rate_hz``, else
+        none, as from the factory) and ``min_erpm``."""
+        o = cls.validate_options(motor.options, f"motor {motor.wheel!r}")
+        rate = cast("float", o["status_rate_hz"])
+        return VescSimulator(
+            motor,
+            status_msgs=STATUS_1 | STATUS_5 if rate else FACTORY_STATUS_MSGS,
+            status_rate_hz=rate or FACTORY_STATUS_RATE_HZ,
+            timeout_s=cast("float", o["controller_timeout_s"]) or FACTORY_TIMEOUT_S,
+            min_erpm=cast("float", o["min_erpm"]),
+        )
+
+    # ----------------------------------------------------------------- protection
+
+    def protection(self, index: int) -> Protection:
+        """STATED from ``controller_timeout_s``; else UNSTATED, saying what is known (the
+        factory timeout, which wheelgate cannot read) and how to state it."""
+        prot = super().protection(index)
+        if prot.guard is not Guard.UNSTATED:
+            return prot
+        return dataclasses.replace(prot, how=UNSTATED_HOW)
+
+    def uncontrolled_band(self, index: int) -> tuple[float, float] | None:
+        """The wheel speeds (rad/s) motor ``index``'s VESC does not speed-control: ``(0.0,
+        high)`` for every speed with ``0 < |speed| < high`` (``high`` is ``min_erpm`` at the
+        wheel); ``None`` when ``min_erpm`` is 0 (:mod:`drivers.vesc.min_erpm`)."""
+        _, gear, _, pole_pairs = self._scale[index]
+        return uncontrolled_band(self._opts[index].min_erpm, pole_pairs, gear)
 
     # ----------------------------------------------------------------- units
 
@@ -260,11 +308,23 @@ class VescDriver(MotorDriver):
         if not self._enabled:
             return []
         out = []
-        for node_id, track, erpm in zip(self._node_ids, self._track, erpms, strict=True):
+        for i, (node_id, track, erpm, min_erpm) in enumerate(
+            zip(self._node_ids, self._track, erpms, self._min_erpm, strict=True)
+        ):
+            if erpm and -min_erpm < erpm < min_erpm:  # in_band, inlined (every cycle)
+                self._below_min_erpm(i, erpm, now_s)
             track.erpm = erpm
             track.sent_s = now_s
             out.append(make_set_rpm(node_id, erpm))
         return out
+
+    def _below_min_erpm(self, index: int, erpm: int, now_s: float) -> None:
+        """Count (and at most every :attr:`BAND_LOG_EVERY_S` log) a command in the band."""
+        self.command_counts[BELOW_MIN_ERPM] += 1
+        m = self.motors[index]
+        line = self._band_watch.note(m.node_id, m.wheel, erpm, self._min_erpm[index], now_s)
+        if line is not None:
+            log.warning("%s", line)
 
     def poll(self, now_s: float) -> list[Frame]:
         """Resend the last command to every motor not commanded for ``command_period_s``."""
@@ -317,10 +377,12 @@ class VescDriver(MotorDriver):
             return False
         track = self._track[index]
         if type(msg) is VescStatus:
+            first = track.status_s is None
             track.status = msg
             track.status_s = frame.timestamp_s
             track.velocity_rad_s = self.wheel_rad_s_for(index, msg.erpm)
         elif type(msg) is VescStatus5:
+            first = track.status5_s is None
             if track.tacho is not None:
                 track.steps += wrap_int32(msg.tachometer - track.tacho)
             track.tacho = msg.tachometer
@@ -328,6 +390,8 @@ class VescDriver(MotorDriver):
             track.status5_s = frame.timestamp_s
         else:  # a PONG: proof of life, but liveness is defined by the status streams
             return True
+        if first:
+            self._say_missing_status(index)
         if track.status_s is not None and track.status5_s is not None:
             # Stamped with the older of the two frames, so a stalled stream shows its age.
             stamp = min(track.status_s, track.status5_s)
@@ -361,25 +425,29 @@ class VescDriver(MotorDriver):
         """The latest STATUS_5 of motor ``index`` (tachometer and input voltage), or ``None``."""
         return self._track[index].status5
 
+    def _missing_status(self, index: int) -> str:
+        """What motor ``index`` has never sent and how to switch it on ("" if nothing)."""
+        track = self._track[index]
+        return missing_status(track.status_s is not None, track.status5_s is not None)
+
+    def _say_missing_status(self, index: int) -> None:
+        """Put what motor ``index`` has never sent in its status detail (or clear it)."""
+        self.set_fault(index, self._faults[index], self._missing_status(index))
+
     def _hint(self, index: int, now_s: float) -> None:
         track = self._track[index]
         if track.hinted or self._enabled_at_s is None:
             return
         if now_s - self._enabled_at_s < self.STATUS_HINT_AFTER_S:
             return
-        missing = [
-            name
-            for name, seen in (("STATUS", track.status_s), ("STATUS_5", track.status5_s))
-            if seen is None
-        ]
+        missing = self._missing_status(index)
         if missing:
             track.hinted = True
             log.warning(
-                "VESC %d (%r) has sent no %s frames %.1f s after enable: check that it is on "
-                "the bus in CAN_MODE_VESC and that VESC Tool, App Settings > General, sends "
-                "STATUS and STATUS_5 (can_status_msgs_r1 bits 0 and 4; the default is none)",
+                "VESC %d (%r), %.1f s after enable: %s (and check that it is on the bus in "
+                "CAN_MODE_VESC with this ID)",
                 self.motors[index].node_id,
                 self.motors[index].wheel,
-                " and ".join(missing),
                 now_s - self._enabled_at_s,
+                missing,
             )

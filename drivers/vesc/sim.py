@@ -1,23 +1,43 @@
 """A simulated VESC: the controller side of :mod:`drivers.vesc.codec`.
 
-Modelled on the firmware (https://github.com/vedderb/bldc, ``comm/comm_can.c``,
-``motor/mc_interface.c``, ``timeout.c``):
+Modelled on the firmware (https://github.com/vedderb/bldc, read at ``b9d287b3``:
+``comm/comm_can.c``, ``motor/mc_interface.c``, ``motor/mcpwm_foc.c``, ``motor/foc_math.c``,
+``timeout.c``), and built at its **factory settings** unless told otherwise
+(``applications/appconf_default.h``, ``motor/mcconf_default.h``; a board's ``hwconf`` may
+override them):
 
-* STATUS and STATUS_5 every ``1 / status_rate_hz`` (VESC Tool's status rate 1, 50 Hz by
-  default), as if ``can_status_msgs_r1`` had bits 0 and 4 set.
+* **Status messages** only as enabled: the factory's ``can_status_msgs_r1`` is 0
+  (``APPCONF_CAN_STATUS_MSGS_R1``), so a factory VESC sends no status at all.  ``status_msgs``
+  is that bit mask; this simulator sends STATUS (bit 0) and STATUS_5 (bit 4), in that order,
+  every ``1 / status_rate_hz`` (``can_status_rate_1``, 50 Hz from the factory), as
+  ``cancom_status_thread`` does.  The other status packets are not simulated.
+* **Timeout**: no command for ``timeout_s`` (``timeout_msec``, 1000 ms from the factory,
+  ``APPCONF_TIMEOUT_MSEC``) releases the motor, which coasts (``timeout_brake_current`` 0 A:
+  ``timeout_thread`` calls ``mc_interface_release_motor_override`` and a brake current below
+  ``cc_min_current``).
+* **Minimum ERPM** (``min_erpm``, ``s_pid_min_erpm``, 900 from the factory): SET_RPM below it
+  does not start a stopped motor (``mcpwm_foc_set_pid_speed``), and a running motor is held at
+  duty 0, phases shorted, until it stands (``"Brake when set ERPM is below min ERPM"`` in
+  ``mcpwm_foc.c``; :mod:`drivers.vesc.min_erpm`).  Modelled simply: the motor brakes to zero
+  at once with the speed loop's own dynamics (the model's time constant and acceleration
+  limit), without the firmware's set-point ramp (``s_pid_ramp_erpms_s``) down to the
+  threshold first; a real shorted-phase brake is weaker at low speed.
 * The tachometer counts 60-degree steps of the electrical angle (6 per electrical revolution),
   is an int32 that wraps, and starts at ``initial_tacho`` so tests can begin near the wrap.
-* SET_RPM runs the speed controller.  SET_CURRENT and SET_CURRENT_BRAKE below
-  ``min_current_a`` (``cc_min_current``, 0.05 A) release the motor; above it SET_CURRENT drives
-  toward the no-load speed (``max_rpm``) and SET_CURRENT_BRAKE brakes to a stop, both with an
-  acceleration of ``accel_per_a_rad_s2`` per ampere (the model has no torque physics).
-* No command for ``timeout_s`` releases the motor (``timeout_brake_current`` 0, freewheel).
+* SET_CURRENT and SET_CURRENT_BRAKE below ``min_current_a`` (``cc_min_current``, 0.05 A)
+  release the motor; above it SET_CURRENT drives toward the no-load speed (``max_rpm``) and
+  SET_CURRENT_BRAKE brakes to a stop, both with an acceleration of ``accel_per_a_rad_s2`` per
+  ampere (the model has no torque physics).
+* Status fields are truncated toward zero, as the firmware's casts are (:func:`make_status`).
 * PING is answered with a PONG carrying the ID the PING was addressed to (the firmware's
   choice, so a broadcast PING gets 255), HW_TYPE_VESC.
 * An injected :attr:`~gateway.sim.SimFault.FAULT` releases the motor; commands are ignored for
   ``fault_stop_s`` (``m_fault_stop_time_ms``, 500 ms by default) and then the fault clears
   itself.  The motor stays released until the next command.  Status frames and PONGs go on
   meanwhile and carry no fault code, as on the device.
+
+:meth:`drivers.vesc.driver.VescDriver.make_simulator` builds one as a configuration says the
+device was set up (its ``controller_timeout_s``, ``status_rate_hz``, ``min_erpm``).
 """
 
 from __future__ import annotations
@@ -40,6 +60,14 @@ from drivers.vesc.codec import (
     make_status5,
     wrap_int32,
 )
+from drivers.vesc.min_erpm import FACTORY_MIN_ERPM
+from drivers.vesc.settings import (
+    FACTORY_STATUS_MSGS,
+    FACTORY_STATUS_RATE_HZ,
+    FACTORY_TIMEOUT_S,
+    STATUS_1,
+    STATUS_5,
+)
 from gateway.errors import ConfigError, DecodeError
 from gateway.sim import DeviceSimulator, SimFault
 
@@ -60,22 +88,28 @@ class SimMode(enum.IntEnum):
     SPEED = 1
     CURRENT = 2
     BRAKE = 3
+    #: SET_RPM below ``min_erpm`` on a running motor: duty 0, phases shorted, braking.
+    BELOW_MIN_ERPM = 4
 
 
 class VescSimulator(DeviceSimulator):
-    """One simulated VESC.
+    """One simulated VESC, at factory settings unless the keywords say otherwise.
 
-    :param motor: the motor block; ``options["pole_pairs"]`` is required, ``timeout_s`` is read
-        when ``timeout_s`` is not given.
+    :param motor: the motor block; ``options["pole_pairs"]`` is required (the other options
+        are read by :meth:`~drivers.vesc.driver.VescDriver.make_simulator`, not here).
     :param model: the motor physics.
-    :param status_rate_hz: STATUS and STATUS_5 rate (Hz).
+    :param status_msgs: ``can_status_msgs_r1``: :data:`STATUS_1` and :data:`STATUS_5` bits
+        (0, none, from the factory).
+    :param status_rate_hz: ``can_status_rate_1`` (Hz; 0 sends nothing).
     :param initial_tacho: tachometer value at the start (int32).
-    :param timeout_s: the device's command timeout (s).
+    :param timeout_s: the device's command timeout, ``timeout_msec`` (s; 0: never).
+    :param min_erpm: ``s_pid_min_erpm``: SET_RPM below it is not speed-controlled (eRPM).
     :param fault_stop_s: how long an injected FAULT lasts before it clears itself (s).
     :param v_in_v: input voltage reported in STATUS_5 (V).
     :param min_current_a: current commands below this release the motor (A).
     :param accel_per_a_rad_s2: motor acceleration per ampere in current and brake mode.
-    :raises ConfigError: if ``pole_pairs`` is missing or not a positive int.
+    :raises ConfigError: if ``pole_pairs`` is missing or not a positive int, or a rate, a
+        timeout or ``min_erpm`` is negative.
     """
 
     def __init__(
@@ -83,9 +117,11 @@ class VescSimulator(DeviceSimulator):
         motor: MotorConfig,
         model: MotorModel | None = None,
         *,
-        status_rate_hz: float = 50.0,
+        status_msgs: int = FACTORY_STATUS_MSGS,
+        status_rate_hz: float = FACTORY_STATUS_RATE_HZ,
         initial_tacho: int = 0,
-        timeout_s: float | None = None,
+        timeout_s: float = FACTORY_TIMEOUT_S,
+        min_erpm: float = FACTORY_MIN_ERPM,
         fault_stop_s: float = 0.5,
         v_in_v: float = 24.0,
         min_current_a: float = 0.05,
@@ -97,12 +133,20 @@ class VescSimulator(DeviceSimulator):
             raise ConfigError(
                 f"motor {motor.wheel!r}.pole_pairs: expected int >= 1, got {pole_pairs!r}"
             )
-        if timeout_s is None:
-            timeout = motor.options.get("timeout_s", 0.5)
-            timeout_s = float(timeout) if isinstance(timeout, (int, float)) else 0.5
+        for name, value in (
+            ("status_rate_hz", status_rate_hz), ("timeout_s", timeout_s), ("min_erpm", min_erpm)
+        ):
+            if not value >= 0.0:
+                raise ConfigError(
+                    f"simulated VESC {motor.node_id}: {name}: expected at least 0, got {value!r}"
+                )
         self.pole_pairs = pole_pairs
-        self.status_period_s = 1.0 / status_rate_hz
+        #: ``can_status_msgs_r1``: which status packets go out.
+        self.status_msgs = status_msgs
+        #: Seconds between status bursts (``inf``: none).
+        self.status_period_s = 1.0 / status_rate_hz if status_rate_hz > 0.0 else math.inf
         self.timeout_s = timeout_s
+        self.min_erpm = min_erpm
         self.fault_stop_s = fault_stop_s
         self.v_in_v = v_in_v
         self.min_current_a = min_current_a
@@ -159,6 +203,14 @@ class VescSimulator(DeviceSimulator):
     def _apply(self, cmd: VescCommand) -> None:
         model = self.model
         if cmd.packet == CanPacketId.SET_RPM:
+            if abs(cmd.value) < self.min_erpm:
+                # mcpwm_foc_set_pid_speed starts a stopped motor only at s_pid_min_erpm or
+                # above; a running one is braked at duty 0 (see the module docstring).
+                if self.mode != SimMode.RELEASED:
+                    self.mode = SimMode.BELOW_MIN_ERPM
+                    model.max_accel_rad_s2 = self._speed_accel
+                    model.target_rad_s = 0.0
+                return
             self.mode = SimMode.SPEED
             model.max_accel_rad_s2 = self._speed_accel
             model.target_rad_s = cmd.value / self.pole_pairs / RPM_PER_RAD_S
@@ -201,12 +253,15 @@ class VescSimulator(DeviceSimulator):
             self._fault_since_s = None
         if (
             self.mode != SimMode.RELEASED
+            and self.timeout_s > 0.0
             and self._last_cmd_s is not None
             and now_s - self._last_cmd_s > self.timeout_s
         ):
             log.debug("simulated VESC %d: command timeout, motor released", self.node_id)
             self._release()
         current_a = self._estimate_current(now_s)
+        if not self.status_msgs & (STATUS_1 | STATUS_5) or math.isinf(self.status_period_s):
+            return []  # the factory setting: no status messages
         due = self._next_status_s
         if due is not None and now_s < due - 1e-9:
             return []
@@ -222,7 +277,7 @@ class VescSimulator(DeviceSimulator):
         prev, self._prev = self._prev, (now_s, v)
         if self.mode == SimMode.RELEASED:
             return 0.0
-        if self.mode != SimMode.SPEED:
+        if self.mode not in (SimMode.SPEED, SimMode.BELOW_MIN_ERPM):
             return self._current_a
         if prev is None or now_s <= prev[0]:
             return 0.0
@@ -230,12 +285,16 @@ class VescSimulator(DeviceSimulator):
         return accel / self.accel_per_a_rad_s2
 
     def _status_frames(self, current_a: float) -> list[Frame]:
-        erpm = round(self.model.velocity_rad_s * RPM_PER_RAD_S * self.pole_pairs)
+        erpm = self.model.velocity_rad_s * RPM_PER_RAD_S * self.pole_pairs
         erpm = min(max(erpm, -_MAX_ERPM), _MAX_ERPM)
         max_erpm = self.motor.max_rpm * self.pole_pairs
-        duty = 0.0 if self.mode == SimMode.RELEASED else min(max(erpm / max_erpm, -1.0), 1.0)
+        # Duty 0 when released, and while braking below min ERPM (phases shorted).
+        idle = self.mode in (SimMode.RELEASED, SimMode.BELOW_MIN_ERPM)
+        duty = 0.0 if idle else min(max(erpm / max_erpm, -1.0), 1.0)
         current_a = min(max(current_a, -_MAX_CURRENT_A), _MAX_CURRENT_A)
-        return [
-            make_status(self.node_id, erpm, current_a, duty),
-            make_status5(self.node_id, self.tachometer, self.v_in_v),
-        ]
+        out = []
+        if self.status_msgs & STATUS_1:
+            out.append(make_status(self.node_id, erpm, current_a, duty))
+        if self.status_msgs & STATUS_5:
+            out.append(make_status5(self.node_id, self.tachometer, self.v_in_v))
+        return out

@@ -76,8 +76,17 @@ def command(ctx: click.Context, config_path: str | None) -> None:
         f"controller-side stop when wheelgate dies (controller_watchdog: "
         f"{cfg.loop.controller_watchdog.value}):"
     )
-    for label, prot in DriveSet(cfg).protections():
+    drives = DriveSet(cfg)
+    for label, prot in drives.protections():
         click.echo(f"  {label}: {prot.describe()}")
+    for w, band in zip(cfg.model.wheels, drives.uncontrolled_bands(), strict=True):
+        if band is not None:
+            click.echo(
+                f"note:     wheel {w.name!r}: |speed| below {band[1]:.4g} rad/s "
+                f"({band[1] * w.radius:.3g} m/s) is not speed-controlled by its controller "
+                f"(it stops the motor instead); the gateway sends such commands as they are, "
+                f"counts them and expects the wheel stopped"
+            )
     for warning in cfg.warnings:
         click.echo(f"warning:  {warning}")
     click.echo("ok" if not cfg.warnings else f"ok, with {len(cfg.warnings)} warning(s)")

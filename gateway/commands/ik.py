@@ -17,6 +17,7 @@ from gateway.commands._common import (
     twist_json,
     twist_options,
 )
+from gateway.drives import DriveSet
 from gateway.errors import InfeasibleTwistError
 from gateway.kinematics.limits import speed_scale
 from gateway.types import Twist
@@ -47,6 +48,7 @@ def command(
             ctx.exit(EXIT_INFEASIBLE)
         raise
     scale = speed_scale(cfg.model, result, cfg.limits)
+    bands = DriveSet(cfg).uncontrolled_bands()
     rows: list[dict[str, Any]] = []
     for i, w in enumerate(cfg.model.wheels):
         speed = result.wheel_rad_s[i]
@@ -61,6 +63,9 @@ def command(
             row["steer_rad"] = result.steer_rad[i]
         if result.steer_rate_rad_s[i] is not None:
             row["steer_rate_rad_s"] = result.steer_rate_rad_s[i]
+        band = bands[i]
+        if band is not None and band[0] < abs(speed) < band[1]:
+            row["not_speed_controlled"] = {"below_rad_s": band[1]}
         rows.append(row)
     if as_json:
         click.echo(
@@ -82,6 +87,15 @@ def command(
             f"  {row['name']:<12} {row['speed_rad_s']:>10.4f} {row['wheel_rpm']:>10.2f} "
             f"{motor_rpm:>10}  {steer}"
         )
+    for row, w in zip(rows, cfg.model.wheels, strict=True):
+        if "not_speed_controlled" in row:
+            high = row["not_speed_controlled"]["below_rad_s"]
+            click.echo(
+                f"note: wheel {row['name']!r} at {abs(row['speed_rad_s']):.4g} rad/s is below "
+                f"its controller's slowest controlled speed ({high:.4g} rad/s, "
+                f"{high * w.radius:.3g} m/s): not "
+                f"speed-controlled, the controller stops the motor instead"
+            )
     if scale < 1.0:
         click.echo(
             f"note: this twist exceeds a speed limit; the gateway scales it by {scale:.4f} "

@@ -68,7 +68,10 @@ def command(
                f"{t['cost_max_us']:.0f} us"
                + (f"; longest gap between bursts {t['burst_gap_max_ms']:.1f} ms"
                   if "burst_gap_max_ms" in t else ""))
-    counters = {k: v for k, v in reply["counters"].items() if v and k != "rejected_frames"}
+    counters = {k: v for k, v in reply["counters"].items()
+                if v and k not in ("rejected_frames", "commands_not_followed")}
+    for driver, counts in (reply["counters"].get("commands_not_followed") or {}).items():
+        counters.update({f"{driver}.{k}": v for k, v in counts.items()})
     click.echo("counters: " + ", ".join(f"{k}={v}" for k, v in sorted(counters.items())))
     bus = reply.get("bus") or {}
     if "error_state" in bus:  # daemons before the bus's health was reported do not send it

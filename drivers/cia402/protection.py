@@ -1,0 +1,142 @@
+"""Controller-side protection of CiA 402 drives: the gateway's heartbeat, and what each drive
+does when it stops.
+
+Without it a CiA 402 drive in OPERATION ENABLED keeps its last target velocity for ever: the
+profile has no command timeout of its own, and a drive at factory settings watches nobody
+(CiA 301 object 0x1016 "consumer heartbeat time": every entry 0, "not used").  So:
+
+* the gateway is a heartbeat producer (CiA 301 "Heartbeat protocol"): from the driver's
+  :meth:`~drivers.cia402.driver.Cia402Driver.poll`, every ``host_heartbeat_s``, it sends the
+  one-byte heartbeat of NMT node ``host_node_id`` (COB-ID 0x700 + ID, state 0x05
+  OPERATIONAL).  It comes from the loop itself, so it stops when the loop stops: a killed,
+  frozen or starved gateway falls silent on the bus;
+* each drive's heartbeat consumer watches it: 0x1016 sub 1 = ``host_node_id << 16 |
+  consumer time in ms`` (bits 23..16 the producer's node ID, bits 15..0 the time, CiA 301).
+  The consumer starts with the first heartbeat after the entry is written (CANopenNode
+  ``301/CO_HBconsumer.h``: "Monitoring starts after the reception of the first HeartBeat");
+  a heartbeat missing for longer than the time is a heartbeat event (EMCY 0x8130);
+* the drive's abort connection option code (CiA 402 object 0x6007: 0 no action, 1 fault
+  signal, 2 disable voltage, 3 quick stop; negative values manufacturer-specific) says what a
+  connection abort, the heartbeat event among them, does to the drive.  The gateway writes 3
+  (quick stop: the drive stops on the ramp its quick stop option code 0x605A names, by default
+  2, the quick-stop deceleration 0x6085, then SWITCH ON DISABLED) or 2 (disable voltage: the
+  power stage switches off and the motor coasts).
+
+Both objects are written by expedited SDO while enabling, before NMT start and so before any
+controlword, and read back; only then is the protection confirmed and the drive enabled
+(:mod:`drivers.cia402.sequence`).  The consumer time is at least two producer periods
+(:data:`~drivers.cia402.options.MIN_TIMEOUT_PERIODS`): CiA 301 leaves the margin to the
+integrator, and a consumer time of 1.5 to 3 producer periods is the usual choice.
+
+The heartbeat's COB-ID is declared the way every frame the gateway sends is: a fresh driver's
+:meth:`~drivers.cia402.driver.Cia402Driver.poll` returns it, so
+:func:`gateway.filters.own_id_collisions` checks it against ``gateway.can_ids``; a drive with
+the same node ID (whose own heartbeat has that COB-ID) is refused here.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+from drivers.cia402.codec import make_heartbeat
+from drivers.cia402.enums import NmtState
+from gateway.errors import ConfigError
+from gateway.protection import Guard, Protection
+
+if TYPE_CHECKING:
+    from collections.abc import Sequence
+
+    from drivers.cia402.options import NodeOptions
+    from gateway.types import Frame, MotorConfig
+
+#: What the drive does when the heartbeat stops, per abort connection option code (0x6007).
+ACTIONS: dict[int, str] = {
+    3: "quick stop (0x605A quick stop option code: by default a quick-stop ramp to standstill, "
+       "then SWITCH ON DISABLED)",
+    2: "disable voltage (the power stage switches off: the motor coasts)",
+}
+
+#: What to do when a drive does not take the protection.
+FIX = (
+    "use a drive with a heartbeat consumer (CiA 301 object 0x1016) and the abort connection "
+    "option code (CiA 402 object 0x6007), see its EDS file; or set a command timeout with the "
+    "vendor's tool and gateway.controller_watchdog: warn"
+)
+
+
+@dataclass(frozen=True, slots=True)
+class HostSettings:
+    """The gateway's heartbeat on one bus.
+
+    :param node_id: the gateway's own NMT node ID (its heartbeat is 0x700 + it).
+    :param period_s: the heartbeat period (s).
+    """
+
+    node_id: int
+    period_s: float
+
+
+def host_settings(motors: Sequence[MotorConfig], opts: Sequence[NodeOptions]) -> HostSettings:
+    """The one heartbeat of a bus, from its motors' ``host_node_id`` and ``host_heartbeat_s``.
+
+    :raises ConfigError: if two motors disagree on them (one gateway heartbeat per bus), or a
+        drive has the gateway's node ID.
+    """
+    if not motors:
+        return HostSettings(127, 0.05)
+    first, ref = motors[0], opts[0]
+    for m, o in zip(motors, opts, strict=True):
+        where = f"wheel {m.wheel!r} (node {m.node_id})"
+        for key, want, got in (("host_node_id", ref.host_node_id, o.host_node_id),
+                               ("host_heartbeat_s", ref.host_heartbeat_s, o.host_heartbeat_s)):
+            if got != want:
+                raise ConfigError(
+                    f"{where}.{key}: expected {want!r} as for wheel {first.wheel!r} (the gateway "
+                    f"sends one heartbeat per bus), got {got!r}"
+                )
+        if m.node_id == ref.host_node_id:
+            raise ConfigError(
+                f"{where}.host_node_id: expected a node ID that no drive on the bus uses (the "
+                f"gateway's heartbeat goes out on 0x{0x700 + ref.host_node_id:03X}), got "
+                f"{ref.host_node_id}, the node ID of wheel {m.wheel!r}"
+            )
+    return HostSettings(ref.host_node_id, ref.host_heartbeat_s)
+
+
+class HostHeartbeat:
+    """The gateway's heartbeat producer: NMT state OPERATIONAL every :attr:`period_s`.
+
+    The periods are kept on a fixed grid (a late cycle does not push the next heartbeat out),
+    and a gap of more than a period is not made up with a burst.
+    """
+
+    def __init__(self, settings: HostSettings) -> None:
+        self.node_id = settings.node_id
+        self.period_s = settings.period_s
+        #: The heartbeat frame (0x700 + node, ``05``).
+        self.frame: Frame = make_heartbeat(settings.node_id, NmtState.OPERATIONAL)
+        self._due: float | None = None
+
+    def poll(self, now_s: float) -> list[Frame]:
+        """``[heartbeat]`` when one is due at ``now_s``, else ``[]``."""
+        due = self._due
+        if due is not None and now_s < due - 1e-9:
+            return []
+        nxt = now_s + self.period_s if due is None else due + self.period_s
+        self._due = nxt if nxt > now_s else now_s + self.period_s
+        return [self.frame]
+
+
+def describe(opts: NodeOptions) -> Protection:
+    """A drive's protection as the gateway configures it (:attr:`Guard.CONFIGURED`)."""
+    option = opts.abort_connection_option
+    return Protection(
+        Guard.CONFIGURED,
+        opts.controller_timeout_s,
+        ACTIONS[option],
+        f"heartbeat consumer 0x1016 watching node {opts.host_node_id} every "
+        f"{opts.consumer_time_ms} ms and abort connection option 0x6007 = {option}, written "
+        "by SDO and read back",
+        FIX,
+    )

@@ -1,0 +1,168 @@
+"""What a configuration states about a VESC's own settings, which wheelgate cannot read.
+
+A VESC's command timeout, its CAN status messages and its minimum ERPM live in its app and
+motor configurations, written as a whole by VESC Tool (``COMM_SET_APPCONF`` and
+``COMM_SET_MCCONF``, ``comm/commands.c`` in https://github.com/vedderb/bldc, read at
+``b9d287b3``), not by a simple CAN command.  The motor block states them:
+
+* ``controller_timeout_s``: App Settings > General > Timeout (``timeout_msec``; 1000 ms from
+  the factory), after which ``timeout_thread`` (``timeout.c``) releases the motor and brakes
+  with ``timeout_brake_current`` (0 A from the factory: the motor coasts);
+* ``status_rate_hz``: App Settings > General > Can Status Rate 1 (``can_status_rate_1``, 50 Hz
+  from the factory), with Status 1 and Status 5 ticked in Can Messages Rate 1
+  (``can_status_msgs_r1``, bits 0 and 4; 0, no status at all, from the factory; the FOC setup
+  wizard, ``conf_general_detect_apply_all_foc_can`` in ``conf_general.c``, sets it to
+  ``0b00001111``: Status 1 to 4, without STATUS_5);
+* ``min_erpm``: Motor Settings > PID Controllers > Minimum ERPM (``s_pid_min_erpm``, 900 from
+  the factory; :mod:`drivers.vesc.min_erpm`).
+
+Factory values: ``APPCONF_TIMEOUT_MSEC``, ``APPCONF_TIMEOUT_BRAKE_CURRENT``,
+``APPCONF_CAN_STATUS_RATE_1``, ``APPCONF_CAN_STATUS_MSGS_R1`` in
+``applications/appconf_default.h``; ``MCCONF_S_PID_MIN_RPM`` in ``motor/mcconf_default.h`` (a
+board's ``hwconf`` may override them).  ``controller_timeout_s`` and ``status_rate_hz`` default
+to 0, "not stated": an unstated timeout is a warning (:meth:`VescDriver.protection`), and a
+simulator built from the block has the factory's timeout and sends no status.  ``min_erpm``
+defaults to the factory value: state it only if you changed it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from types import MappingProxyType
+from typing import TYPE_CHECKING, cast
+
+from drivers.vesc.min_erpm import FACTORY_MIN_ERPM
+from gateway.driver import CONTROLLER_TIMEOUT_OPTION, OptionSpec
+from gateway.errors import ConfigError
+
+if TYPE_CHECKING:
+    from collections.abc import Mapping
+
+#: ``timeout_msec`` from the factory (s).
+FACTORY_TIMEOUT_S = 1.0
+#: ``can_status_rate_1`` from the factory (Hz); ``can_status_msgs_r1`` is 0, so none is sent.
+FACTORY_STATUS_RATE_HZ = 50.0
+#: ``can_status_msgs_r1`` bit of STATUS (Status 1 in VESC Tool).
+STATUS_1 = 1 << 0
+#: ``can_status_msgs_r1`` bit of STATUS_5 (Status 5 in VESC Tool).
+STATUS_5 = 1 << 4
+#: ``can_status_msgs_r1`` from the factory: no status messages.
+FACTORY_STATUS_MSGS = 0
+
+#: Where a VESC's status messages are switched on, for the messages about missing ones.
+STATUS_WHERE = "VESC Tool, App Settings > General > Can Messages Rate 1"
+
+#: The protocol keys of a VESC motor block.
+OPTIONS: Mapping[str, OptionSpec] = MappingProxyType(
+    {
+        "pole_pairs": OptionSpec(
+            int, minimum=1, help="motor pole pairs (poles / 2); eRPM = RPM * pole_pairs"
+        ),
+        "command_period_s": OptionSpec(
+            float,
+            0.02,
+            minimum=0.001,
+            help="resend the last command at least this often (s); less than half the VESC's "
+            "timeout (controller_timeout_s, else the factory 1 s)",
+        ),
+        "controller_timeout_s": dataclasses.replace(
+            CONTROLLER_TIMEOUT_OPTION,
+            help="the VESC's own command timeout as set in VESC Tool, App Settings > General > "
+            "Timeout (s; 1 s from the factory), after which it releases the motor; not "
+            "readable over CAN; 0: not stated",
+        ),
+        "status_rate_hz": OptionSpec(
+            float,
+            0.0,
+            minimum=0.0,
+            maximum=10000.0,
+            help="the rate set in VESC Tool for STATUS and STATUS_5, App Settings > General > "
+            "Can Status Rate 1 (Hz), with Status 1 and Status 5 ticked in Can Messages Rate "
+            "1; 0: not stated (a factory VESC sends none)",
+        ),
+        "min_erpm": OptionSpec(
+            float,
+            FACTORY_MIN_ERPM,
+            minimum=0.0,
+            help="s_pid_min_erpm, VESC Tool: Motor Settings > PID Controllers > Minimum ERPM "
+            "(900 from the factory; state it if you changed it): below it the VESC does not "
+            "speed-control the motor",
+        ),
+        "liveness_s": OptionSpec(
+            float, 0.25, minimum=0.001, help="status frames older than this: OFFLINE (s)"
+        ),
+    }
+)
+
+#: What a VESC does when its timeout expires (``timeout.c``: ``timeout_thread``).
+TIMEOUT_ACTION = "releases the motor: it coasts (timeout_brake_current 0 A)"
+#: How to get a stated timeout.
+TIMEOUT_FIX = (
+    "set App Settings > General > Timeout in VESC Tool (1000 ms from the factory; 0 turns it "
+    "off) and state it as controller_timeout_s, e.g. controller_timeout_s: 1.0"
+)
+#: What is known of an unstated timeout.
+UNSTATED_HOW = (
+    "not stated: a VESC releases its motor after App Settings > General > Timeout (1000 ms "
+    "from the factory, 0: never), which wheelgate cannot read over CAN"
+)
+
+
+def check_options(raw: Mapping[str, object], where: str) -> None:
+    """Refuse the renamed ``timeout_s`` before the keys are validated.
+
+    :raises ConfigError: naming the new key.
+    """
+    if "timeout_s" in raw:
+        raise ConfigError(
+            f"{where}.timeout_s: renamed controller_timeout_s (the timeout set in VESC Tool, "
+            f"App Settings > General > Timeout, in s)"
+        )
+
+
+def check_validated(out: Mapping[str, object], where: str) -> None:
+    """Check validated keys against each other.
+
+    :raises ConfigError: for a keep-alive period not less than half the VESC's timeout (the
+        stated one, else the factory 1 s), or a liveness time shorter than two periods of
+        the stated status rate.
+    """
+    period = cast("float", out["command_period_s"])
+    stated = cast("float", out["controller_timeout_s"])
+    timeout = stated or FACTORY_TIMEOUT_S
+    if not period < timeout / 2.0:
+        whose = (
+            f"controller_timeout_s {stated:g} s" if stated
+            else f"the factory {FACTORY_TIMEOUT_S:g} s, as controller_timeout_s is not stated"
+        )
+        raise ConfigError(
+            f"{where}.command_period_s: expected less than half the VESC's timeout ({whose}) "
+            f"= {timeout / 2:g} s (one lost frame must not let the VESC release the motor), "
+            f"got {period!r}"
+        )
+    rate = cast("float", out["status_rate_hz"])
+    liveness = cast("float", out["liveness_s"])
+    if rate and liveness < 2.0 / rate:
+        raise ConfigError(
+            f"{where}.liveness_s: expected at least two status periods at status_rate_hz "
+            f"{rate:g} ({2.0 / rate:g} s), or one late frame makes the motor OFFLINE; got "
+            f"{liveness!r}"
+        )
+
+
+def missing_status(status_seen: bool, status5_seen: bool) -> str:
+    """What a motor has never sent and how to switch it on ("" if it has sent both)."""
+    if not status_seen and not status5_seen:
+        return (
+            f"no STATUS or STATUS_5 received: a VESC sends CAN status only when enabled in "
+            f"VESC Tool (none from the factory): tick Status 1 and Status 5 in {STATUS_WHERE}, "
+            f"set Can Status Rate 1 (e.g. 50 Hz), and state it as status_rate_hz"
+        )
+    if not status5_seen:
+        return (
+            f"no STATUS_5 received (the tachometer, for odometry): tick Status 5 in "
+            f"{STATUS_WHERE} (the motor setup wizard ticks Status 1 to 4 only)"
+        )
+    if not status_seen:
+        return f"no STATUS received (the speed): tick Status 1 in {STATUS_WHERE}"
+    return ""
