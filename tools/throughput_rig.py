@@ -40,7 +40,10 @@ PROTOCOLS: dict[str, dict[str, object]] = {
     "odrive": {"driver": "odrive", "firmware": "0.6", "gear_ratio": 10.0, "max_rpm": 3000,
                "watchdog_endpoints": {"fw_version": "0.0.0", "enable_watchdog": 1,
                                       "watchdog_timeout": 2}},
-    "vesc": {"driver": "vesc", "pole_pairs": 7, "gear_ratio": 10.0, "max_rpm": 3000},
+    # Status 1 and 5 at 50 Hz, as the configuration states they were switched on in VESC Tool
+    # (a factory VESC sends none).
+    "vesc": {"driver": "vesc", "pole_pairs": 7, "gear_ratio": 10.0, "max_rpm": 3000,
+             "status_rate_hz": 50.0, "controller_timeout_s": 1.0},
     "cia402": {"driver": "cia402", "gear_ratio": 10.0, "max_rpm": 3000},
     "dji": {"driver": "dji", "esc": "c620", "gear_ratio": 19.203208556149733, "max_rpm": 9000,
             "no_controller_stop": "acknowledged"},
