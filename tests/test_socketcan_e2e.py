@@ -41,7 +41,10 @@ pytestmark = [pytest.mark.socketcan, pytest.mark.timeout(600)]
 #: for tens of milliseconds at times, so the DJI robot (M3508 motors, 19.2:1, 76 mm wheels)
 #: drives slowly enough for 80 ms gaps (6 rotor turns a second).  The Ackermann robot's odometry
 #: uses the measured steering angle, which lags more in a loaded VM: it drives its arcs slower.
-SPEED = {"dji": 0.15, "steered": 0.25}
+#: The VESC tub's wheels are not speed-controlled below 2.69 rad/s (minimum ERPM 900): at
+#: 0.7 m/s its corners turn in place at 1.75 rad/s, 3.5 rad/s at the wheels (at 0.4 m/s they
+#: would need 2 rad/s: the wheels would brake, and the square would be a line).
+SPEED = {"dji": 0.15, "steered": 0.25, "vesc": 0.7}
 #: The simulators' step rate: 1 kHz, but the DJI ESCs' 250 Hz in the VM, where three of them
 #: at 1 kHz take a whole emulated CPU and starve the gateway (every step reports each rotor).
 SIM_RATE = {"dji": 250.0}
