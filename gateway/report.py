@@ -18,15 +18,12 @@ def status_dict(daemon: Daemon, now_s: float) -> dict[str, object]:
     """Everything a status request returns: state, motors, odometry, counters, timing."""
     gw = daemon.gateway
     sup = gw.supervisor
-    protection = {
-        m.wheel: {
-            "guard": drv.protection(i).guard.value,
-            "timeout_s": drv.protection(i).timeout_s,
-            "state": drv.protection_state(i).value,
-        }
-        for drv, _ in gw.drives.groups
-        for i, m in enumerate(drv.motors)
-    }
+    protection = {}
+    for drv, _ in gw.drives.groups:
+        for i, m in enumerate(drv.motors):
+            prot = drv.protection(i)
+            protection[m.wheel] = {"guard": prot.guard.value, "timeout_s": prot.timeout_s,
+                                   "state": drv.protection_state(i).value}
     motors = []
     for st in gw.drives.status(now_s):
         fb = st.feedback

@@ -1,6 +1,7 @@
 """Tests of the CANopen CiA 402 codec, state machine and enable sequence (``_bus``: on a bus).
 
-Golden frames come from ``/work/shared/specs/can-protocols.md`` section 3, "Worked examples
+Golden frames come from CiA 301 / CiA 402 as the canopen library (christiansandberg/canopen)
+implements them, "Worked examples
 (node 3)" and "Verified on the virtual bus" (frames captured from canopen 2.4.1).  The
 ``canopen`` library serves as an independent cross-check of our SDO frames, the state table and
 the abort-code texts; it is never used by the driver itself.

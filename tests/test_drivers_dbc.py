@@ -2,7 +2,8 @@
 
 Golden frames for ``config/example_controller.dbc`` are packed by hand with ``struct`` from the
 layout in that file and cross-checked with cantools.  ODrive golden frames are the worked
-examples of ``specs/can-protocols.md`` section 1 ("Worked examples" table), encoded here through
+examples of the ODrive CAN protocol documentation (docs.odriverobotics.com, can-protocol) ("Worked
+examples" table), encoded here through
 the official ODrive DBC (``tests/data/odrive-cansimple-0.5.6.dbc``, a pinned copy).
 """
 
@@ -208,7 +209,7 @@ def test_example_angle_message_mixes_byte_orders() -> None:
 
 def test_odrive_golden_frames_through_the_generic_driver() -> None:
     drv = DbcDriver([odrive_motor(3)])
-    # specs/can-protocols.md section 1, worked examples: Set_Input_Vel node 3, 10 rev/s,
+    # the ODrive CAN protocol documentation, worked examples: Set_Input_Vel node 3, 10 rev/s,
     # Set_Axis_State node 3 CLOSED_LOOP (8) and IDLE (1), DLC 8 as in the DBC.
     assert drv.enable(0.0) == [
         Frame(0x06D, bytes(8)),

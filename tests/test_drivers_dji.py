@@ -1,6 +1,7 @@
 """Tests of the DJI C620 / C610 driver: codec, PI loop, driver and simulator on a virtual bus.
 
-Golden frames are the worked examples of ``specs/can-protocols.md`` section 4 ("Worked
+Golden frames are the worked examples of the RoboMaster C620/C610 user guides' CAN protocol
+sections ("Worked
 examples" table), which were checked against DJI's ``CAN_receive.c``.
 """
 

@@ -1,6 +1,7 @@
 """Tests of the ODrive CANSimple driver: codec, transition table, driver and simulator.
 
-Golden frames are the worked examples of ``specs/can-protocols.md`` section 1 (checked there
+Golden frames are the worked examples of the ODrive CAN protocol documentation
+(docs.odriverobotics.com, can-protocol) (checked there
 against the official DBC and the firmware's struct formats).
 """
 

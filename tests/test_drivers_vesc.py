@@ -1,7 +1,7 @@
 """Tests of the VESC codec and driver (drivers/vesc); the simulator in ``test_drivers_vesc_sim``.
 
-Golden vectors: section 2 "Worked examples (VESC ID 23 = 0x17)" of
-/work/shared/specs/can-protocols.md, built from vedderb/bldc ``comm/comm_can.c`` at b9d287b3;
+Golden vectors: worked examples (VESC ID 23 = 0x17) built from vedderb/bldc ``comm/comm_can.c`` at
+b9d287b3;
 SET_CURRENT 51 A matches the example in the firmware's ``documentation/comm_can.md``.
 """
 

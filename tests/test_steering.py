@@ -1,7 +1,8 @@
 """Steering actuators over CAN: the ``steering:`` block, the ODrive position commands, and the
 gateway steering a swerve robot with measured angles in its odometry.
 
-Golden frame: ``specs/can-protocols.md`` section 1, "Set_Input_Pos, node 0: pos 1.5, vel_ff 2.0,
+Golden frame: the ODrive CAN protocol documentation (docs.odriverobotics.com, can-protocol),
+"Set_Input_Pos, node 0: pos 1.5, vel_ff 2.0,
 torque_ff -0.5", cross-checked with the official 0.5.6 DBC (``Axis0_Set_Input_Pos``).
 """
 

@@ -1,6 +1,7 @@
 """Steering actuators on the CiA 402 driver: cyclic synchronous position mode (CSP, mode 8).
 
-Golden frames follow ``/work/shared/specs/can-protocols.md`` section 3: the RPDO layout is the
+Golden frames follow CiA 301 / CiA 402 as the canopen library (christiansandberg/canopen)
+implements them: the RPDO layout is the
 "RPDO3 = 6040 + 607A" entry of the DS402 default pattern (controlword u16 + target position
 i32, little endian, as the worked example "RPDO4 (6040 + 60FF): enable op + 1000" =
 ``0F 00 E8 03 00 00``), the SDO frames the "Worked examples (node 3)" (``2F 60 60 00 03 ..``

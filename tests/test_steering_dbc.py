@@ -4,7 +4,8 @@ absolute position across counter wraps, and driver + simulator on a virtual bus.
 Golden frames:
 
 * ODrive through the official DBC (``tests/data/odrive-cansimple-0.5.6.dbc``, pinned):
-  ``specs/can-protocols.md`` section 1, worked example "Set_Input_Pos, node 0: pos 1.5" (bytes
+  the ODrive CAN protocol documentation (docs.odriverobotics.com, can-protocol), worked example
+  "Set_Input_Pos, node 0: pos 1.5" (bytes
   0-3 ``00 00 C0 3F``, float32 turns) and the Set_Controller_Mode layout (i32 Control_Mode @0,
   i32 Input_Mode @4; POSITION_CONTROL = 3 and PASSTHROUGH = 1 from the DBC's ``VAL_ 107``
   tables, i.e. ``ODriveEnums.h``).

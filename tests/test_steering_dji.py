@@ -1,6 +1,7 @@
 """Tests of DJI C620 / C610 steering actuators: the host-side position cascade.
 
-The ESCs take only a torque current (``specs/can-protocols.md`` section 4), so a steering
+The ESCs take only a torque current (the RoboMaster C620/C610 user guides' CAN protocol sections),
+so a steering
 actuator's frames are the same current slots as a wheel's: golden frames reuse the section's
 worked examples (``0x200`` ``0F A0 ...`` = 4000 raw in ESC 1's slot, ``0x1FF`` ``C0 00 40 00 ...``
 = -16384 / +16384 in ESC 5 / 6's, feedback ``0x201`` ``1F FF 05 DC FF 38 23 00`` = angle 8191,

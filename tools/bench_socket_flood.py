@@ -188,35 +188,12 @@ class Outcome:
 # -- the loads ---------------------------------------------------------------------------------
 
 
-def status_flood(path: str, seconds: float, out: Outcome) -> None:
-    count = FLOOD_BYTES // len(STATUS_LINE)
-    replies = 0
-    ids_ok = True
-    with connect(path) as sock:
-        def reader() -> None:
-            nonlocal replies, ids_ok
-            buf = bytearray()
-            sock.settimeout(max(seconds, 60.0) + 5.0)
-            with contextlib.suppress(OSError):
-                while replies < count:
-                    line = read_line(sock, buf)
-                    if not line:
-                        break
-                    ids_ok = ids_ok and json.loads(line).get("ok") is True
-                    replies += 1
+def pipeline(path: str, payload: bytes, count: int, seconds: float) -> tuple[int, int, float]:
+    """Send ``count`` request lines at once on one connection while a thread reads the replies.
 
-        thread = threading.Thread(target=reader, daemon=True)
-        start = time.monotonic()
-        thread.start()
-        sock.sendall(STATUS_LINE * count)
-        thread.join(max(seconds, 60.0))
-        took = time.monotonic() - start
-    out.notes.append(f"{replies} of {count} replies in {took:.2f} s"
-                     + ("" if ids_ok else " (some not ok)"))
-
-
-def twist_flood(path: str, seconds: float, out: Outcome) -> None:
-    count = TWISTS
+    :return: ``(replies, replies with "ok": true, seconds until the last reply or the wait's
+        end)``.
+    """
     replies = ok = 0
     with connect(path) as sock:
         def reader() -> None:
@@ -231,14 +208,27 @@ def twist_flood(path: str, seconds: float, out: Outcome) -> None:
                     ok += json.loads(line).get("ok") is True
                     replies += 1
 
-        payload = b"".join(b'{"op":"twist","vx":0.1,"wz":0.2,"id":%d}\n' % k
-                           for k in range(count))
         thread = threading.Thread(target=reader, daemon=True)
         start = time.monotonic()
         thread.start()
         sock.sendall(payload)
         thread.join(max(seconds, 60.0))
         took = time.monotonic() - start
+    return replies, ok, took
+
+
+def status_flood(path: str, seconds: float, out: Outcome) -> None:
+    count = FLOOD_BYTES // len(STATUS_LINE)
+    replies, ok, took = pipeline(path, STATUS_LINE * count, count, seconds)
+    out.notes.append(f"{replies} of {count} replies in {took:.2f} s"
+                     + ("" if ok == replies else " (some not ok)"))
+
+
+def twist_flood(path: str, seconds: float, out: Outcome) -> None:
+    count = TWISTS
+    payload = b"".join(b'{"op":"twist","vx":0.1,"wz":0.2,"id":%d}\n' % k
+                       for k in range(count))
+    replies, ok, took = pipeline(path, payload, count, seconds)
     out.notes.append(f"{replies} of {count} replies ({ok} ok) in {took:.2f} s: "
                      f"{replies / took:.0f} a second")
 

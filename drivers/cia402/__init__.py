@@ -16,7 +16,7 @@ actuators in cyclic synchronous position mode.
   (:mod:`~drivers.cia402.sim_device`, :mod:`~drivers.cia402.sim_control`).
 
 Reference: CiA 301 / CiA 402 (https://www.can-cia.org/can-knowledge/cia402-series) and
-``/work/shared/specs/can-protocols.md`` section 3.
+CiA 301 / CiA 402 as the canopen library (christiansandberg/canopen) implements them.
 """
 
 from __future__ import annotations

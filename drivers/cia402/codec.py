@@ -10,7 +10,7 @@ SDO frames live in :mod:`drivers.cia402.sdo`.
 
 Reference: CiA 301 (NMT, SYNC, EMCY, PDO), CiA 402 (objects
 0x6040/0x6041/0x6064/0x606C/0x607A/0x60FF); byte layouts and worked frames in
-``/work/shared/specs/can-protocols.md`` section 3.
+CiA 301 / CiA 402 as the canopen library (christiansandberg/canopen) implements them.
 """
 
 from __future__ import annotations

@@ -7,7 +7,8 @@ byte holds the command specifier in bits 7..5, the number of unused data bytes `
 ``4F``/``4B``/``43``; an abort is ``80`` with a 32-bit abort code.  Segmented and block
 transfers are not needed for the objects a wheel drive uses and are rejected.
 
-Reference: CiA 301; worked frames in ``/work/shared/specs/can-protocols.md`` section 3.
+Reference: CiA 301; worked frames in CiA 301 / CiA 402 as the canopen library
+(christiansandberg/canopen) implements them.
 """
 
 from __future__ import annotations

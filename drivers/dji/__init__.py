@@ -2,7 +2,7 @@
 
 Protocol reference: DJI's `Development-Board-C-Examples
 <https://github.com/RoboMaster/Development-Board-C-Examples>`_ (``14.CAN/application/
-CAN_receive.{h,c}``) and ``specs/can-protocols.md`` section 4.
+CAN_receive.{h,c}``) and the RoboMaster C620/C610 user guides' CAN protocol sections.
 
 * :mod:`drivers.dji.codec`: the pure wire format (frame IDs, field tables, unwrapping);
 * :mod:`drivers.dji.pi`: the pure rotor-speed PI controller;

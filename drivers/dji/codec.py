@@ -4,7 +4,7 @@ Reference: DJI's own example firmware, `RoboMaster/Development-Board-C-Examples
 <https://github.com/RoboMaster/Development-Board-C-Examples>`_ ``14.CAN/application/
 CAN_receive.{h,c}`` (``CAN_cmd_chassis``, ``get_motor_measure``), and `RoboRTS-Firmware
 <https://github.com/RoboMaster/RoboRTS-Firmware>`_ ``components/devices/motor.c`` for the
-angle unwrapping; summarised in ``specs/can-protocols.md`` section 4.
+angle unwrapping; summarised in the RoboMaster C620/C610 user guides' CAN protocol sections.
 
 Frames are classical CAN, 11-bit IDs, DLC 8, big endian:
 

@@ -2,7 +2,8 @@
 
 Protocol reference: DJI's `Development-Board-C-Examples
 <https://github.com/RoboMaster/Development-Board-C-Examples>`_ (``14.CAN``) and
-``specs/can-protocols.md`` section 4.  The wire format lives in :mod:`drivers.dji.codec`.
+the RoboMaster C620/C610 user guides' CAN protocol sections.  The wire format lives in
+:mod:`drivers.dji.codec`.
 
 The ESCs take only a current set point, so this driver closes the wheel-speed loop on the host
 (:class:`drivers.dji.pi.SpeedPi`, one per motor) every time :meth:`DjiDriver.command` is called,

@@ -1,7 +1,8 @@
 """Host-side position loop of a DJI steering actuator (pure; no clock, no state).
 
 C620 / C610 ESCs have no position (or speed) mode: they take a torque-current set point only
-(``specs/can-protocols.md`` section 4).  A steering actuator therefore gets a cascade on the
+(the RoboMaster C620/C610 user guides' CAN protocol sections).  A steering actuator therefore gets
+a cascade on the
 host, as DJI's own gimbal firmware does for its current-driven motors (`RoboRTS-Firmware
 <https://github.com/RoboMaster/RoboRTS-Firmware>`_ commit ``06ea500a``,
 ``application/gimbal_task.c``: ``cascade[n].outer`` angle loop feeding ``cascade[n].inter``

@@ -1,6 +1,6 @@
 """Simulated DJI C620 / C610 ESC with a current-driven motor (for tests and ``--sim``).
 
-Protocol reference: ``specs/can-protocols.md`` section 4 and DJI's
+Protocol reference: the RoboMaster C620/C610 user guides' CAN protocol sections and DJI's
 `Development-Board-C-Examples <https://github.com/RoboMaster/Development-Board-C-Examples>`_.
 
 What the simulated ESC does:

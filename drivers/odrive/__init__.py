@@ -2,7 +2,8 @@
 
 Reference: the `ODrive CAN protocol
 <https://docs.odriverobotics.com/v/latest/manual/can-protocol.html>`_ and the official DBC
-``odrive-cansimple.dbc``; summarised with worked frames in ``specs/can-protocols.md`` section 1.
+``odrive-cansimple.dbc``; summarised with worked frames in the ODrive CAN protocol documentation
+(docs.odriverobotics.com, can-protocol).
 
 * :mod:`drivers.odrive.enums`: command IDs, axis states, modes, error flags and their mapping
   onto :class:`gateway.types.DriveFault`.

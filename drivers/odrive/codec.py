@@ -4,7 +4,7 @@ Reference: the `ODrive CAN protocol
 <https://docs.odriverobotics.com/v/latest/manual/can-protocol.html>`_, the 0.5.x
 `can_simple.cpp <https://github.com/odriverobotics/ODrive/blob/master/Firmware/communication/
 can/can_simple.cpp>`_ and the official DBC ``odrive-cansimple.dbc`` (0.5.6); summarised with
-worked frames in ``specs/can-protocols.md`` section 1.
+worked frames in the ODrive CAN protocol documentation (docs.odriverobotics.com, can-protocol).
 
 Arbitration ID = ``node_id << 5 | cmd_id``, with 11-bit IDs (node 0..0x3F) or, when the axis is
 configured ``is_extended``, 29-bit IDs (node 0..0xFFFFFF).  The firmware ignores frames whose IDE

@@ -2,7 +2,8 @@
 
 Reference: the `ODrive CAN protocol
 <https://docs.odriverobotics.com/v/latest/manual/can-protocol.html>`_ and
-``specs/can-protocols.md`` section 1.  Frame layouts live in :mod:`drivers.odrive.messages`,
+the ODrive CAN protocol documentation (docs.odriverobotics.com, can-protocol).  Frame layouts live
+in :mod:`drivers.odrive.messages`,
 the protocol keys in :mod:`drivers.odrive.options`, and the mapping of reported errors onto
 faults in :mod:`drivers.odrive.faults`.
 

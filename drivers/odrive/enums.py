@@ -1,6 +1,6 @@
 """ODrive CANSimple constants: command IDs, axis states, modes and error flags.
 
-Sources (see ``specs/can-protocols.md`` section 1):
+Sources (see the ODrive CAN protocol documentation (docs.odriverobotics.com, can-protocol)):
 
 * 0.5.x: `odriverobotics/ODrive <https://github.com/odriverobotics/ODrive>`_ fw-v0.5.x,
   ``Firmware/communication/can/can_simple.{hpp,cpp}`` and ``tools/odrive-cansimple.dbc``
