@@ -1,7 +1,7 @@
 """Built-in motor-controller drivers, one protocol per module.
 
 :data:`BUILTIN_DRIVERS` maps a config ``driver:`` name to ``(module, class)``; classes are
-imported lazily by :mod:`gateway.registry`.  Third-party packages add drivers through the
+imported lazily by :mod:`gateway.drive.registry`.  Third-party packages add drivers through the
 ``gateway.drivers`` entry-point group.
 """
 

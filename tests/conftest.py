@@ -14,7 +14,7 @@ from click.testing import CliRunner
 if TYPE_CHECKING:
     from collections.abc import Iterator
 
-    from gateway.daemon import Daemon
+    from gateway.runtime.daemon import Daemon
 
 REPO = Path(__file__).resolve().parent.parent
 CONFIG_DIR = REPO / "config"
@@ -91,9 +91,9 @@ def daemon(sock_path: str, channel: str) -> Iterator[Daemon]:
     import time
 
     from gateway.config import load_config
-    from gateway.daemon import Daemon
-    from gateway.sdnotify import SystemdNotifier
-    from gateway.types import GatewayState
+    from gateway.core.types import GatewayState
+    from gateway.runtime.daemon import Daemon
+    from gateway.runtime.sdnotify import SystemdNotifier
 
     cfg = load_config(CONFIG_DIR / "turtlebot3_burger.yaml", {"channel": channel})
     d = Daemon(cfg, sim=True, socket_path=sock_path, notifier=SystemdNotifier(None))

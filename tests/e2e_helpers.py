@@ -8,23 +8,24 @@ from typing import TYPE_CHECKING
 
 import can
 
-from gateway.bus import drain, send_frames
-from gateway.config import GatewayConfig, load_config
-from gateway.daemon import Daemon
-from gateway.errors import BusError
-from gateway.kinematics import Odometry
-from gateway.kinematics.limits import speed_scale
-from gateway.loop import Gateway
-from gateway.sdnotify import SystemdNotifier
-from gateway.simbus import SimulatedControllers
-from gateway.types import GatewayState, Twist
-from gateway.wgproto import ErrorReport, TwistCommand, TwistFlags
+from gateway.bus.can_bus import drain, send_frames
+from gateway.config import load_config
+from gateway.core.errors import BusError
+from gateway.core.kinematics import Odometry
+from gateway.core.kinematics.limits import speed_scale
+from gateway.core.types import GatewayState, Twist
+from gateway.runtime.daemon import Daemon
+from gateway.runtime.loop import Gateway
+from gateway.runtime.sdnotify import SystemdNotifier
+from gateway.sim.bus import SimulatedControllers
+from gateway.wire.can import ErrorReport, TwistCommand, TwistFlags
 
 if TYPE_CHECKING:
     from collections.abc import Callable
     from pathlib import Path
 
-    from gateway.sim import DeviceSimulator
+    from gateway.core.settings import GatewayConfig
+    from gateway.sim.device import DeviceSimulator
 
 
 #: Simulator step (s).  DJI ESCs report the 13-bit rotor angle every millisecond; a slower

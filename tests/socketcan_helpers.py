@@ -22,7 +22,7 @@ from typing import IO, Any
 
 import yaml
 
-from gateway.client import ControlClient
+from gateway.runtime.client import ControlClient
 
 #: Generous bounds for the emulated VM: process start (imports take ~10 s there), enabling.
 START_S = 180.0

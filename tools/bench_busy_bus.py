@@ -4,8 +4,8 @@ the kernel receive filters its drivers declare.
 Method: the embedded default robot (4-wheel mecanum, four ODrive controllers) moved onto a
 SocketCAN interface (default ``vcan0``, ``--channel``; needs a kernel with AF_CAN and the
 interface up, e.g. ``ip link add vcan0 type vcan && ip link set vcan0 up``).  The gateway
-(:class:`gateway.loop.Gateway`, the daemon's cycle) and the four device simulators
-(:class:`gateway.simbus.SimulatedControllers`, a socket of their own) run in this process's
+(:class:`gateway.runtime.loop.Gateway`, the daemon's cycle) and the four device simulators
+(:class:`gateway.sim.bus.SimulatedControllers`, a socket of their own) run in this process's
 main thread on simulated time, paced in real time at ``--rate`` (default 100 Hz) so that
 traffic piles up between cycles as it does on a robot: each cycle is ``Gateway.cycle``, then
 two simulator steps (outside the measurement).  The gateway follows a twist sent every 20
@@ -54,21 +54,21 @@ import sys
 import time
 from typing import TYPE_CHECKING
 
-from gateway.bus import open_bus
+from gateway.bus.can_bus import open_bus
 from gateway.config import load_config
-from gateway.control import Source
-from gateway.drives import DriveSet
-from gateway.errors import BusError
-from gateway.filters import CanFilter, gateway_filters, matches_any
-from gateway.loop import Gateway
-from gateway.simbus import SimulatedControllers
-from gateway.types import GatewayState, Twist
+from gateway.core.control import Source
+from gateway.core.errors import BusError
+from gateway.core.types import GatewayState, Twist
+from gateway.drive.driveset import DriveSet
+from gateway.drive.filters import CanFilter, gateway_filters, matches_any
+from gateway.runtime.loop import Gateway
+from gateway.sim.bus import SimulatedControllers
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
     from multiprocessing.sharedctypes import Synchronized
 
-    from gateway.config import GatewayConfig
+    from gateway.core.settings import GatewayConfig
 
 #: ``struct can_frame`` (linux/can.h): can_id, len, padding, 8 data bytes.
 _CAN_FRAME = struct.Struct("=IB3x8s")

@@ -40,7 +40,7 @@ from cantools.database.conversion import BaseConversion
 
 from drivers.odrive.codec import OdriveCodec
 from drivers.odrive.messages import FLOAT32_MAX, SET_INPUT_VEL, EncoderEstimates
-from gateway.types import Frame
+from gateway.core.types import Frame
 
 if TYPE_CHECKING:
     from collections.abc import Callable
@@ -232,7 +232,7 @@ def main() -> None:
             f"{min(theirs):11.3f} / {statistics.median(theirs):11.3f} {ratio:6.1f}x"
         )
     frame_us -= overhead
-    print(f"(for scale: constructing one frozen gateway.types.Frame costs {frame_us:.3f} us)")
+    print(f"(for scale: constructing one frozen gateway.core.types.Frame costs {frame_us:.3f} us)")
 
 
 if __name__ == "__main__":

@@ -20,8 +20,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from gateway.kinematics import PRESETS, Limits, RobotModel, apply_limits
-from gateway.types import Twist
+from gateway.core.kinematics import PRESETS, Limits, RobotModel, apply_limits
+from gateway.core.types import Twist
 
 if TYPE_CHECKING:
     from collections.abc import Callable

@@ -17,7 +17,8 @@ own timing statistics, over the whole run, are read at the end:
   send, odometry), the daemon's own figure;
 * lateness: when a cycle started minus its deadline (p50/p99/max);
 * missed cycles: deadlines skipped after an overrun (skipped, not burst), each late start
-  classed by the daemon's :class:`~gateway.timing.MissProbe` from the loop thread's schedstat
+  classed by the daemon's :class:`~gateway.runtime.timing.MissProbe` from the loop thread's
+  schedstat
   over the interval before it: on CPU for more than a period, runnable but not running, or
   asleep past its deadline;
 * twist-to-frame latency: from the twist being sent to the daemon's socket (the client's
@@ -71,15 +72,15 @@ from typing import Any
 import can
 from platform_floor import CyclicTest, cyclictest, fixed_work_loop, steal_s
 
-from gateway.bus import drain, to_message
+from gateway.bus.can_bus import drain, to_message
 from gateway.config import load_config
-from gateway.daemon import Daemon
-from gateway.protocol import ProtocolError, Request, TwistRequest, encode_line
-from gateway.sdnotify import SystemdNotifier
-from gateway.simbus import SimulatedControllers
-from gateway.timing import LoopTimer
-from gateway.types import Frame, Twist
-from gateway.wgproto import TwistCommand, WgCodec
+from gateway.core.types import Frame, Twist
+from gateway.runtime.daemon import Daemon
+from gateway.runtime.sdnotify import SystemdNotifier
+from gateway.runtime.timing import LoopTimer
+from gateway.sim.bus import SimulatedControllers
+from gateway.wire.can import TwistCommand, WgCodec
+from gateway.wire.socket import ProtocolError, Request, TwistRequest, encode_line
 
 
 def bare_python_can_cycle_us(sims: SimulatedControllers, channel: str,

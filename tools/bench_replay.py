@@ -31,12 +31,12 @@ import time
 from drivers.odrive.codec import OdriveCodec
 from drivers.odrive.enums import AxisState
 from drivers.odrive.messages import Heartbeat
-from gateway.candump import read_lines
+from gateway.apps.replay.replay import Replay
 from gateway.config import load_config
-from gateway.drives import DriveSet
-from gateway.kinematics import Pose, compose, se2_exp, wrap_angle
-from gateway.replay import Replay
-from gateway.types import Twist
+from gateway.core.kinematics import Pose, compose, se2_exp, wrap_angle
+from gateway.core.types import Twist
+from gateway.drive.driveset import DriveSet
+from gateway.wire.candump import read_lines
 
 #: Encoder rate per wheel, Hz.
 ENCODER_HZ = 1000

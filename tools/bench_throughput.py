@@ -7,7 +7,7 @@ python-can alone moving the same frames on the same virtual bus.
 Method, per protocol (ODrive, VESC, CiA 402, DJI, DBC), on one robot (the embedded 4-wheel
 mecanum demo with that protocol's motors), single-threaded, on the python-can ``virtual`` bus:
 
-1. The gateway (:class:`gateway.loop.Gateway`, the daemon's cycle) is enabled against its
+1. The gateway (:class:`gateway.runtime.loop.Gateway`, the daemon's cycle) is enabled against its
    device simulators on simulated time (1 kHz cycles, two simulator steps per cycle), then
    follows a constant twist.  For 2 s of simulated time every frame the simulators emit is
    recorded, cycle by cycle: that is the feedback pool.

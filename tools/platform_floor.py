@@ -15,7 +15,7 @@ Three independent readings, none of which runs any wheelgate work:
 
 A loop that misses deadlines while these show the same misses, or stolen time, is held up by
 the machine, not by its own work.  The daemon's own
-:class:`~gateway.timing.MissProbe` classifies each of its late starts from the loop thread's
+:class:`~gateway.runtime.timing.MissProbe` classifies each of its late starts from the loop thread's
 scheduler statistics (on a CPU, runnable but not running, or asleep); :func:`fixed_work_loop`
 runs the same probe, so the two compare directly.  On a virtual machine the guest does not
 see every stall: a constant workload's CPU time spreads too, and :func:`fixed_work_loop`
@@ -34,7 +34,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from gateway.timing import LoopTimer, MissProbe, Scheduler, TimingStats
+from gateway.runtime.timing import LoopTimer, MissProbe, Scheduler, TimingStats
 
 #: Width of cyclictest's latency histogram (us); later wake-ups count as overflows.
 HISTOGRAM_US = 2000
@@ -46,7 +46,7 @@ class WorkLoop:
 
     :param stats: the scheduler's timing statistics (late starts by cause included).
     :param work_us: CPU time (p50, p99, max) of the constant workload, cycle by cycle.
-    :param late_starts: the :class:`~gateway.timing.MissProbe`'s description of its late
+    :param late_starts: the :class:`~gateway.runtime.timing.MissProbe`'s description of its late
         starts.
     """
 

@@ -27,7 +27,7 @@ import callgrind
 from can.interfaces.virtual import VirtualBus
 from throughput_rig import PERIOD_S, PROTOCOLS, Bench
 
-from gateway.types import GatewayState
+from gateway.core.types import GatewayState
 
 if TYPE_CHECKING:
     import can

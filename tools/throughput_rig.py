@@ -14,19 +14,19 @@ from typing import TYPE_CHECKING
 import can
 import yaml
 
-from gateway.bus import drain, open_bus, send_frames
+from gateway.bus.can_bus import drain, open_bus, send_frames
 from gateway.config import parse_config
-from gateway.control import Source
-from gateway.loop import Gateway
-from gateway.types import GatewayState, Twist
+from gateway.core.control import Source
+from gateway.core.types import GatewayState, Twist
+from gateway.runtime.loop import Gateway
 
 if TYPE_CHECKING:
     import cProfile
     from collections.abc import Callable
 
-    from gateway.config import GatewayConfig
-    from gateway.sim import DeviceSimulator
-    from gateway.types import Frame
+    from gateway.core.settings import GatewayConfig
+    from gateway.core.types import Frame
+    from gateway.sim.device import DeviceSimulator
 
 ROOT = Path(__file__).resolve().parent.parent
 PERIOD_S = 0.001

@@ -1,6 +1,6 @@
 """Pure frame builders and parsers for CANopen (CiA 301) with the CiA 402 drive objects.
 
-No I/O, no clock: every function maps values to a :class:`~gateway.types.Frame` or back.  The
+No I/O, no clock: every function maps values to a :class:`~gateway.core.types.Frame` or back.  The
 PDO layout the gateway writes into each drive is data (:data:`RPDO_MAP` for a drive motor,
 :data:`RPDO_POSITION_MAP` for a steering actuator, :data:`TPDO_POSITION_MAP`,
 :data:`TPDO_VELOCITY_MAP`) and the packed form is one precompiled ``struct.Struct("<Hi")``
@@ -32,9 +32,9 @@ from drivers.cia402.enums import (
     tpdo_cob_id,
 )
 from drivers.cia402.sdo import SdoResponse, parse_sdo_response
-from gateway.codec import MotorCodec
-from gateway.errors import DecodeError, EncodeError
-from gateway.types import Frame
+from gateway.core.errors import DecodeError, EncodeError
+from gateway.core.types import Frame
+from gateway.drive.codec import MotorCodec
 
 if TYPE_CHECKING:
     from collections.abc import Mapping

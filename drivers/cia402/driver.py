@@ -59,17 +59,17 @@ from drivers.cia402.sequence import NodeSequencer, Phase
 from drivers.cia402.sim import Cia402Simulator
 from drivers.cia402.steps import configuration_steps
 from drivers.cia402.targets import raw_targets, target_counts, wrap_delta
-from gateway.driver import MotorDriver, OptionSpec
-from gateway.errors import DecodeError
-from gateway.filters import CanFilter
-from gateway.protection import ProtectionState, WatchdogPolicy
-from gateway.types import DriveFault, DriveState, WheelFeedback
+from gateway.core.errors import DecodeError
+from gateway.core.protection import ProtectionState, WatchdogPolicy
+from gateway.core.types import DriveFault, DriveState, WheelFeedback
+from gateway.drive.driver import MotorDriver, OptionSpec
+from gateway.drive.filters import CanFilter
 
 if TYPE_CHECKING:
     from collections.abc import Mapping, Sequence
 
-    from gateway.protection import Protection
-    from gateway.types import Frame, MotorConfig
+    from gateway.core.protection import Protection
+    from gateway.core.types import Frame, MotorConfig
 
 __all__ = ["Cia402Driver", "wrap_delta"]
 
@@ -307,7 +307,7 @@ class Cia402Driver(MotorDriver):
     # ----------------------------------------------------------------- protection
 
     def protection(self, index: int) -> Protection:
-        """:attr:`~gateway.protection.Guard.CONFIGURED`: the drive's heartbeat consumer and
+        """:attr:`~gateway.core.protection.Guard.CONFIGURED`: the drive's heartbeat consumer and
         abort connection option (:mod:`drivers.cia402.protection`)."""
         return describe(self._nodes[index].opts)
 

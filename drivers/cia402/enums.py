@@ -16,7 +16,7 @@ from __future__ import annotations
 import enum
 import struct
 
-from gateway.errors import EncodeError, IllegalTransitionError
+from gateway.core.errors import EncodeError, IllegalTransitionError
 
 #: COB-ID bit 31 of a PDO communication parameter: the PDO is not valid (switched off).
 PDO_COB_INVALID = 1 << 31

@@ -2,7 +2,7 @@
 
 EMCY codes follow CiA 301 (table "Emergency error codes") and CiA 402 (drive-specific codes such
 as 0x2310 continuous over-current); each maps onto the gateway's generic
-:class:`~gateway.types.DriveFault`.  SDO abort texts are the CiA 301 wording as used by
+:class:`~gateway.core.types.DriveFault`.  SDO abort texts are the CiA 301 wording as used by
 ``canopen.sdo.exceptions.SdoAbortedError.CODES`` (https://github.com/canopen-python/canopen),
 which the tests check.
 """
@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import enum
 
-from gateway.types import DriveFault
+from gateway.core.types import DriveFault
 
 
 class SdoAbortCode(enum.IntEnum):

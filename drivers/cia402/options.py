@@ -30,11 +30,11 @@ from typing import TYPE_CHECKING
 
 from drivers.cia402.codec import PdoLayout
 from drivers.cia402.enums import OperationMode
-from gateway.driver import MotorDriver, OptionSpec
-from gateway.errors import ConfigError
+from gateway.core.errors import ConfigError
+from gateway.drive.driver import MotorDriver, OptionSpec
 
 if TYPE_CHECKING:
-    from gateway.types import MotorConfig
+    from gateway.core.types import MotorConfig
 
 #: 2^31: the position objects (0x6064, 0x607A) are int32.
 _INT32_LIMIT = float(1 << 31)

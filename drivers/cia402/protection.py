@@ -30,7 +30,7 @@ integrator, and a consumer time of 1.5 to 3 producer periods is the usual choice
 
 The heartbeat's COB-ID is declared the way every frame the gateway sends is: a fresh driver's
 :meth:`~drivers.cia402.driver.Cia402Driver.poll` returns it, so
-:func:`gateway.filters.own_id_collisions` checks it against ``gateway.can_ids``; a drive with
+:func:`gateway.drive.filters.own_id_collisions` checks it against ``gateway.can_ids``; a drive with
 the same node ID (whose own heartbeat has that COB-ID) is refused here.
 """
 
@@ -41,14 +41,14 @@ from typing import TYPE_CHECKING
 
 from drivers.cia402.codec import make_heartbeat
 from drivers.cia402.enums import NmtState
-from gateway.errors import ConfigError
-from gateway.protection import Guard, Protection
+from gateway.core.errors import ConfigError
+from gateway.core.protection import Guard, Protection
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
 
     from drivers.cia402.options import NodeOptions
-    from gateway.types import Frame, MotorConfig
+    from gateway.core.types import Frame, MotorConfig
 
 #: What the drive does when the heartbeat stops, per abort connection option code (0x6007).
 ACTIONS: dict[int, str] = {

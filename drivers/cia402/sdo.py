@@ -25,8 +25,8 @@ from drivers.cia402.enums import (
     ServerCommand,
     check_node_id,
 )
-from gateway.errors import DecodeError
-from gateway.types import Frame
+from gateway.core.errors import DecodeError
+from gateway.core.types import Frame
 
 _SDO_HEADER = struct.Struct("<BHB")
 _SDO_U32 = struct.Struct("<BHBI")

@@ -45,15 +45,15 @@ from drivers.cia402.enums import (
 from drivers.cia402.faults import sdo_abort_text
 from drivers.cia402.sdo import make_sdo_download, make_sdo_upload
 from drivers.cia402.steps import NmtStep, SdoExpectStep, SdoVerifyStep, SdoWriteStep
-from gateway.errors import DecodeError
-from gateway.protection import ProtectionState
-from gateway.types import DriveFault
+from gateway.core.errors import DecodeError
+from gateway.core.protection import ProtectionState
+from gateway.core.types import DriveFault
 
 if TYPE_CHECKING:
     from drivers.cia402.codec import Cia402Codec
     from drivers.cia402.sdo import SdoResponse
     from drivers.cia402.steps import Step
-    from gateway.types import Frame
+    from gateway.core.types import Frame
 
 log = logging.getLogger(__name__)
 

@@ -9,7 +9,8 @@ Quantisation follows a real drive: position actual value (0x6064) is an int32 co
 modulo 2^32 (``initial_position`` lets a test start near the wrap), velocities are int32
 device units.  The motor follows 0x60FF only in OPERATION ENABLED with mode 3 displayed and
 halt clear.  In cyclic synchronous position mode (8, a steering actuator) it follows 0x607A
-instead, under the same conditions, with the position loop of :class:`~gateway.sim.MotorModel`
+instead, under the same conditions, with the position loop of
+:class:`~gateway.sim.device.MotorModel`
 (speed limited to ``max_rpm``): the int32 target is taken modulo 2^32 relative to the current
 position, as a drive compares target and actual position.  Statusword bit 12 is "speed 0" in
 mode 3 and "follows the target" in mode 8.  For a steering actuator the position frame of
@@ -67,15 +68,15 @@ from drivers.cia402.sim_control import (
 )
 from drivers.cia402.sim_device import POWERED, DriveControl
 from drivers.cia402.sim_od import SimObjectDictionary
-from gateway.errors import DecodeError
-from gateway.sim import DeviceSimulator
-from gateway.types import Frame
+from gateway.core.errors import DecodeError
+from gateway.core.types import Frame
+from gateway.sim.device import DeviceSimulator
 
 if TYPE_CHECKING:
     from collections.abc import Iterable
 
-    from gateway.sim import MotorModel
-    from gateway.types import MotorConfig
+    from gateway.core.types import MotorConfig
+    from gateway.sim.device import MotorModel
 
 log = logging.getLogger(__name__)
 

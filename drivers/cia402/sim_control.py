@@ -38,7 +38,7 @@ from typing import TYPE_CHECKING
 from drivers.cia402.enums import CobBase, NmtState, State
 
 if TYPE_CHECKING:
-    from gateway.types import Frame
+    from gateway.core.types import Frame
 
 #: The quick stop option codes (0x605A) after which the drive stays in QUICK STOP ACTIVE.
 STAY_IN_QUICK_STOP = range(5, 9)

@@ -20,14 +20,14 @@ from drivers.cia402.sim_control import (
     quick_stop_deceleration,
 )
 from drivers.cia402.sim_od import FACTORY_QUICK_STOP_OPTION
-from gateway.sim import SimFault
+from gateway.sim.device import SimFault
 
 if TYPE_CHECKING:
     from drivers.cia402.options import NodeOptions
     from drivers.cia402.sim_control import HeartbeatConsumer, Timing
     from drivers.cia402.sim_od import SimObjectDictionary
-    from gateway.sim import MotorModel
-    from gateway.types import Frame
+    from gateway.core.types import Frame
+    from gateway.sim.device import MotorModel
 
 log = logging.getLogger(__name__)
 

@@ -34,13 +34,13 @@ import math
 from typing import TYPE_CHECKING
 
 from drivers.cia402.codec import INT32_RANGE, position_to_raw, velocity_to_raw
-from gateway.errors import EncodeError
+from gateway.core.errors import EncodeError
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
 
     from drivers.cia402.options import NodeOptions
-    from gateway.types import MotorConfig
+    from gateway.core.types import MotorConfig
 
 _INT32_SPAN = 1 << 32
 

@@ -3,7 +3,7 @@
 :func:`bind_motor` loads the DBC (through a :class:`DatabaseCache`, so motors that share a
 file parse it once), looks up every configured message and signal, computes the frame IDs on
 the wire from the node ID, and the range each signal can carry.  Names that do not exist raise
-:class:`~gateway.errors.ConfigError` listing the names that do.  The result is a frozen
+:class:`~gateway.core.errors.ConfigError` listing the names that do.  The result is a frozen
 :class:`MotorBinding`, the only input the pure codec needs.
 """
 
@@ -17,12 +17,12 @@ from typing import TYPE_CHECKING, Any
 import cantools
 
 from drivers.dbc.options import UnitConversion
-from gateway.errors import ConfigError
-from gateway.types import MAX_EXTENDED_ID, MAX_STANDARD_ID
+from gateway.core.errors import ConfigError
+from gateway.core.types import MAX_EXTENDED_ID, MAX_STANDARD_ID
 
 if TYPE_CHECKING:
     from drivers.dbc.options import DbcOptions
-    from gateway.types import MotorConfig
+    from gateway.core.types import MotorConfig
 
 log = logging.getLogger(__name__)
 

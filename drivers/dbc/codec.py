@@ -30,9 +30,9 @@ from typing import TYPE_CHECKING, Any
 
 import cantools
 
-from gateway.codec import MotorCodec
-from gateway.errors import ConfigError, DecodeError, EncodeError
-from gateway.types import DriveFault, Frame
+from gateway.core.errors import ConfigError, DecodeError, EncodeError
+from gateway.core.types import DriveFault, Frame
+from gateway.drive.codec import MotorCodec
 
 if TYPE_CHECKING:
     from collections.abc import Iterable, Mapping, Sequence
@@ -373,7 +373,7 @@ def describe_fault(signal: Any, raw: int) -> tuple[DriveFault, str]:
 
     A code listed in the signal's value table (``VAL_``) is named by it; otherwise the code is
     split into the single-bit entries of the table (a bit field), with any bits left over shown
-    in hex.  A name equal to a :class:`~gateway.types.DriveFault` member (``OVER_CURRENT``,
+    in hex.  A name equal to a :class:`~gateway.core.types.DriveFault` member (``OVER_CURRENT``,
     ``ENCODER``, ...) maps onto it; every other name maps onto ``DriveFault.OTHER``.
 
     :param signal: the cantools fault signal.

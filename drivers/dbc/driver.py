@@ -62,8 +62,8 @@ sample is taken as it is, and counter wrap-around is undone from there on.
 **When wheelgate dies** only the controller's own command timeout stops the motor, and a DBC
 file does not say which parameter sets it, so wheelgate cannot set or read it: the motor block
 states what was set with the vendor's tool, ``controller_timeout_s: 0.2``
-(:attr:`~gateway.protection.Guard.STATED`); without it ``wheelgate check`` and the start-up log
-warn (:attr:`~gateway.protection.Guard.UNSTATED`).  The simulator stops its motor that long
+(:attr:`~gateway.core.protection.Guard.STATED`); without it ``wheelgate check`` and the start-up log
+warn (:attr:`~gateway.core.protection.Guard.UNSTATED`).  The simulator stops its motor that long
 after the last command frame, and holds the last command for ever when none is stated.
 """
 
@@ -77,10 +77,10 @@ from drivers.dbc.binding import DatabaseCache, bind_motor
 from drivers.dbc.codec import DbcCodec, describe_fault
 from drivers.dbc.options import OPTIONS, UnitConversion, motor_where, parse_options
 from drivers.dbc.sim import DbcSimulator
-from gateway.driver import MotorDriver
-from gateway.errors import DecodeError, EncodeError
-from gateway.filters import CanFilter
-from gateway.types import WheelFeedback
+from gateway.core.errors import DecodeError, EncodeError
+from gateway.core.types import WheelFeedback
+from gateway.drive.driver import MotorDriver
+from gateway.drive.filters import CanFilter
 
 if TYPE_CHECKING:
     from collections.abc import Mapping, Sequence
@@ -88,8 +88,8 @@ if TYPE_CHECKING:
     from drivers.dbc.binding import MotorBinding
     from drivers.dbc.codec import DbcReading
     from drivers.dbc.options import DbcOptions
-    from gateway.options import OptionSpec
-    from gateway.types import Frame, MotorConfig
+    from gateway.core.options import OptionSpec
+    from gateway.core.types import Frame, MotorConfig
 
 log = logging.getLogger(__name__)
 

@@ -1,6 +1,6 @@
 """Protocol keys of a ``driver: dbc`` motor block and the unit conversions they imply.
 
-Every key is described once in :data:`OPTIONS` (an :class:`~gateway.driver.OptionSpec` each);
+Every key is described once in :data:`OPTIONS` (an :class:`~gateway.drive.driver.OptionSpec` each);
 :func:`parse_options` turns a validated mapping into the frozen :class:`DbcOptions` and checks
 the rules that involve several keys.  :class:`UnitConversion` derives, from the options and the
 motor block (gear ratio, inversion), the factors between wheel rad/s and the signal values.
@@ -24,13 +24,13 @@ from dataclasses import dataclass
 from types import MappingProxyType
 from typing import TYPE_CHECKING
 
-from gateway.driver import CONTROLLER_TIMEOUT_OPTION
-from gateway.errors import ConfigError
-from gateway.options import OptionSpec, validate_block
-from gateway.types import MotorRole
+from gateway.core.errors import ConfigError
+from gateway.core.options import OptionSpec, validate_block
+from gateway.core.types import MotorRole
+from gateway.drive.driver import CONTROLLER_TIMEOUT_OPTION
 
 if TYPE_CHECKING:
-    from gateway.types import MotorConfig
+    from gateway.core.types import MotorConfig
 
 log = logging.getLogger(__name__)
 
@@ -176,7 +176,7 @@ def parse_options(
 ) -> DbcOptions:
     """Validate a motor block's protocol keys and check the rules between keys.
 
-    Values that :meth:`~gateway.driver.MotorDriver.validate_options` already normalised pass
+    Values that :meth:`~gateway.drive.driver.MotorDriver.validate_options` already normalised pass
     through unchanged, so this may be applied twice (at config load and driver construction).
     Keys ``position_message`` and ``fault_message`` default to ``feedback_message``, and
     ``feedback_side`` to ``command_side``.
@@ -303,7 +303,7 @@ class UnitConversion:
     A command signal value is ``wheel_rad_s * gear * sign * command_per_rad_s`` (motor side)
     or ``wheel_rad_s * sign * command_per_rad_s`` (wheel side); feedback goes the other way
     with its own side.  The simulator uses the inverse functions from the motor shaft
-    (:class:`gateway.sim.MotorModel` rad and rad/s, already inverted).
+    (:class:`gateway.sim.device.MotorModel` rad and rad/s, already inverted).
 
     :param command_per_rad_s: command signal value per rad/s on the command side.
     :param velocity_per_rad_s: velocity signal value per rad/s on the feedback side.

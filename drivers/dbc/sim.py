@@ -1,7 +1,7 @@
 """A generic device simulator for any controller described by a DBC file.
 
 It reads the same motor block as :class:`drivers.dbc.DbcDriver`, decodes the command (and
-arming) message with the same DBC, drives a :class:`~gateway.sim.MotorModel` and emits the
+arming) message with the same DBC, drives a :class:`~gateway.sim.device.MotorModel` and emits the
 feedback message(s) periodically.  Like a real encoder, the position is quantised to the
 signal's scale (or to float32 for float signals) and wraps: modulo ``2**position_wrap_bits``,
 else modulo the signal's bit width.  ``initial_raw`` starts the counter anywhere, e.g. next to
@@ -37,12 +37,12 @@ from typing import TYPE_CHECKING
 from drivers.dbc.binding import DatabaseCache, bind_motor
 from drivers.dbc.codec import DbcCodec, DbcReading, Role
 from drivers.dbc.options import UnitConversion, motor_where, parse_options
-from gateway.errors import DecodeError
-from gateway.sim import DeviceSimulator, SimFault
+from gateway.core.errors import DecodeError
+from gateway.sim.device import DeviceSimulator, SimFault
 
 if TYPE_CHECKING:
-    from gateway.sim import MotorModel
-    from gateway.types import Frame, MotorConfig
+    from gateway.core.types import Frame, MotorConfig
+    from gateway.sim.device import MotorModel
 
 log = logging.getLogger(__name__)
 

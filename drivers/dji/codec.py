@@ -25,9 +25,9 @@ import struct
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from gateway.codec import MotorCodec
-from gateway.errors import DecodeError, EncodeError
-from gateway.types import Frame
+from gateway.core.errors import DecodeError, EncodeError
+from gateway.core.types import Frame
+from gateway.drive.codec import MotorCodec
 
 if TYPE_CHECKING:
     from collections.abc import Mapping

@@ -77,17 +77,17 @@ from drivers.dji.position import STEERING_OPTIONS, PositionLoop, power_up_positi
 from drivers.dji.protection import ACK_KEY, ACK_OPTION, ACTION, check_acknowledged
 from drivers.dji.protection import protection as dji_protection
 from drivers.dji.sim import DjiSimulator
-from gateway.driver import MotorDriver, OptionSpec
-from gateway.errors import ConfigError, DecodeError, EncodeError
-from gateway.filters import CanFilter
-from gateway.types import DriveFault, DriveState, WheelFeedback
+from gateway.core.errors import ConfigError, DecodeError, EncodeError
+from gateway.core.types import DriveFault, DriveState, WheelFeedback
+from gateway.drive.driver import MotorDriver, OptionSpec
+from gateway.drive.filters import CanFilter
 
 if TYPE_CHECKING:
     from collections.abc import Mapping, Sequence
 
     from drivers.dji.codec import EscModel
-    from gateway.protection import Protection
-    from gateway.types import Frame, MotorConfig
+    from gateway.core.protection import Protection
+    from gateway.core.types import Frame, MotorConfig
 
 log = logging.getLogger(__name__)
 
@@ -338,7 +338,7 @@ class DjiDriver(MotorDriver):
         return DjiSimulator(motor)
 
     def protection(self, index: int) -> Protection:
-        """:attr:`~gateway.protection.Guard.NONE`: the ESC has no known command timeout and is
+        """:attr:`~gateway.core.protection.Guard.NONE`: the ESC has no known command timeout and is
         assumed to hold its last current (:mod:`drivers.dji.protection`)."""
         return dji_protection(self.motors[index])
 

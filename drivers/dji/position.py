@@ -32,8 +32,8 @@ from types import MappingProxyType
 from typing import TYPE_CHECKING
 
 from drivers.dji.codec import COUNTS_PER_REV
-from gateway.errors import ConfigError
-from gateway.options import OptionSpec
+from gateway.core.errors import ConfigError
+from gateway.core.options import OptionSpec
 
 if TYPE_CHECKING:
     from collections.abc import Mapping

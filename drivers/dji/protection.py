@@ -26,14 +26,14 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from gateway.errors import ConfigError
-from gateway.options import OptionSpec
-from gateway.protection import Guard, Protection
+from gateway.core.errors import ConfigError
+from gateway.core.options import OptionSpec
+from gateway.core.protection import Guard, Protection
 
 if TYPE_CHECKING:
     from collections.abc import Mapping
 
-    from gateway.types import MotorConfig
+    from gateway.core.types import MotorConfig
 
 __all__ = ["ACK_KEY", "ACK_OPTION", "ACK_VALUE", "check_acknowledged", "protection"]
 

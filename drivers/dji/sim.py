@@ -47,11 +47,11 @@ from drivers.dji.codec import (
     decode_command,
     encode_feedback,
 )
-from gateway.errors import ConfigError, DecodeError
-from gateway.sim import DeviceSimulator, MotorModel, SimFault
+from gateway.core.errors import ConfigError, DecodeError
+from gateway.sim.device import DeviceSimulator, MotorModel, SimFault
 
 if TYPE_CHECKING:
-    from gateway.types import Frame, MotorConfig
+    from gateway.core.types import Frame, MotorConfig
 
 log = logging.getLogger(__name__)
 

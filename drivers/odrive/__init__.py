@@ -6,7 +6,7 @@ Reference: the `ODrive CAN protocol
 (docs.odriverobotics.com, can-protocol).
 
 * :mod:`drivers.odrive.enums`: command IDs, axis states, modes, error flags and their mapping
-  onto :class:`gateway.types.DriveFault`.
+  onto :class:`gateway.core.types.DriveFault`.
 * :mod:`drivers.odrive.messages`: every message's layout, the decoded messages and the
   axis-state transition table, as data.
 * :mod:`drivers.odrive.codec`: the pure :class:`OdriveCodec`.

@@ -63,9 +63,9 @@ from drivers.odrive.messages import (
     SetInputVel,
     Step,
 )
-from gateway.codec import MotorCodec
-from gateway.errors import ConfigError, DecodeError, EncodeError, IllegalTransitionError
-from gateway.types import Frame
+from gateway.core.errors import ConfigError, DecodeError, EncodeError, IllegalTransitionError
+from gateway.core.types import Frame
+from gateway.drive.codec import MotorCodec
 
 if TYPE_CHECKING:
     from collections.abc import Mapping

@@ -72,17 +72,17 @@ from drivers.odrive.watchdog import (
     parse_sdo,
     parse_version,
 )
-from gateway.driver import MotorDriver, OptionSpec
-from gateway.errors import ConfigError, DecodeError, EncodeError, IllegalTransitionError
-from gateway.filters import EXT_MASK, STD_MASK, CanFilter
-from gateway.protection import Guard, Protection, ProtectionState, WatchdogPolicy
-from gateway.types import DriveFault, DriveState, WheelFeedback
+from gateway.core.errors import ConfigError, DecodeError, EncodeError, IllegalTransitionError
+from gateway.core.protection import Guard, Protection, ProtectionState, WatchdogPolicy
+from gateway.core.types import DriveFault, DriveState, WheelFeedback
+from gateway.drive.driver import MotorDriver, OptionSpec
+from gateway.drive.filters import EXT_MASK, STD_MASK, CanFilter
 
 if TYPE_CHECKING:
     from collections.abc import Mapping, Sequence
 
-    from gateway.sim import DeviceSimulator
-    from gateway.types import Frame, MotorConfig
+    from gateway.core.types import Frame, MotorConfig
+    from gateway.sim.device import DeviceSimulator
 
 log = logging.getLogger(__name__)
 

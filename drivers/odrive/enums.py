@@ -20,7 +20,7 @@ import enum
 from types import MappingProxyType
 from typing import TYPE_CHECKING
 
-from gateway.types import DriveFault
+from gateway.core.types import DriveFault
 
 if TYPE_CHECKING:
     from collections.abc import Mapping
@@ -261,7 +261,7 @@ _FAULT_MASKS: Mapping[Firmware, tuple[tuple[int, DriveFault], ...]] = MappingPro
 
 
 def error_faults(firmware: Firmware, bits: int) -> DriveFault:
-    """Map an axis error word onto :class:`~gateway.types.DriveFault` flags.
+    """Map an axis error word onto :class:`~gateway.core.types.DriveFault` flags.
 
     Bits the table does not know (a newer firmware) map to ``DriveFault.OTHER``.
 

@@ -18,7 +18,7 @@ from drivers.odrive.enums import (
     flag_names,
 )
 from drivers.odrive.messages import ErrorStatus
-from gateway.types import DriveFault
+from gateway.core.types import DriveFault
 
 if TYPE_CHECKING:
     from drivers.odrive.messages import Heartbeat, MotorErrorStatus

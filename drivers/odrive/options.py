@@ -1,6 +1,6 @@
 """Protocol keys of a ``driver: odrive`` motor block, described once, and the bus they imply.
 
-Every key is an :class:`~gateway.driver.OptionSpec` in :data:`OPTIONS`;
+Every key is an :class:`~gateway.drive.driver.OptionSpec` in :data:`OPTIONS`;
 :func:`bus_settings` checks that the motors of one bus agree on the keys that hold for the
 whole bus (firmware family and ID mode).
 """
@@ -11,13 +11,13 @@ from typing import TYPE_CHECKING
 
 from drivers.odrive.enums import Firmware, InputMode
 from drivers.odrive.messages import DEFAULT_EXTENDED_ID, DEFAULT_FIRMWARE
-from gateway.driver import MotorDriver, OptionSpec
-from gateway.errors import ConfigError
+from gateway.core.errors import ConfigError
+from gateway.drive.driver import MotorDriver, OptionSpec
 
 if TYPE_CHECKING:
     from collections.abc import Mapping, Sequence
 
-    from gateway.types import MotorConfig
+    from gateway.core.types import MotorConfig
 
 #: Every protocol key of a ``driver: odrive`` motor block.
 OPTIONS: dict[str, OptionSpec] = {

@@ -75,14 +75,14 @@ from drivers.odrive.watchdog import (
     parse_sdo,
     version_reply,
 )
-from gateway.errors import DecodeError
-from gateway.sim import DeviceSimulator, SimFault
-from gateway.types import Frame
+from gateway.core.errors import DecodeError
+from gateway.core.types import Frame
+from gateway.sim.device import DeviceSimulator, SimFault
 
 if TYPE_CHECKING:
     from drivers.odrive.watchdog import WatchdogEndpoints
-    from gateway.sim import MotorModel
-    from gateway.types import MotorConfig
+    from gateway.core.types import MotorConfig
+    from gateway.sim.device import MotorModel
 
 log = logging.getLogger(__name__)
 

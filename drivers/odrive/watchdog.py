@@ -35,8 +35,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from gateway.errors import ConfigError
-from gateway.types import Frame
+from gateway.core.errors import ConfigError
+from gateway.core.types import Frame
 
 if TYPE_CHECKING:
     from collections.abc import Mapping

@@ -27,9 +27,9 @@ import struct
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, TypeAlias
 
-from gateway.codec import MotorCodec
-from gateway.errors import DecodeError, EncodeError
-from gateway.types import Frame
+from gateway.core.errors import DecodeError, EncodeError
+from gateway.core.types import Frame
+from gateway.drive.codec import MotorCodec
 
 if TYPE_CHECKING:
     from collections.abc import Mapping
@@ -304,7 +304,7 @@ def decode(frame: Frame) -> VescMessage | None:
 
 
 class VescCodec(MotorCodec[VescMessage]):
-    """The :class:`~gateway.codec.MotorCodec` of VESC: SET_RPM out, status frames in."""
+    """The :class:`~gateway.drive.codec.MotorCodec` of VESC: SET_RPM out, status frames in."""
 
     def encode_command(self, commands: Mapping[int, float]) -> tuple[Frame, ...]:
         """One SET_RPM frame per controller, in the mapping's order.

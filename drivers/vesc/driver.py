@@ -83,18 +83,18 @@ from drivers.vesc.settings import (
     missing_status,
 )
 from drivers.vesc.sim import VescSimulator
-from gateway.driver import MotorDriver
-from gateway.errors import DecodeError, EncodeError
-from gateway.filters import CanFilter
-from gateway.protection import Guard, Protection
-from gateway.types import DriveState, WheelFeedback
+from gateway.core.errors import DecodeError, EncodeError
+from gateway.core.protection import Guard, Protection
+from gateway.core.types import DriveState, WheelFeedback
+from gateway.drive.driver import MotorDriver
+from gateway.drive.filters import CanFilter
 
 if TYPE_CHECKING:
     from collections.abc import Mapping, Sequence
 
-    from gateway.options import OptionSpec
-    from gateway.sim import DeviceSimulator
-    from gateway.types import Frame, MotorConfig
+    from gateway.core.options import OptionSpec
+    from gateway.core.types import Frame, MotorConfig
+    from gateway.sim.device import DeviceSimulator
 
 log = logging.getLogger(__name__)
 

@@ -32,8 +32,8 @@ from types import MappingProxyType
 from typing import TYPE_CHECKING, cast
 
 from drivers.vesc.min_erpm import FACTORY_MIN_ERPM
-from gateway.driver import CONTROLLER_TIMEOUT_OPTION, OptionSpec
-from gateway.errors import ConfigError
+from gateway.core.errors import ConfigError
+from gateway.drive.driver import CONTROLLER_TIMEOUT_OPTION, OptionSpec
 
 if TYPE_CHECKING:
     from collections.abc import Mapping

@@ -31,7 +31,8 @@ override them):
 * Status fields are truncated toward zero, as the firmware's casts are (:func:`make_status`).
 * PING is answered with a PONG carrying the ID the PING was addressed to (the firmware's
   choice, so a broadcast PING gets 255), HW_TYPE_VESC.
-* An injected :attr:`~gateway.sim.SimFault.FAULT` releases the motor; commands are ignored for
+* An injected :attr:`~gateway.sim.device.SimFault.FAULT` releases the motor; commands are ignored
+  for
   ``fault_stop_s`` (``m_fault_stop_time_ms``, 500 ms by default) and then the fault clears
   itself.  The motor stays released until the next command.  Status frames and PONGs go on
   meanwhile and carry no fault code, as on the device.
@@ -68,12 +69,12 @@ from drivers.vesc.settings import (
     STATUS_1,
     STATUS_5,
 )
-from gateway.errors import ConfigError, DecodeError
-from gateway.sim import DeviceSimulator, SimFault
+from gateway.core.errors import ConfigError, DecodeError
+from gateway.sim.device import DeviceSimulator, SimFault
 
 if TYPE_CHECKING:
-    from gateway.sim import MotorModel
-    from gateway.types import Frame, MotorConfig
+    from gateway.core.types import Frame, MotorConfig
+    from gateway.sim.device import MotorModel
 
 log = logging.getLogger(__name__)
 

@@ -1,0 +1,350 @@
+"""Replaying a candump log through the drivers and the odometry, as the gateway would have.
+
+:class:`Replay` is the core of ``wheelgate odom``: every :class:`~gateway.wire.candump.LogEntry`
+goes, stamped with its recorded time, to a :class:`~gateway.drive.driveset.DriveSet` built from the
+configuration (drivers ignore frames that are not theirs, so a gateway ``--record`` log with
+both directions is fed whole), and the odometry integrates every wheel's latest position the
+way :meth:`gateway.runtime.loop.Gateway._integrate` does: at the newest feedback time stamp, with
+``None`` for wheels without feedback.  It reads no clock and touches no file or bus.
+
+When the odometry is updated
+    At the end of a group of entries that share one time stamp (the gateway stamps all frames
+    of a cycle alike, so a ``--record`` log replays at the gateway's cadence), once every
+    driven wheel has a new sample since the last update (``candump`` stamps each frame on its
+    own: updating after each would mix new and old positions of different wheels and turn
+    their stagger into zig-zag and false distance), and at most once per ``min_interval_s`` of
+    log time (by default the configured control period, as the gateway).  A wheel that falls
+    silent delays an update by at most ``max_interval_s``.  Positions are absolute, so fewer
+    updates lose no motion: the SE(2) step is exact while the twist is constant, and a twist
+    that changes within an interval costs a second-order error (``tools/bench_replay.py``
+    measures it).  Whatever is pending is integrated at the end of the log.
+
+Steering angles come from the steering actuators' feedback in the log when every steered
+wheel has one.  Otherwise the wheels were steered outside the gateway and the log holds no
+angles: robots with steered wheels take them from the source that
+:mod:`gateway.core.steer_log` describes (:class:`SteeringSource`): the twist of the wheels
+that are not steered, the gateway's own ``WG_Odom_Velocity`` frames, or the neutral angles.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+from gateway.core.errors import DecodeError, KinematicsError
+from gateway.core.kinematics import Odometry
+from gateway.core.steer_log import SteeringSource, fixed_subset, reconstruct_steer
+from gateway.drive.driveset import DriveSet
+from gateway.wire.can import WgCodec
+from gateway.wire.candump import read_lines
+
+if TYPE_CHECKING:
+    from collections.abc import Iterable, Iterator, Sequence
+
+    from gateway.core.kinematics import OdometryState, Pose
+    from gateway.core.settings import GatewayConfig
+    from gateway.core.types import Frame, Twist, WheelFeedback
+    from gateway.wire.candump import CandumpError, LogEntry
+
+__all__ = [
+    "DEFAULT_MAX_INTERVAL_S",
+    "Replay",
+    "ReplaySummary",
+    "Sample",
+    "SteeringSource",
+    "fixed_subset",
+    "reconstruct_steer",
+]
+
+log = logging.getLogger(__name__)
+
+#: Default log time after which a pending update waits no longer for every wheel, s.
+DEFAULT_MAX_INTERVAL_S = 0.1
+#: Slack for float rounding of time stamps (microseconds in the log; float64 epoch times
+#: resolve 0.24 us), s.
+_STAMP_SLACK_S = 1e-6
+
+
+@dataclass(frozen=True, slots=True)
+class Sample:
+    """The odometry after one update.
+
+    :param time_s: log time of the newest feedback, s.
+    :param pose: integrated pose.
+    :param twist: body twist over the last interval.
+    :param slip_m_s: RMS residual of the forward kinematics over the last interval, m/s.
+    :param distance_m: path length so far, m.
+    :param wheel_rad_s: every wheel's latest reported speed (model order), rad/s, ``None``
+        for wheels without feedback.
+    :param steer_rad: the steering angles used (``None`` for wheels not steered).
+    """
+
+    time_s: float
+    pose: Pose
+    twist: Twist
+    slip_m_s: float
+    distance_m: float
+    wheel_rad_s: tuple[float | None, ...]
+    steer_rad: tuple[float | None, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class ReplaySummary:
+    """What a replay read and where it ended.
+
+    :param pose: final pose.
+    :param distance_m: path length, m.
+    :param entries: log entries read.
+    :param received: entries marked received (``R`` or no direction).
+    :param motor_frames: entries one of the drivers claimed (its motors' frames, in either
+        direction: a ``--record`` log holds the commands too).
+    :param updates: odometry updates.
+    :param corrupt_lines: lines that could not be read (skipped).
+    :param start_s: time stamp of the first entry, s (``None`` for an empty log).
+    :param end_s: time stamp of the last entry, s.
+    :param steering: where the steering angles came from.
+    :param skipped_updates: intervals the forward kinematics could not solve (too few wheels
+        with feedback); their motion is lost.
+    :param silent_wheels: driven wheels with no feedback in the log (the odometry starts once
+        every driven wheel has reported, so one silent wheel leaves it at the origin), and
+        steering actuators with none (their wheels are then replayed at the neutral angle).
+    """
+
+    pose: Pose
+    distance_m: float
+    entries: int
+    received: int
+    motor_frames: int
+    updates: int
+    corrupt_lines: int
+    start_s: float | None
+    end_s: float | None
+    steering: SteeringSource
+    skipped_updates: int = 0
+    silent_wheels: tuple[str, ...] = ()
+
+    @property
+    def duration_s(self) -> float:
+        """Log time covered, s."""
+        if self.start_s is None or self.end_s is None:
+            return 0.0
+        return self.end_s - self.start_s
+
+
+
+class Replay:
+    """Feeds log entries to the drivers and integrates the odometry.
+
+    :param config: the robot (its motors decide which frames are feedback).
+    :param min_interval_s: least log time between two odometry updates, s; by default the
+        control period of the configuration (``gateway.rate_hz``), the gateway's own cadence.
+    :param max_interval_s: log time after which the odometry is updated even though some
+        driven wheel has no new sample (a wheel that fell silent), s.
+    :raises DriverNotFoundError: if a driver cannot be loaded.
+    :raises ValueError: if an interval is negative or not finite.
+    """
+
+    def __init__(
+        self,
+        config: GatewayConfig,
+        min_interval_s: float | None = None,
+        max_interval_s: float = DEFAULT_MAX_INTERVAL_S,
+    ) -> None:
+        if min_interval_s is None:
+            min_interval_s = 1.0 / config.loop.rate_hz
+        for name, value in (("min_interval_s", min_interval_s),
+                            ("max_interval_s", max_interval_s)):
+            if not 0.0 <= value < math.inf:
+                raise ValueError(f"Expected {name} >= 0 s and finite, but got {value!r}")
+        self.config = config
+        self.model = config.model
+        self.drives = DriveSet(config)
+        self.min_interval_s = min_interval_s
+        self.max_interval_s = max_interval_s
+        #: Lines that could not be read, in order (filled by :meth:`feed_lines`).
+        self.errors: list[CandumpError] = []
+        covered = {name for a in config.steering for name in a.steers}
+        measured = bool(covered) and covered >= {w.name for w in self.model.wheels if w.steered}
+        self._subset = None if measured else fixed_subset(config)
+        if measured:
+            self.steering = SteeringSource.ACTUATORS
+        elif not any(w.steered for w in self.model.wheels):
+            self.steering = SteeringSource.NONE
+        elif self._subset is not None:
+            self.steering = SteeringSource.FIXED_WHEELS
+        else:
+            self.steering = SteeringSource.NEUTRAL
+        self.odometry = Odometry(self._subset[1] if self._subset else self.model)
+        self._steer: tuple[float | None, ...] = self.model.neutral_steer
+        # Angles from the gateway's own twist frames, when the log has them.
+        self._wg = (
+            WgCodec(config.loop.can_ids) if self.steering is SteeringSource.NEUTRAL else None
+        )
+        self._velocity_id = (config.loop.can_ids.odom_velocity, config.loop.can_ids.extended)
+        # Wheels whose feedback must be there before the first update (a later first sample
+        # would leave an interval with too few wheels to solve).
+        self._needed = tuple(i for i, m in enumerate(config.motors) if m is not None)
+        self._n_needed = len(self._needed)
+        self._last_feedback: list[WheelFeedback | None] = [None] * self.model.n
+        # Frames the drivers took since the last update: every driven wheel having a new
+        # sample needs at least one each, so fewer spares the look at every wheel.
+        self._taken = 0
+        groups = self.drives.groups
+        self._on_frame = groups[0][0].on_frame if len(groups) == 1 else self.drives.on_frame
+        self._pending = False
+        self._group_s: float | None = None
+        self._last_update_s = float("-inf")
+        self._odom_stamp = float("-inf")
+        self._start_s: float | None = None
+        self._entries = 0
+        self._received = 0
+        self._motor_frames = 0
+        self._updates = 0
+        self._skipped = 0
+
+    # ----------------------------------------------------------------- input
+
+    def feed_lines(self, lines: Iterable[str]) -> Iterator[Sample]:
+        """Every update from the lines of a candump log (unreadable lines are appended to
+        :attr:`errors` and skipped), the final one included."""
+        feed = self.feed
+        for entry in read_lines(lines, self.errors):
+            sample = feed(entry)
+            if sample is not None:
+                yield sample
+        last = self.finish()
+        if last is not None:
+            yield last
+
+    def feed(self, entry: LogEntry) -> Sample | None:
+        """Take one entry.
+
+        :return: the update that the start of a new time stamp group triggered, if any.
+        """
+        t = entry.timestamp_s
+        out = None
+        if t != self._group_s:
+            # Cheap tests first: every driven wheel needs a frame of its own to be new.
+            if self._pending and (
+                self._taken >= self._n_needed
+                or (self._group_s or 0.0) - self._last_update_s + _STAMP_SLACK_S
+                >= self.max_interval_s
+            ):
+                out = self._update(final=False)
+            self._group_s = t
+            if self._start_s is None:
+                self._start_s = t
+        self._entries += 1
+        if entry.is_rx:
+            self._received += 1
+        frame = entry.frame
+        if self._on_frame(frame):
+            self._motor_frames += 1
+            self._taken += 1
+            self._pending = True
+        elif (
+            self._wg is not None
+            and frame.arbitration_id == self._velocity_id[0]
+            and frame.is_extended_id == self._velocity_id[1]
+        ):
+            self._take_gateway_twist(self._wg, frame)
+        return out
+
+    def finish(self) -> Sample | None:
+        """Integrate whatever is still pending (at the end of the log)."""
+        return self._update(final=True) if self._pending else None
+
+    # ----------------------------------------------------------------- odometry
+
+    def _update(self, final: bool) -> Sample | None:
+        group = self._group_s if self._group_s is not None else 0.0
+        elapsed = group - self._last_update_s
+        if not final and elapsed + _STAMP_SLACK_S < self.min_interval_s:
+            return None
+        waiting = not final and elapsed + _STAMP_SLACK_S < self.max_interval_s
+        if waiting and self._taken < self._n_needed:
+            return None
+        feedback = self.drives.feedback_by_wheel()
+        last = self._last_feedback
+        if waiting and any(feedback[i] is last[i] for i in self._needed):
+            return None  # wait until every driven wheel has a new sample
+        if any(feedback[i] is None for i in self._needed):
+            return None  # not started: some driven wheel has not reported yet
+        self._pending = False
+        self._taken = 0
+        self._last_update_s = group
+        self._last_feedback = feedback
+        stamp = max(fb.timestamp_s for fb in feedback if fb is not None)
+        if stamp <= self._odom_stamp:
+            return None
+        self._odom_stamp = stamp
+        positions = [None if fb is None else fb.position_rad for fb in feedback]
+        try:
+            state = self._integrate(positions, stamp)
+        except KinematicsError as err:
+            self._skipped += 1
+            log.warning("odometry at %.6f s skipped: %s", stamp, err)
+            return None
+        self._updates += 1
+        return Sample(
+            stamp,
+            state.pose,
+            state.twist,
+            state.slip_m_s,
+            state.distance_m,
+            tuple(None if fb is None else fb.velocity_rad_s for fb in feedback),
+            self._steer,
+        )
+
+    def _integrate(self, positions: Sequence[float | None], stamp: float) -> OdometryState:
+        if self.steering is SteeringSource.ACTUATORS:
+            self._steer = self.drives.measured_steer(self._steer)
+        if self._subset is None:
+            return self.odometry.update(positions, stamp, self._steer)
+        state = self.odometry.update([positions[i] for i in self._subset[0]], stamp)
+        self._steer = self._steer_for(state.twist)
+        return state
+
+    def _steer_for(self, twist: Twist) -> tuple[float | None, ...]:
+        feedback = self.drives.feedback_by_wheel()
+        speeds = [None if fb is None else fb.velocity_rad_s for fb in feedback]
+        return reconstruct_steer(self.model, twist, self._steer, speeds)
+
+    def _take_gateway_twist(self, wg: WgCodec, frame: Frame) -> None:
+        try:
+            velocity = wg.decode_velocity(frame)
+        except DecodeError as err:
+            log.warning("unreadable WG_Odom_Velocity frame: %s", err)
+            return
+        if velocity is None:
+            return
+        self.steering = SteeringSource.GATEWAY_TWIST
+        if velocity.twist.is_finite():
+            self._steer = self._steer_for(velocity.twist)
+
+    # ----------------------------------------------------------------- result
+
+    def summary(self) -> ReplaySummary:
+        """What was read so far and where the odometry stands."""
+        st = self.odometry.state
+        feedback = self.drives.feedback_by_wheel()
+        return ReplaySummary(
+            pose=st.pose,
+            distance_m=st.distance_m,
+            entries=self._entries,
+            received=self._received,
+            motor_frames=self._motor_frames,
+            updates=self._updates,
+            corrupt_lines=len(self.errors),
+            start_s=self._start_s,
+            end_s=self._group_s,
+            steering=self.steering,
+            skipped_updates=self._skipped,
+            silent_wheels=(
+                *(self.model.names[i] for i in self._needed if feedback[i] is None),
+                *(a.wheel for a, fb in zip(self.config.steering, self.drives.steer_feedback(),
+                                           strict=True) if fb is None),
+            ),
+        )

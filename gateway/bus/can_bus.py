@@ -1,0 +1,152 @@
+"""The only module that touches ``can.Bus`` and ``can.Message``.
+
+It converts between python-can messages and wheelgate's frozen :class:`~gateway.core.types.Frame`,
+and wraps python-can errors into :class:`~gateway.core.errors.BusError`.
+"""
+
+from __future__ import annotations
+
+import inspect
+import logging
+import time
+from typing import TYPE_CHECKING, Any
+
+import can
+
+from gateway.core.errors import BusError
+from gateway.core.types import Frame
+
+if TYPE_CHECKING:
+    from collections.abc import Iterable
+
+log = logging.getLogger(__name__)
+
+
+#: ``can.Message``'s leading parameters, in order; positional arguments cost about half of
+#: keywords, and every frame of every cycle goes through :func:`to_message`.
+_MESSAGE_PARAMS = ("timestamp", "arbitration_id", "is_extended_id", "is_remote_frame",
+                   "is_error_frame", "channel", "dlc", "data")
+_POSITIONAL = tuple(inspect.signature(can.Message).parameters)[:8] == _MESSAGE_PARAMS
+
+
+def to_message(frame: Frame) -> can.Message:
+    """A python-can message for ``frame``."""
+    if _POSITIONAL:
+        return can.Message(0.0, frame.arbitration_id, frame.is_extended_id,
+                           frame.is_remote_frame, False, None, frame.dlc, frame.data)
+    return can.Message(  # pragma: no cover - a python-can with another parameter order
+        arbitration_id=frame.arbitration_id,
+        data=frame.data,
+        is_extended_id=frame.is_extended_id,
+        is_remote_frame=frame.is_remote_frame,
+        dlc=frame.dlc,
+    )
+
+
+#: Received frames are built with ``tuple.__new__(Frame, fields)``, past ``Frame.__new__`` (a
+#: Python function, more than half the cost of converting a message): every field is given,
+#: in ``Frame._fields`` order, so its only work, defaulting ``dlc``, has nothing to do
+#: (``tests/drive/test_fast_paths.py`` checks the result against ``Frame(...)``).
+_new_tuple = tuple.__new__
+
+
+def to_frame(msg: can.Message, timestamp_s: float | None = None) -> Frame:
+    """A frame for a python-can message.
+
+    :param timestamp_s: receive time to record; the message's own stamp when omitted.
+    """
+    remote = msg.is_remote_frame
+    return _new_tuple(Frame, (
+        msg.arbitration_id,
+        b"" if remote else bytes(msg.data),
+        msg.is_extended_id,
+        remote,
+        msg.dlc,
+        msg.timestamp if timestamp_s is None else timestamp_s,
+    ))
+
+
+def open_bus(interface: str, channel: str, **kwargs: Any) -> can.BusABC:
+    """Open a python-can bus.
+
+    :raises BusError: if python-can cannot open it.
+    """
+    try:
+        return can.Bus(interface=interface, channel=channel, **kwargs)
+    except (can.CanError, OSError, ValueError, ImportError) as err:
+        raise BusError(f"Cannot open CAN bus {interface}:{channel}: {err}") from err
+
+
+def send_frames(bus: can.BusABC, frames: Iterable[Frame]) -> int:
+    """Send frames in order.
+
+    :return: how many were sent.
+    :raises BusError: on the first frame that python-can refuses.
+    """
+    sent = 0
+    for frame in frames:
+        try:
+            bus.send(to_message(frame))
+        except (can.CanError, OSError) as err:
+            raise BusError(f"Sending {frame.to_cansend()} failed: {err}") from err
+        sent += 1
+    return sent
+
+
+#: A message stamp further than this from the wall clock is not trusted (s).
+_PLAUSIBLE_S = 1.0
+
+
+def drain(
+    bus: can.BusABC,
+    limit: int = 10_000,
+    timestamp_s: float | None = None,
+    odd: list[can.Message] | None = None,
+) -> list[Frame]:
+    """Every frame waiting in ``bus``'s receive queue.
+
+    Error frames and CAN FD frames are not returned (they carry nothing for the drivers,
+    which speak classic CAN); they go to ``odd`` when given, for the bus's health.
+
+    :param timestamp_s: the receive time to stamp on every frame (simulated time in tests).
+        When omitted, each frame keeps the time python-can stamped on it (the kernel's receive
+        time on socketcan), moved from the wall clock onto ``time.monotonic()`` so it compares
+        with the loop's clock; a stamp more than a second away from the wall clock (an
+        interface with its own epoch) is replaced by the time of receipt.
+
+    :raises BusError: if receiving fails.
+    """
+    out: list[Frame] = []
+    if limit <= 0:
+        return out
+    try:
+        msg = bus.recv(0.0)
+        if msg is None:
+            return out  # the common case at a high loop rate: nothing waiting
+        wall, mono = time.time(), time.monotonic()
+        offset = mono - wall
+        new_tuple, recv = _new_tuple, bus.recv
+        for k in range(limit):
+            if k:
+                msg = recv(0.0)
+                if msg is None:
+                    break
+            if msg.is_error_frame or msg.is_fd:
+                if odd is not None:
+                    odd.append(msg)
+                continue
+            if timestamp_s is not None:
+                stamp = timestamp_s
+            elif abs(msg.timestamp - wall) <= _PLAUSIBLE_S:
+                stamp = msg.timestamp + offset
+            else:
+                stamp = time.monotonic()
+            # to_frame, inlined (the per-frame cost of receiving).
+            remote = msg.is_remote_frame
+            out.append(new_tuple(Frame, (
+                msg.arbitration_id, b"" if remote else bytes(msg.data), msg.is_extended_id,
+                remote, msg.dlc, stamp,
+            )))
+    except (can.CanError, OSError) as err:
+        raise BusError(f"Receiving failed: {err}") from err
+    return out

@@ -1,0 +1,128 @@
+"""The ``wheelgate`` command: a click group that loads one module per subcommand.
+
+Errors are mapped to exit codes in one place: 0 ok, 1 other gateway error, 2 bad usage or
+configuration, 3 infeasible twist.  ``--debug`` re-raises to show the traceback.
+"""
+
+from __future__ import annotations
+
+import importlib
+import logging
+import os
+import sys
+from typing import TYPE_CHECKING, Any, ClassVar
+
+import click
+
+from gateway import __version__
+from gateway.core.errors import ConfigError, GatewayError, InfeasibleTwistError
+
+if TYPE_CHECKING:
+    from collections.abc import Callable
+
+#: Subcommand name -> module under ``gateway.cli.commands``.
+COMMANDS: dict[str, str] = {
+    "check": "check",
+    "ik": "ik",
+    "fk": "fk",
+    "frames": "frames",
+    "run": "run",
+    "twist": "twist",
+    "status": "status",
+    "jog": "jog",
+    "monitor": "monitor",
+    "odom": "odom",
+    "sim": "sim",
+}
+
+EXIT_ERROR = 1
+EXIT_USAGE = 2
+EXIT_INFEASIBLE = 3
+
+
+class InfeasibleExit(click.ClickException):
+    """An infeasible twist: message on stderr, exit code 3."""
+
+    exit_code = EXIT_INFEASIBLE
+
+
+class ConfigExit(click.ClickException):
+    """A configuration error: message on stderr, exit code 2."""
+
+    exit_code = EXIT_USAGE
+
+
+class JournalFormatter(logging.Formatter):
+    """Log lines for journald: a ``<N>`` syslog priority prefix (sd-daemon(3)) and no time
+    stamp (the journal adds its own)."""
+
+    _PRIORITY: ClassVar[dict[int, int]] = {
+        logging.CRITICAL: 2, logging.ERROR: 3, logging.WARNING: 4, logging.INFO: 6,
+        logging.DEBUG: 7,
+    }
+
+    def format(self, record: logging.LogRecord) -> str:
+        prio = self._PRIORITY.get(record.levelno, 6)
+        return f"<{prio}>{record.name}: {super().format(record)}"
+
+
+class LazyGroup(click.Group):
+    """A group that imports a subcommand's module only when it runs."""
+
+    def list_commands(self, ctx: click.Context) -> list[str]:
+        return sorted(COMMANDS)
+
+    def get_command(self, ctx: click.Context, cmd_name: str) -> click.Command | None:
+        module = COMMANDS.get(cmd_name)
+        if module is None:
+            return None
+        command: click.Command = importlib.import_module(f"gateway.cli.commands.{module}").command
+        return command
+
+    def invoke(self, ctx: click.Context) -> Any:
+        try:
+            return super().invoke(ctx)
+        except GatewayError as err:
+            if ctx.obj and ctx.obj.get("debug"):
+                raise
+            if isinstance(err, InfeasibleTwistError):
+                raise InfeasibleExit(str(err)) from err
+            if isinstance(err, ConfigError):
+                raise ConfigExit(str(err)) from err
+            raise click.ClickException(str(err)) from err
+
+
+@click.group(cls=LazyGroup, context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(__version__, prog_name="wheelgate")
+@click.option("--interface", help="python-can interface, overrides the config (e.g. socketcan).")
+@click.option("--channel", help="CAN channel, overrides the config (e.g. can0).")
+@click.option("-v", "--verbose", count=True, help="More log output (repeat for debug).")
+@click.option("--debug", is_flag=True, help="Show tracebacks instead of short errors.")
+@click.pass_context
+def main(
+    ctx: click.Context, interface: str | None, channel: str | None, verbose: int, debug: bool
+) -> None:
+    """wheelgate: twist in, wheel frames out, odometry back, over CAN."""
+    level = logging.WARNING - 10 * min(verbose, 2)
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(JournalFormatter() if os.environ.get("JOURNAL_STREAM") else
+                         logging.Formatter("%(levelname)s %(name)s: %(message)s"))
+    logging.basicConfig(level=level, handlers=[handler])
+    ctx.obj = {"interface": interface, "channel": channel, "debug": debug}
+
+
+def config_option(func: Callable[..., Any]) -> Callable[..., Any]:
+    """The ``-c/--config FILE`` option shared by subcommands (embedded default if omitted)."""
+    return click.option(
+        "-c",
+        "--config",
+        "config_path",
+        type=click.Path(dir_okay=False),
+        default=None,
+        help="Robot configuration (YAML). Default: the embedded demo robot.",
+    )(func)
+
+
+def json_option(func: Callable[..., Any]) -> Callable[..., Any]:
+    """The ``--json`` flag shared by subcommands."""
+    return click.option("--json", "as_json", is_flag=True, help="Machine-readable output.")(func)

@@ -1,0 +1,89 @@
+"""Helpers shared by subcommands: loading the config with CLI overrides, parsing twists."""
+
+from __future__ import annotations
+
+import json
+import math
+from typing import TYPE_CHECKING, Any
+
+import click
+
+from gateway.config import client_socket_path, load_config
+
+if TYPE_CHECKING:
+    from gateway.core.errors import InfeasibleTwistError
+    from gateway.core.settings import GatewayConfig
+    from gateway.core.types import Twist
+
+
+#: What to do instead of a ``virtual`` bus when processes must share it.
+VIRTUAL_HINT = (
+    "to share a bus between processes, use a kernel one: sudo modprobe vcan && sudo ip link add "
+    "vcan0 type vcan && sudo ip link set vcan0 up, then give every command "
+    "--interface socketcan --channel vcan0 (see 'A real kernel bus without hardware' in the "
+    "README)"
+)
+
+
+def load(ctx: click.Context, path: str | None) -> GatewayConfig:
+    """The configuration at ``path`` with the root group's bus overrides."""
+    obj = ctx.find_root().obj or {}
+    return load_config(path, {"interface": obj.get("interface"), "channel": obj.get("channel")})
+
+
+def socket_for(ctx: click.Context, config_path: str | None, socket_path: str | None) -> str:
+    """The daemon's socket: ``--socket``, else the config's ``gateway.socket`` (with ``-c``),
+    else the default path."""
+    if socket_path:
+        return socket_path
+    if config_path is not None:
+        cfg = load(ctx, config_path)
+        if cfg.loop.socket:
+            return cfg.loop.socket
+    return client_socket_path()
+
+
+def twist_options(func: Any) -> Any:
+    """``--vx --vy --wz`` options."""
+    for name, unit in (("wz", "rad/s, CCW positive"), ("vy", "m/s, left"), ("vx", "m/s, forward")):
+        func = click.option(f"--{name}", type=float, default=0.0, show_default=True,
+                            help=f"Body twist component ({unit}).")(func)
+    return func
+
+
+def check_finite(**values: float) -> None:
+    """Reject NaN and infinity in numeric options (click accepts them as floats).
+
+    :raises click.BadParameter: naming the option.
+    """
+    for name, value in values.items():
+        if not math.isfinite(value):
+            raise click.BadParameter(f"expected a finite number, got {value!r}",
+                                     param_hint=f"--{name}")
+
+
+def twist_json(t: Twist) -> dict[str, float]:
+    """A twist as a JSON object."""
+    return {"vx_m_s": t.vx_m_s, "vy_m_s": t.vy_m_s, "wz_rad_s": t.wz_rad_s}
+
+
+def infeasible_json(err: InfeasibleTwistError) -> str:
+    """The JSON error object printed on stdout for an infeasible twist with ``--json``."""
+    return json.dumps(
+        {
+            "error": {
+                "type": "infeasible_twist",
+                "message": str(err),
+                "wheel": err.wheel,
+                "constraint": err.constraint,
+                "residual_m_s": err.residual_m_s,
+                "twist": twist_json(err.twist),
+                "nearest": twist_json(err.nearest),
+            }
+        }
+    )
+
+
+def rad_s_to_rpm(value: float) -> float:
+    """rad/s to revolutions per minute."""
+    return value * 60.0 / (2.0 * math.pi)

@@ -1,0 +1,384 @@
+"""``wheelgate jog``: drive the robot from the keyboard, on one terminal screen.
+
+The terminal edge around :mod:`gateway.apps.jog.keys` and :mod:`gateway.apps.jog.screen`: raw mode
+(so
+Ctrl-C arrives as a key), one screen redrawn in place with ANSI escapes (alternate screen; no
+curses), ``select`` on stdin with the deadman's deadlines as timeouts, the daemon's status
+polled at 5 Hz.  With ``--standalone`` a :class:`~gateway.runtime.daemon.Daemon` runs in a thread of
+this process on a private socket.
+
+Whatever ends the session -- Ctrl-C, Ctrl-D, Esc, end of input, a closed terminal, SIGHUP,
+SIGTERM or SIGINT -- sends stop before the terminal mode is restored.  Should this program die
+without it, the daemon's ``cmd_timeout_s`` stops the robot.
+"""
+
+from __future__ import annotations
+
+import collections
+import contextlib
+import json
+import logging
+import os
+import select
+import shutil
+import signal
+import sys
+import tempfile
+import termios
+import threading
+import time
+import tty
+from typing import IO, TYPE_CHECKING, Any
+
+import click
+
+from gateway.apps.jog.keys import DEFAULT_DEADMAN_S, STOP, JogState, Request, jog_limits, split_keys
+from gateway.apps.jog.screen import Screen, daemon_view, render, reply_error
+from gateway.cli import config_option
+from gateway.cli.commands._common import check_finite, load, socket_for
+from gateway.runtime.client import ClientError, ControlClient
+from gateway.runtime.daemon import Daemon
+from gateway.runtime.sdnotify import SystemdNotifier
+
+if TYPE_CHECKING:
+    from collections.abc import Iterator
+
+    from gateway.apps.jog.screen import DaemonView
+    from gateway.core.settings import GatewayConfig
+
+#: How often the daemon's status is polled (s).
+STATUS_PERIOD_S = 0.2
+#: How often a lost connection is retried (s).
+RECONNECT_PERIOD_S = 1.0
+#: Longest wait for any reply (s); the deadman loop must not hang on a stuck daemon.
+REPLY_TIMEOUT_S = 1.0
+#: Log lines kept for the screen.
+LOG_LINES = 3
+
+#: Longest directory for the private socket of ``--standalone`` (AF_UNIX limit, with margin).
+_MAX_SOCKET_DIR = 90
+
+_ENTER = "\x1b[?1049h\x1b[?25l\x1b[2J"  # alternate screen, hide the cursor, clear
+_LEAVE = "\x1b[?25h\x1b[?1049l"
+_SIGNALS = (signal.SIGHUP, signal.SIGTERM, signal.SIGINT)
+
+
+class _Link:
+    """The connection to the daemon: requests, their log, reconnection after a loss.
+
+    :raises ClientError: if the first connection fails.
+    """
+
+    def __init__(self, path: str, log_file: IO[str] | None) -> None:
+        self.path = path
+        self.log_file = log_file
+        self.client: ControlClient | None = ControlClient(path, timeout_s=REPLY_TIMEOUT_S)
+        self.error = ""
+        self.last_op = ""
+        self._retry_s = 0.0
+        self._t0 = time.monotonic()
+
+    def request(self, payload: dict[str, object]) -> dict[str, Any] | None:
+        """The reply, or ``None`` when the daemon cannot be reached (``error`` says why)."""
+        if self.client is None:
+            return None
+        try:
+            return self.client.request(payload)
+        except ClientError as err:
+            self.error = str(err)
+            self.client.close()
+            self.client = None
+            self._retry_s = time.monotonic() + RECONNECT_PERIOD_S
+            return None
+
+    def send(self, req: Request) -> dict[str, Any] | None:
+        """Send a twist or stop, and log it with its reply."""
+        if self.client is None:
+            self.retry(force=req.op == "stop")
+        payload = req.payload()
+        reply = self.request(payload)
+        self.last_op = req.op if reply is not None and reply.get("ok") else ""
+        if self.log_file is not None:
+            entry = {"t_s": round(time.monotonic() - self._t0, 4), "request": payload,
+                     "reply": reply, **({"error": self.error} if reply is None else {})}
+            self.log_file.write(json.dumps(entry) + "\n")
+            self.log_file.flush()
+        return reply
+
+    def retry(self, force: bool = False) -> None:
+        """Reconnect after a loss, at most every :data:`RECONNECT_PERIOD_S` unless forced."""
+        if self.client is not None or (not force and time.monotonic() < self._retry_s):
+            return
+        self._retry_s = time.monotonic() + RECONNECT_PERIOD_S
+        try:
+            self.client = ControlClient(self.path, timeout_s=REPLY_TIMEOUT_S)
+            self.error = ""
+        except ClientError as err:
+            self.error = str(err)
+
+    def close(self) -> None:
+        if self.client is not None:
+            self.client.close()
+            self.client = None
+
+
+class _LogCapture(logging.Handler):
+    """Keeps log records while the screen is up; they are re-emitted afterwards."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.records: list[logging.LogRecord] = []
+        self.lines: collections.deque[str] = collections.deque(maxlen=LOG_LINES)
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.records.append(record)
+        self.lines.append(f"{record.levelname} {record.name}: {record.getMessage()}")
+
+
+@contextlib.contextmanager
+def _captured_logs() -> Iterator[_LogCapture]:
+    root = logging.getLogger()
+    saved = root.handlers[:]
+    capture = _LogCapture()
+    root.handlers[:] = [capture]
+    try:
+        yield capture
+    finally:
+        root.handlers[:] = saved
+        for record in capture.records:
+            if record.levelno >= logging.WARNING:
+                logging.getLogger(record.name).handle(record)
+
+
+@contextlib.contextmanager
+def _standalone(cfg: GatewayConfig, sim: bool) -> Iterator[str]:
+    """A daemon in a thread of this process on a private socket; stopped on exit."""
+    folder = tempfile.mkdtemp(prefix="wgjog")
+    if len(folder) > _MAX_SOCKET_DIR:  # AF_UNIX paths end at 107 bytes; a long $TMPDIR
+        os.rmdir(folder)
+        folder = tempfile.mkdtemp(prefix="wgjog", dir="/tmp")
+    daemon = None
+    try:
+        daemon = Daemon(cfg, sim=sim, socket_path=f"{folder}/s.sock",
+                        notifier=SystemdNotifier(None))
+        thread = threading.Thread(target=daemon.run, name="wheelgate-daemon", daemon=True)
+        thread.start()
+        try:
+            yield daemon.socket_path
+        finally:
+            daemon.request_stop()
+            thread.join(timeout=10.0)
+    finally:
+        if daemon is not None:
+            daemon.close()
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+@contextlib.contextmanager
+def _signals_wake(fd_write: int) -> Iterator[list[str]]:
+    """SIGHUP, SIGTERM and SIGINT end the session: their names are collected and the select
+    loop wakes through ``fd_write`` instead of the program dying without a stop."""
+    caught: list[str] = []
+
+    def handler(signum: int, frame: object) -> None:
+        caught.append(signal.Signals(signum).name)
+
+    old_fd = signal.set_wakeup_fd(fd_write)
+    old = {s: signal.signal(s, handler) for s in _SIGNALS}
+    try:
+        yield caught
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
+        signal.set_wakeup_fd(old_fd)
+
+
+@contextlib.contextmanager
+def _raw_terminal(fd: int) -> Iterator[None]:
+    """Raw mode on ``fd`` (no echo, no line editing, Ctrl-C as a byte), restored on exit."""
+    saved = termios.tcgetattr(fd)
+    try:
+        tty.setraw(fd)
+        yield
+    finally:
+        with contextlib.suppress(termios.error):  # EIO: the terminal is gone, nothing to restore
+            termios.tcsetattr(fd, termios.TCSADRAIN, saved)
+
+
+class _Terminal:
+    """Writes to the screen; a closed terminal is noted, never fatal (stop must still go)."""
+
+    def __init__(self, fd: int) -> None:
+        self.fd = fd
+        self.gone = False
+        self._last: tuple[int, int, list[str]] = (0, 0, [])
+
+    def write(self, text: str) -> None:
+        data = text.encode("utf-8", "replace")
+        while data and not self.gone:
+            try:
+                data = data[os.write(self.fd, data):]
+            except OSError:
+                self.gone = True
+
+    def draw(self, screen: Screen) -> None:
+        try:
+            cols, rows = os.get_terminal_size(self.fd)
+        except OSError:
+            cols, rows = 100, 40
+        lines = render(screen, max(cols - 1, 20))[: max(rows - 1, 1)]
+        if (cols, rows, lines) != self._last:  # redraw on a change or a resize
+            self._last = (cols, rows, lines)
+            self.write("\x1b[H" + "".join(line + "\x1b[K\r\n" for line in lines) + "\x1b[J")
+
+
+def _session(fd_in: int, wake_fd: int, caught: list[str], term: _Terminal, link: _Link,
+             state: JogState, robot: str, title: str, logs: _LogCapture) -> JogState:
+    """The select loop; returns the final state (stop has been sent)."""
+    last_error = ""
+    view: DaemonView | None = None
+    next_status = 0.0
+
+    def send(requests: tuple[Request, ...]) -> None:
+        nonlocal last_error
+        for req in requests:
+            reply = link.send(req)
+            if reply is None:
+                last_error = f"connection: {link.error}"
+            elif not reply.get("ok"):
+                last_error = reply_error(reply)
+            elif reply.get("warning"):
+                last_error = f"warning: {reply['warning']}"
+            elif req.op == "twist":
+                last_error = ""
+
+    try:
+        while not state.ended:
+            now = time.monotonic()
+            if now >= next_status:
+                link.retry()
+                status = link.request({"op": "status"})
+                if status is not None and status.get("ok"):
+                    view = daemon_view(status)
+                next_status = now + STATUS_PERIOD_S
+            connection = (f"connected: {link.path}" if link.client is not None else
+                          f"DISCONNECTED: {link.error} (retrying)")
+            term.draw(Screen(robot, title, connection, state, view, last_error,
+                             tuple(logs.lines)))
+            deadline = min(state.next_deadline_s(), next_status)
+            ready, _, _ = select.select([fd_in, wake_fd], [], [], max(0.0, deadline - now))
+            now = time.monotonic()
+            if wake_fd in ready:
+                os.read(wake_fd, 512)
+            if caught:
+                step = state.on_quit(caught[0])
+                state = step.state
+                send(step.requests)
+                break
+            if fd_in in ready:
+                try:
+                    data = os.read(fd_in, 1024)
+                except OSError:  # EIO: the terminal is gone
+                    data = b""
+                if not data:
+                    step = state.on_quit("end of input")
+                    state = step.state
+                    send(step.requests)
+                    break
+                for key in split_keys(data):
+                    step = state.on_key(key, now)
+                    state = step.state
+                    send(step.requests)
+                    if state.ended:
+                        break
+            step = state.on_tick(now)
+            state = step.state
+            send(step.requests)
+    finally:
+        if link.last_op != "stop":  # an exception, or the stop was not acknowledged
+            send((STOP,))
+    return state
+
+
+@click.command()
+@config_option
+@click.option("--socket", "socket_path", type=click.Path(dir_okay=False), default=None,
+              help="Control socket of the running daemon.")
+@click.option("--standalone", is_flag=True,
+              help="Own the bus: run the daemon in this process on a private socket.")
+@click.option("--sim", is_flag=True,
+              help="With --standalone: simulate the motor controllers on a virtual bus.")
+@click.option("--deadman", type=click.FloatRange(min=0.1, max=5.0), default=DEFAULT_DEADMAN_S,
+              show_default=True,
+              help="Stop when no motion key came for this long (s); keep it above the "
+                   "keyboard's auto-repeat delay (250-500 ms).")
+@click.option("--log", "log_path", type=click.Path(dir_okay=False, writable=True), default=None,
+              help="Write every twist and stop sent, with its reply, as JSON lines.")
+@click.pass_context
+def command(
+    ctx: click.Context,
+    config_path: str | None,
+    socket_path: str | None,
+    standalone: bool,
+    sim: bool,
+    deadman: float,
+    log_path: str | None,
+) -> None:
+    """Drive the robot from the keyboard (teleop_twist_keyboard keys) on one screen.
+
+    \b
+       u i o     U I O   (shift: holonomic drives only)
+       j k l     J K L   k, space, other keys: stop
+       m , .     M < >   q/z w/x e/c: speeds +/-10%
+
+    A move lasts while its key repeats; --deadman seconds without one sends stop.
+    Quit with Ctrl-C, Ctrl-D or Esc (q speeds up, as in teleop_twist_keyboard); quitting
+    always sends stop.  Should this program die, the daemon's cmd_timeout_s stops the robot.
+    """
+    check_finite(deadman=deadman)
+    if sim and not standalone:
+        raise click.UsageError("--sim needs --standalone (a running daemon has its own bus)")
+    if standalone and socket_path:
+        raise click.UsageError("--standalone uses a private socket; drop --socket")
+    cfg = load(ctx, config_path)
+    if not sys.stdin.isatty():
+        raise click.UsageError("jog reads keys from a terminal, but stdin is not a terminal")
+    limits = jog_limits(cfg)
+    with contextlib.ExitStack() as stack:
+        log_file = None
+        if log_path is not None:
+            try:
+                log_file = stack.enter_context(open(log_path, "w", encoding="utf-8"))
+            except OSError as err:
+                raise click.BadParameter(f"cannot write {log_path}: {err.strerror}",
+                                         param_hint="--log") from err
+        logs = stack.enter_context(_captured_logs())
+        if standalone:
+            path = stack.enter_context(_standalone(cfg, sim))
+        else:
+            path = socket_for(ctx, config_path, socket_path)
+        try:
+            link = _Link(path, log_file)
+        except ClientError as err:
+            raise click.ClickException(str(err)) from err
+        stack.callback(link.close)
+        state = JogState.start(limits, deadman_s=deadman)
+        title = (f"{cfg.name} ({cfg.drive})"
+                 + (f", standalone{', simulated' if sim else ''}" if standalone else ""))
+        fd_in, term = sys.stdin.fileno(), _Terminal(sys.stdout.fileno())
+        wake_r, wake_w = os.pipe()
+        for fd in (wake_r, wake_w):
+            os.set_blocking(fd, False)
+            stack.callback(os.close, fd)
+        caught = stack.enter_context(_signals_wake(wake_w))
+        stack.enter_context(_raw_terminal(fd_in))
+        term.write(_ENTER)
+        stack.callback(term.write, _LEAVE)
+        state = _session(fd_in, wake_r, caught, term, link, state, cfg.name, title, logs)
+    if link.last_op != "stop":
+        raise click.ClickException(
+            f"could not send stop to {path}: {link.error or 'refused'}; the daemon's "
+            f"cmd_timeout_s ({cfg.loop.cmd_timeout_s:g} s) stops the robot")
+    with contextlib.suppress(OSError):  # the terminal may be gone
+        click.echo(f"jog: {state.ended}: stop sent to {path}", err=True)
+

@@ -1,0 +1,282 @@
+"""``wheelgate monitor``: a live, decoded view of the configured robot's bus.
+
+One of three sources:
+
+* the daemon (the default, when one answers; ``--socket PATH``): its ``status`` is polled at
+  the refresh rate, and rates come from the differences between replies;
+* ``--bus``: the configured bus (or the root ``--interface``/``--channel``), opened with
+  python-can.  **Read-only**: the monitor never sends a frame, not even a request; it decodes
+  what the controllers and the gateway put on the bus.  (On SocketCAN the adapter still
+  acknowledges frames as every node does; for a silent tap set the link listen-only with
+  ``ip link set can0 type can listen-only on``.)  Frame times are the monitor's monotonic
+  clock at receipt;
+* ``--log FILE``: a candump log (``candump -l``, ``wheelgate run --record``), replayed at the
+  recorded speed, or as fast as possible with ``--fast``; the log's time stamps are the clock.
+  Unreadable lines are reported on stderr with their line number and skipped.
+
+The screen is redrawn in place (ANSI home and clear) ``--refresh`` times a second when stdout
+is a terminal, else printed one snapshot after the other.  ``--once`` prints one snapshot (of a
+log: at its end, read as fast as possible; of a bus or the daemon: after ``--window``
+seconds) and ``--json`` prints it as JSON.  Ctrl-C ends the monitor with exit code 0.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+import sys
+import time
+from typing import TYPE_CHECKING, Any
+
+import can
+import click
+
+from gateway.apps.monitor import WINDOW_S, BusMonitor, StatusMonitor, render, snapshot_json
+from gateway.bus.can_bus import open_bus, to_frame
+from gateway.bus.edge import bus_options
+from gateway.bus.health import CLASS_COUNTERS, ErrorFrame
+from gateway.cli import config_option, json_option
+from gateway.cli.commands._common import load, socket_for
+from gateway.runtime.client import ClientError, ControlClient
+from gateway.wire.candump import CandumpError, parse_line
+
+if TYPE_CHECKING:
+    from collections.abc import Callable
+
+    from gateway.apps.monitor import MonitorSnapshot
+    from gateway.core.settings import GatewayConfig
+
+#: Largest accepted --refresh (Hz) and --window (s).
+MAX_REFRESH_HZ = 100.0
+MAX_WINDOW_S = 3600.0
+#: Line width when stdout is not a terminal.
+PIPE_WIDTH = 1000
+#: ANSI: cursor home, clear screen.
+CLEAR = "\x1b[H\x1b[2J"
+#: CAN_ERR_FLAG of SocketCAN, which candump and python-can write into an error frame's ID.
+CAN_ERR_FLAG = 0x20000000
+
+
+def _positive(limit: float, unit: str) -> Callable[[click.Context, click.Parameter, float], float]:
+    def check(ctx: click.Context, param: click.Parameter, value: float) -> float:
+        if not (math.isfinite(value) and 0.0 < value <= limit):
+            raise click.BadParameter(f"expected a number above 0 and at most {limit:g} {unit}, "
+                                     f"got {value!r}")
+        return value
+    return check
+
+
+class Screen:
+    """Where snapshots go: redrawn in place on a terminal, one after the other otherwise.
+
+    :param as_json: print the final snapshot as JSON.
+    """
+
+    def __init__(self, as_json: bool = False) -> None:
+        self.as_json = as_json
+        self.tty = sys.stdout.isatty()
+
+    def show(self, snap: MonitorSnapshot) -> None:
+        """Draw one live snapshot (cut to the terminal's width; whole lines into a pipe)."""
+        if self.tty:
+            click.echo(CLEAR + render(snap, shutil.get_terminal_size((120, 24)).columns))
+        else:
+            click.echo(render(snap, PIPE_WIDTH) + "\n")
+
+    def final(self, snap: MonitorSnapshot) -> None:
+        """Print the last snapshot (as JSON with ``--json``)."""
+        if self.as_json:
+            click.echo(json.dumps(snapshot_json(snap)))
+        else:
+            self.show(snap)
+
+
+@click.command()
+@config_option
+@click.option("--socket", "socket_path", type=click.Path(dir_okay=False), default=None,
+              help="Control socket of the daemon to watch (the default source).")
+@click.option("--bus", "use_bus", is_flag=True,
+              help="Listen on the configured bus directly (read-only: sends nothing).")
+@click.option("--log", "log_path", type=click.Path(exists=True, dir_okay=False), default=None,
+              help="Replay a candump log (e.g. from `wheelgate run --record`).")
+@click.option("--fast", is_flag=True, help="With --log: replay as fast as possible.")
+@click.option("--refresh", type=float, default=5.0, show_default=True,
+              callback=_positive(MAX_REFRESH_HZ, "Hz"), help="Screen updates per second.")
+@click.option("--window", type=float, default=WINDOW_S, show_default=True,
+              callback=_positive(MAX_WINDOW_S, "s"),
+              help="Rates and bus load average over this many seconds.")
+@click.option("--once", is_flag=True, help="Print one snapshot and exit.")
+@json_option
+@click.pass_context
+def command(
+    ctx: click.Context, config_path: str | None, socket_path: str | None, use_bus: bool,
+    log_path: str | None, fast: bool, refresh: float, window: float, once: bool, as_json: bool,
+) -> None:
+    """Watch the robot's bus: motor states, speeds, positions and faults, frame rates per ID,
+    bus load and error counters; from the daemon, the bus (--bus) or a log (--log)."""
+    if as_json and not once:
+        raise click.UsageError("--json needs --once (the live view is text)")
+    sources = [name for name, on in (("--socket", socket_path), ("--bus", use_bus),
+                                     ("--log", log_path)) if on]
+    if len(sources) > 1:
+        raise click.UsageError(f"expected one source, got {' and '.join(sources)}")
+    if fast and log_path is None:
+        raise click.UsageError("--fast applies to --log only")
+    cfg = load(ctx, config_path)
+    screen = Screen(as_json)
+    period = 1.0 / refresh
+    try:
+        if log_path is not None:
+            watch_log(cfg, log_path, screen, period, window, fast=fast or once, once=once)
+        elif use_bus:
+            watch_bus(cfg, screen, period, window, once)
+        else:
+            path = socket_for(ctx, config_path, socket_path)
+            try:
+                client = ControlClient(path)
+            except ClientError as err:
+                hint = "" if socket_path else (
+                    "; to watch without a daemon use --bus, or --log FILE for a recording")
+                raise click.ClickException(f"{err}{hint}") from err
+            with client:
+                watch_daemon(cfg, client, screen, period, window, once)
+    except KeyboardInterrupt:
+        return
+
+
+def _is_error_frame(line: str) -> bool:
+    """Whether a candump line carries an error frame (CAN_ERR_FLAG in its 8-digit ID)."""
+    parts = line.split()
+    ident = parts[2].partition("#")[0] if len(parts) >= 3 else ""
+    try:
+        return len(ident) == 8 and bool(int(ident, 16) & CAN_ERR_FLAG)
+    except ValueError:
+        return False
+
+
+def watch_log(cfg: GatewayConfig, path: str, screen: Screen, period: float, window: float,
+              fast: bool, once: bool) -> None:
+    """Replay a candump log through a :class:`BusMonitor` on the log's clock."""
+    mon = BusMonitor(cfg, window, source=f"log {path}")
+    mon.count("bus error frames", 0)
+    mon.count("unreadable lines", 0)
+    t: float | None = None
+    offset: float | None = None  # wall clock - log clock, at recorded speed
+    next_draw = time.monotonic() + period
+    with open(path, encoding="utf-8", errors="replace") as lines:
+        for number, line in enumerate(lines, start=1):
+            if line[:1] != "(" and (not line.strip() or line.lstrip().startswith("#")):
+                continue  # blank lines and comments, as gateway.wire.candump.read_lines skips them
+            try:
+                entry = parse_line(line, number)
+            except CandumpError as err:
+                if _is_error_frame(line):
+                    mon.count("bus error frames")
+                else:
+                    mon.count("unreadable lines")
+                    click.echo(f"{path}: {err} (skipped)", err=True)
+                continue
+            if not fast:
+                if offset is None:
+                    offset = time.monotonic() - entry.timestamp_s
+                while (now := time.monotonic()) < entry.timestamp_s + offset:
+                    if now >= next_draw and t is not None:
+                        screen.show(mon.snapshot(max(now - offset, t)))
+                        next_draw = max(next_draw + period, now)
+                    time.sleep(max(min(entry.timestamp_s + offset, next_draw) - now, 0.0))
+            t = entry.timestamp_s
+            mon.feed(entry.frame, t, "rx" if entry.is_rx else "tx", decode=entry.is_rx)
+            if not once and number & 0xFF == 0 and (now := time.monotonic()) >= next_draw:
+                screen.show(mon.snapshot(t))
+                next_draw = max(next_draw + period, now)
+    screen.final(mon.snapshot(0.0 if t is None else t))
+
+
+def virtual_bus_note(channel: str) -> str:
+    """What ``monitor --bus`` says up front on a ``virtual`` bus: why it sees nothing of other
+    processes, and how to watch a gateway and its controllers anyway."""
+    kernel = "wheelgate --interface socketcan --channel vcan0"
+    return (
+        f"monitor: the bus is python-can's virtual one (channel {channel!r}), which exists only "
+        f"inside one process: this monitor sees nothing of a gateway ('wheelgate run --sim') or "
+        f"of simulated controllers ('wheelgate sim') running in another process.\n"
+        f"  To watch them, run the gateway and 'wheelgate sim' on a kernel bus:\n"
+        f"    sudo modprobe vcan && sudo ip link add vcan0 type vcan && "
+        f"sudo ip link set vcan0 up\n"
+        f"    {kernel} sim\n"
+        f"    {kernel} run\n"
+        f"    {kernel} monitor --bus    (or: candump vcan0)\n"
+        f"  or watch the daemon through its socket: wheelgate monitor (without --bus).\n"
+        f"  Listening on the virtual bus anyway."
+    )
+
+
+def watch_bus(cfg: GatewayConfig, screen: Screen, period: float, window: float,
+              once: bool) -> None:
+    """Listen on the configured bus (never sending) through a :class:`BusMonitor`."""
+    if cfg.bus.interface == "virtual":
+        click.echo(virtual_bus_note(cfg.bus.channel), err=True)
+    bus = open_bus(cfg.bus.interface, cfg.bus.channel, **bus_options(cfg.bus.interface, None))
+    try:
+        start = time.monotonic()
+        mon = BusMonitor(cfg, window, source=f"bus {cfg.bus.interface}:{cfg.bus.channel}",
+                         start_s=start)
+        mon.count("bus error frames", 0)
+        mon.count("receive errors", 0)
+        end = start + window if once else math.inf
+        next_draw = start + period
+        while (now := time.monotonic()) < end:
+            if now >= next_draw and not once:
+                screen.show(mon.snapshot(now))
+                next_draw = max(next_draw + period, now)
+            try:
+                msg = bus.recv(max(min(end, next_draw) - now, 0.0))
+            except (can.CanError, OSError) as err:
+                mon.count("receive errors")
+                click.echo(f"monitor: receiving from {cfg.bus.channel} failed: {err}", err=True)
+                time.sleep(min(period, 0.1))
+                continue
+            if msg is None:
+                continue
+            t = time.monotonic()
+            if msg.is_error_frame:
+                mon.count("bus error frames")
+                error = ErrorFrame.decode(msg.arbitration_id, bytes(msg.data))
+                for flag, name in CLASS_COUNTERS.items():
+                    if error.classes & flag:
+                        mon.count(f"error frames: {name.replace('_', ' ')}")
+            elif msg.is_fd:
+                mon.count("CAN FD frames (ignored)")
+            else:
+                mon.feed(to_frame(msg, t), t)
+        screen.final(mon.snapshot(time.monotonic()))
+    finally:
+        bus.shutdown()
+
+
+def _status(client: ControlClient) -> dict[str, Any]:
+    reply = client.request({"op": "status"})
+    if not reply.get("ok"):
+        error = reply.get("error") or {}
+        raise click.ClickException(f"the daemon at {client.path} refused the status request: "
+                                   f"{error.get('message', reply)}")
+    return reply
+
+
+def watch_daemon(cfg: GatewayConfig, client: ControlClient, screen: Screen, period: float,
+                 window: float, once: bool) -> None:
+    """Poll the daemon's status through a :class:`StatusMonitor`."""
+    mon = StatusMonitor(cfg, window, source=f"daemon {client.path}")
+    mon.update(_status(client))
+    if once:
+        time.sleep(window)
+        mon.update(_status(client))
+        screen.final(mon.snapshot())
+        return
+    next_poll = time.monotonic()
+    while True:
+        next_poll = max(next_poll + period, time.monotonic())
+        time.sleep(max(next_poll - time.monotonic(), 0.0))
+        mon.update(_status(client))
+        screen.show(mon.snapshot())

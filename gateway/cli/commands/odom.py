@@ -1,0 +1,323 @@
+"""``wheelgate odom``: replay a candump log through the drivers and the odometry.
+
+The log is read line by line (a line that cannot be read is reported with its number and
+skipped), every frame goes to the drivers the configuration names, stamped with its recorded
+time, and the odometry integrates the wheels' positions as the gateway does
+(:mod:`gateway.apps.replay.replay`).  Prints the final pose, the distance, what was read and how
+fast;
+``--csv`` writes the trajectory, ``--plot`` draws it (needs ``wheelgate[plot]``).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import csv
+import importlib
+import json
+import math
+import os
+import sys
+import time
+from typing import IO, TYPE_CHECKING, Any, TextIO, cast
+
+import click
+
+from gateway.apps.replay.replay import Replay, SteeringSource
+from gateway.cli import config_option, json_option
+from gateway.cli.commands._common import load
+
+if TYPE_CHECKING:
+    from collections.abc import Iterable, Iterator
+    from types import ModuleType
+
+    from gateway.apps.replay.replay import ReplaySummary, Sample
+    from gateway.core.settings import GatewayConfig
+
+#: Corrupt lines reported one by one; the rest are counted.
+MAX_REPORTED = 20
+#: Lines between two progress bar updates.
+PROGRESS_EVERY = 4096
+#: The message when ``--plot`` cannot work.
+NO_MATPLOTLIB = "plotting needs matplotlib: pip install 'wheelgate[plot]'"
+#: CSV columns before the wheels' speeds.
+CSV_COLUMNS = ("time_s", "x_m", "y_m", "theta_rad", "vx_m_s", "vy_m_s", "wz_rad_s", "slip_m_s")
+
+
+class UsageExit(click.ClickException):
+    """An error of the command line that is not one option's value: exit code 2."""
+
+    exit_code = 2
+
+
+def _plotting() -> ModuleType:
+    """:mod:`gateway.apps.replay.plot`, or exit 2 when matplotlib is missing."""
+    try:
+        importlib.import_module("matplotlib")
+        return importlib.import_module("gateway.apps.replay.plot")
+    except ImportError as err:
+        raise UsageExit(f"{NO_MATPLOTLIB} ({err})") from err
+
+
+def _writable(path: str, option: str) -> None:
+    """Fail before the replay if ``path`` cannot be created."""
+    folder = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(folder):
+        raise click.BadParameter(f"expected a file in an existing directory, got {path!r} "
+                                 f"({folder} does not exist)", param_hint=option)
+    if not os.access(folder, os.W_OK) or (os.path.exists(path) and not os.access(path, os.W_OK)):
+        raise click.BadParameter(f"expected a file that can be written, got {path!r}",
+                                 param_hint=option)
+
+
+def _progress(lines: Iterable[str], bar: Any) -> Iterator[str]:
+    """``lines``, advancing ``bar`` by the characters read (bytes, for an ASCII log)."""
+    pending = 0
+    for count, line in enumerate(lines, start=1):
+        pending += len(line)
+        if count % PROGRESS_EVERY == 0:
+            bar.update(pending)
+            pending = 0
+        yield line
+    bar.update(pending)
+
+
+class _Tty:
+    """A stream that says it is a terminal, for ``--progress`` on one that is not (click
+    hides its progress bar otherwise)."""
+
+    def __init__(self, stream: IO[str]) -> None:
+        self._stream = stream
+
+    def isatty(self) -> bool:
+        return True
+
+    def write(self, text: str) -> int:
+        return self._stream.write(text)
+
+    def flush(self) -> None:
+        self._stream.flush()
+
+
+def _wheel_columns(config: GatewayConfig) -> list[str]:
+    return [f"{name}_rad_s" for name in config.model.names]
+
+
+def _row(sample: Sample) -> list[str]:
+    p, t = sample.pose, sample.twist
+    values = [sample.time_s, p.x_m, p.y_m, p.theta_rad, t.vx_m_s, t.vy_m_s, t.wz_rad_s,
+              sample.slip_m_s]
+    out = [f"{v:.9g}" for v in values]
+    out[0] = f"{sample.time_s:.6f}"
+    out.extend("" if w is None else f"{w:.6g}" for w in sample.wheel_rad_s)
+    return out
+
+
+@click.command()
+@config_option
+@click.argument("log_path", metavar="LOG",
+                type=click.Path(exists=True, dir_okay=False, readable=True))
+@click.option("--csv", "csv_path", type=click.Path(dir_okay=False), default=None,
+              help="Write the trajectory: time_s (the log's time stamp), x_m, y_m, "
+                   "theta_rad, vx_m_s, vy_m_s, wz_rad_s, slip_m_s, then every wheel's speed "
+                   "(rad/s).")
+@click.option("--every", type=click.IntRange(min=1), default=1, show_default=True,
+              help="Keep every Nth odometry update (and the last) for --csv and --plot.")
+@click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None,
+              help="Draw the trajectory to this image (PNG); needs wheelgate[plot].")
+@click.option("--robots", type=click.IntRange(min=0), default=8, show_default=True,
+              help="Robot outlines drawn along the path in --plot.")
+@click.option("--min-interval-ms", type=click.FloatRange(min=0.0), default=None,
+              help="Least log time between odometry updates, ms (default: the config's "
+                   "control period, the gateway's own cadence).")
+@click.option("--progress", is_flag=True,
+              help="Show a progress bar on stderr even when it is not a terminal.")
+@click.option("-q", "--quiet", is_flag=True,
+              help="No progress bar and no line-by-line list of unreadable lines.")
+@json_option
+@click.pass_context
+def command(
+    ctx: click.Context,
+    config_path: str | None,
+    log_path: str,
+    csv_path: str | None,
+    every: int,
+    plot_path: str | None,
+    robots: int,
+    min_interval_ms: float | None,
+    progress: bool,
+    quiet: bool,
+    as_json: bool,
+) -> None:
+    """Replay a candump LOG (candump -l, wheelgate run --record) through the drivers and the
+    odometry: final pose, distance, trajectory.
+
+    Steered wheels take their angles from their steering actuators' feedback when the
+    configuration gives every one an actuator; otherwise the log has none: see the summary's
+    "steering" line."""
+    if min_interval_ms is not None and not math.isfinite(min_interval_ms):
+        raise click.BadParameter(f"expected a finite number, got {min_interval_ms!r}",
+                                 param_hint="--min-interval-ms")
+    plotting = _plotting() if plot_path is not None else None
+    if plot_path is not None:
+        _writable(plot_path, "--plot")
+    if csv_path is not None:
+        _writable(csv_path, "--csv")
+    cfg = load(ctx, config_path)
+    replay = Replay(cfg, None if min_interval_ms is None else min_interval_ms / 1000.0)
+    stderr = sys.stderr
+    bar_file: TextIO | None = None
+    if not quiet and (progress or stderr.isatty()):
+        bar_file = stderr if stderr.isatty() else cast("TextIO", _Tty(stderr))
+    sink = _Sink(every, plotting is not None)
+    with contextlib.ExitStack() as stack:
+        if csv_path is not None:
+            sink.start_csv(stack.enter_context(open(csv_path, "w", newline="", encoding="utf-8")),
+                           cfg)
+        started = time.perf_counter()
+        log_file = stack.enter_context(open(log_path, encoding="ascii", errors="replace"))
+        lines: Iterable[str] = log_file
+        if bar_file is not None:
+            bar = stack.enter_context(click.progressbar(
+                length=os.path.getsize(log_path), label="replaying", file=bar_file))
+            lines = _progress(log_file, bar)
+        for sample in replay.feed_lines(lines):
+            sink.take(sample)
+        sink.finish()
+        wall = time.perf_counter() - started
+    summary = replay.summary()
+    _report_errors(replay, quiet)
+    plotted = None
+    if plotting is not None and plot_path is not None and sink.kept:
+        fig = plotting.plot_trajectory(sink.kept, cfg, robots=robots)
+        try:
+            plotting.save_figure(fig, plot_path)
+        except OSError as err:
+            raise click.FileError(plot_path, str(err)) from err
+        plotted = plot_path
+    if as_json:
+        click.echo(json.dumps(_json(cfg, log_path, summary, wall, replay,
+                                    {"path": csv_path, "rows": sink.rows} if csv_path else None,
+                                    plotted)))
+    else:
+        _print(cfg, log_path, summary, wall, replay)
+        if csv_path is not None:
+            click.echo(f"csv: {csv_path} ({sink.rows:,} rows)")
+        if plotted is not None:
+            click.echo(f"plot: {plotted}")
+    _warn(cfg, summary)
+    if summary.updates == 0:
+        raise click.ClickException(
+            f"{log_path}: no odometry: {summary.motor_frames:,} of {summary.entries:,} "
+            f"frames belong to {cfg.name}'s motors"
+            + (f", none from {', '.join(summary.silent_wheels)}"
+               if summary.silent_wheels else "")
+            + " (is it the right config?)"
+        )
+
+
+class _Sink:
+    """Keeps every Nth update (and the last) for the CSV file and the plot."""
+
+    def __init__(self, every: int, plotting: bool) -> None:
+        self.every = every
+        self.plotting = plotting
+        self.kept: list[Sample] = []
+        self.rows = 0
+        self._writer: Any = None
+        self._count = 0
+        self._last: Sample | None = None
+
+    def start_csv(self, stream: IO[str], config: GatewayConfig) -> None:
+        self._writer = csv.writer(stream)
+        self._writer.writerow([*CSV_COLUMNS, *_wheel_columns(config)])
+
+    def take(self, sample: Sample) -> None:
+        if self._count % self.every == 0:
+            self._keep(sample)
+            self._last = None
+        else:
+            self._last = sample
+        self._count += 1
+
+    def finish(self) -> None:
+        if self._last is not None:
+            self._keep(self._last)
+            self._last = None
+
+    def _keep(self, sample: Sample) -> None:
+        if self.plotting:
+            self.kept.append(sample)
+        if self._writer is not None:
+            self._writer.writerow(_row(sample))
+            self.rows += 1
+
+
+def _report_errors(replay: Replay, quiet: bool) -> None:
+    errors = replay.errors
+    if not errors or quiet:
+        return
+    for err in errors[:MAX_REPORTED]:
+        click.echo(f"warning: skipped {err}", err=True)
+    if len(errors) > MAX_REPORTED:
+        click.echo(f"warning: ... and {len(errors) - MAX_REPORTED:,} more unreadable lines",
+                   err=True)
+
+
+def _warn(cfg: GatewayConfig, s: ReplaySummary) -> None:
+    if s.steering is SteeringSource.NEUTRAL:
+        click.echo(f"warning: {cfg.name} has steered wheels and the log holds no "
+                   "WG_Odom_Velocity frames: they were replayed at their neutral angles, so "
+                   "every turn of theirs is missing from the pose", err=True)
+    if s.silent_wheels and s.updates:
+        click.echo(f"warning: no feedback from {', '.join(s.silent_wheels)}", err=True)
+    if s.skipped_updates:
+        click.echo(f"warning: {s.skipped_updates} odometry intervals could not be solved "
+                   "(too few wheels with feedback); their motion is missing", err=True)
+
+
+def _factor(s: ReplaySummary, wall: float) -> float | None:
+    return s.duration_s / wall if wall > 0 and s.duration_s > 0 else None
+
+
+def _print(cfg: GatewayConfig, log_path: str, s: ReplaySummary, wall: float,
+           replay: Replay) -> None:
+    factor = _factor(s, wall)
+    p = s.pose
+    click.echo(f"robot: {cfg.name} ({cfg.drive}, {cfg.model.n} wheels); log: {log_path}")
+    click.echo(f"frames: {s.entries:,} read ({s.received:,} received, "
+               f"{s.entries - s.received:,} sent), {s.motor_frames:,} of the motors; "
+               f"{s.corrupt_lines:,} unreadable lines skipped")
+    click.echo(f"time: {s.duration_s:.3f} s of log replayed in {wall:.3f} s"
+               + (f" ({factor:.1f}x real time)" if factor is not None else ""))
+    click.echo(f"odometry: {s.updates:,} updates, at most one per "
+               f"{replay.min_interval_s * 1e3:g} ms of log time")
+    click.echo(f"final pose: x {p.x_m:+.4f} m, y {p.y_m:+.4f} m, theta {p.theta_rad:+.4f} rad "
+               f"({math.degrees(p.theta_rad):+.2f} deg)")
+    click.echo(f"distance: {s.distance_m:.3f} m")
+    click.echo(f"steering: {s.steering.value}")
+
+
+def _json(cfg: GatewayConfig, log_path: str, s: ReplaySummary, wall: float, replay: Replay,
+          csv_info: dict[str, object] | None, plot_path: str | None) -> dict[str, object]:
+    return {
+        "robot": cfg.name,
+        "log": log_path,
+        "pose": {"x": s.pose.x_m, "y": s.pose.y_m, "theta": s.pose.theta_rad},
+        "distance_m": s.distance_m,
+        "frames": {"read": s.entries, "received": s.received, "motors": s.motor_frames},
+        "unreadable_lines": s.corrupt_lines,
+        "unreadable": [{"line": e.line_number, "message": str(e)}
+                       for e in replay.errors[:MAX_REPORTED]],
+        "updates": s.updates,
+        "skipped_updates": s.skipped_updates,
+        "min_interval_s": replay.min_interval_s,
+        "start_s": s.start_s,
+        "duration_s": s.duration_s,
+        "replay_s": wall,
+        "speed_factor": _factor(s, wall),
+        "steering": s.steering.name.lower(),
+        "silent_wheels": list(s.silent_wheels),
+        "csv": csv_info,
+        "plot": plot_path,
+    }
+

@@ -1,0 +1,61 @@
+"""``wheelgate run``: the gateway daemon."""
+
+from __future__ import annotations
+
+import logging
+import threading
+
+import click
+
+from gateway.cli import config_option
+from gateway.cli.commands._common import load
+from gateway.drive.driveset import DriveSet
+from gateway.runtime.daemon import Daemon
+
+log = logging.getLogger("gateway.run")
+
+
+@click.command()
+@config_option
+@click.option("--sim", is_flag=True,
+              help="Simulate every motor controller on a virtual bus in this process.")
+@click.option("--record", type=click.Path(dir_okay=False, writable=True), default=None,
+              help="Log every frame sent and received, candump format (.log).")
+@click.option("--socket", "socket_path", type=click.Path(dir_okay=False), default=None,
+              help="Control socket path (default: the config's, else /run/wheelgate/...).")
+@click.option("--duration", type=click.FloatRange(min=0.0, min_open=True), default=None,
+              help="Stop after this many seconds, as on SIGTERM (default: run until stopped).")
+@click.pass_context
+def command(
+    ctx: click.Context,
+    config_path: str | None,
+    sim: bool,
+    record: str | None,
+    socket_path: str | None,
+    duration: float | None,
+) -> None:
+    """Run the gateway: twists in, wheel frames out, odometry back (SIGTERM or Ctrl-C stops
+    it, leaving every motor at zero and disarmed)."""
+    cfg = load(ctx, config_path)
+    for warning in cfg.warnings:
+        log.warning("%s", warning)
+    for label, prot in DriveSet(cfg).protections():
+        log.info("controller-side stop of %s: %s", label, prot.describe())
+    daemon = Daemon(cfg, sim=sim, record=record, socket_path=socket_path)
+    click.echo(
+        f"wheelgate: {cfg.name} ({cfg.drive}, {cfg.model.n} wheels) on "
+        f"{'virtual (simulated controllers)' if sim else cfg.bus.interface}:{cfg.bus.channel} "
+        f"at {cfg.loop.rate_hz:g} Hz; control socket {daemon.socket_path}",
+        err=True,
+    )
+    timer = None
+    if duration is not None:
+        timer = threading.Timer(duration, daemon.request_stop)
+        timer.daemon = True
+        timer.start()
+    try:
+        code = daemon.run()
+    finally:
+        if timer is not None:
+            timer.cancel()
+    ctx.exit(code)

@@ -1,0 +1,145 @@
+"""The keys a configuration file accepts, described once: one :class:`OptionSpec` table per block.
+
+Each table gives, per key, its type, its default (``None``: required), its bounds or choices and
+a line of help; :func:`gateway.core.options.validate_block` checks a block against its table and
+fills in the defaults.  :mod:`gateway.config` reads the file with these tables.
+
+Two kinds of keys are not here, because they depend on what the file chose:
+
+* the ``geometry:`` keys of a preset drive come from the preset
+  (:data:`gateway.core.kinematics.PRESETS`, ``params`` and ``choices``);
+* the protocol keys of a motor block come from its driver (``OPTIONS`` of the driver class).
+"""
+
+from __future__ import annotations
+
+import math
+from types import MappingProxyType
+from typing import TYPE_CHECKING
+
+from gateway.core.kinematics import WheelType
+from gateway.core.options import OptionSpec
+from gateway.core.tracking import DEFAULT_LIMITS
+
+if TYPE_CHECKING:
+    from collections.abc import Mapping
+
+#: The top-level keys of a configuration file.
+TOP_KEYS = frozenset(
+    {"name", "drive", "geometry", "wheels", "motors", "motor_defaults", "steering",
+     "steering_defaults", "limits", "kinematics", "bus", "gateway"}
+)
+#: The keys of a motor block that every driver takes (``motor_defaults:`` is merged in first);
+#: any other key is a protocol key of the driver.
+MOTOR_KEYS: Mapping[str, OptionSpec] = MappingProxyType({
+    "driver": OptionSpec(str, help="driver name, e.g. odrive"),
+    "node_id": OptionSpec(int, help="the controller's node ID"),
+    "gear_ratio": OptionSpec(float, 1.0, minimum=1e-9, help="motor turns per wheel turn"),
+    "invert": OptionSpec(bool, False),
+    "max_rpm": OptionSpec(float, minimum=1e-9, help="motor speed limit in RPM at the motor"),
+})
+#: The keys of a steering actuator's block (``steering:``, with ``steering_defaults:`` merged
+#: in first) that every driver takes; any other key is a protocol key of the driver.
+STEERING_KEYS: Mapping[str, OptionSpec] = MappingProxyType({
+    **MOTOR_KEYS,
+    "gear_ratio": OptionSpec(float, 1.0, minimum=1e-9,
+                             help="motor turns per turn of the wheel's plane"),
+    "zero_rad": OptionSpec(float, 0.0, help="motor position (rad, the controller's frame) "
+                                             "with the wheels at their neutral angle"),
+})
+#: The keys of a steering block that say what it turns (not merged from
+#: ``steering_defaults:``): several wheels through a linkage.
+LINKAGE_KEYS: Mapping[str, OptionSpec] = MappingProxyType({
+    "wheels": OptionSpec(list, [], help="the wheels a linkage turns; empty: the block's name "
+                                        "is the wheel or steer group"),
+    "linkage": OptionSpec(str, "direct", choices=("direct", "ackermann"),
+                          help="ackermann: the angle is that of a virtual wheel in the middle "
+                               "of the wheels' axle"),
+})
+#: The keys of one item of ``wheels:`` (``drive: generic``).
+WHEEL_KEYS: Mapping[str, OptionSpec] = MappingProxyType({
+    "name": OptionSpec(str),
+    "type": OptionSpec(str, choices=tuple(t.value for t in WheelType)),
+    "alpha": OptionSpec(float, help="polar angle of the mounting point, rad"),
+    "l": OptionSpec(float, minimum=0.0, help="distance from the body origin, m"),
+    "beta": OptionSpec(float, help="plane angle, rad"),
+    "radius": OptionSpec(float, minimum=1e-9, help="wheel radius, m"),
+    "gamma": OptionSpec(float, 0.0),
+    "d": OptionSpec(float, 0.0, minimum=0.0),
+    "steer_min": OptionSpec(float, -math.pi),
+    "steer_max": OptionSpec(float, math.pi),
+    "max_steer_rate": OptionSpec(float, math.inf, minimum=1e-9),
+    "steer_group": OptionSpec(str, ""),
+    "motor": OptionSpec(dict, {}),
+})
+#: The keys of ``limits:``.
+LIMIT_KEYS: Mapping[str, OptionSpec] = MappingProxyType({
+    "max_wheel_accel_rad_s2": OptionSpec(float, math.inf, minimum=1e-9),
+    "max_linear_m_s": OptionSpec(float, math.inf, minimum=0.0),
+    "max_angular_rad_s": OptionSpec(float, math.inf, minimum=0.0),
+})
+#: The keys of ``kinematics:``.
+KINEMATICS_KEYS: Mapping[str, OptionSpec] = MappingProxyType({
+    "slip_tolerance_m_s": OptionSpec(float, 1e-3, minimum=0.0),
+})
+#: The keys of ``gateway:``, the daemon's settings (:class:`gateway.core.settings.LoopConfig`).
+GATEWAY_KEYS: Mapping[str, OptionSpec] = MappingProxyType({
+    "rate_hz": OptionSpec(float, 200.0, minimum=50.0, maximum=1000.0,
+                          help="control loop rate"),
+    "cmd_timeout_s": OptionSpec(float, 0.5, minimum=0.0,
+                                help="no valid twist for this long ramps the wheels to zero; 0 "
+                                     "disables"),
+    "infeasible_policy": OptionSpec(str, "reject", choices=("reject", "project")),
+    "feedback_recovery": OptionSpec(str, "auto", choices=("auto", "manual")),
+    "fault_action": OptionSpec(str, "zero", choices=("zero", "disarm")),
+    "enable_on_start": OptionSpec(bool, True),
+    "estop_release": OptionSpec(str, "socket", choices=("socket", "any"),
+                                help="who may release an e-stop: the control socket only, or "
+                                     "also a CAN twist frame's ENABLE flag"),
+    "state_file": OptionSpec(str, "", help="the e-stop latch file; empty: $STATE_DIRECTORY/"
+                                           "estop, else ~/.local/state/wheelgate/"),
+    "controller_watchdog": OptionSpec(
+        str, "required", choices=("required", "warn"),
+        help="a controller-side watchdog the protocol can set over CAN but that is not "
+             "confirmed: refuse to arm the motor (required) or arm it with a warning (warn)"),
+    "enable_timeout_s": OptionSpec(float, 5.0, minimum=0.1),
+    "odom_rate_hz": OptionSpec(float, 50.0, minimum=0.1, maximum=1000.0),
+    "status_rate_hz": OptionSpec(float, 10.0, minimum=0.1, maximum=1000.0),
+    "socket": OptionSpec(str, "", help="control socket path; empty: the default path"),
+    "socket_mode": OptionSpec(int, 0o660, minimum=0, maximum=0o777),
+    "socket_uids": OptionSpec(list, []),
+    "can_input": OptionSpec(bool, True),
+    "can_ids": OptionSpec(dict, {}),
+    "rt_priority": OptionSpec(int, 0, minimum=0, maximum=99,
+                              help="SCHED_FIFO priority of the loop thread; 0: normal"),
+    "rt_cpu": OptionSpec(int, -1, minimum=-1, help="CPU to pin the loop to; -1: any"),
+    "lock_memory": OptionSpec(bool, False),
+    "spin_us": OptionSpec(float, 200.0, minimum=0.0, maximum=5000.0),
+    "tracking_tolerance_rad_s": OptionSpec(
+        float, DEFAULT_LIMITS.tolerance_rad_s, minimum=0.0,
+        help="wheel speed error allowed at standstill (wheel rad/s)"),
+    "tracking_tolerance_ratio": OptionSpec(
+        float, DEFAULT_LIMITS.tolerance_ratio, minimum=0.0,
+        help="added error allowed per rad/s of command"),
+    "tracking_time_s": OptionSpec(
+        float, DEFAULT_LIMITS.time_s, minimum=0.0,
+        help="how long a wheel may stay off its command before a fault; 0 disables the check"),
+    "tracking_steer_tolerance_rad": OptionSpec(
+        float, DEFAULT_LIMITS.steer_tolerance_rad, minimum=0.0,
+        help="steering-angle error allowed of a steering actuator (rad)"),
+})
+#: The keys of ``gateway.can_ids:``, the gateway's own CAN IDs (:class:`gateway.wire.can.CanIds`).
+CAN_ID_KEYS: Mapping[str, OptionSpec] = MappingProxyType({
+    "twist": OptionSpec(int, 0x100, minimum=0),
+    "odom_pose": OptionSpec(int, 0x101, minimum=0),
+    "odom_velocity": OptionSpec(int, 0x102, minimum=0),
+    "status": OptionSpec(int, 0x103, minimum=0),
+    "error": OptionSpec(int, 0x104, minimum=0),
+    "extended": OptionSpec(bool, False),
+})
+#: The keys of ``bus:``; each can also come from ``GATEWAY_<KEY>`` or a ``--<key>`` flag.
+BUS_KEYS: Mapping[str, OptionSpec] = MappingProxyType({
+    "interface": OptionSpec(str, "virtual"),
+    "channel": OptionSpec(str, "wheelgate"),
+    "bitrate": OptionSpec(int, 500_000, minimum=10_000, maximum=1_000_000),
+})

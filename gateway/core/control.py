@@ -1,0 +1,405 @@
+"""The gateway's decisions, kept pure: which twist to follow, when to stop, when to disarm.
+
+:class:`Supervisor` takes events (twists from any source, stop, e-stop, enable, disable, the
+motors' states) with explicit times and answers, each cycle, with a :class:`Decision`: the
+twist to command, whether to ramp to it through the acceleration limits or jump (e-stop), and
+whether the drives should be armed.  The loop (:mod:`gateway.runtime.loop`) does the I/O around it.
+
+States (:class:`~gateway.core.types.GatewayState`)::
+
+    DISABLED --enable--> ENABLING --all motors ENABLED--> RUNNING
+    RUNNING  --motor FAULT/OFFLINE, or a wheel off its command--> FAULT
+    FAULT    --all answer again, recovery "auto" (3 tries)--> ENABLING
+    FAULT    --enable (recovery "manual")--> ENABLING
+    any      --e-stop--> ESTOP --enable--> ENABLING
+    any      --disable--> DISABLED            ENABLING --timeout--> FAULT
+
+Safety rules:
+
+* no valid twist for ``cmd_timeout_s`` (when > 0): the target becomes zero, reached within the
+  deceleration limits;
+* an infeasible twist: ``reject`` answers with the error and ramps to zero; ``project``
+  follows the nearest feasible twist and counts a warning;
+* a motor that faults or stops answering, or a wheel that stays off its command longer than
+  ``tracking_time_s`` (:mod:`gateway.core.tracking`): zero for every wheel (and disarm with
+  ``fault_action: disarm``, or when a speed loop closed on the host -- DJI -- would have to
+  hold zero on the feedback in doubt); the error names the motor;
+* e-stop: zero at once, disarm, and stay there until an explicit enable.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+from gateway.core.errors import InfeasibleTwistError
+from gateway.core.tracking import SteerMonitor, TrackingMonitor
+from gateway.core.types import DriveState, ErrorCode, GatewayState, Twist
+
+if TYPE_CHECKING:
+    from collections.abc import Sequence
+
+    from gateway.core.kinematics import RobotModel
+    from gateway.core.settings import LoopConfig
+    from gateway.core.types import MotorStatus
+
+ZERO = Twist()
+#: Automatic re-enable attempts after a fault, once every motor answers again.
+AUTO_RETRIES = 3
+#: RUNNING this long without a fault gives back the automatic attempts (s): a fault that comes
+#: back soon after every recovery (a wheel pushing against an obstacle) is retried at most
+#: AUTO_RETRIES times, then waits for an explicit enable.
+AUTO_RETRY_RESET_S = 5.0
+#: Delay before the first automatic re-enable; the n-th waits n times as long (s).
+AUTO_RETRY_DELAY_S = 0.5
+#: Faults that put the feedback itself in doubt.
+_FEEDBACK_FAULTS = frozenset({ErrorCode.FEEDBACK_TIMEOUT, ErrorCode.TRACKING_ERROR})
+
+
+class Source(enum.Enum):
+    """Where a command came from."""
+
+    SOCKET = "socket"
+    CAN = "can"
+    INTERNAL = "internal"
+
+
+@dataclass(frozen=True, slots=True)
+class Rejection:
+    """Why a command was refused.
+
+    :param code: the error class.
+    :param message: a sentence for people.
+    :param error: the kinematic error, for infeasible twists.
+    """
+
+    code: ErrorCode
+    message: str
+    error: InfeasibleTwistError | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class Accepted:
+    """A twist that will be followed.
+
+    :param twist: the twist the gateway follows (the nearest feasible one when projected).
+    :param projected: whether it was projected from an infeasible request.
+    :param error: the kinematic error of the request, when projected.
+    """
+
+    twist: Twist
+    projected: bool = False
+    error: InfeasibleTwistError | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class Fault:
+    """Why the gateway went to FAULT just now.
+
+    :param code: the error class (``MOTOR_FAULT``, ``FEEDBACK_TIMEOUT``, ``TRACKING_ERROR``).
+    :param message: a sentence naming every motor involved.
+    """
+
+    code: ErrorCode
+    message: str
+
+
+@dataclass(frozen=True, slots=True)
+class Decision:
+    """What to command this cycle.
+
+    :param twist: the target twist.
+    :param ramp: reach it through the acceleration limits (False: jump, for e-stop).
+    :param armed: whether the drives should be enabled.
+    :param cmd_timeout: whether the command timeout forced the zero target.
+    """
+
+    twist: Twist
+    ramp: bool
+    armed: bool
+    cmd_timeout: bool
+
+
+class Supervisor:
+    """The gateway's state machine.
+
+    :param model: the robot, to check twists.
+    :param loop: the daemon's settings.
+    :param host_speed_loop: some wheel's speed loop is closed on the host (DJI): a fault
+        about feedback or tracking then releases the motors, whatever ``fault_action`` says.
+    """
+
+    def __init__(self, model: RobotModel, loop: LoopConfig,
+                 host_speed_loop: bool = False) -> None:
+        self.model = model
+        self.cfg = loop
+        self.host_speed_loop = host_speed_loop
+        self.state = GatewayState.DISABLED
+        self.target = ZERO
+        self._last_twist_s: float | None = None
+        self._enable_started_s = 0.0
+        #: The reason for the current FAULT or ESTOP state, for status reports.
+        self.reason = ""
+        #: Names of the motors that caused the current fault.
+        self.faulted: tuple[str, ...] = ()
+        #: The error class of the current fault (twists refused in FAULT carry it).
+        self.fault_code = ErrorCode.MOTOR_FAULT
+        #: Counters of what happened, by kind.
+        self.counts = {"infeasible": 0, "projected": 0, "rejected": 0, "faults": 0,
+                       "cmd_timeouts": 0, "estops": 0}
+        #: Whether the bus can carry frames (``False`` from bus-off until the controller
+        #: reports that it is back): automatic recovery waits for it.
+        self.bus_ok = True
+        self._timed_out = False
+        self._pending_enable = False
+        self._fault_s = 0.0
+        self._now_hint = 0.0
+        self._auto_attempts = 0
+        self._running_since_s = 0.0
+        #: The tracking-error check (active while RUNNING).
+        self.tracking = TrackingMonitor(loop.tracking)
+        #: The steering actuators' angle check (active while RUNNING).
+        self.steer_tracking = SteerMonitor(loop.tracking)
+
+    # ----------------------------------------------------------------- commands
+
+    def twist(self, twist: Twist, now_s: float, steer: Sequence[float | None] | None = None
+              ) -> Accepted | Rejection:
+        """A twist from a client.
+
+        :param steer: current steering angles, for the feasibility check.
+        """
+        if self.state is not GatewayState.RUNNING:
+            self.counts["rejected"] += 1
+            return Rejection(*self._not_running())
+        try:
+            self.model.ik(twist, steer)
+        except InfeasibleTwistError as err:
+            self.counts["infeasible"] += 1
+            self._last_twist_s = now_s
+            if self.cfg.infeasible_policy == "project":
+                self.counts["projected"] += 1
+                self.target = err.nearest
+                return Accepted(err.nearest, projected=True, error=err)
+            self.target = ZERO
+            return Rejection(ErrorCode.INFEASIBLE_TWIST, str(err), err)
+        self.target = twist
+        self._last_twist_s = now_s
+        self._timed_out = False
+        return Accepted(twist)
+
+    def stop(self, now_s: float) -> None:
+        """Zero twist, drives stay armed."""
+        self.target = ZERO
+        self._last_twist_s = now_s
+
+    def estop(self, reason: str = "e-stop requested") -> None:
+        """Zero at once and disarm until an explicit enable."""
+        if self.state is not GatewayState.ESTOP:
+            self.counts["estops"] += 1
+        self.state = GatewayState.ESTOP
+        self.reason = reason
+        self.target = ZERO
+
+    def enable(self, now_s: float) -> None:
+        """Start (or restart) the enable sequence; also the way out of ESTOP and FAULT."""
+        self._auto_attempts = 0
+        self._start_enable(now_s)
+
+    def _start_enable(self, now_s: float) -> None:
+        if self.state in (GatewayState.RUNNING, GatewayState.ENABLING, GatewayState.STOPPING):
+            return
+        self.state = GatewayState.ENABLING
+        self._enable_started_s = now_s
+        self._pending_enable = True
+        self.target = ZERO
+        self.reason = ""
+        self.faulted = ()
+
+    def disable(self) -> None:
+        """Ramp to zero and disarm (an e-stop stays latched: only enable releases it)."""
+        if self.state not in (GatewayState.STOPPING, GatewayState.ESTOP):
+            self.state = GatewayState.DISABLED
+        self.target = ZERO
+
+    def shutdown(self) -> None:
+        """The process is stopping: zero and disarm for good."""
+        self.state = GatewayState.STOPPING
+        self.target = ZERO
+
+    def enable_failed(self, why: str) -> str:
+        """The drives refused the enable sequence: FAULT with ``why`` as the reason."""
+        self.counts["faults"] += 1
+        self.state = GatewayState.FAULT
+        self.target = ZERO
+        self._fault_s = self._now_hint
+        self.fault_code = ErrorCode.MOTOR_FAULT
+        self.reason = f"enable refused: {why}"
+        return self.reason
+
+    @property
+    def cmd_timeout_active(self) -> bool:
+        """Whether the command timeout holds the target at zero."""
+        return self._timed_out
+
+    def take_enable_request(self) -> bool:
+        """Whether the loop should send the drives' enable frames now (once per enable)."""
+        pending, self._pending_enable = self._pending_enable, False
+        return pending
+
+    # ----------------------------------------------------------------- per cycle
+
+    def motors(
+        self,
+        statuses: Sequence[MotorStatus],
+        now_s: float,
+        command_rad_s: Sequence[float] | None = None,
+        steer_rad: Sequence[float] | None = None,
+    ) -> Fault | None:
+        """Take the motors' states; return the fault when one starts.
+
+        :param command_rad_s: each drive motor's wheel speed as commanded the cycle before
+            (the order of ``statuses``, whose drive motors come first; steering actuators
+            follow), for the tracking-error check; ``None`` skips it.
+        :param steer_rad: each steering actuator's angle as commanded the cycle before (the
+            order of the statuses after the drive motors), for the steering check.
+        """
+        self._now_hint = now_s
+        if self.state is not GatewayState.RUNNING:
+            self.tracking.reset()
+            self.steer_tracking.reset()
+        bad = [s for s in statuses if s.state in (DriveState.FAULT, DriveState.OFFLINE)]
+        if self.state is GatewayState.ENABLING:
+            if statuses and all(s.state is DriveState.ENABLED for s in statuses):
+                self.state = GatewayState.RUNNING
+                self._running_since_s = now_s
+                self._last_twist_s = now_s
+                return None
+            if now_s - self._enable_started_s > self.cfg.enable_timeout_s:
+                late = [s for s in statuses if s.state is not DriveState.ENABLED]
+                return self._fault(late, "did not enable within "
+                                         f"{self.cfg.enable_timeout_s:g} s")
+            return None
+        if self.state is GatewayState.RUNNING:
+            if self._auto_attempts and now_s - self._running_since_s >= AUTO_RETRY_RESET_S:
+                self._auto_attempts = 0
+            if bad:
+                return self._fault(bad, "")
+            if command_rad_s is not None:
+                n = len(command_rad_s)
+                feedback = [s.feedback for s in statuses]
+                if len(feedback) != n:
+                    del feedback[n:]
+                off = self.tracking.check(command_rad_s, feedback, now_s)
+                if off is not None:
+                    return self._fault([statuses[off.index]], off.describe(),
+                                       ErrorCode.TRACKING_ERROR)
+                if steer_rad is not None:
+                    actuators = statuses[n:]
+                    turn = self.steer_tracking.check(
+                        steer_rad, [s.feedback for s in actuators], now_s
+                    )
+                    if turn is not None:
+                        return self._fault([actuators[turn.index]], turn.describe(),
+                                           ErrorCode.TRACKING_ERROR)
+            return None
+        if (
+            self.state is GatewayState.FAULT
+            and self.cfg.feedback_recovery == "auto"
+            and statuses
+            and not any(s.state is DriveState.OFFLINE for s in statuses)
+            and self.bus_ok
+            and self._auto_attempts < AUTO_RETRIES
+            and now_s - self._fault_s >= AUTO_RETRY_DELAY_S * (self._auto_attempts + 1)
+            and not (self.host_speed_loop and self.fault_code is ErrorCode.TRACKING_ERROR)
+        ):
+            # Every motor answers again: re-run the enable sequence, which clears the errors
+            # that the outage latched (an expired watchdog).  A fault that persists, or comes
+            # back within AUTO_RETRY_RESET_S of each recovery, is retried AUTO_RETRIES times and
+            # then waits for an explicit enable.  So does at once a wheel that did not follow a
+            # speed loop closed on the host: that loop ran on the very feedback that failed it
+            # (a late DJI stream makes it run away again after every re-enable).
+            self._auto_attempts += 1
+            self._start_enable(now_s)
+        return None
+
+    def _fault(self, motors: Sequence[MotorStatus], why: str,
+               code: ErrorCode = ErrorCode.MOTOR_FAULT) -> Fault:
+        self.counts["faults"] += 1
+        self._fault_s = self._now_hint
+        self.state = GatewayState.FAULT
+        self.target = ZERO
+        self.faulted = tuple(s.name for s in motors)
+        parts = []
+        for s in motors:
+            if why:
+                text = why
+            elif s.state is DriveState.OFFLINE:
+                age = "no feedback yet" if s.feedback_age_s is None else (
+                    f"no feedback for {s.feedback_age_s:.3f} s")
+                text = f"stopped answering ({age})"
+                code = ErrorCode.FEEDBACK_TIMEOUT
+            else:
+                text = f"reports a fault: {s.detail or repr(s.faults)}"
+            parts.append(f"motor {s.name!r} (node {s.node_id}) {text}")
+        self.reason = "; ".join(parts)
+        self.fault_code = code
+        return Fault(code, self.reason)
+
+    def bus_fault(self, message: str, names: Sequence[str] = ()) -> Fault | None:
+        """The bus cannot carry the commands (bus-off, a command that does not go out): a
+        fault with ``message`` while the motors are enabled or enabling, else nothing.
+
+        :param names: the motors the message is about, when it names any.
+        """
+        if self.state not in (GatewayState.RUNNING, GatewayState.ENABLING):
+            return None
+        self.counts["faults"] += 1
+        self._fault_s = self._now_hint
+        self.state = GatewayState.FAULT
+        self.target = ZERO
+        self.faulted = tuple(names)
+        self.reason = message
+        self.fault_code = ErrorCode.BUS_ERROR
+        return Fault(ErrorCode.BUS_ERROR, message)
+
+    def decide(self, now_s: float) -> Decision:
+        """The command for this cycle."""
+        state = self.state
+        if state is GatewayState.ESTOP:
+            return Decision(ZERO, ramp=False, armed=False, cmd_timeout=False)
+        if state in (GatewayState.DISABLED, GatewayState.STOPPING):
+            return Decision(ZERO, ramp=True, armed=False, cmd_timeout=False)
+        if state is GatewayState.FAULT:
+            # Zero at once: with a motor gone, no wheel should keep driving on its own.  A speed
+            # loop closed on the host cannot hold zero on feedback that is missing, late or not
+            # followed (late DJI feedback makes it run away): release those motors.
+            release = self.cfg.fault_action == "disarm" or (
+                self.host_speed_loop and self.fault_code in _FEEDBACK_FAULTS)
+            return Decision(ZERO, ramp=False, armed=not release, cmd_timeout=False)
+        if state is GatewayState.ENABLING:
+            return Decision(ZERO, ramp=True, armed=True, cmd_timeout=False)
+        timeout = self.cfg.cmd_timeout_s
+        if (
+            timeout > 0.0
+            and self.target != ZERO
+            and self._last_twist_s is not None
+            and now_s - self._last_twist_s > timeout
+        ):
+            self.target = ZERO
+            if not self._timed_out:
+                self.counts["cmd_timeouts"] += 1
+            self._timed_out = True
+        return Decision(self.target, ramp=True, armed=True, cmd_timeout=self._timed_out)
+
+    def _not_running(self) -> tuple[ErrorCode, str]:
+        if self.state is GatewayState.ESTOP:
+            return ErrorCode.ESTOP, f"e-stop is latched ({self.reason}); send enable first"
+        if self.state is GatewayState.FAULT:
+            return self.fault_code, f"gateway is in FAULT: {self.reason}"
+        if self.state is GatewayState.ENABLING:
+            return ErrorCode.NOT_ENABLED, "drives are still enabling"
+        return ErrorCode.NOT_ENABLED, (
+            f"gateway is {self.state.name}; send enable first"
+        )

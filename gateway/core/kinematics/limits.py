@@ -1,0 +1,163 @@
+"""Speed, acceleration and steering-rate limits that keep the path.
+
+* **Speed**: twist caps (linear and angular) and every motor's ``max_rpm`` (through its gear
+  ratio) are met by scaling the *whole* twist by one factor, so direction and curvature stay.
+* **Acceleration**: the change from the previous command is scaled by one factor so that no
+  wheel's speed changes faster than ``max_wheel_accel_rad_s2``; all wheels reach the new command
+  together, and from rest the direction and curvature are kept.  Where the interpolated twist
+  would be infeasible (steering cones), the robot decelerates along its previous path instead.
+* **Steering rate**: a steered wheel turns at most ``max_steer_rate * dt`` per cycle, and while
+  it lags behind its target it only drives the part of its target speed that lies along its
+  actual heading (cosine of the error), so it does not push sideways.
+
+Nothing is silent: every call returns a :class:`LimitReport` with the factors applied.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+from gateway.core.errors import KinematicsError
+from gateway.core.kinematics.model import IkResult
+from gateway.core.types import Twist
+
+if TYPE_CHECKING:
+
+    from gateway.core.kinematics.model import RobotModel
+
+
+@dataclass(frozen=True, slots=True)
+class Limits:
+    """Limits applied after inverse kinematics.
+
+    :param max_wheel_rad_s: per wheel (model order), the largest wheel speed, rad/s.
+    :param max_wheel_accel_rad_s2: the largest change of any wheel's speed, rad/s^2.
+    :param max_linear_m_s: cap on ``hypot(vx, vy)``, m/s.
+    :param max_angular_rad_s: cap on ``|wz|``, rad/s.
+    """
+
+    max_wheel_rad_s: tuple[float, ...]
+    max_wheel_accel_rad_s2: float = math.inf
+    max_linear_m_s: float = math.inf
+    max_angular_rad_s: float = math.inf
+
+
+@dataclass(frozen=True, slots=True)
+class LimitReport:
+    """What the limits did to one command.
+
+    :param speed_scale: factor on the twist from speed limits (1.0: untouched).
+    :param accel_scale: factor on the change from the previous command (1.0: untouched).
+    :param steer_limited: names of wheels whose steering was rate limited.
+    :param requested: the twist asked for.
+    """
+
+    speed_scale: float
+    accel_scale: float
+    steer_limited: tuple[str, ...]
+    requested: Twist
+
+    @property
+    def limited(self) -> bool:
+        """Whether any limit changed the command."""
+        return self.speed_scale < 1.0 or self.accel_scale < 1.0 or bool(self.steer_limited)
+
+
+def speed_scale(model: RobotModel, result: IkResult, limits: Limits) -> float:
+    """The largest factor in (0, 1] that keeps ``result`` within the speed limits."""
+    t = result.twist
+    scale = 1.0
+    lin = math.hypot(t.vx_m_s, t.vy_m_s)
+    if lin > limits.max_linear_m_s:
+        scale = limits.max_linear_m_s / lin
+    if abs(t.wz_rad_s) > limits.max_angular_rad_s:
+        scale = min(scale, limits.max_angular_rad_s / abs(t.wz_rad_s))
+    for speed, cap in zip(result.wheel_rad_s, limits.max_wheel_rad_s, strict=True):
+        if abs(speed) > cap:
+            scale = min(scale, cap / abs(speed))
+    return scale
+
+
+def _scaled(result: IkResult, factor: float) -> IkResult:
+    return IkResult(
+        result.twist.scaled(factor),
+        tuple(s * factor for s in result.wheel_rad_s),
+        result.steer_rad,
+        tuple(None if r is None else r * factor for r in result.steer_rate_rad_s),
+    )
+
+
+def apply_limits(
+    model: RobotModel,
+    result: IkResult,
+    limits: Limits,
+    prev: IkResult | None = None,
+    dt_s: float = 0.0,
+) -> tuple[IkResult, LimitReport]:
+    """Limit one inverse-kinematics result.
+
+    :param model: the robot.
+    :param result: the unlimited result (from :meth:`RobotModel.ik`).
+    :param limits: the limits.
+    :param prev: the previous limited command; acceleration and steering-rate limits need it.
+    :param dt_s: time since ``prev``, s.
+    :return: the limited result and what was done.
+    :raises KinematicsError: if ``limits`` does not match the model.
+    """
+    if len(limits.max_wheel_rad_s) != model.n:
+        raise KinematicsError(
+            f"Expected {model.n} wheel speed limits, but got {len(limits.max_wheel_rad_s)}"
+        )
+    requested = result.twist
+    s_speed = speed_scale(model, result, limits)
+    if s_speed < 1.0:
+        result = _scaled(result, s_speed)
+    s_accel = 1.0
+    steer_limited: list[str] = []
+    if prev is not None and dt_s > 0.0:
+        max_step = limits.max_wheel_accel_rad_s2 * dt_s
+        p, c = prev.twist, result.twist
+        d = (c.vx_m_s - p.vx_m_s, c.vy_m_s - p.vy_m_s, c.wz_rad_s - p.wz_rad_s)
+        need = model.max_wheel_change(*d)
+        if need > max_step:
+            s_accel = max_step / need
+            t = Twist(p.vx_m_s + s_accel * d[0], p.vy_m_s + s_accel * d[1],
+                      p.wz_rad_s + s_accel * d[2])
+            interpolated = model.try_ik(t, prev.steer_rad)
+            if interpolated is not None:
+                result = interpolated
+            else:
+                # The straight change passes through twists the steering cannot follow:
+                # slow down along the previous path instead.
+                stop = model.max_wheel_change(p.vx_m_s, p.vy_m_s, p.wz_rad_s)
+                result = model.ik(p.scaled(max(0.0, 1.0 - max_step / stop)), prev.steer_rad)
+                s_accel = 0.0
+        result, steer_limited = _limit_steering(model, result, prev, dt_s)
+    report = LimitReport(s_speed, s_accel, tuple(steer_limited), requested)
+    return result, report
+
+
+def _limit_steering(
+    model: RobotModel, result: IkResult, prev: IkResult, dt_s: float
+) -> tuple[IkResult, list[str]]:
+    names: list[str] = []
+    limited = model.rate_limited_wheels
+    if not limited:
+        return result, names
+    speeds = list(result.wheel_rad_s)
+    angles = list(result.steer_rad)
+    for i, w in limited:
+        target, before = result.steer_rad[i], prev.steer_rad[i]
+        if target is None or before is None:
+            continue
+        step = w.max_steer_rate * dt_s
+        if abs(target - before) > step:
+            actual = before + math.copysign(step, target - before)
+            speeds[i] *= max(0.0, math.cos(target - actual))
+            angles[i] = actual
+            names.append(w.name)
+    if not names:
+        return result, names
+    return IkResult(result.twist, tuple(speeds), tuple(angles), result.steer_rate_rad_s), names

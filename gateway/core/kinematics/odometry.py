@@ -1,0 +1,183 @@
+r"""Wheel odometry by exact SE(2) integration.
+
+Between two encoder samples the wheel-angle increments :math:`\Delta\varphi` give, through the
+same least-squares forward kinematics as wheel speeds, a body displacement
+:math:`\delta = (\delta_x, \delta_y, \delta_\theta)`.  The pose is then updated on the group,
+as in seed 004:
+
+.. math::
+
+    T' = T \exp(\hat\delta), \qquad
+    \exp(\hat\delta)_{xy} =
+    \begin{pmatrix} A & -B \\ B & A \end{pmatrix}
+    \begin{pmatrix} \delta_x \\ \delta_y \end{pmatrix},\quad
+    A = \frac{\sin\delta_\theta}{\delta_\theta},\;
+    B = \frac{1 - \cos\delta_\theta}{\delta_\theta}
+
+which is exact for motion at constant twist (an arc) and uses Taylor series near
+:math:`\delta_\theta = 0`, so straight lines are exact too.  Euler integration is not used.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+from gateway.core.errors import KinematicsError
+from gateway.core.types import Twist
+
+if TYPE_CHECKING:
+    from collections.abc import Sequence
+
+    from gateway.core.kinematics.model import RobotModel
+
+
+@dataclass(frozen=True, slots=True)
+class Pose:
+    """A planar pose in the odometry frame.
+
+    :param x_m: x, m.
+    :param y_m: y, m.
+    :param theta_rad: heading, rad, wrapped to [-pi, pi).
+    """
+
+    x_m: float = 0.0
+    y_m: float = 0.0
+    theta_rad: float = 0.0
+
+
+def se2_exp(dx: float, dy: float, dtheta: float) -> Pose:
+    """The group exponential of a body displacement (a relative pose).
+
+    >>> p = se2_exp(math.pi / 2, 0.0, math.pi / 2)   # quarter circle of radius 1
+    >>> round(p.x_m, 9), round(p.y_m, 9), round(p.theta_rad, 9)
+    (1.0, 1.0, 1.570796327)
+    """
+    a, b = _exp_coefficients(dtheta)
+    return Pose(a * dx - b * dy, b * dx + a * dy, dtheta)
+
+
+def _exp_coefficients(dtheta: float) -> tuple[float, float]:
+    """``(sin(t)/t, (1 - cos(t))/t)``, by Taylor series near ``t = 0``."""
+    t2 = dtheta * dtheta
+    if abs(dtheta) < 1e-4:
+        return 1.0 - t2 / 6.0 + t2 * t2 / 120.0, dtheta / 2.0 - dtheta * t2 / 24.0
+    return math.sin(dtheta) / dtheta, (1.0 - math.cos(dtheta)) / dtheta
+
+
+def compose(pose: Pose, delta: Pose) -> Pose:
+    """``pose`` followed by the relative pose ``delta`` (heading wrapped)."""
+    c, s = math.cos(pose.theta_rad), math.sin(pose.theta_rad)
+    theta = (pose.theta_rad + delta.theta_rad + math.pi) % (2 * math.pi) - math.pi
+    return Pose(
+        pose.x_m + c * delta.x_m - s * delta.y_m,
+        pose.y_m + s * delta.x_m + c * delta.y_m,
+        theta,
+    )
+
+
+@dataclass(frozen=True, slots=True)
+class OdometryState:
+    """Odometry after one update.
+
+    :param pose: the integrated pose.
+    :param twist: body velocity over the last interval.
+    :param slip_m_s: RMS residual of the forward kinematics over the last interval, m/s.
+    :param distance_m: path length travelled so far, m.
+    :param timestamp_s: time of the last sample, s.
+    """
+
+    pose: Pose
+    twist: Twist
+    slip_m_s: float
+    distance_m: float
+    timestamp_s: float
+
+
+class Odometry:
+    """Integrates wheel angles into a pose.
+
+    Pure: it keeps the previous sample but reads no clock; callers pass sample times.
+
+    :param model: the robot.
+    :param pose: the starting pose.
+    """
+
+    def __init__(self, model: RobotModel, pose: Pose | None = None) -> None:
+        self.model = model
+        self.state = OdometryState(pose or Pose(), Twist(), 0.0, 0.0, 0.0)
+        self._last: list[float | None] | None = None
+        self._last_steer: Sequence[float | None] | None = None
+
+    def reset(self, pose: Pose | None = None) -> None:
+        """Set the pose (origin by default) and zero the distance; keeps the last sample."""
+        self.state = OdometryState(
+            pose or Pose(), Twist(), 0.0, 0.0, self.state.timestamp_s
+        )
+
+    def update(
+        self,
+        positions_rad: Sequence[float | None],
+        timestamp_s: float,
+        steer_rad: Sequence[float | None] | None = None,
+    ) -> OdometryState:
+        """Take one sample of every wheel's unwrapped angle.
+
+        :param positions_rad: wheel angles (model order), ``None`` for wheels not measured.
+        :param timestamp_s: sample time, s.
+        :param steer_rad: steering angles at this sample (steered wheels).
+        :raises KinematicsError: for wrong lengths or too few measured wheels.
+        """
+        if len(positions_rad) != self.model.n:
+            raise KinematicsError(
+                f"Expected {self.model.n} wheel positions, but got {len(positions_rad)}"
+            )
+        steer = steer_rad if steer_rad is not None else self.model.neutral_steer
+        last = self._last
+        self._last = list(positions_rad)
+        last_steer, self._last_steer = self._last_steer, steer
+        if last is None:
+            self.state = OdometryState(
+                self.state.pose, Twist(), 0.0, self.state.distance_m, timestamp_s
+            )
+            return self.state
+        deltas = [
+            None if p is None or q is None else p - q
+            for p, q in zip(positions_rad, last, strict=True)
+        ]
+        mid = steer
+        if last_steer is not None and steer != last_steer:
+            # Equal angles need no midpoint (0.5 * (a + a) == a exactly).
+            mid = [
+                None if a is None or b is None else 0.5 * (a + b)
+                for a, b in zip(steer, last_steer, strict=True)
+            ]
+        dx, dy, dtheta, residual = self.model.fk_twist(deltas, mid)
+        state = self.state
+        pose = _advance(state.pose, dx, dy, dtheta)
+        dt = timestamp_s - state.timestamp_s
+        if dt > 0:
+            inv = 1.0 / dt
+            twist = Twist(dx * inv, dy * inv, dtheta * inv)
+            slip = residual / dt
+        else:
+            twist, slip = Twist(), 0.0
+        # The displacement is the twist times the interval, so the norm of its linear part
+        # is the arc length, not the chord.
+        dist = state.distance_m + math.hypot(dx, dy)
+        self.state = OdometryState(pose, twist, slip, dist, timestamp_s)
+        return self.state
+
+
+def _advance(pose: Pose, dx: float, dy: float, dtheta: float) -> Pose:
+    """``compose(pose, se2_exp(dx, dy, dtheta))`` with one allocation (same arithmetic)."""
+    a, b = _exp_coefficients(dtheta)
+    ex, ey = a * dx - b * dy, b * dx + a * dy
+    theta0 = pose.theta_rad
+    c, s = math.cos(theta0), math.sin(theta0)
+    return Pose(
+        pose.x_m + c * ex - s * ey,
+        pose.y_m + s * ex + c * ey,
+        (theta0 + dtheta + math.pi) % (2 * math.pi) - math.pi,
+    )

@@ -1,0 +1,85 @@
+"""Typed keys of a configuration block: one validator for driver options and drive geometry."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+from gateway.core.errors import ConfigError
+
+
+@dataclass(frozen=True, slots=True)
+class OptionSpec:
+    """One protocol key of a motor block.
+
+    :param kind: the Python type expected (``int``, ``float``, ``str`` or ``bool``).
+    :param default: value when the key is absent; ``None`` makes the key required.
+    :param choices: allowed values, if restricted.
+    :param minimum: smallest allowed number, if bounded.
+    :param maximum: largest allowed number, if bounded.
+    :param help: one line for docs and error messages.
+    """
+
+    kind: type
+    default: object = None
+    choices: tuple[object, ...] = ()
+    minimum: float | None = None
+    maximum: float | None = None
+    help: str = ""
+
+    def validate(self, value: object, where: str) -> object:
+        """Check one value and return it normalised (ints accepted for floats).
+
+        :raises ConfigError: naming ``where``, what was expected and what came.
+        """
+        ok: bool
+        if self.kind is float:
+            ok = isinstance(value, (int, float)) and not isinstance(value, bool)
+            if ok:
+                value = float(value)  # type: ignore[arg-type]
+                ok = math.isfinite(value)
+        elif self.kind is int:
+            ok = isinstance(value, int) and not isinstance(value, bool)
+        else:
+            ok = isinstance(value, self.kind)
+        if not ok:
+            raise ConfigError(f"{where}: expected {self.kind.__name__}, got {value!r}")
+        if self.choices and value not in self.choices:
+            allowed = ", ".join(repr(c) for c in self.choices)
+            raise ConfigError(f"{where}: expected one of {allowed}, got {value!r}")
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            if self.minimum is not None and value < self.minimum:
+                raise ConfigError(f"{where}: expected at least {self.minimum:g}, got {value!r}")
+            if self.maximum is not None and value > self.maximum:
+                raise ConfigError(f"{where}: expected at most {self.maximum:g}, got {value!r}")
+        return value
+
+
+def validate_block(
+    raw: object, specs: Mapping[str, OptionSpec], where: str, what: str = "keys"
+) -> dict[str, object]:
+    """Validate a mapping of keys against their specs and fill in defaults.
+
+    :param raw: the block as loaded from YAML.
+    :param specs: the allowed keys.
+    :param where: file and key path of the block, for messages.
+    :param what: how to name the allowed keys in the unknown-key message.
+    :raises ConfigError: for a non-mapping, an unknown key, a missing required key or a bad value.
+    """
+    if not isinstance(raw, Mapping):
+        raise ConfigError(f"{where}: expected a mapping, got {raw!r}")
+    for key in raw:
+        if key not in specs:
+            known = ", ".join(sorted(specs)) or "none"
+            raise ConfigError(f"{where}.{key}: unknown key (known {what}: {known})")
+    out: dict[str, object] = {}
+    for key, spec in specs.items():
+        if key in raw:
+            out[key] = spec.validate(raw[key], f"{where}.{key}")
+        elif spec.default is None:
+            hint = f" ({spec.help})" if spec.help else ""
+            raise ConfigError(f"{where}.{key}: required key is missing{hint}")
+        else:
+            out[key] = spec.default
+    return out

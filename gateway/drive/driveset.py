@@ -1,0 +1,260 @@
+"""The motors of one robot grouped by protocol: one driver instance per driver name.
+
+:class:`DriveSet` is what the loop and the CLI talk to: it takes every wheel's speed in model
+order, hands each driver the speeds of its own motors and returns all frames of the cycle in
+one list (moteus' "build all, then send once"), so no two wheels act on commands from different
+cycles.
+
+Steering actuators (``steering:`` blocks) join the driver of their protocol, after its drive
+motors: a driver serves every motor of its protocol on the bus, whatever each one does (DJI packs
+four ESCs into one frame, CANopen has one SYNC per bus).  Their setpoint is the steering angle of
+the first wheel they turn (wheels steered together share it; through an Ackermann linkage, the
+virtual middle wheel's angle, :mod:`gateway.core.linkage`), and their feedback is the measured
+angle,
+which the odometry uses in place of the commanded one (:meth:`DriveSet.measured_steer`).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from gateway.core.linkage import virtual_angle, wheel_angle
+from gateway.drive.registry import get_driver_class
+
+if TYPE_CHECKING:
+    from collections.abc import Sequence
+
+    from gateway.core.protection import Protection
+    from gateway.core.settings import GatewayConfig
+    from gateway.core.types import Frame, MotorConfig, MotorStatus, WheelFeedback
+    from gateway.drive.driver import MotorDriver
+    from gateway.drive.filters import CanFilter
+    from gateway.sim.device import DeviceSimulator
+
+
+class DriveSet:
+    """Every driven wheel's driver, and every steering actuator's.
+
+    :param config: the validated configuration.
+    :raises DriverNotFoundError: if a driver cannot be loaded.
+    """
+
+    def __init__(self, config: GatewayConfig) -> None:
+        self.config = config
+        n = len(config.motors)
+        # Setpoint slots: 0..n-1 are the wheels' speeds (model order), n + k the steering angle
+        # of actuator k.
+        slots: list[MotorConfig | None] = [*config.motors, *config.steering]
+        groups: dict[str, list[int]] = {}
+        for i, motor in enumerate(slots):
+            if motor is not None:
+                groups.setdefault(motor.driver, []).append(i)
+        #: (driver, setpoint slots) pairs: a slot below the number of wheels is that wheel's
+        #: speed (model order); slot ``wheels + k`` is steering actuator ``k``'s angle.
+        self.groups: tuple[tuple[MotorDriver, tuple[int, ...]], ...] = tuple(
+            (
+                get_driver_class(name)([m for m in (slots[i] for i in idx) if m is not None]),
+                tuple(idx),
+            )
+            for name, idx in groups.items()
+        )
+        for drv, _ in self.groups:
+            drv.watchdog_policy = config.loop.controller_watchdog
+        index = config.model.index
+        #: Per steering actuator, the model indices of the wheels it turns.
+        self.steered_by: tuple[tuple[int, ...], ...] = tuple(
+            tuple(index(w) for w in a.steers) for a in config.steering
+        )
+        wheels = config.model.wheels
+        #: Per steering actuator, ``None`` (direct) or, for an Ackermann linkage, the axle's
+        #: x and each of its wheels' y (m, body frame).
+        self._linkage: tuple[tuple[float, tuple[float, ...]] | None, ...] = tuple(
+            (wheels[ix[0]].x, tuple(wheels[i].y for i in ix)) if a.linkage == "ackermann"
+            else None
+            for a, ix in zip(config.steering, self.steered_by, strict=True)
+        )
+        #: Whether any driver closes its speed loop on the host (see MotorDriver).
+        self.host_speed_loop = any(drv.HOST_SPEED_LOOP for drv, _ in self.groups)
+        flat = [i for _, idx in self.groups for i in idx]
+        self._whole = len(self.groups) == 1 and flat == list(range(n))
+        #: Positions in the drivers' concatenated status that give model order (``None``:
+        #: already in model order), so :meth:`status` needs no sort per cycle.
+        self._status_order: tuple[int, ...] | None = (
+            None if flat == sorted(flat) else tuple(sorted(range(len(flat)), key=flat.__getitem__))
+        )
+
+    def steer_setpoints(self, steer_rad: Sequence[float | None]) -> list[float]:
+        """Every steering actuator's setpoint for these wheel angles (model order)."""
+        out = []
+        for ix, link in zip(self.steered_by, self._linkage, strict=True):
+            if link is None:
+                out.append(steer_rad[ix[0]] or 0.0)
+                continue
+            # Every wheel of an inverse-kinematics solve gives the same virtual angle, except
+            # when a wheel stopped at its limit (a twist too slow to slip beyond the
+            # tolerance): then the smallest keeps every wheel within its limits.
+            candidates = [virtual_angle(steer_rad[i] or 0.0, link[0], y)
+                          for i, y in zip(ix, link[1], strict=True)]
+            out.append(min(candidates, key=abs))
+        return out
+
+    def wheel_angles(self, actuator: int, angle: float) -> list[tuple[int, float]]:
+        """(model index, steering angle) of every wheel that steering actuator ``actuator``
+        turns, with the actuator at ``angle`` (rad)."""
+        ix, link = self.steered_by[actuator], self._linkage[actuator]
+        if link is None:
+            return [(i, angle) for i in ix]
+        return [(i, wheel_angle(angle, link[0], y)) for i, y in zip(ix, link[1], strict=True)]
+
+    def _split(
+        self, wheel_rad_s: Sequence[float], steer_rad: Sequence[float | None] | None
+    ) -> list[Sequence[float]]:
+        if self._whole and len(wheel_rad_s) == len(self.config.motors):
+            return [wheel_rad_s]  # one driver for every wheel, in model order: nothing to split
+        setpoints = list(wheel_rad_s)
+        if self.steered_by:
+            if steer_rad is None:
+                raise ValueError(
+                    f"Expected the wheels' steering angles for the {len(self.steered_by)} "
+                    f"steering actuators, but got None."
+                )
+            setpoints.extend(self.steer_setpoints(steer_rad))
+        return [[setpoints[i] for i in idx] for _, idx in self.groups]
+
+    def enable(self, now_s: float) -> list[Frame]:
+        """Enable frames of every driver."""
+        return [f for drv, _ in self.groups for f in drv.enable(now_s)]
+
+    def disable(self, now_s: float) -> list[Frame]:
+        """Zero-speed and disarm frames of every driver."""
+        return [f for drv, _ in self.groups for f in drv.disable(now_s)]
+
+    def command(
+        self,
+        wheel_rad_s: Sequence[float],
+        now_s: float,
+        steer_rad: Sequence[float | None] | None = None,
+    ) -> list[Frame]:
+        """This cycle's frames for every wheel (model order, rad/s) and steering actuator.
+
+        :param steer_rad: every wheel's steering angle (model order, ``None`` for wheels not
+            steered); needed when there are steering actuators.
+        """
+        out: list[Frame] = []
+        setpoints = self._split(wheel_rad_s, steer_rad)
+        for (drv, _), values in zip(self.groups, setpoints, strict=True):
+            out.extend(drv.command(values, now_s))
+        return out
+
+    def preview(
+        self, wheel_rad_s: Sequence[float], steer_rad: Sequence[float | None] | None = None
+    ) -> list[Frame]:
+        """The frames for these speeds and angles with every driver freshly enabled and no
+        feedback (what ``wheelgate frames`` prints)."""
+        out: list[Frame] = []
+        setpoints = self._split(wheel_rad_s, steer_rad)
+        for (drv, _), values in zip(self.groups, setpoints, strict=True):
+            out.extend(drv.preview_command(values))
+        return out
+
+    def poll(self, now_s: float) -> list[Frame]:
+        """Housekeeping frames of every driver."""
+        return [f for drv, _ in self.groups for f in drv.poll(now_s)]
+
+    def on_frame(self, frame: Frame) -> bool:
+        """Give a received frame to the driver it belongs to."""
+        for drv, _ in self.groups:
+            if drv.on_frame(frame):
+                return True
+        return False
+
+    def receive_filters(self) -> tuple[CanFilter, ...] | None:
+        """The receive filters of every driver (:meth:`MotorDriver.receive_filters`), in
+        driver order without repeats: whatever :meth:`on_frame` would give a driver passes.
+
+        :return: ``None`` if a driver does not declare what it takes (:meth:`undeclared`):
+            it needs every frame of the bus.
+        """
+        out: dict[CanFilter, None] = {}
+        for drv, _ in self.groups:
+            declared = drv.receive_filters()
+            if declared is None:
+                return None
+            out.update(dict.fromkeys(declared))
+        return tuple(out)
+
+    def undeclared(self) -> list[str]:
+        """The class names of the drivers that do not declare the identifiers they take."""
+        return [type(drv).__name__ for drv, _ in self.groups if drv.receive_filters() is None]
+
+    def protections(self) -> list[tuple[str, Protection]]:
+        """Every motor's controller-side protection (:mod:`gateway.core.protection`), labelled
+        ``motor 'wheel' (driver node N)``, in the drivers' order."""
+        return [
+            (f"motor {m.wheel!r} ({m.driver} node {m.node_id})", drv.protection(i))
+            for drv, _ in self.groups
+            for i, m in enumerate(drv.motors)
+        ]
+
+    def uncontrolled_bands(self) -> list[tuple[float, float] | None]:
+        """Per wheel (model order; ``None`` for a passive wheel or none), the speeds its
+        controller does not speed-control (:meth:`MotorDriver.uncontrolled_band`)."""
+        out: list[tuple[float, float] | None] = [None] * len(self.config.motors)
+        for drv, idx in self.groups:
+            for i, slot in enumerate(idx):  # the driver's motors are its slots, in order
+                if slot < len(out):
+                    out[slot] = drv.uncontrolled_band(i)
+        return out
+
+    def status(self, now_s: float) -> list[MotorStatus]:
+        """Every motor's status: the drive motors in model order of their wheels, then the
+        steering actuators in the order of the ``steering:`` blocks."""
+        out: list[MotorStatus] = []
+        for drv, idx in self.groups:
+            statuses = drv.status(now_s)
+            if len(statuses) != len(idx):
+                raise ValueError(
+                    f"{type(drv).__name__}.status returned {len(statuses)} motors, "
+                    f"expected {len(idx)}"
+                )
+            out.extend(statuses)
+        order = self._status_order
+        return out if order is None else [out[k] for k in order]
+
+    def feedback_by_wheel(self) -> list[WheelFeedback | None]:
+        """The latest feedback of every wheel in model order (``None``: passive or none yet)."""
+        out = self._slot_feedback()
+        return out[: len(self.config.motors)] if self.steered_by else out
+
+    def steer_feedback(self) -> list[WheelFeedback | None]:
+        """The latest feedback of every steering actuator (``None``: none yet)."""
+        return self._slot_feedback()[len(self.config.motors):]
+
+    def _slot_feedback(self) -> list[WheelFeedback | None]:
+        """The latest feedback of every setpoint slot (the wheels, then the actuators)."""
+        out: list[WheelFeedback | None] = [None] * (len(self.config.motors) + len(self.steered_by))
+        for drv, idx in self.groups:
+            for k, i in enumerate(idx):
+                out[i] = drv.feedback(k)
+        return out
+
+    def measured_steer(
+        self, commanded: tuple[float | None, ...]
+    ) -> tuple[float | None, ...]:
+        """Every wheel's steering angle: measured by its actuator where it has one that has
+        reported, else ``commanded`` (returned as is when no actuator has reported)."""
+        if not self.steered_by:
+            return commanded
+        out: list[float | None] | None = None
+        for k, fb in enumerate(self.steer_feedback()):
+            if fb is None:
+                continue
+            if out is None:
+                out = list(commanded)
+            for i, angle in self.wheel_angles(k, fb.position_rad):
+                out[i] = angle
+        return commanded if out is None else tuple(out)
+
+    def simulators(self) -> list[DeviceSimulator]:
+        """A device simulator for every motor."""
+        return [drv.make_simulator(m) for drv, _ in self.groups for m in drv.motors]

@@ -1,0 +1,415 @@
+"""The daemon: the real-time loop around :class:`~gateway.runtime.loop.Gateway`.
+
+It runs the cycle at absolute deadlines (sleep, then spin for the last ``spin_us``), waits for
+the control socket while it sleeps so a twist is applied at the next cycle, speaks sd_notify
+(READY=1 once the drives are enabled, WATCHDOG=1 from the loop while it is healthy, STATUS=
+on every state change, STOPPING=1), and on SIGTERM or SIGINT sends zero and disarm frames
+before it exits 0.  With ``--sim`` every motor gets its device simulator on the same virtual
+bus in the same process.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import faulthandler
+import logging
+import math
+import select
+import signal
+import threading
+import time
+from typing import TYPE_CHECKING, Any
+
+import can
+
+from gateway.config import default_socket_path
+from gateway.core.control import Accepted, Source
+from gateway.core.errors import GatewayError
+from gateway.core.types import DriveState, ErrorCode, Frame, GatewayState
+from gateway.runtime.latch import EstopLatch, latch_path
+from gateway.runtime.loop import Gateway
+from gateway.runtime.report import status_dict
+from gateway.runtime.sdnotify import SystemdNotifier
+from gateway.runtime.server import ControlServer
+from gateway.runtime.timing import MissProbe, Scheduler, realtime_setup
+from gateway.sim.bus import SimulatedControllers
+from gateway.wire.socket import (
+    CommandRequest,
+    Op,
+    ProtocolError,
+    ResetOdometryRequest,
+    SubscribeRequest,
+    Topic,
+    TwistRequest,
+    event,
+    reply_error,
+    reply_ok,
+    reply_protocol_error,
+)
+
+if TYPE_CHECKING:
+    from types import FrameType
+
+    from gateway.core.settings import GatewayConfig
+    from gateway.wire.socket import Request
+
+log = logging.getLogger(__name__)
+
+#: How long the shutdown keeps polling so multi-step disarm sequences finish (s).
+SHUTDOWN_GRACE_S = 0.3
+
+#: Every signal whose default action ends the process and that Python can catch: each one
+#: stops the daemon the way SIGTERM does (zero, disarm, socket file removed, exit 0).  SIGHUP
+#: included: wheelgate has no reload (a changed configuration means a restart, which re-checks
+#: the controllers); SIGABRT included: systemd's watchdog sends it to a stalled loop, and once
+#: the loop moves again the motors get their zero.  SIGPIPE stays ignored (Python's default:
+#: a client that went away is an error on its socket, not a signal).  SIGKILL cannot be caught:
+#: the controllers' own command timeouts stop the motors then.
+STOP_SIGNALS: tuple[signal.Signals, ...] = tuple(
+    getattr(signal, name) for name in (
+        "SIGTERM", "SIGINT", "SIGHUP", "SIGQUIT", "SIGABRT", "SIGUSR1", "SIGUSR2", "SIGALRM",
+        "SIGVTALRM", "SIGPROF", "SIGXCPU", "SIGXFSZ", "SIGIO", "SIGPWR", "SIGSTKFLT",
+    ) if hasattr(signal, name)
+)
+
+
+class Daemon:
+    """The running gateway: bus, optional simulators, socket, recorder, notifier.
+
+    :param config: the configuration.
+    :param sim: run every motor's device simulator on a virtual bus in this process.
+    :param record: candump-format log of every frame sent and received.
+    :param socket_path: the control socket; the config's, or the default, when omitted.
+    :param notifier: sd_notify client; from the environment when omitted.
+    """
+
+    def __init__(
+        self,
+        config: GatewayConfig,
+        sim: bool = False,
+        record: str | None = None,
+        socket_path: str | None = None,
+        notifier: SystemdNotifier | None = None,
+    ) -> None:
+        if sim and config.bus.interface != "virtual":
+            log.info("--sim: using the virtual bus instead of %s", config.bus.interface)
+            config = dataclasses.replace(
+                config, bus=dataclasses.replace(config.bus, interface="virtual")
+            )
+        self.config = config
+        self.notifier = notifier if notifier is not None else SystemdNotifier.from_env()
+        self._stop = False
+        #: The name of the signal that stopped the daemon, if one did.
+        self.stop_signal = ""
+        self._closers: list[Any] = []
+        self.writer: can.Listener | None = None
+        try:
+            if record:
+                self.writer = can.CanutilsLogWriter(record)
+                self._closers.append(self.writer.stop)
+            self.scheduler = Scheduler(config.loop.rate_hz, spin_s=config.loop.spin_us * 1e-6)
+            self.gateway = Gateway(config, record=self.writer, timer=self.scheduler.timer)
+            self._closers.append(self.gateway.close)
+            self.sim: SimulatedControllers | None = None
+            if sim:
+                # Started by run(), after realtime_setup (see there).
+                self.sim = SimulatedControllers(self.gateway.drives.simulators(),
+                                                config.bus.channel)
+                self._closers.append(self.sim.shutdown)
+            path = socket_path or config.loop.socket or default_socket_path()
+            self.server = ControlServer(
+                path,
+                mode=config.loop.socket_mode,
+                allowed_uids=frozenset(config.loop.socket_uids) or None,
+            )
+            self._closers.append(self.server.close)
+        except BaseException:
+            self.close()
+            raise
+        self.socket_path = path
+        #: The e-stop latch on disk (see :mod:`gateway.runtime.latch`).
+        self.latch = EstopLatch(latch_path(config.loop.state_file, config.name))
+        self._ready = False
+        self._state = GatewayState.DISABLED
+        self._pending_twists: list[float] = []
+        self._watchdog_s = self.notifier.watchdog_period_s
+        self._next_watchdog = 0.0
+        self.rt_notes: list[str] = []
+        #: Classifies the loop's late starts; made by :meth:`run` in the loop's thread.
+        self.miss_probe: MissProbe | None = None
+        # The server's selector descriptor, readable when a request or a connection waits:
+        # lets the loop wait for requests with microsecond resolution (see _wait).
+        fileno = getattr(self.server, "fileno", None)
+        self._server_fd: int | None = fileno() if callable(fileno) else None
+
+    # ----------------------------------------------------------------- requests
+
+    def handle(self, client: int, request: Request | ProtocolError, now_s: float) -> None:
+        """Answer one socket request."""
+        gw, server = self.gateway, self.server
+        if isinstance(request, ProtocolError):
+            server.reply(client, reply_protocol_error(request))
+            return
+        rid = request.id
+        if isinstance(request, TwistRequest):
+            result = gw.twist(request.twist, now_s, Source.SOCKET)
+            if isinstance(result, Accepted):
+                self._pending_twists.append(time.perf_counter())
+                server.reply(client, reply_ok(rid, {
+                    "twist": result.twist, "projected": result.projected,
+                    **({"warning": str(result.error)} if result.error else {}),
+                }))
+                return
+            details: dict[str, object] = {}
+            if result.error is not None:
+                err = result.error
+                details = {"wheel": err.wheel, "constraint": err.constraint,
+                           "residual_m_s": err.residual_m_s, "nearest": err.nearest}
+            out: list[Frame] = []
+            gw.report_error(result.code, result.message, out, result)
+            gw.send(out)
+            server.reply(client, reply_error(rid, result.code, result.message, **details))
+            return
+        if isinstance(request, ResetOdometryRequest):
+            gw.odometry.reset(request.pose)
+            server.reply(client, reply_ok(rid, {"odometry": gw.odometry_dict()}))
+            return
+        if isinstance(request, SubscribeRequest):
+            server.subscribe(client, request.topics)
+            server.reply(client, reply_ok(rid, {"topics": sorted(t.value for t in request.topics)}))
+            return
+        self._command(client, request, now_s)
+
+    def handle_safely(self, client: int, request: Request | ProtocolError, now_s: float) -> None:
+        """:meth:`handle`, but a reply that cannot be built becomes an error reply: no client
+        message may stop the loop."""
+        try:
+            self.handle(client, request, now_s)
+        except (GatewayError, ValueError, UnicodeError) as err:
+            log.warning("request from client %d failed: %s", client, err)
+            try:
+                self.server.reply(client, reply_error(
+                    None, ErrorCode.BAD_COMMAND, f"request failed: {err}"))
+            except (GatewayError, ValueError, UnicodeError):
+                log.warning("client %d: no error reply possible", client)
+
+    def _command(self, client: int, request: CommandRequest, now_s: float) -> None:
+        sup, rid = self.gateway.supervisor, request.id
+        if request.op is Op.STATUS:
+            self.server.reply(client, reply_ok(rid, self.status()))
+            return
+        if request.op is Op.STOP:
+            sup.stop(now_s)
+        elif request.op is Op.ESTOP:
+            sup.estop("e-stop requested on the control socket")
+            self.latch.set(sup.reason)
+        elif request.op is Op.ENABLE:
+            sup.enable(now_s)
+        elif request.op is Op.DISABLE:
+            sup.disable()
+        elif request.op is Op.UNSUBSCRIBE:
+            self.server.unsubscribe(client)
+        self.server.reply(client, reply_ok(rid, {"state": sup.state}))
+
+    def status(self) -> dict[str, object]:
+        """Everything a ``status`` request returns."""
+        return status_dict(self, time.monotonic())
+
+    # ----------------------------------------------------------------- loop
+
+    def request_stop(self, signum: int = 0, frame: FrameType | None = None) -> None:
+        """Ask the loop to stop (signal handler: every signal of :data:`STOP_SIGNALS`)."""
+        if signum and not self._stop:
+            self.stop_signal = signal.Signals(signum).name
+        self._stop = True
+
+    def run(self, max_cycles: int | None = None) -> int:
+        """Run until a signal of :data:`STOP_SIGNALS` (or ``max_cycles``); return the exit
+        status."""
+        main_thread = threading.current_thread() is threading.main_thread()
+        signals = STOP_SIGNALS if main_thread else ()
+        old = {s: signal.signal(s, self.request_stop) for s in signals}
+        if main_thread and not faulthandler.is_enabled():
+            # After the handlers above, so that a fatal signal's traceback (SIGSEGV, a SIGABRT
+            # from systemd's watchdog: where the loop was stuck) is written and the Python
+            # handler still runs (faulthandler chains to the handler it found).
+            faulthandler.enable(all_threads=True)
+            self._closers.append(faulthandler.disable)
+        try:
+            self.rt_notes = realtime_setup(
+                self.config.loop.rt_priority or None,
+                None if self.config.loop.rt_cpu < 0 else self.config.loop.rt_cpu,
+                self.config.loop.lock_memory,
+            )
+            # Classifies late starts from this thread's scheduler statistics (opened here,
+            # in the loop's thread).
+            self.miss_probe = MissProbe(self.scheduler)
+            self._closers.append(self.miss_probe.close)
+            if self.sim is not None:
+                # Started after realtime_setup, the simulators' thread inherits SCHED_FIFO when
+                # the loop has it: a SCHED_OTHER thread preempted while it holds the GIL would
+                # stall the FIFO loop thread for as long as the scheduler keeps it waiting.
+                self.sim.start()
+            latched = self.latch.read()
+            if latched is not None:
+                # Never out of an e-stop by a restart: only an explicit enable releases it.
+                self.gateway.supervisor.estop(latched)
+                self._state = GatewayState.ESTOP
+                log.warning("starting e-stopped: %s; send enable to release it (%s)", latched,
+                            self.latch.path)
+            elif self.config.loop.enable_on_start:
+                self.gateway.supervisor.enable(time.monotonic())
+            # Ready once the bus and the socket are up, whatever the motors do: with their
+            # power off at boot, the drives enable when they answer (STATUS= says so), and
+            # `systemctl start` does not wait for them.
+            self._mark_ready()
+            cycles = 0
+            while not self._stop and (max_cycles is None or cycles < max_cycles):
+                self.step(time.monotonic())
+                cycles += 1
+                self._wait()
+        finally:
+            if self.stop_signal:
+                log.warning("%s: stopping (zero and disarm for every motor)", self.stop_signal)
+            self.shutdown()
+            for s, handler in old.items():
+                signal.signal(s, handler)
+        return 0
+
+    def step(self, now_s: float) -> None:
+        """One cycle plus its bookkeeping (also used by tests on simulated time)."""
+        gw = self.gateway
+        start = time.perf_counter()
+        gw.cycle(now_s)
+        sent = gw.burst_sent_s
+        for arrived in self._pending_twists:
+            self.scheduler.timer.record_latency(sent - arrived)
+        self._pending_twists.clear()
+        for topic, payload in gw.outbox:
+            if self.server.has_subscribers(Topic(topic)):
+                self.server.publish(Topic(topic), event(topic, payload))
+        gw.outbox.clear()
+        if gw.state is not self._state:
+            if gw.state is GatewayState.ESTOP:
+                self.latch.set(gw.supervisor.reason)  # from CAN, or anything but the socket
+            elif self._state is GatewayState.ESTOP:
+                self.latch.clear()  # only an explicit enable leaves ESTOP
+            self._state = gw.state
+            text = self._status_text()
+            self.notifier.status(text)
+            log.info("state %s", text)
+        if gw.state is GatewayState.RUNNING and not self._ready:
+            self._mark_ready()
+        if self._watchdog_s is not None and now_s >= self._next_watchdog and self._healthy():
+            self.notifier.watchdog()
+            self._next_watchdog = now_s + self._watchdog_s
+        self.scheduler.timer.record_cost(time.perf_counter() - start)
+
+    def _status_text(self) -> str:
+        """The state for systemd's ``STATUS=``, with what the daemon waits for."""
+        gw = self.gateway
+        reason = gw.supervisor.reason
+        text = gw.state.name + (f": {reason}" if reason else "")
+        if gw.state is GatewayState.ENABLING:
+            return text + ": waiting for the motors to enable"
+        if gw.state is GatewayState.FAULT and self.config.loop.feedback_recovery == "auto":
+            offline = [s.name for s in gw.drives.status(time.monotonic())
+                       if s.state is DriveState.OFFLINE]
+            if offline:
+                text += (f" (waiting for motors: {', '.join(offline)} silent; the drives are "
+                         f"enabled again once every motor answers)")
+        return text
+
+    def _healthy(self) -> bool:
+        """Whether to feed the systemd watchdog: the loop runs (we are in it) and the bus
+        takes frames; a wedged bus ends in a restart instead of a zombie daemon."""
+        return self.gateway.bus_healthy
+
+    def _mark_ready(self) -> None:
+        self._ready = True
+        self.notifier.ready(f"{self._status_text()}; socket {self.socket_path}")
+
+    def _wait(self) -> None:
+        """Serve the socket until the next deadline: poll while whole milliseconds remain
+        before the spin phase, wait out the rest, spin, then serve once more.
+
+        The socket poll (epoll) waits in whole milliseconds, rounded up: asked for 0.7 ms it
+        sleeps 1 ms.  So it is asked only for the whole milliseconds that end before the spin
+        phase (``k - 0.5`` ms, which rounds up to ``k``); otherwise every cycle could start up
+        to a millisecond late.  The sub-millisecond rest (all of the wait at 1 kHz) is a
+        ``select`` on the server's descriptor, which wakes for a request at once, where the
+        server offers one (``fileno()``), else a plain sleep.  The last pass, at the deadline,
+        hands this cycle every request that arrived meanwhile.
+
+        Every poll until the next cycle's draws on one budget, begun here where the server
+        offers one (:meth:`ControlServer.begin_cycle`): however fast clients send, this wait
+        serves at most one cycle's share of requests, and the rest waits, unread, for later
+        cycles.
+        """
+        sched = self.scheduler
+        spin = sched.spin_s
+        begin_cycle = getattr(self.server, "begin_cycle", None)
+        if begin_cycle is not None:
+            begin_cycle(sched.period_s)
+        probe = self.miss_probe
+        if probe is not None:
+            probe.before_wait()
+        while True:
+            whole_ms = math.floor((sched.remaining_s() - spin) * 1000.0)
+            if whole_ms < 1:
+                break
+            self._serve(self.server.poll((whole_ms - 0.5) * 1e-3))
+        woke = sched.wait_next(self._wait_fine)
+        if probe is not None:
+            probe.after_wait(woke)
+            text = probe.report(woke)
+            if text is not None:
+                log.warning("control loop: %s", text)
+        self._serve(self.server.poll(0.0))
+
+    def _wait_fine(self, timeout_s: float) -> None:
+        """Wait up to ``timeout_s`` (under a millisecond), serving requests as they come."""
+        fd = self._server_fd
+        if fd is not None:
+            try:
+                ready, _, _ = select.select([fd], [], [], timeout_s)
+            except (OSError, ValueError):  # closed, or beyond FD_SETSIZE: sleep instead
+                self._server_fd = None
+            else:
+                if ready:
+                    self._serve(self.server.poll(0.0))
+                return
+        time.sleep(timeout_s)
+
+    def _serve(self, events: list[tuple[int, Request | ProtocolError]]) -> None:
+        if events:
+            now = time.monotonic()
+            for client, request in events:
+                self.handle_safely(client, request, now)
+
+    def shutdown(self) -> None:
+        """Zero and disarm every motor, then close everything (safe to call twice)."""
+        if not self._closers:
+            return
+        gw = self.gateway
+        self.notifier.stopping("sending zero and disarm")
+        gw.supervisor.shutdown()
+        now = time.monotonic()
+        gw.send(gw.drives.disable(now))
+        end = now + SHUTDOWN_GRACE_S
+        while time.monotonic() < end:
+            time.sleep(0.01)
+            t = time.monotonic()
+            for frame in gw.receive(t):
+                gw.drives.on_frame(frame)
+            gw.send(gw.drives.poll(t))
+        self.close()
+
+    def close(self) -> None:
+        """Release every resource (reverse order of creation)."""
+        while self._closers:
+            closer = self._closers.pop()
+            try:
+                closer()
+            except Exception as err:  # closing must go on whatever one part does
+                log.warning("closing %r failed: %s", closer, err)

@@ -1,0 +1,206 @@
+"""Configuration: every shipped file loads; bad files get precise messages."""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING
+
+import pytest
+import yaml
+
+from gateway.config import DEFAULT_NAME, load_config, parse_config
+from gateway.core.errors import ConfigError
+from gateway.core.settings import BusConfig, LoopConfig
+from tests.conftest import CONFIG_DIR, SIM_ODRIVE_ENDPOINTS
+
+if TYPE_CHECKING:
+    from pathlib import Path
+
+SHIPPED = sorted(CONFIG_DIR.glob("*.yaml"))
+
+
+def test_every_seed_robot_ships_a_config() -> None:
+    names = {p.stem for p in SHIPPED}
+    assert {"turtlebot3_burger", "mecanum", "differential_tub", "differential_castor",
+            "omni3_swedish", "omni_delta", "omni3", "synchro", "tricycle", "ackermann",
+            "skid_steer", "swerve"} <= names
+
+
+@pytest.mark.parametrize("path", SHIPPED, ids=lambda p: p.stem)
+def test_shipped_config_loads(path: Path) -> None:
+    cfg = load_config(path)
+    assert cfg.model.n == len(cfg.motors)
+    assert any(m is not None for m in cfg.motors)
+
+
+def test_turtlebot3_burger() -> None:
+    cfg = load_config(CONFIG_DIR / "turtlebot3_burger.yaml")
+    assert cfg.drive == "differential"
+    assert [w.name for w in cfg.wheels] == ["left", "right"]
+    assert cfg.geometry["wheel_radius"] == 0.033
+    assert cfg.geometry["track"] == 0.160
+    assert cfg.wheels[0].y == pytest.approx(0.08)
+
+
+def test_mecanum_wheel_names() -> None:
+    cfg = load_config(CONFIG_DIR / "mecanum.yaml")
+    assert [w.name for w in cfg.wheels] == ["front_left", "front_right", "rear_left", "rear_right"]
+
+
+def test_embedded_default_loads() -> None:
+    cfg = load_config()
+    assert cfg.source == DEFAULT_NAME
+    assert cfg.model.mobility.mobility == 3
+
+
+def test_motor_defaults_merge_and_limits() -> None:
+    cfg = load_config(CONFIG_DIR / "turtlebot3_burger.yaml")
+    left, right = cfg.motors
+    assert left is not None and right is not None
+    assert (left.driver, left.node_id, left.invert) == ("odrive", 1, False)
+    assert (right.node_id, right.invert, right.max_rpm) == (2, True, 61.0)
+    assert cfg.limits.max_wheel_rad_s[0] == pytest.approx(61 * 2 * math.pi / 60)
+
+
+BASE = {
+    "drive": "differential",
+    "geometry": {"wheel_radius": 0.05, "track": 0.3},
+    "motor_defaults": {"driver": "odrive", "max_rpm": 3000,
+                       "watchdog_endpoints": SIM_ODRIVE_ENDPOINTS},
+    "motors": {"left": {"node_id": 1}, "right": {"node_id": 2}},
+}
+
+
+def with_(path: str, value: object) -> dict[str, object]:
+    doc = yaml.safe_load(yaml.safe_dump(BASE))
+    node = doc
+    keys = path.split(".")
+    for k in keys[:-1]:
+        node = node.setdefault(k, {})
+    if value is ...:
+        del node[keys[-1]]
+    else:
+        node[keys[-1]] = value
+    return doc  # type: ignore[no-any-return]
+
+
+@pytest.mark.parametrize(
+    ("path", "value", "message"),
+    [
+        ("colour", "red", "robot.yaml: colour: unknown key (known keys: bus, drive, gateway, "),
+        ("drive", "hovercraft", "robot.yaml: drive: expected one of ackermann, differential, "),
+        ("geometry.track", "wide", "robot.yaml: geometry.track: expected float, got 'wide'"),
+        ("geometry.track", -0.3, "robot.yaml: geometry.track: expected at least 0, got -0.3"),
+        ("geometry.track", 0.0, "robot.yaml: geometry.track: expected a length > 0 m, got 0"),
+        ("geometry.track", ..., "robot.yaml: geometry.track: required key is missing"),
+        ("geometry.wheelbase", 0.3, "robot.yaml: geometry.wheelbase: unknown key (known "
+                                    "differential geometry keys: track, wheel_radius)"),
+        ("motors.left.node_id", "x", "robot.yaml: motors.left.node_id: expected int, got 'x'"),
+        ("motors.left.node_id", 99, "robot.yaml: motors.left.node_id: expected int 0..62, got 99"),
+        ("motors.left.node_id", 2, "share odrive node_id 2; expected unique node IDs"),
+        ("motors.middle", {"node_id": 3}, "robot.yaml: motors.middle: unknown wheel (wheels of "
+                                          "this drive: left, right)"),
+        ("motors.right", ..., "robot.yaml: motors.right: driven wheel needs a motor block"),
+        ("motor_defaults.driver", "tesla", "robot.yaml: motors.left.driver: Unknown driver "
+                                           "'tesla'; expected one of: "),
+        ("motor_defaults.max_rpm", ..., "robot.yaml: motors.left.max_rpm: required key is missing"),
+        ("motors.left.colour", "red", "robot.yaml: motors.left.colour: unknown key"),
+        ("motors.left.gear_ratio", math.nan, "robot.yaml: motors.left.gear_ratio: expected float, "
+                                             "got nan"),
+        ("bus.bitrate", 3, "robot.yaml: bus.bitrate: expected at least 10000, got 3"),
+        ("limits.max_linear_m_s", -1, "robot.yaml: limits.max_linear_m_s: expected at least 0"),
+        ("wheels", [], "robot.yaml: wheels: only used with drive: generic"),
+    ],
+)
+def test_bad_config_is_named_precisely(path: str, value: object, message: str) -> None:
+    with pytest.raises(ConfigError) as info:
+        parse_config(with_(path, value), "robot.yaml")
+    assert message in str(info.value)
+
+
+GENERIC_WHEEL = {"name": "a", "type": "fixed", "alpha": 1.5707963, "l": 0.2, "beta": 0.0,
+                 "radius": 0.05, "motor": {"driver": "odrive", "node_id": 1, "max_rpm": 100}}
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        ({"type": "hover"}, "robot.yaml: wheels[0].type: expected one of 'fixed', 'steerable'"),
+        ({"radius": 0.0}, "robot.yaml: wheels[0].radius: expected at least 1e-09, got 0.0"),
+        ({"gamma": 0.5}, "robot.yaml: wheels[0]: wheel 'a': gamma applies to Swedish wheels"),
+        ({"type": "castor"}, "robot.yaml: wheels[0]: wheel 'a': expected castor offset d > 0 m"),
+        ({"type": "swedish", "gamma": 1.5707963267948966},
+         "robot.yaml: wheels[0]: wheel 'a': expected |gamma| < pi/2"),
+        ({"alpha": ...}, "robot.yaml: wheels[0].alpha: required key is missing"),
+        ({"spin": 1}, "robot.yaml: wheels[0].spin: unknown key (known wheel keys: "),
+    ],
+)
+def test_bad_generic_wheel(change: dict[str, object], message: str) -> None:
+    wheel = {**GENERIC_WHEEL, **{k: v for k, v in change.items() if v is not ...}}
+    for k, v in change.items():
+        if v is ...:
+            del wheel[k]
+    doc = {"drive": "generic", "wheels": [wheel]}
+    with pytest.raises(ConfigError) as info:
+        parse_config(doc, "robot.yaml")
+    assert message in str(info.value)
+
+
+def test_file_errors(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match=r"missing\.yaml: cannot read the file"):
+        load_config(tmp_path / "missing.yaml")
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("drive: [unclosed\n")
+    with pytest.raises(ConfigError, match=r"bad\.yaml: not valid YAML"):
+        load_config(bad)
+    bad.write_text("- a list\n")
+    with pytest.raises(ConfigError, match=r"bad\.yaml: expected a mapping at the top level"):
+        load_config(bad)
+
+
+def test_bus_precedence(monkeypatch: pytest.MonkeyPatch) -> None:
+    doc = with_("bus", {"interface": "socketcan", "channel": "can0"})
+    assert parse_config(doc, "r").bus.channel == "can0"
+    monkeypatch.setenv("GATEWAY_CHANNEL", "can1")
+    assert parse_config(doc, "r").bus.channel == "can1"
+    assert parse_config(doc, "r", {"channel": "vcan0"}).bus.channel == "vcan0"
+    monkeypatch.setenv("GATEWAY_BITRATE", "fast")
+    with pytest.raises(ConfigError, match="GATEWAY_BITRATE: expected an integer bit rate"):
+        parse_config(doc, "r")
+
+
+@pytest.mark.parametrize(
+    ("block", "message"),
+    [
+        ({"rate_hz": 5}, "robot.yaml: gateway.rate_hz: expected at least 50, got 5"),
+        ({"rate_hz": 2000}, "robot.yaml: gateway.rate_hz: expected at most 1000, got 2000"),
+        ({"infeasible_policy": "ignore"}, "robot.yaml: gateway.infeasible_policy: expected one of "
+                                          "'reject', 'project', got 'ignore'"),
+        ({"odom_rate_hz": 500}, "robot.yaml: gateway.odom_rate_hz: expected at most rate_hz"),
+        ({"can_ids": {"twist": 0x101}}, "robot.yaml: gateway.can_ids"),
+        ({"can_ids": {"status": 0x800}}, "robot.yaml: gateway.can_ids.status"),
+        ({"socket_uids": ["root"]}, "robot.yaml: gateway.socket_uids: expected a list of user IDs"),
+        ({"spin": 1}, "robot.yaml: gateway.spin: unknown key (known gateway keys: "),
+    ],
+)
+def test_bad_gateway_block(block: dict[str, object], message: str) -> None:
+    with pytest.raises(ConfigError) as info:
+        parse_config({**BASE, "gateway": block}, "robot.yaml")
+    assert message in str(info.value)
+
+
+def test_gateway_block_defaults_and_octal_mode() -> None:
+    cfg = parse_config(yaml.safe_load(yaml.safe_dump(BASE) + "gateway: {socket_mode: 0600}\n"),
+                       "r")
+    assert cfg.loop.socket_mode == 0o600
+    assert cfg.loop.rate_hz == 200.0
+    assert cfg.loop.can_ids.twist == 0x100
+
+
+def test_dataclass_defaults_are_those_of_empty_blocks(monkeypatch: pytest.MonkeyPatch) -> None:
+    # The key tables and the dataclasses both carry the defaults: they must agree.
+    for key in ("INTERFACE", "CHANNEL", "BITRATE"):
+        monkeypatch.delenv(f"GATEWAY_{key}", raising=False)
+    cfg = parse_config(BASE, "r")
+    assert cfg.loop == LoopConfig()
+    assert cfg.bus == BusConfig()

@@ -1,0 +1,96 @@
+"""Configuration files that PyYAML alone would take wrongly or slowly: duplicate keys, aliases,
+huge scalars, huge files, deep nesting; and what is allowed but warned about."""
+
+from __future__ import annotations
+
+import time
+from typing import TYPE_CHECKING
+
+import pytest
+
+from gateway.cli import main
+from gateway.config import load_config
+from gateway.config.yaml_text import MAX_BYTES
+from gateway.core.errors import ConfigError
+from tests.conftest import CONFIG_DIR
+
+if TYPE_CHECKING:
+    from pathlib import Path
+
+    from click.testing import CliRunner
+
+MECANUM = (CONFIG_DIR / "mecanum.yaml").read_text()
+
+
+def write(tmp_path: Path, text: str) -> Path:
+    path = tmp_path / "robot.yaml"
+    path.write_text(text)
+    return path
+
+
+def test_a_motor_given_twice_is_refused_naming_both_lines(tmp_path: Path) -> None:
+    lines = MECANUM.splitlines()
+    k = next(i for i, line in enumerate(lines) if line.strip().startswith("rear_right:"))
+    text = "\n".join([*lines[: k + 1], lines[k].split(":")[0] + ": {node_id: 4}",
+                      *lines[k + 1:]])
+    with pytest.raises(ConfigError) as err:
+        load_config(write(tmp_path, text))
+    assert f"line {k + 2}: key 'rear_right' is given twice in one mapping (first on line " \
+           f"{k + 1})" in str(err.value)
+
+
+def test_a_second_limits_block_is_refused(tmp_path: Path) -> None:
+    text = MECANUM + "\nlimits:\n  max_linear_m_s: 2.0\n"
+    with pytest.raises(ConfigError, match="key 'limits' is given twice"):
+        load_config(write(tmp_path, text))
+
+
+def test_an_alias_bomb_is_refused_at_once(tmp_path: Path) -> None:
+    bomb = "a: &a [lol, lol, lol, lol, lol, lol, lol, lol, lol]\n" + "".join(
+        f"{chr(98 + i)}: &{chr(98 + i)} [{', '.join([f'*{chr(97 + i)}'] * 9)}]\n"
+        for i in range(8)
+    )
+    start = time.process_time()
+    with pytest.raises(ConfigError, match="anchors and aliases are not accepted"):
+        load_config(write(tmp_path, MECANUM + bomb))
+    assert time.process_time() - start < 1.0  # nothing was expanded
+
+
+def test_a_huge_integer_is_a_clear_error_not_a_traceback(
+    tmp_path: Path, runner: CliRunner
+) -> None:
+    path = write(tmp_path, MECANUM.replace("node_id: 1", "node_id: " + "9" * 5000, 1))
+    result = runner.invoke(main, ["check", "-c", str(path)])
+    assert result.exit_code == 2, result.output
+    assert "expected a value of at most 4096 characters, got 5000" in result.output
+    path = write(tmp_path, MECANUM.replace("node_id: 1", "node_id: " + "9" * 200, 1))
+    with pytest.raises(ConfigError, match="expected a number of at most 80 characters"):
+        load_config(path)
+
+
+def test_a_huge_file_is_refused_before_it_is_parsed(tmp_path: Path) -> None:
+    path = write(tmp_path, MECANUM + "#" * MAX_BYTES)
+    with pytest.raises(ConfigError, match=f"at most {MAX_BYTES} bytes"):
+        load_config(path)
+
+
+def test_deep_nesting_is_refused(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match="levels of nesting"):
+        load_config(write(tmp_path, MECANUM + "\nx: " + "[" * 40 + "]" * 40 + "\n"))
+
+
+def test_a_world_writable_socket_is_warned_about(tmp_path: Path, runner: CliRunner) -> None:
+    path = write(tmp_path, MECANUM + "\ngateway:\n  socket_mode: 0777\n")
+    result = runner.invoke(main, ["check", "-c", str(path)])
+    assert result.exit_code == 0, result.output
+    assert "gateway.socket_mode: 0o777 makes the control socket writable by every local user" \
+        in result.output
+    # One more than the shipped robot's own (its DJI ESCs have no controller-side stop).
+    own = load_config(CONFIG_DIR / "mecanum.yaml").warnings
+    assert not any("socket_mode" in w for w in own)
+    assert f"ok, with {len(own) + 1} warning(s)" in result.output
+
+
+def test_every_shipped_config_still_loads() -> None:
+    for path in sorted(CONFIG_DIR.glob("*.yaml")):
+        load_config(path)

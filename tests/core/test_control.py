@@ -1,0 +1,226 @@
+"""The supervisor's state machine, on simulated time."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import pytest
+
+from gateway.core.control import (
+    AUTO_RETRIES,
+    AUTO_RETRY_DELAY_S,
+    AUTO_RETRY_RESET_S,
+    Accepted,
+    Fault,
+    Rejection,
+    Supervisor,
+)
+from gateway.core.kinematics import PRESETS, RobotModel
+from gateway.core.settings import LoopConfig
+from gateway.core.types import (
+    DriveFault,
+    DriveState,
+    ErrorCode,
+    GatewayState,
+    MotorStatus,
+    Twist,
+    WheelFeedback,
+)
+
+MODEL = RobotModel(PRESETS["differential"].wheels(wheel_radius=0.05, track=0.3))
+
+
+def motors(*states: DriveState, age: float | None = 0.01) -> list[MotorStatus]:
+    return [
+        MotorStatus(name, i + 1, st, DriveFault.MOTOR if st is DriveState.FAULT else
+                    DriveFault.NONE, "phase loss" if st is DriveState.FAULT else "", age, None)
+        for i, (name, st) in enumerate(zip(("left", "right"), states, strict=False))
+    ]
+
+
+def state_of(sup: Supervisor) -> GatewayState:
+    """The state, read through a call so mypy does not narrow it across transitions."""
+    return sup.state
+
+
+def running(**cfg: object) -> Supervisor:
+    sup = Supervisor(MODEL, dataclasses.replace(LoopConfig(), **cfg))  # type: ignore[arg-type]
+    sup.enable(0.0)
+    assert sup.take_enable_request()
+    assert not sup.take_enable_request()
+    sup.motors(motors(DriveState.ENABLED, DriveState.ENABLED), 0.1)
+    assert state_of(sup) is GatewayState.RUNNING
+    return sup
+
+
+def test_twist_is_followed_until_the_command_timeout() -> None:
+    sup = running(cmd_timeout_s=0.5)
+    assert isinstance(sup.twist(Twist(0.3, 0.0, 0.1), 1.0), Accepted)
+    d = sup.decide(1.4)
+    assert (d.twist, d.ramp, d.armed, d.cmd_timeout) == (Twist(0.3, 0.0, 0.1), True, True, False)
+    d = sup.decide(1.51)
+    assert d.twist == Twist() and d.ramp and d.cmd_timeout
+    assert sup.counts["cmd_timeouts"] == 1
+    assert isinstance(sup.twist(Twist(0.1, 0.0, 0.0), 2.0), Accepted)
+    assert sup.decide(2.1).twist == Twist(0.1, 0.0, 0.0)
+
+
+def test_zero_timeout_disables_it() -> None:
+    sup = running(cmd_timeout_s=0.0)
+    sup.twist(Twist(0.3, 0.0, 0.0), 1.0)
+    assert sup.decide(1000.0).twist == Twist(0.3, 0.0, 0.0)
+
+
+def test_infeasible_reject_ramps_to_zero() -> None:
+    sup = running()
+    sup.twist(Twist(0.3, 0.0, 0.0), 1.0)
+    result = sup.twist(Twist(0.3, 0.2, 0.0), 1.1)
+    assert isinstance(result, Rejection)
+    assert result.code is ErrorCode.INFEASIBLE_TWIST
+    assert result.error is not None and result.error.constraint == "sliding"
+    assert sup.decide(1.1).twist == Twist() and sup.decide(1.1).ramp
+    assert sup.counts["infeasible"] == 1
+
+
+def test_infeasible_project_follows_nearest() -> None:
+    sup = running(infeasible_policy="project")
+    result = sup.twist(Twist(0.3, 0.2, 0.0), 1.0)
+    assert isinstance(result, Accepted) and result.projected
+    assert result.twist.vx_m_s == pytest.approx(0.3)
+    assert abs(result.twist.vy_m_s) < 1e-12
+    assert sup.counts["projected"] == 1
+
+
+def test_motor_fault_zeroes_names_motor_and_recovers_automatically() -> None:
+    sup = running()
+    sup.twist(Twist(0.3, 0.0, 0.0), 1.0)
+    msg = sup.motors(motors(DriveState.ENABLED, DriveState.OFFLINE, age=0.4), 1.1)
+    assert msg == Fault(ErrorCode.FEEDBACK_TIMEOUT,
+                        "motor 'right' (node 2) stopped answering (no feedback for 0.400 s)")
+    assert state_of(sup) is GatewayState.FAULT
+    d = sup.decide(1.1)
+    assert d.twist == Twist() and not d.ramp and d.armed
+    assert isinstance(sup.twist(Twist(0.1, 0.0, 0.0), 1.2), Rejection)
+    sup.motors(motors(DriveState.ENABLED, DriveState.DISABLED), 1.3)  # feedback is back
+    assert state_of(sup) is GatewayState.FAULT  # waits AUTO_RETRY_DELAY_S first
+    sup.motors(motors(DriveState.ENABLED, DriveState.DISABLED), 1.1 + AUTO_RETRY_DELAY_S)
+    assert state_of(sup) is GatewayState.ENABLING
+    assert sup.take_enable_request()
+    sup.motors(motors(DriveState.ENABLED, DriveState.ENABLED), 1.8)
+    assert state_of(sup) is GatewayState.RUNNING
+
+
+def test_manual_recovery_waits_for_enable_and_disarm_action() -> None:
+    sup = running(feedback_recovery="manual", fault_action="disarm")
+    msg = sup.motors(motors(DriveState.FAULT, DriveState.ENABLED), 1.0)
+    assert msg == Fault(ErrorCode.MOTOR_FAULT, "motor 'left' (node 1) reports a fault: phase loss")
+    assert not sup.decide(1.0).armed
+    sup.motors(motors(DriveState.DISABLED, DriveState.DISABLED), 1.1)
+    assert state_of(sup) is GatewayState.FAULT
+    sup.enable(1.2)
+    assert state_of(sup) is GatewayState.ENABLING
+
+
+def test_estop_latches_until_enable() -> None:
+    sup = running()
+    sup.twist(Twist(0.3, 0.0, 0.0), 1.0)
+    sup.estop()
+    d = sup.decide(1.0)
+    assert (d.twist, d.ramp, d.armed) == (Twist(), False, False)
+    refused = sup.twist(Twist(0.1, 0.0, 0.0), 1.1)
+    assert isinstance(refused, Rejection) and refused.code is ErrorCode.ESTOP
+    sup.motors(motors(DriveState.DISABLED, DriveState.DISABLED), 1.2)
+    assert state_of(sup) is GatewayState.ESTOP  # no automatic way out
+    sup.enable(1.3)
+    assert state_of(sup) is GatewayState.ENABLING
+
+
+def test_enable_timeout_faults_with_the_late_motor() -> None:
+    sup = Supervisor(MODEL, dataclasses.replace(LoopConfig(), enable_timeout_s=1.0))
+    sup.enable(0.0)
+    assert sup.motors(motors(DriveState.ENABLED, DriveState.ENABLING), 0.5) is None
+    msg = sup.motors(motors(DriveState.ENABLED, DriveState.ENABLING), 1.5)
+    assert msg == Fault(ErrorCode.MOTOR_FAULT, "motor 'right' (node 2) did not enable within 1 s")
+    assert state_of(sup) is GatewayState.FAULT
+
+
+def test_disabled_and_stop() -> None:
+    sup = Supervisor(MODEL, LoopConfig())
+    refused = sup.twist(Twist(0.1, 0.0, 0.0), 0.0)
+    assert isinstance(refused, Rejection) and refused.code is ErrorCode.NOT_ENABLED
+    sup = running()
+    sup.twist(Twist(0.3, 0.0, 0.0), 1.0)
+    sup.stop(1.1)
+    assert sup.decide(1.1).twist == Twist() and sup.decide(1.1).armed
+    sup.disable()
+    assert not sup.decide(1.2).armed and state_of(sup) is GatewayState.DISABLED
+
+
+@pytest.mark.parametrize(("host_loop", "state", "released"), [
+    (True, DriveState.OFFLINE, True),  # a host-side loop on missing feedback: release
+    (True, DriveState.FAULT, False),  # a fault code: the feedback is fine, hold zero
+    (False, DriveState.OFFLINE, False),  # the drive's own loop holds zero
+])
+def test_fault_releases_host_side_speed_loops_when_feedback_is_in_doubt(
+        host_loop: bool, state: DriveState, released: bool) -> None:
+    sup = Supervisor(MODEL, LoopConfig(), host_speed_loop=host_loop)
+    sup.enable(0.0)
+    sup.motors(motors(DriveState.ENABLED, DriveState.ENABLED), 0.1)
+    assert sup.motors(motors(DriveState.ENABLED, state, age=0.4), 1.0) is not None
+    d = sup.decide(1.0)
+    assert d.twist == Twist() and not d.ramp
+    assert d.armed is not released
+
+
+def recover(sup: Supervisor, now_s: float) -> float:
+    """Feed healthy motors until the automatic re-enable reaches RUNNING; the time then."""
+    t = now_s
+    while state_of(sup) is GatewayState.FAULT and t < now_s + 10.0:
+        t += 0.05
+        sup.motors(motors(DriveState.DISABLED, DriveState.DISABLED), t)
+    if state_of(sup) is GatewayState.ENABLING:
+        sup.motors(motors(DriveState.ENABLED, DriveState.ENABLED), t)
+    return t
+
+
+@pytest.mark.parametrize(("running_s", "recoveries"), [
+    (1.0, AUTO_RETRIES),  # the fault comes back soon after each recovery: 3 tries, then wait
+    (AUTO_RETRY_RESET_S, 6),  # RUNNING long enough in between: every fault is retried
+])
+def test_automatic_recovery_is_bounded_unless_running_holds_in_between(
+        running_s: float, recoveries: int) -> None:
+    sup = running()
+    t = 1.0
+    for _ in range(recoveries):
+        assert sup.motors(motors(DriveState.FAULT, DriveState.ENABLED), t) is not None
+        t = recover(sup, t)
+        assert state_of(sup) is GatewayState.RUNNING
+        t += running_s
+        sup.motors(motors(DriveState.ENABLED, DriveState.ENABLED), t)
+    assert sup.motors(motors(DriveState.FAULT, DriveState.ENABLED), t) is not None
+    t = recover(sup, t)
+    if recoveries == AUTO_RETRIES:
+        assert state_of(sup) is GatewayState.FAULT  # waits for an explicit enable
+        sup.enable(t)
+        assert state_of(sup) is GatewayState.ENABLING
+    else:
+        assert state_of(sup) is GatewayState.RUNNING
+
+
+@pytest.mark.parametrize("host_loop", [True, False])
+def test_tracking_fault_of_a_host_side_speed_loop_waits_for_enable(host_loop: bool) -> None:
+    sup = Supervisor(MODEL, LoopConfig(), host_speed_loop=host_loop)
+    sup.enable(0.0)
+    sup.motors(motors(DriveState.ENABLED, DriveState.ENABLED), 0.1)
+    t, fault = 0.1, None
+    while fault is None and t < 2.0:  # the right wheel turns at 10 rad/s on a command of 0
+        t += 0.01
+        status = [dataclasses.replace(m, feedback=WheelFeedback(0.0, 10.0 * k, t))
+                  for k, m in enumerate(motors(DriveState.ENABLED, DriveState.ENABLED))]
+        fault = sup.motors(status, t, (0.0, 0.0))
+    assert fault is not None and fault.code is ErrorCode.TRACKING_ERROR
+    assert "'right'" in fault.message
+    t = recover(sup, t)
+    # The drive's own loop is re-enabled as usual; a loop closed on the host ran away on its
+    # own feedback and is not restarted without an explicit enable.
+    assert state_of(sup) is (GatewayState.FAULT if host_loop else GatewayState.RUNNING)

@@ -1,0 +1,532 @@
+"""Tests of the VESC codec and driver (drivers/vesc); the simulator in ``test_drivers_vesc_sim``.
+
+Golden vectors: worked examples (VESC ID 23 = 0x17) built from vedderb/bldc ``comm/comm_can.c`` at
+b9d287b3;
+SET_CURRENT 51 A matches the example in the firmware's ``documentation/comm_can.md``.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import re
+from types import MappingProxyType
+from typing import TYPE_CHECKING
+
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from drivers.vesc import VescDriver
+from drivers.vesc.codec import (
+    COMMANDS,
+    CanPacketId,
+    HwType,
+    VescCodec,
+    VescCommand,
+    VescPing,
+    VescPong,
+    VescStatus,
+    VescStatus5,
+    decode,
+    decode_command,
+    make_command,
+    make_ping,
+    make_pong,
+    make_set_current,
+    make_set_current_brake,
+    make_set_rpm,
+    make_status,
+    make_status5,
+    wrap_int32,
+)
+from gateway.core.errors import ConfigError, DecodeError, EncodeError
+from gateway.core.types import DriveState, Frame, MotorConfig
+from gateway.drive.registry import get_driver_class
+
+if TYPE_CHECKING:
+    from collections.abc import Callable, Sequence
+
+I32 = st.integers(-(2**31), 2**31 - 1)
+PP = 7
+
+
+def ext(eid: int, hexdata: str) -> Frame:
+    return Frame(eid, bytes.fromhex(hexdata), is_extended_id=True)
+
+
+def motor(
+    node_id: int = 23,
+    *,
+    wheel: str = "left",
+    gear_ratio: float = 1.0,
+    invert: bool = False,
+    max_rpm: float = 3000.0,
+    **options: object,
+) -> MotorConfig:
+    opts: dict[str, object] = {"pole_pairs": PP, **options}
+    return MotorConfig(
+        wheel=wheel,
+        driver="vesc",
+        node_id=node_id,
+        gear_ratio=gear_ratio,
+        invert=invert,
+        max_rpm=max_rpm,
+        options=MappingProxyType(opts),
+    )
+
+
+def rpm_to_rad_s(rpm: float) -> float:
+    return rpm * 2.0 * math.pi / 60.0
+
+
+# ============================================================================ codec: golden
+
+
+@pytest.mark.parametrize(
+    ("frame", "cansend"),
+    [
+        (make_set_rpm(23, 700), "00000317#000002BC"),  # 100 rpm at 7 pole pairs
+        (make_set_rpm(23, -700), "00000317#FFFFFD44"),
+        (make_set_current(23, 51.0), "00000117#0000C738"),  # comm_can.md example
+        (make_set_current_brake(23, 10.0), "00000217#00002710"),
+        (make_ping(23, 1), "00001117#01"),
+        (make_status(23, 700, 12.3, 0.5), "00000917#000002BC007B01F4"),
+        (make_status5(23, 4200, 24.5), "00001B17#0000106800F50000"),  # 100 revs at 7 pp
+    ],
+)
+def test_golden_frames(frame: Frame, cansend: str) -> None:
+    assert frame.is_extended_id
+    assert frame.to_cansend() == cansend
+
+
+def test_golden_decode() -> None:
+    assert decode(ext(0x917, "000002BC007B01F4")) == VescStatus(23, 700, 12.3, 0.5)
+    assert decode(ext(0x1B17, "0000106800F50000")) == VescStatus5(23, 4200, 24.5)
+    assert decode_command(ext(0x317, "FFFFFD44")) == VescCommand(23, CanPacketId.SET_RPM, -700)
+    assert decode_command(ext(0x117, "0000C738")) == VescCommand(23, CanPacketId.SET_CURRENT, 51.0)
+    assert decode_command(ext(0x1117, "01")) == VescPing(23, 1)
+
+
+def test_pong_goes_to_the_pinger() -> None:
+    # decode_msg(): PONG to (18 << 8) | data[0] of the PING, payload [responder, HW_TYPE].
+    assert make_pong(1, 23) == ext(0x1201, "1700")
+    assert decode(ext(0x1201, "1700")) == VescPong(23, 1, HwType.VESC)
+    assert decode(ext(0x1201, "17")) == VescPong(23, 1, HwType.VESC)  # 1 byte: HW_TYPE_VESC
+    assert decode(ext(0x1201, "1702")) == VescPong(23, 1, HwType.CUSTOM_MODULE)
+
+
+def test_codec_encodes_set_rpm_in_mapping_order() -> None:
+    codec = VescCodec()
+    assert codec.encode_command({24: -700, 23: 700}) == (
+        ext(0x318, "FFFFFD44"),
+        ext(0x317, "000002BC"),
+    )
+    assert codec.decode(ext(0x917, "000002BC007B01F4")) == VescStatus(23, 700, 12.3, 0.5)
+
+
+def test_wrap_int32() -> None:
+    assert wrap_int32(2**31 - 1) == 2**31 - 1
+    assert wrap_int32(2**31) == -(2**31)
+    assert wrap_int32(-(2**31) - 1) == 2**31 - 1
+    assert wrap_int32(-(2**31) - (2**31 - 1)) == 1  # 0x80000000 - 0x7FFFFFFF = +1 step
+
+
+# ============================================================================ codec: round trips
+
+
+@given(
+    packet=st.sampled_from(sorted(COMMANDS)),
+    node_id=st.integers(0, 255),
+    fraction=st.floats(-1.0, 1.0),
+)
+def test_command_round_trip(packet: CanPacketId, node_id: int, fraction: float) -> None:
+    field = COMMANDS[packet]
+    value = fraction * (field.maximum if fraction > 0 else -field.minimum)
+    got = decode_command(make_command(packet, node_id, value))
+    assert isinstance(got, VescCommand)
+    assert (got.node_id, got.packet) == (node_id, packet)
+    assert abs(got.value - value) <= 0.5 / field.scale + abs(value) * 1e-15
+
+
+@given(
+    node_id=st.integers(0, 255),
+    erpm=I32,
+    current_a=st.floats(-3276.8, 3276.7),
+    duty=st.floats(-32.768, 32.767),
+)
+def test_status_round_trip(node_id: int, erpm: int, current_a: float, duty: float) -> None:
+    got = decode(make_status(node_id, erpm, current_a, duty))
+    assert isinstance(got, VescStatus)
+    assert (got.node_id, got.erpm) == (node_id, erpm)
+    # Truncated toward zero, as the firmware's (int16_t) casts.
+    assert round(got.current_a * 10) == math.trunc(current_a * 10)
+    assert round(got.duty * 1000) == math.trunc(duty * 1000)
+
+
+@given(node_id=st.integers(0, 255), tacho=I32, v_in=st.floats(-3276.8, 3276.7))
+def test_status5_round_trip(node_id: int, tacho: int, v_in: float) -> None:
+    got = decode(make_status5(node_id, tacho, v_in))
+    assert isinstance(got, VescStatus5)
+    assert (got.node_id, got.tachometer) == (node_id, tacho)
+    assert round(got.v_in_v * 10) == math.trunc(v_in * 10)
+
+
+def test_device_side_truncates_like_the_firmware() -> None:
+    # comm_can_send_status1/5 (vedderb/bldc comm/comm_can.c) cast with (int32_t) and
+    # (int16_t): toward zero, where rounding would give one LSB more (701, -13, 500, 246).
+    assert make_status(23, 700.9, -1.29, 0.4999) == ext(0x917, "000002BCFFF401F3")
+    assert make_status5(23, 0, 24.59) == ext(0x1B17, "0000000000F50000")
+
+
+@given(to_id=st.integers(0, 255), node_id=st.integers(0, 255), hw=st.sampled_from(HwType))
+def test_ping_pong_round_trip(to_id: int, node_id: int, hw: HwType) -> None:
+    assert decode_command(make_ping(node_id, to_id)) == VescPing(node_id, to_id)
+    assert decode(make_pong(to_id, node_id, hw)) == VescPong(node_id, to_id, hw)
+
+
+# ============================================================================ codec: errors
+
+
+def test_encode_error_message_names_entity_range_and_value() -> None:
+    with pytest.raises(EncodeError) as err:
+        make_set_rpm(23, math.nan)
+    assert str(err.value) == (
+        "Expected speed for VESC 23 between -2147483648 and 2147483647 eRPM, but got nan."
+    )
+
+
+@pytest.mark.parametrize(
+    "call",
+    [
+        lambda: make_set_rpm(23, math.inf),
+        lambda: make_set_rpm(23, -math.inf),
+        lambda: make_set_rpm(23, 2.0**31),
+        lambda: make_set_rpm(23, -(2.0**31) - 1),
+        lambda: make_set_current(23, 2147484.0),
+        lambda: make_set_current_brake(23, math.nan),
+        lambda: make_set_rpm(256, 0.0),
+        lambda: make_set_rpm(-1, 0.0),
+        lambda: make_command(CanPacketId.SET_DUTY, 23, 0.5),  # not in the field table
+        lambda: make_ping(23, 256),
+        lambda: make_status(23, 0, 3300.0, 0.0),
+        lambda: make_status(23, 2**31, 0.0, 0.0),
+        lambda: make_status5(23, 0, math.nan),
+        lambda: make_pong(300, 23),
+    ],
+)
+def test_encode_rejects(call: Callable[[], Frame]) -> None:
+    with pytest.raises(EncodeError):
+        call()
+
+
+@pytest.mark.parametrize(
+    "frame",
+    [
+        ext(0x917, "000002BC007B01"),  # STATUS, DLC 7
+        ext(0x917, ""),
+        ext(0x1B17, "0000106800F5000000"),  # STATUS_5, DLC 9
+        Frame(0x917, is_extended_id=True, is_remote_frame=True, dlc=8),  # no RTR in VESC
+        Frame(0x1B17, is_extended_id=True, is_remote_frame=True, dlc=8),
+        ext(0x1201, ""),  # PONG without payload
+        ext(0x1201, "170000"),
+    ],
+)
+def test_decode_rejects_malformed(frame: Frame) -> None:
+    with pytest.raises(DecodeError):
+        decode(frame)
+
+
+@pytest.mark.parametrize(
+    "frame",
+    [
+        ext(0x117, "00000000C738"),  # the inconsistent 6-byte SET_CURRENT form
+        ext(0x317, "02BC"),
+        Frame(0x317, is_extended_id=True, is_remote_frame=True, dlc=4),
+        ext(0x1117, ""),
+    ],
+)
+def test_decode_command_rejects_malformed(frame: Frame) -> None:
+    with pytest.raises(DecodeError):
+        decode_command(frame)
+
+
+@pytest.mark.parametrize(
+    ("parse", "frame"),
+    [
+        (decode, Frame(0x917, bytes(8))),  # standard IDs are never VESC frames
+        (decode, ext(0x10917, "000002BC007B01F4")),  # bits above 15: packet 0x109 unknown
+        (decode, ext(0x1017, "0000000000000000")),  # STATUS_4: not decoded
+        (decode, ext(0x317, "000002BC")),  # a command, host to device
+        (decode_command, Frame(0x317, bytes.fromhex("000002BC"))),
+        (decode_command, ext(0x917, "000002BC007B01F4")),  # status, device to host
+        (decode_command, ext(0x017, "00007A12")),  # SET_DUTY: not spoken here
+    ],
+)
+def test_decode_ignores_foreign_frames(parse: Callable[[Frame], object], frame: Frame) -> None:
+    assert parse(frame) is None
+
+
+# ============================================================================ driver: config
+
+
+def test_registry_entry() -> None:
+    assert get_driver_class("vesc") is VescDriver
+
+
+def test_validate_options_fills_defaults() -> None:
+    got = VescDriver.validate_options({"pole_pairs": 7}, "robot.yaml: wheels[0].motor")
+    defaults = {
+        "command_period_s": 0.02,
+        "controller_timeout_s": 0.0,  # not stated
+        "status_rate_hz": 0.0,  # not stated
+        "min_erpm": 900.0,  # the factory's s_pid_min_erpm
+        "liveness_s": 0.25,
+    }
+    assert got == {"pole_pairs": 7, **defaults}
+    got = VescDriver.validate_options({"pole_pairs": 7, "command_period_s": 0.499}, "w")
+    assert got["command_period_s"] == 0.499  # just below half the factory 1 s
+    got = VescDriver.validate_options({"pole_pairs": 7, "status_rate_hz": 8}, "w")
+    assert got["status_rate_hz"] == 8.0  # two periods: exactly the 0.25 s liveness
+
+
+@pytest.mark.parametrize(
+    ("raw", "message"),
+    [
+        ({}, "w.pole_pairs: required key is missing"),
+        ({"pole_pairs": 0}, "w.pole_pairs: expected at least 1"),
+        ({"pole_pairs": 7.0}, "w.pole_pairs: expected int"),
+        ({"pole_pairs": 7, "poles": 14}, "w.poles: unknown key"),
+        (
+            {"pole_pairs": 7, "timeout_s": 0.5},
+            "w.timeout_s: renamed controller_timeout_s (the timeout set in VESC Tool",
+        ),
+        ({"pole_pairs": 7, "controller_timeout_s": -1}, "w.controller_timeout_s: expected at"),
+        (
+            {"pole_pairs": 7, "command_period_s": 0.5},  # exactly half the factory 1 s
+            "w.command_period_s: expected less than half the VESC's timeout (the factory 1 s, "
+            "as controller_timeout_s is not stated) = 0.5 s",
+        ),
+        (
+            {"pole_pairs": 7, "controller_timeout_s": 0.5, "command_period_s": 0.25},
+            "(controller_timeout_s 0.5 s) = 0.25 s",
+        ),
+        (
+            {"pole_pairs": 7, "status_rate_hz": 5},
+            "w.liveness_s: expected at least two status periods at status_rate_hz 5 (0.4 s)",
+        ),
+        ({"pole_pairs": 7, "status_rate_hz": 20000}, "w.status_rate_hz: expected at most"),
+        ({"pole_pairs": 7, "min_erpm": -1}, "w.min_erpm: expected at least 0"),
+    ],
+)
+def test_validate_options_rejects(raw: dict[str, object], message: str) -> None:
+    with pytest.raises(ConfigError, match=re.escape(message)):
+        VescDriver.validate_options(raw, "w")
+
+
+@pytest.mark.parametrize(
+    "motors",
+    [
+        [motor(255)],  # broadcast
+        [motor(-1)],
+        [motor(23), motor(23, wheel="right")],
+        [motor(23, command_period_s=0.5)],
+        [motor(23, controller_timeout_s=0.2, command_period_s=0.1)],
+        [MotorConfig(wheel="left", driver="vesc", node_id=23)],  # no pole_pairs
+    ],
+)
+def test_constructor_rejects(motors: list[MotorConfig]) -> None:
+    with pytest.raises(ConfigError):
+        VescDriver(motors)
+
+
+# ============================================================================ driver: units
+
+
+def test_command_converts_wheel_speed_to_erpm() -> None:
+    # 100 rpm at the motor, 7 pole pairs -> 700 eRPM (spec worked example).
+    drv = VescDriver([motor(23), motor(24, wheel="right", gear_ratio=2.0, invert=True)])
+    drv.enable(0.0)
+    speeds = [rpm_to_rad_s(100.0), rpm_to_rad_s(50.0)]
+    assert drv.command(speeds, 0.01) == [ext(0x317, "000002BC"), ext(0x318, "FFFFFD44")]
+    # round(), not int(): 0.6 eRPM is 1, -0.6 is -1.
+    tiny = rpm_to_rad_s(0.6 / PP)
+    assert drv.command([tiny, 0.0], 0.02)[0] == make_set_rpm(23, 1)
+    assert drv.command([-tiny, 0.0], 0.03)[0] == make_set_rpm(23, -1)
+
+
+def test_command_limits() -> None:
+    drv = VescDriver([motor(23, max_rpm=3000.0)])
+    with pytest.raises(EncodeError) as err:
+        drv.command([400.0], 0.0)
+    assert str(err.value) == (
+        'Expected velocity for node 23 ("left") between -314.2 and 314.2 rad/s, but got 400.0.'
+    )
+    for bad in (math.nan, math.inf, -400.0):
+        with pytest.raises(EncodeError):
+            drv.command([bad], 0.0)  # checked even while disabled
+    with pytest.raises(EncodeError, match="Expected 1 wheel speeds"):
+        drv.command([1.0, 2.0], 0.0)
+    assert drv.command([rpm_to_rad_s(3000.0)], 0.0) == []  # the limit itself is fine
+
+
+def test_enable_disable_frames_and_keepalive() -> None:
+    drv = VescDriver([motor(23), motor(24, wheel="right", command_period_s=0.05)])
+    assert drv.keepalive_period_s == 0.02
+    assert drv.command([1.0, 1.0], 0.0) == []  # disabled: nothing goes out
+    assert drv.poll(0.0) == []
+    assert drv.enable(1.0) == [make_set_rpm(23, 0), make_set_rpm(24, 0)]
+    sent = drv.command([rpm_to_rad_s(100.0), 0.0], 1.0)
+    assert sent == [make_set_rpm(23, 700), make_set_rpm(24, 0)]
+    assert drv.poll(1.019) == []
+    assert drv.poll(1.020) == [make_set_rpm(23, 700)]  # per motor period
+    assert drv.poll(1.039) == []
+    assert drv.poll(1.050) == [make_set_rpm(23, 700), make_set_rpm(24, 0)]
+    # SET_CURRENT 0 releases the motor; then the stream stops.
+    assert drv.disable(1.06) == [ext(0x117, "00000000"), ext(0x118, "00000000")]
+    assert drv.poll(2.0) == []
+
+
+def status_pair(node_id: int, erpm: int, tacho: int, t: float) -> list[Frame]:
+    return [
+        make_status(node_id, erpm, 1.5, 0.1).stamped(t),
+        make_status5(node_id, tacho, 24.0).stamped(t),
+    ]
+
+
+def feed(drv: VescDriver, frames: Sequence[Frame]) -> list[bool]:
+    return [drv.on_frame(f) for f in frames]
+
+
+def test_feedback_units_and_sign() -> None:
+    drv = VescDriver([motor(23, gear_ratio=2.0, invert=True)])
+    assert feed(drv, status_pair(23, 700, 1000, 0.5)) == [True, True]
+    fb = drv.feedback(0)
+    assert fb is not None
+    assert fb.velocity_rad_s == pytest.approx(-rpm_to_rad_s(100.0) / 2.0)
+    assert fb.position_rad == 0.0  # counted from the first sample
+    assert fb.timestamp_s == 0.5
+    feed(drv, status_pair(23, 700, 1000 + 6 * PP * 10, 0.6))  # +10 motor turns
+    fb = drv.feedback(0)
+    assert fb is not None
+    assert fb.position_rad == pytest.approx(-10 * 2 * math.pi / 2.0)
+    status5 = drv.last_status5(0)
+    status = drv.last_status(0)
+    assert status5 is not None and status5.v_in_v == 24.0
+    assert status is not None and status.current_a == 1.5
+
+
+@pytest.mark.parametrize(
+    ("first", "second", "steps"),
+    [
+        (0x7FFFFFFF, -0x80000000, 1),  # int32 0x7FFFFFFF -> 0x80000000 is +1 step
+        (-0x80000000, 0x7FFFFFFF, -1),
+        (0x7FFFFFF0, -0x7FFFFFF0, 32),
+        (5, -5, -10),
+    ],
+)
+def test_tachometer_unwraps_int32(first: int, second: int, steps: int) -> None:
+    drv = VescDriver([motor(23)])
+    feed(drv, status_pair(23, 0, first, 0.0))
+    feed(drv, status_pair(23, 0, second, 0.02))
+    fb = drv.feedback(0)
+    assert fb is not None
+    assert fb.position_rad == drv.wheel_rad_for(0, steps)
+    assert fb.position_rad == pytest.approx(steps * 2 * math.pi / (6 * PP))
+
+
+@given(start=I32, deltas=st.lists(st.integers(-(2**24), 2**24), max_size=40))
+def test_tachometer_unwrap_is_exact(start: int, deltas: list[int]) -> None:
+    drv = VescDriver([motor(23)])
+    feed(drv, status_pair(23, 0, start, 0.0))
+    tacho = start
+    for k, d in enumerate(deltas):
+        tacho = wrap_int32(tacho + d)
+        feed(drv, status_pair(23, 0, tacho, 0.01 * (k + 1)))
+    fb = drv.feedback(0)
+    assert fb is not None
+    assert fb.position_rad == drv.wheel_rad_for(0, sum(deltas))
+
+
+def test_on_frame_claims_only_own_frames_and_counts_malformed() -> None:
+    drv = VescDriver([motor(23)])
+    assert drv.on_frame(ext(0x917, "000002BC007B01")) is True  # own, malformed
+    assert "for STATUS of VESC 23, but got 7" in drv.last_rejection["malformed"]
+    assert drv.on_frame(Frame(0x1B17, is_extended_id=True, is_remote_frame=True, dlc=8))
+    assert sum(drv.rejected.values()) == 2
+    assert drv.on_frame(ext(0x918, "000002BC007B01")) is False  # malformed, not ours
+    assert drv.on_frame(ext(0x918, "000002BC007B01F4")) is False  # another VESC
+    assert drv.on_frame(Frame(0x917, bytes(8))) is False  # standard ID
+    assert drv.on_frame(ext(0x317, "000002BC")) is False  # a command
+    assert drv.on_frame(ext(0x1017, bytes(8).hex())) is True  # STATUS_4: ours, unused
+    assert drv.on_frame(ext(0x1201, "1700")) is True  # PONG from 23
+    assert sum(drv.rejected.values()) == 2
+    assert drv.feedback(0) is None
+
+
+# ============================================================================ driver: state
+
+
+@pytest.mark.parametrize(
+    ("status_s", "status5_s", "enabled_at", "expected"),
+    [  # times of the last STATUS, STATUS_5 and enable(); state asked at t = 1.0
+        (None, None, None, DriveState.OFFLINE),  # nothing yet
+        (0.9, None, None, DriveState.OFFLINE),  # STATUS only: no odometry
+        (None, 0.9, 0.5, DriveState.OFFLINE),  # STATUS_5 only
+        (0.9, 0.70, None, DriveState.OFFLINE),  # STATUS_5 stale (> 0.25 s)
+        (0.70, 0.9, 0.5, DriveState.OFFLINE),  # STATUS stale
+        (0.9, 0.9, None, DriveState.DISABLED),
+        (0.9, 0.9, 0.95, DriveState.ENABLING),  # no status since enable
+        (0.96, 0.9, 0.95, DriveState.ENABLING),  # one stream only since enable
+        (0.96, 0.97, 0.95, DriveState.ENABLED),
+        (0.95, 0.95, 0.95, DriveState.ENABLED),
+    ],
+)
+def test_state_derivation(
+    status_s: float | None, status5_s: float | None, enabled_at: float | None, expected: DriveState
+) -> None:
+    drv = VescDriver([motor(23)])
+    if enabled_at is not None:
+        drv.enable(enabled_at)
+    if status_s is not None:
+        drv.on_frame(make_status(23, 0, 0.0, 0.0).stamped(status_s))
+    if status5_s is not None:
+        drv.on_frame(make_status5(23, 0, 24.0).stamped(status5_s))
+    assert drv.state(0, 1.0) == expected
+    assert drv.status(1.0)[0].state == expected
+
+
+def test_state_walk_through_every_reachable_state() -> None:
+    drv = VescDriver([motor(23)])
+    seen = [drv.state(0, 0.0)]
+    feed(drv, status_pair(23, 0, 0, 0.1))
+    seen.append(drv.state(0, 0.1))
+    drv.enable(0.15)
+    seen.append(drv.state(0, 0.15))
+    feed(drv, status_pair(23, 0, 0, 0.2))
+    seen.append(drv.state(0, 0.2))
+    seen.append(drv.state(0, 0.46))  # silence
+    feed(drv, status_pair(23, 0, 0, 0.5))
+    seen.append(drv.state(0, 0.5))
+    drv.disable(0.55)
+    seen.append(drv.state(0, 0.55))
+    names = [state.name for state in seen]
+    assert names == "OFFLINE DISABLED ENABLING ENABLED OFFLINE ENABLED DISABLED".split()
+    assert DriveState.FAULT not in seen  # no fault codes in VESC status frames
+
+
+def test_missing_status_frames_log_a_hint_once(caplog: pytest.LogCaptureFixture) -> None:
+    drv = VescDriver([motor(23)])
+    drv.enable(0.0)
+    with caplog.at_level(logging.WARNING, logger="drivers.vesc.driver"):
+        drv.poll(0.5)
+        assert not caplog.records
+        drv.on_frame(make_status(23, 0, 0.0, 0.0).stamped(0.6))
+        drv.poll(1.1)
+        drv.poll(1.2)
+    assert len(caplog.records) == 1
+    assert "no STATUS_5 received" in caplog.records[0].getMessage()
+    assert "Can Messages Rate 1" in caplog.records[0].getMessage()
+
+
+# ============================================================================ simulator alone

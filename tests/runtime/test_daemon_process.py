@@ -1,0 +1,146 @@
+"""The daemon as a process: sd_notify, SIGTERM/SIGINT with the recorded last frames."""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import struct
+import subprocess
+import sys
+import time
+from typing import TYPE_CHECKING
+
+import can
+import pytest
+
+from gateway.runtime.client import ControlClient
+from tests.conftest import CONFIG_DIR
+
+if TYPE_CHECKING:
+    from collections.abc import Iterator
+    from pathlib import Path
+
+
+#: Longer than the 10 s default: each starts the daemon as a process.
+pytestmark = pytest.mark.timeout(30)
+
+
+@pytest.fixture
+def notify_socket(sock_path: str) -> Iterator[tuple[socket.socket, str]]:
+    path = sock_path.replace("s.sock", "n.sock")
+    sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+    sock.bind(path)
+    sock.settimeout(0.2)
+    yield sock, path
+    sock.close()
+
+
+def read_notify(sock: socket.socket, until: bytes, timeout_s: float) -> list[bytes]:
+    got: list[bytes] = []
+    end = time.monotonic() + timeout_s
+    while time.monotonic() < end:
+        try:
+            msg = sock.recv(4096)
+        except TimeoutError:
+            continue
+        got.append(msg)
+        if msg.startswith(until):
+            break
+    return got
+
+
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT, signal.SIGHUP,
+                                    signal.SIGQUIT, signal.SIGABRT, signal.SIGUSR1,
+                                    signal.SIGUSR2])
+@pytest.mark.timeout(60)
+def test_signal_sends_zero_and_disarm_then_exits_0(
+    signum: int, sock_path: str, tmp_path: Path, notify_socket: tuple[socket.socket, str]
+) -> None:
+    nsock, npath = notify_socket
+    record = tmp_path / "run.log"
+    env = {**os.environ, "NOTIFY_SOCKET": npath, "WATCHDOG_USEC": "400000"}
+    env.pop("WATCHDOG_PID", None)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "gateway", "run", "--sim", "--socket", sock_path,
+         "--record", str(record)],
+        env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+    )
+    try:
+        before = read_notify(nsock, b"READY=1", 30.0)
+        assert before and before[-1].startswith(b"READY=1"), (before, proc.poll())
+        with ControlClient(sock_path) as client:
+            # READY=1 comes with the bus and the socket up; the drives enable just after.
+            end = time.monotonic() + 10
+            while client.request({"op": "status"})["state"] != "running":
+                assert time.monotonic() < end, "the drives did not enable"
+                time.sleep(0.05)
+            for _ in range(10):
+                assert client.request({"op": "twist", "vx": 0.4, "wz": 0.5})["ok"]
+                time.sleep(0.05)
+        during = read_notify(nsock, b"WATCHDOG=1", 5.0)
+        assert any(m == b"WATCHDOG=1" for m in during)
+        start = time.monotonic()
+        proc.send_signal(signum)
+        code = proc.wait(timeout=10)
+        elapsed = time.monotonic() - start
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        _, err = proc.communicate()
+    assert code == 0, err.decode()
+    # Bounded, not a timing assertion: the daemon's own grace is 0.3 s of its 1 s budget.
+    assert elapsed < 5.0
+    after = read_notify(nsock, b"STOPPING=1", 2.0)
+    assert any(m.startswith(b"STOPPING=1") for m in after)
+    assert any(m.startswith(b"STATUS=") for m in before + during + after)
+    sent = [m for m in can.LogReader(str(record)) if not m.is_rx]
+    assert len(sent) > 50
+    # Embedded default: ODrive nodes 1..4.  After the last moving velocity command each node
+    # gets Set_Input_Vel 0 and Set_Axis_State IDLE.
+    for node in (1, 2, 3, 4):
+        vel_id, state_id = node << 5 | 0x0D, node << 5 | 0x07
+        velocities = [(i, struct.unpack("<f", bytes(m.data[:4]))[0])
+                      for i, m in enumerate(sent) if m.arbitration_id == vel_id]
+        assert any(v != 0.0 for _, v in velocities), f"node {node} never moved"
+        last_moving = max(i for i, v in velocities if v != 0.0)
+        assert velocities[-1][1] == 0.0
+        idle = [i for i, m in enumerate(sent)
+                if m.arbitration_id == state_id and bytes(m.data[:4]) == b"\x01\x00\x00\x00"]
+        assert idle and idle[-1] > last_moving, f"node {node} was not disarmed at the end"
+    assert not os.path.exists(sock_path), "the socket file was left behind"
+    if signum not in (signal.SIGTERM, signal.SIGINT):
+        assert f"{signal.Signals(signum).name}: stopping" in err.decode()
+
+
+@pytest.mark.timeout(60)
+def test_ready_with_the_motors_unpowered_and_the_status_says_what_it_waits_for(
+    sock_path: str, tmp_path: Path, notify_socket: tuple[socket.socket, str]
+) -> None:
+    """systemd must not wait for the motors: READY=1 once the bus and the socket are up, the
+    state in STATUS=, and the drives enable when the motors answer."""
+    nsock, npath = notify_socket
+    cfg = tmp_path / "robot.yaml"
+    cfg.write_text((CONFIG_DIR / "turtlebot3_burger.yaml").read_text()
+                   + "\ngateway:\n  enable_timeout_s: 0.5\n")
+    env = {**os.environ, "NOTIFY_SOCKET": npath}
+    # No --sim: nothing answers on this virtual bus, as with the motors' power off.
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "gateway", "--interface", "virtual", "--channel",
+         f"unpowered-{os.getpid()}", "run",
+         "-c", str(cfg), "--socket", sock_path],
+        env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+    )
+    try:
+        ready = read_notify(nsock, b"READY=1", 30.0)
+        assert any(m.startswith(b"READY=1") for m in ready), (ready, proc.poll())
+        assert any(b"ENABLING" in m and b"waiting for the motors" in m for m in ready), ready
+        later = read_notify(nsock, b"waiting for motors", 10.0)
+        assert any(b"STATUS=FAULT" in m and b"waiting for motors: left, right silent" in m
+                   for m in later), later
+        with ControlClient(sock_path) as client:
+            assert client.request({"op": "status"})["state"] == "fault"
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        proc.communicate(timeout=10)

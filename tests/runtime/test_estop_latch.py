@@ -1,0 +1,155 @@
+"""An e-stop lasts: across a crash and a restart, against enable_on_start, against a CAN
+ENABLE flag unless allowed; only an explicit enable releases it."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from typing import TYPE_CHECKING
+
+import pytest
+
+from gateway.core.types import GatewayState, Twist
+from gateway.runtime.client import ControlClient
+from gateway.runtime.latch import EstopLatch, latch_path
+from gateway.wire.can import TwistFlags
+from tests.conftest import CONFIG_DIR
+from tests.e2e_helpers import Rig, SocketPilot, errors_on_can, virtual_config
+
+if TYPE_CHECKING:
+    from pathlib import Path
+
+TB3 = CONFIG_DIR / "turtlebot3_burger.yaml"
+
+
+def state(rig: Rig) -> GatewayState:
+    """The gateway state, read through a call so mypy does not narrow it across cycles."""
+    return rig.gw.state
+
+
+def test_latch_path_prefers_the_config_then_systemd_then_xdg(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    assert str(latch_path("/var/lib/x/latch", "r")) == "/var/lib/x/latch"
+    monkeypatch.setenv("STATE_DIRECTORY", f"{tmp_path}/a:{tmp_path}/b")
+    assert latch_path("", "robot 1") == tmp_path / "a" / "estop"
+    monkeypatch.delenv("STATE_DIRECTORY")
+    monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path))
+    assert latch_path("", "robot 1/x") == tmp_path / "wheelgate" / "estop-robot_1_x"
+
+
+def test_a_damaged_or_unreadable_latch_still_holds(tmp_path: Path) -> None:
+    latch = EstopLatch(tmp_path / "d" / "estop")
+    assert latch.read() is None
+    assert latch.set("e-stop requested on CAN")
+    reason = latch.read()
+    assert reason is not None and reason.startswith("e-stop requested on CAN (latched since ")
+    latch.path.write_bytes(b"\x00garbage")
+    assert "damaged; treated as latched" in str(latch.read())
+    latch.clear()
+    assert latch.read() is None
+    latch.clear()  # twice is fine
+
+
+def test_socket_estop_survives_a_restart_and_enable_on_start(channel: str, sock_path: str) -> None:
+    cfg = virtual_config(TB3, channel, rate_hz=100.0)
+    with Rig(cfg, sock_path) as rig:
+        rig.enable()
+        pilot = SocketPilot(sock_path)
+        pilot.send(op="estop", id=1)
+        rig.advance(0.05)
+        assert state(rig) is GatewayState.ESTOP
+        assert rig.daemon is not None
+        path = rig.daemon.latch.path
+        assert path.exists()
+        # disable does not release it either
+        pilot.send(op="disable", id=2)
+        rig.advance(0.05)
+        assert state(rig) is GatewayState.ESTOP and path.exists()
+        pilot.close()
+    # The same robot again (a restart): enable_on_start is true, the e-stop holds.
+    with Rig(cfg, f"{sock_path}2") as rig:
+        assert rig.daemon is not None
+        rig.daemon.run(max_cycles=3)  # ends with the shutdown (STOPPING)
+        assert rig.gw.supervisor.counts["estops"] == 1
+        assert rig.daemon.latch.path.exists()
+        assert "e-stop requested on the control socket (latched since" in rig.gw.supervisor.reason
+        assert all(not s.model.armed for s in rig.sims)
+
+
+def test_a_can_enable_flag_does_not_release_a_socket_estop_unless_allowed(
+    channel: str, sock_path: str
+) -> None:
+    cfg = virtual_config(TB3, channel, rate_hz=100.0)
+    with Rig(cfg, sock_path) as rig:
+        rig.enable()
+        pilot = SocketPilot(sock_path)
+        pilot.send(op="estop")
+        rig.advance(0.05)
+        rig.send_can_twist(Twist(), TwistFlags.ENABLE)
+        rig.advance(0.5)
+        assert state(rig) is GatewayState.ESTOP
+        reports = errors_on_can(rig)
+        assert reports and "ESTOP" in reports[-1].code.name
+        pilot.send(op="enable", id=3)  # the socket may
+        rig.advance(1.0)
+        assert state(rig) is GatewayState.RUNNING
+        assert rig.daemon is not None and not rig.daemon.latch.path.exists()
+        pilot.close()
+    cfg = virtual_config(TB3, channel, rate_hz=100.0, estop_release="any")
+    with Rig(cfg, f"{sock_path}2") as rig:
+        rig.enable()
+        rig.send_can_twist(Twist(), TwistFlags.ESTOP)
+        rig.advance(0.05)
+        assert state(rig) is GatewayState.ESTOP
+        assert rig.daemon is not None and rig.daemon.latch.path.exists()  # a CAN e-stop too
+        rig.send_can_twist(Twist(), TwistFlags.ENABLE)
+        rig.advance(1.0)
+        assert state(rig) is GatewayState.RUNNING
+
+
+@pytest.mark.timeout(60)
+def test_kill_9_after_an_estop_restarts_estopped(sock_path: str) -> None:
+    """The crash case itself: a daemon e-stopped, killed with SIGKILL, started again."""
+    def start() -> subprocess.Popen[bytes]:
+        return subprocess.Popen([sys.executable, "-m", "gateway", "run", "--sim", "--socket",
+                                 sock_path], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+
+    def wait_socket(proc: subprocess.Popen[bytes]) -> None:
+        end = time.monotonic() + 30
+        while not os.path.exists(sock_path):
+            assert proc.poll() is None and time.monotonic() < end, proc.communicate()
+            time.sleep(0.05)
+
+    proc = start()
+    try:
+        wait_socket(proc)
+        with ControlClient(sock_path) as client:
+            end = time.monotonic() + 20
+            while client.request({"op": "status"})["state"] != "running":
+                assert time.monotonic() < end
+                time.sleep(0.05)
+            assert client.request({"op": "estop"})["ok"]
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(timeout=10)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        proc.communicate()
+    os.unlink(sock_path)  # what SIGKILL left behind (a restart removes a stale one too)
+    proc = start()
+    try:
+        wait_socket(proc)
+        with ControlClient(sock_path) as client:
+            time.sleep(0.5)
+            status = client.request({"op": "status"})
+        assert status["state"] == "estop", json.dumps(status)[:500]
+        assert "latched since" in status["reason"]
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=10)
+    assert b"starting e-stopped" in err
