@@ -1,7 +1,8 @@
 """Built-in motor-controller drivers, one protocol per module.
 
 :data:`BUILTIN_DRIVERS` maps a config ``driver:`` name to ``(module, class)``; classes are
-imported lazily by :mod:`gateway.drive.registry`.  Third-party packages add drivers through the
+imported lazily by :mod:`gateway.drive.registry`; :data:`BUILTIN_SIMULATORS` names their device
+simulators, found by :mod:`gateway.sim.registry`.  Third-party packages add drivers through the
 ``gateway.drivers`` entry-point group.
 """
 
@@ -14,4 +15,14 @@ BUILTIN_DRIVERS: dict[str, tuple[str, str]] = {
     "cia402": ("drivers.cia402", "Cia402Driver"),
     "dji": ("drivers.dji", "DjiDriver"),
     "dbc": ("drivers.dbc", "DbcDriver"),
+}
+
+#: Driver name -> (module, function) of its device simulator, for tests and ``--sim``
+#: (:mod:`gateway.sim.registry`); the drivers themselves never import these modules.
+BUILTIN_SIMULATORS: dict[str, tuple[str, str]] = {
+    "odrive": ("drivers.odrive.sim", "simulator_for"),
+    "vesc": ("drivers.vesc.sim", "simulator_for"),
+    "cia402": ("drivers.cia402.sim", "simulator_for"),
+    "dji": ("drivers.dji.sim", "simulator_for"),
+    "dbc": ("drivers.dbc.sim", "simulator_for"),
 }

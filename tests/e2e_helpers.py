@@ -18,6 +18,7 @@ from gateway.runtime.daemon import Daemon
 from gateway.runtime.loop import Gateway
 from gateway.runtime.sdnotify import SystemdNotifier
 from gateway.sim.bus import SimulatedControllers
+from gateway.sim.registry import simulators_for
 from gateway.wire.can import ErrorReport, TwistCommand, TwistFlags
 
 if TYPE_CHECKING:
@@ -60,7 +61,7 @@ class Rig:
             self.gw.stamp_with_cycle_time = True
         else:
             self.gw = Gateway(config, stamp_with_cycle_time=True)
-        self.sims = self.gw.drives.simulators()
+        self.sims = simulators_for(self.gw.drives.all_motors())
         # The simulators and the pilot join the gateway's bus: the virtual one, or a kernel
         # interface in the socketcan tier.
         self.ctl = SimulatedControllers(self.sims, config.bus.channel, config.bus.interface)

@@ -60,9 +60,11 @@ from gateway.core.control import Source
 from gateway.core.errors import BusError
 from gateway.core.types import GatewayState, Twist
 from gateway.drive.driveset import DriveSet
-from gateway.drive.filters import CanFilter, gateway_filters, matches_any
+from gateway.drive.filters import CanFilter, matches_any
+from gateway.drive.ownership import gateway_filters
 from gateway.runtime.loop import Gateway
 from gateway.sim.bus import SimulatedControllers
+from gateway.sim.registry import simulators_for
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -157,7 +159,7 @@ def run(cfg: GatewayConfig, filters: Sequence[CanFilter], sim_filters: Sequence[
     # The simulators stand for controllers at the other end of the bus: they take only their
     # own frames (the ODrive filters cover the commands too), so the flood loads only the
     # gateway and cannot make a simulator miss a command.
-    ctl = SimulatedControllers(gw.drives.simulators(), channel, "socketcan",
+    ctl = SimulatedControllers(simulators_for(gw.drives.all_motors()), channel, "socketcan",
                                can_filters=[f.as_python_can() for f in sim_filters])
     period = 1.0 / cfg.loop.rate_hz
     try:

@@ -5,10 +5,9 @@ Run from the repository with the project's environment::
     .venv/bin/python tools/bench_codec.py [--number N]
 
 Cases: ODrive Set_Input_Vel encode and Get_Encoder_Estimates decode against the official
-0.5.6 DBC (``tests/data/odrive-cansimple-0.5.6.dbc``); when :mod:`drivers.vesc` and
-:mod:`drivers.dji` are importable, their velocity command and feedback codecs against a
-cantools database built in code for the same layout.  Before timing, every pair is checked to
-produce the same payload (encode) or the same values (decode).
+0.5.6 DBC (``tests/data/odrive-cansimple-0.5.6.dbc``); the VESC and DJI velocity command and
+feedback codecs against a cantools database built in code for the same layout.  Before timing,
+every pair is checked to produce the same payload (encode) or the same values (decode).
 
 Method: each callable runs ``N`` times in a plain ``for`` loop timed with
 ``time.perf_counter_ns``; that is one round.  Five rounds give five per-call times (round time
@@ -24,7 +23,6 @@ does).
 from __future__ import annotations
 
 import argparse
-import importlib
 import logging
 import math
 import platform
@@ -38,13 +36,14 @@ import cantools
 from cantools.database.can import Database, Message, Signal
 from cantools.database.conversion import BaseConversion
 
+import drivers.dji.codec as dji
+import drivers.vesc.codec as vesc
 from drivers.odrive.codec import OdriveCodec
 from drivers.odrive.messages import FLOAT32_MAX, SET_INPUT_VEL, EncoderEstimates
 from gateway.core.types import Frame
 
 if TYPE_CHECKING:
     from collections.abc import Callable
-    from types import ModuleType
 
 ROUNDS = 5
 DBC_PATH = Path(__file__).resolve().parent.parent / "tests" / "data" / "odrive-cansimple-0.5.6.dbc"
@@ -126,20 +125,8 @@ def odrive_cases() -> list[Case]:
     ]
 
 
-def _optional(module: str) -> ModuleType | None:
-    try:
-        return importlib.import_module(module)
-    except ImportError as err:
-        print(f"(skipping {module}: {err})")
-        return None
-
-
 def vesc_cases() -> list[Case]:
     """SET_RPM encode and STATUS decode against a cantools database built in code."""
-    mod = _optional("drivers.vesc.codec")
-    if mod is None or not hasattr(mod, "VescCodec"):
-        return []
-    codec = mod.VescCodec()
     rpm = _database(0x317, "SET_RPM", [_signal("ERPM", 7, 32, True)], extended=True)
     status = _database(
         0x917,
@@ -152,28 +139,25 @@ def vesc_cases() -> list[Case]:
         extended=True,
     )
     frame = Frame(0x917, bytes.fromhex("000002BC007B01F4"), is_extended_id=True)
-    if codec.encode_command({23: 700.0})[0].data != rpm.encode({"ERPM": 700}):
+    if vesc.make_set_rpm(23, 700.0).data != rpm.encode({"ERPM": 700}):
         raise SystemExit("VESC SET_RPM: payloads differ")
     ref = status.decode(frame.data)
-    got = codec.decode(frame)
-    if not math.isclose(ref["Current"], got.current_a) or ref["ERPM"] != got.erpm:
+    got = vesc.decode(frame)
+    if (not isinstance(got, vesc.VescStatus) or not math.isclose(ref["Current"], got.current_a)
+            or ref["ERPM"] != got.erpm):
         raise SystemExit("VESC STATUS: values differ")
     return [
         Case(
             "VESC SET_RPM encode",
-            lambda: codec.encode_command({23: 700.0}),
+            lambda: vesc.make_set_rpm(23, 700.0),
             lambda: rpm.encode({"ERPM": 700}),
         ),
-        Case("VESC STATUS decode", lambda: codec.decode(frame), lambda: status.decode(frame.data)),
+        Case("VESC STATUS decode", lambda: vesc.decode(frame), lambda: status.decode(frame.data)),
     ]
 
 
 def dji_cases() -> list[Case]:
     """0x200 current command encode and 0x201 feedback decode, cantools built in code."""
-    mod = _optional("drivers.dji.codec")
-    if mod is None or not hasattr(mod, "DjiCodec"):
-        return []
-    codec = mod.DjiCodec()
     names = [f"ESC{k}" for k in range(1, 5)]
     signals = [_signal(n, 7 + 16 * k, 16, True) for k, n in enumerate(names)]
     command = _database(0x200, "CMD", signals, extended=False)
@@ -188,22 +172,22 @@ def dji_cases() -> list[Case]:
         ],
         extended=False,
     )
-    raw = {1: 4000.0, 2: -4000.0, 3: 0.0, 4: 1000.0}
-    values = {f"ESC{k}": int(v) for k, v in raw.items()}
+    raw = [4000, -4000, 0, 1000, 0, 0, 0, 0]
+    values = {f"ESC{k}": raw[k - 1] for k in range(1, 5)}
     frame = Frame(0x201, bytes.fromhex("1FFF05DCFF382300"))
-    if codec.encode_command(raw)[0].data != command.encode(values):
+    if dji.encode_command(raw, (0,))[0].data != command.encode(values):
         raise SystemExit("DJI 0x200: payloads differ")
-    if codec.decode(frame) is None or feedback.decode(frame.data)["Angle"] != 8191:
+    if dji.decode_feedback(frame) is None or feedback.decode(frame.data)["Angle"] != 8191:
         raise SystemExit("DJI feedback: values differ")
     return [
         Case(
             "DJI 0x200 command encode (4 ESCs)",
-            lambda: codec.encode_command(raw),
+            lambda: dji.encode_command(raw, (0,)),
             lambda: command.encode(values),
         ),
         Case(
             "DJI 0x201 feedback decode",
-            lambda: codec.decode(frame),
+            lambda: dji.decode_feedback(frame),
             lambda: feedback.decode(frame.data),
         ),
     ]

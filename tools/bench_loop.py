@@ -79,6 +79,7 @@ from gateway.runtime.daemon import Daemon
 from gateway.runtime.sdnotify import SystemdNotifier
 from gateway.runtime.timing import LoopTimer
 from gateway.sim.bus import SimulatedControllers
+from gateway.sim.registry import simulators_for
 from gateway.wire.can import TwistCommand, WgCodec
 from gateway.wire.socket import ProtocolError, Request, TwistRequest, encode_line
 
@@ -267,7 +268,9 @@ def main() -> None:
         sys.exit("perf_counter is not CLOCK_MONOTONIC here: cross-process latency impossible")
     daemon = BenchDaemon(cfg, sim=not inline, socket_path=path, notifier=SystemdNotifier(None))
     if inline:
-        daemon.sims = SimulatedControllers(daemon.gateway.drives.simulators(), cfg.bus.channel)
+        daemon.sims = SimulatedControllers(
+            simulators_for(daemon.gateway.drives.all_motors()), cfg.bus.channel
+        )
     # Keep every sample of the run (the daemon's own ring holds the last 4096).
     timer = LoopTimer(cfg.loop.rate_hz, capacity=int(args.seconds * cfg.loop.rate_hz) + 2000)
     daemon.scheduler.timer = daemon.gateway.timer = timer
@@ -309,7 +312,7 @@ def main() -> None:
                                                strict=False)]
     can_p50, can_p99, can_max = _percentiles_us(can_e2e)
     # Same simulators, same bus, python-can alone.
-    sims = SimulatedControllers(daemon.gateway.drives.simulators(), "wgb-bare")
+    sims = SimulatedControllers(simulators_for(daemon.gateway.drives.all_motors()), "wgb-bare")
     try:
         bare = bare_python_can_cycle_us(sims, "wgb-bare")
     finally:

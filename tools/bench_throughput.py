@@ -48,7 +48,9 @@ nobody reads), the part common to both.  Instructions per cycle = (I(2N) - I(N))
 setup, fork and exit cancel; the harness's is subtracted from the other two.  The parent's
 fork and wait between children add a constant drift per child, measured by empty children at
 both ends and taken out.  ``--verify`` repeats every N-cycle child and adds a 3N one, to show
-the counts repeat and (I(3N) - I(2N)) / (I(2N) - I(N)) - 1 is near 0.
+the counts repeat and (I(3N) - I(2N)) / (I(2N) - I(N)) - 1 is near 0.  ``bench_anchor.py``
+adds a fourth loop on the ODrive frames, counted the same way: the hand-written loop a robot
+builder would write instead (``anchor_loop.py``).
 
 Run: ``.venv/bin/python tools/bench_throughput.py [--cycles N] [--repeats R]
 [--protocol NAME ...] [--profile NAME] [--instructions [--instr-cycles N] [--verify]]``.

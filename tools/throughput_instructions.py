@@ -4,6 +4,9 @@ The method is described in :mod:`bench_throughput` (and printed by it).  This mo
 halves: the measuring process, which runs under callgrind (``main`` below: one per protocol,
 it sets up once and forks one child per measured loop), and :func:`run_instructions`, the
 driver that starts those processes, differences their counts and prints the table.
+
+With ``anchor=True`` (ODrive only) a fourth loop is measured on the same delivered frames: the
+hand-written loop of :mod:`anchor_loop`, on a bus pair of its own (:mod:`bench_anchor`).
 """
 
 from __future__ import annotations
@@ -21,21 +24,21 @@ import tempfile
 import traceback
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import callgrind
+import can
+from anchor_loop import AXIS_CLOSED_LOOP_CONTROL, AnchorLoop, Robot
 from can.interfaces.virtual import VirtualBus
-from throughput_rig import PERIOD_S, PROTOCOLS, Bench
+from throughput_rig import PERIOD_S, PROTOCOLS, TWIST, Bench, gateway_edge, robot_raw
 
 from gateway.core.types import GatewayState
-
-if TYPE_CHECKING:
-    import can
 
 MIXES = ("1 kHz mix", "saturated")
 #: The measured loops: the gateway's cycle, python-can alone, and the harness common to both
 #: (putting the injected frames on the receiving bus's queue), subtracted from each.
 SIDES = ("gateway", "python-can", "harness")
+#: The hand-written loop's side (``--anchor``): its frames go out on a bus of its own.
+ANCHOR = "anchor"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -59,11 +62,59 @@ def _queue(bus: can.BusABC) -> queue.Queue[can.Message]:
     return bus.queue
 
 
-def run_loop(bench: Bench, side: str, work: Work, n: int) -> None:
+@dataclasses.dataclass(frozen=True)
+class Anchor:
+    """The hand-written loop on a channel of its own, with one other bus there (as the
+    gateway's and python-can's buses have), so each of its sends costs the same copy."""
+
+    loop: AnchorLoop
+    peer: can.BusABC
+
+    @classmethod
+    def open(cls, bench: Bench) -> Anchor:
+        if bench.protocol != "odrive":
+            raise SystemExit(f"--anchor: the anchor loop drives ODrives, not {bench.protocol}")
+        channel = f"{bench.channel}-anchor"
+        robot = Robot.from_mapping(robot_raw(bench.protocol, channel), "<bench odrive>")
+        loop = AnchorLoop(robot, can.Bus(interface="virtual", channel=channel))
+        loop.set_twist(TWIST.vx_m_s, TWIST.vy_m_s, TWIST.wz_rad_s)
+        return cls(loop, can.Bus(interface="virtual", channel=channel))
+
+    def warm(self, slots: list[list[can.Message]]) -> None:
+        """Run over ``slots`` once (positions and heartbeats known), then empty the peer."""
+        run_anchor(self, slots, len(slots))
+        while self.peer.recv(0.0) is not None:
+            pass
+
+    def healthy(self) -> bool:
+        """Every axis in CLOSED_LOOP_CONTROL without error, and every frame taken."""
+        loop = self.loop
+        return (not any(loop.axis_error) and _queue(loop.bus).empty()
+                and all(s == AXIS_CLOSED_LOOP_CONTROL for s in loop.axis_state))
+
+    def close(self) -> None:
+        self.loop.bus.shutdown()
+        self.peer.shutdown()
+
+
+def run_anchor(anchor: Anchor, slots: list[list[can.Message]], n: int) -> None:
+    """The anchor's measured loop: put each cycle's frames on its bus's queue, one cycle."""
+    put, cycle = _queue(anchor.loop.bus).put, anchor.loop.cycle
+    for k in range(n):
+        for msg in slots[k]:
+            put(msg)
+        cycle()
+
+
+def run_loop(bench: Bench, side: str, work: Work, n: int, anchor: Anchor | None = None) -> None:
     """The measured loop: ``n`` cycles of one side, nothing else."""
     slots = work.slots
-    if side == "gateway":
-        put, cycle, t = _queue(bench.gw.bus).put, bench.gw.cycle, bench.t
+    if side == ANCHOR:
+        if anchor is None:
+            raise SystemExit("the anchor side needs the anchor loop (--anchor)")
+        run_anchor(anchor, slots, n)
+    elif side == "gateway":
+        put, cycle, t = _queue(gateway_edge(bench.gw).bus).put, bench.gw.cycle, bench.t
         for k in range(n):
             for msg in slots[k]:
                 put(msg)
@@ -95,10 +146,13 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("outdir", type=Path)
     parser.add_argument("--cycles", type=int, required=True)
     parser.add_argument("--multiples", required=True, help="comma-separated, e.g. 1,2")
+    parser.add_argument("--anchor", action="store_true", help="also the hand-written loop")
     args = parser.parse_args(argv)
     multiples = [int(m) for m in args.multiples.split(",")]
     n_max = args.cycles * max(multiples)
     bench = Bench(args.protocol, overhead_ns=0.0)
+    anchor = Anchor.open(bench) if args.anchor else None
+    sides = (*SIDES, ANCHOR) if anchor is not None else SIDES
     # A pool of exactly N cycles: every N-cycle window of the 1 kHz mix holds the same frames.
     bench.record_pool(args.cycles * PERIOD_S, enable_cycles=200, twist_cycles=300)
     works: dict[str, Work] = {}
@@ -108,12 +162,14 @@ def main(argv: list[str] | None = None) -> None:
         slots = [[_delivered(m, bench.channel) for m in g] for g in schedule]
         sent = bench.run_gateway(schedule[:args.cycles], None)[3]
         works[mix] = Work(slots, sent)
+        if anchor is not None and mix == MIXES[0]:
+            anchor.warm(slots[:args.cycles])
         frames[mix] = {n: [sum(len(sent[k % len(sent)]) for k in range(n)),
                            sum(len(slots[k]) for k in range(n))]
                        for n in {args.cycles * m for m in multiples}}
     (args.outdir / "frames.json").write_text(json.dumps(frames))
     plan: list[tuple[str, str, int]] = [("null", "harness", 0)]
-    plan += [(mix, side, args.cycles * m) for mix in MIXES for side in SIDES for m in multiples]
+    plan += [(mix, side, args.cycles * m) for mix in MIXES for side in sides for m in multiples]
     plan.append(("null", "harness", 0))
     rejected0 = bench.rejected()
     sys.stdout.flush()
@@ -122,25 +178,32 @@ def main(argv: list[str] | None = None) -> None:
     for position, (mix, side, n) in enumerate(plan):
         pid = os.fork()
         if pid == 0:
-            _child(bench, args.outdir, position, mix, side, works.get(mix), n, rejected0)
+            _child(bench, args.outdir, position, mix, side, works.get(mix), n, rejected0,
+                   anchor)
         _, status = os.waitpid(pid, 0)
         if status != 0:
             raise SystemExit(f"{args.protocol} {mix} {side} {n}: child exit status {status}")
+    if anchor is not None:
+        anchor.close()
     bench.close()
 
 
 def _child(bench: Bench, outdir: Path, position: int, mix: str, side: str, work: Work | None,
-           n: int, rejected0: int) -> None:
+           n: int, rejected0: int, anchor: Anchor | None) -> None:
     """One forked child: the loop, the gateway's checks and counts, then ``os._exit``."""
     status = 0
     try:
         counts = bench.gw.counts
         sent0, recv0 = counts["frames_sent"], counts["frames_received"]
+        peer0 = _queue(anchor.peer).qsize() if anchor is not None else 0
         if work is not None:
-            run_loop(bench, side, work, n)
+            run_loop(bench, side, work, n, anchor)
         ok = bench.gw.state is GatewayState.RUNNING and bench.rejected() == rejected0
+        if anchor is not None:
+            ok = ok and anchor.healthy()
         meta = {"position": position, "mix": mix, "side": side, "n": n, "ok": ok,
-                "gw_frames": [counts["frames_sent"] - sent0, counts["frames_received"] - recv0]}
+                "gw_frames": [counts["frames_sent"] - sent0, counts["frames_received"] - recv0],
+                "anchor_sent": _queue(anchor.peer).qsize() - peer0 if anchor else 0}
         (outdir / f"meta.{os.getpid()}.json").write_text(json.dumps(meta))
     except BaseException:  # a forked child must never return into the parent's loop
         traceback.print_exc()
@@ -158,18 +221,25 @@ class Row:
     received: float
     per_cycle: dict[str, float]  # side -> (I(2N) - I(N)) / N, harness included
     checks: dict[str, tuple[float, float]]  # side -> (repeat spread, linearity), --verify
+    anchor_sent: float = 0.0  # frames the anchor loop sent per cycle (anchor=True)
 
     def net(self, side: str) -> float:
         return self.per_cycle[side] - self.per_cycle["harness"]
 
 
-def measure(protocol: str, cycles: int, verify: bool) -> tuple[list[Row], float]:
-    """One protocol under callgrind: its rows and the parent's drift per fork."""
+def measure(protocol: str, cycles: int, verify: bool, anchor: bool = False
+            ) -> tuple[list[Row], float]:
+    """One protocol under callgrind: its rows and the parent's drift per fork.
+
+    :param anchor: also measure the hand-written loop of :mod:`anchor_loop` (ODrive only).
+    """
     multiples = (1, 2, 1, 3) if verify else (1, 2)
+    sides = (*SIDES, ANCHOR) if anchor else SIDES
     with tempfile.TemporaryDirectory(prefix="wg-callgrind-") as tmp:
         outdir = Path(tmp)
         argv = [sys.executable, str(Path(__file__).resolve()), protocol, str(outdir),
-                "--cycles", str(cycles), "--multiples", ",".join(map(str, multiples))]
+                "--cycles", str(cycles), "--multiples", ",".join(map(str, multiples)),
+                *(["--anchor"] if anchor else [])]
         counts = callgrind.run(argv, outdir, {"PYTHONHASHSEED": "0"})
         metas = []
         for path in outdir.glob("meta.*.json"):
@@ -179,7 +249,8 @@ def measure(protocol: str, cycles: int, verify: bool) -> tuple[list[Row], float]
         frames = json.loads((outdir / "frames.json").read_text())
     metas.sort(key=lambda m: m["position"])
     if not all(m["ok"] for m in metas):
-        raise SystemExit(f"{protocol}: left RUNNING or rejected injected frames")
+        raise SystemExit(f"{protocol}: left RUNNING or rejected injected frames"
+                         + (", or the anchor loop lost an axis or a frame" if anchor else ""))
     # Each fork comes after the parent's previous fork and wait: a constant drift per
     # position, measured by the empty children at both ends and taken out.
     drift = (metas[-1]["ir"] - metas[0]["ir"]) / metas[-1]["position"]
@@ -188,7 +259,7 @@ def measure(protocol: str, cycles: int, verify: bool) -> tuple[list[Row], float]
     rows = []
     for mix in MIXES:
         got = {side: [v for (mx, s, _, _), v in sorted(ir.items(), key=lambda kv: kv[0][3])
-                      if mx == mix and s == side] for side in SIDES}
+                      if mx == mix and s == side] for side in sides}
         per_cycle = {side: (v[1] - v[0]) / cycles for side, v in got.items()}
         checks = {}
         if verify:
@@ -203,7 +274,13 @@ def measure(protocol: str, cycles: int, verify: bool) -> tuple[list[Row], float]
         if pcan[1] != gwf[1] or abs(pcan[0] - gwf[0]) > max(3, pcan[0] // 50):
             raise SystemExit(f"{protocol} {mix}: python-can moved {pcan[0]}+{pcan[1]} frames, "
                              f"the gateway {gwf[0]}+{gwf[1]}")
-        rows.append(Row(protocol, mix, gwf[0] / cycles, gwf[1] / cycles, per_cycle, checks))
+        anchor_sent = [m["anchor_sent"] for m in metas if m["mix"] == mix
+                       and m["side"] == ANCHOR and m["n"] == cycles]
+        if anchor_sent and anchor_sent[0] != 4 * cycles:
+            raise SystemExit(f"{protocol} {mix}: the anchor loop sent {anchor_sent[0]} frames "
+                             f"in {cycles} cycles, expected {4 * cycles}")
+        rows.append(Row(protocol, mix, gwf[0] / cycles, gwf[1] / cycles, per_cycle, checks,
+                        anchor_sent[0] / cycles if anchor_sent else 0.0))
     return rows, drift
 
 

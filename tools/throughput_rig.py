@@ -9,7 +9,7 @@ from __future__ import annotations
 import dataclasses
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import can
 import yaml
@@ -19,6 +19,7 @@ from gateway.config import parse_config
 from gateway.core.control import Source
 from gateway.core.types import GatewayState, Twist
 from gateway.runtime.loop import Gateway
+from gateway.sim.registry import simulators_for
 
 if TYPE_CHECKING:
     import cProfile
@@ -57,9 +58,9 @@ PROTOCOLS: dict[str, dict[str, object]] = {
 }
 
 
-def robot_config(protocol: str, channel: str) -> GatewayConfig:
-    """The 4-wheel mecanum demo robot with ``protocol`` motors on a virtual channel."""
-    raw: dict[str, object] = {
+def robot_raw(protocol: str, channel: str) -> dict[str, Any]:
+    """The configuration mapping of :func:`robot_config` (the anchor loop reads it too)."""
+    return {
         "name": f"bench_{protocol}",
         "drive": "mecanum",
         "geometry": {"wheel_radius": 0.05, "wheelbase": 0.40, "track": 0.36},
@@ -75,7 +76,17 @@ def robot_config(protocol: str, channel: str) -> GatewayConfig:
         "bus": {"interface": "virtual", "channel": channel, "bitrate": 1_000_000},
         "gateway": {"rate_hz": 1000.0, "cmd_timeout_s": 0.0},
     }
-    return parse_config(raw, f"<bench {protocol}>")
+
+
+def robot_config(protocol: str, channel: str) -> GatewayConfig:
+    """The 4-wheel mecanum demo robot with ``protocol`` motors on a virtual channel."""
+    return parse_config(robot_raw(protocol, channel), f"<bench {protocol}>")
+
+
+def gateway_edge(gw: Gateway) -> Any:
+    """The part of the gateway that owns its python-can bus (``bus``, ``close``): the
+    gateway's bus edge, or the gateway itself where the edge is not a part of its own."""
+    return getattr(gw, "edge", gw)
 
 
 def clock_overhead_ns(clock: Callable[[], int], samples: int = 20_000) -> float:
@@ -148,12 +159,12 @@ class Bench:
     def close(self) -> None:
         for bus in (self.bare, self.bare_injector, self.injector):
             bus.shutdown()
-        self.gw.close()
+        gateway_edge(self.gw).close()
 
     def record_pool(self, seconds: float = 2.0, enable_cycles: int = 2000,
                     twist_cycles: int = 1000) -> None:
         """Enable against the simulators, then record their output per cycle."""
-        sims = Sims(self.gw.drives.simulators(), open_bus("virtual", self.channel))
+        sims = Sims(simulators_for(self.gw.drives.all_motors()), open_bus("virtual", self.channel))
         try:
             gw = self.gw
             gw.supervisor.enable(self.t)

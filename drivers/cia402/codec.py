@@ -34,7 +34,6 @@ from drivers.cia402.enums import (
 from drivers.cia402.sdo import SdoResponse, parse_sdo_response
 from gateway.core.errors import DecodeError, EncodeError
 from gateway.core.types import Frame
-from gateway.drive.codec import MotorCodec
 
 if TYPE_CHECKING:
     from collections.abc import Mapping
@@ -244,7 +243,9 @@ class Emergency:
 Cia402Message = PdoFeedback | Heartbeat | Emergency | SdoResponse
 
 
-class _Kind(enum.Enum):
+class Received(enum.Enum):
+    """What a node sends us, by COB-ID (value: how messages name it)."""
+
     POSITION = "TPDO (statusword + position)"
     VELOCITY = "TPDO (statusword + velocity)"
     EMCY = "EMCY"
@@ -252,48 +253,35 @@ class _Kind(enum.Enum):
     HEARTBEAT = "heartbeat"
 
 
-class Cia402Codec(MotorCodec[Cia402Message]):
-    """Encoder of command RPDOs and decoder of everything our nodes send.
+class Cia402Codec:
+    """Builder of command RPDOs and decoder of everything our nodes send.
 
     :param nodes: node ID -> the PDO layout the gateway configured on that node.
     """
 
     def __init__(self, nodes: Mapping[int, PdoLayout]) -> None:
         self.nodes = dict(nodes)
-        self._rx: dict[int, tuple[int, _Kind]] = {}
+        #: Every COB-ID :meth:`decode` takes (the feedback TPDOs, EMCY, SDO responses and
+        #: heartbeats of our nodes; CiA 301 predefined connection set: function code << 7 |
+        #: node), with the node and what it carries.
+        self.receivers: dict[int, tuple[int, Received]] = {}
         for node_id, layout in self.nodes.items():
             check_node_id(node_id)
-            self._rx[tpdo_cob_id(layout.tpdo_position, node_id)] = (node_id, _Kind.POSITION)
-            self._rx[tpdo_cob_id(layout.tpdo_velocity, node_id)] = (node_id, _Kind.VELOCITY)
-            self._rx[CobBase.EMCY + node_id] = (node_id, _Kind.EMCY)
-            self._rx[CobBase.SDO_TX + node_id] = (node_id, _Kind.SDO)
-            self._rx[CobBase.HEARTBEAT + node_id] = (node_id, _Kind.HEARTBEAT)
-        #: Every COB-ID :meth:`decode` takes (TPDOs, EMCY, SDO responses, heartbeats).
-        self.received_ids: frozenset[int] = frozenset(self._rx)
+            rx = self.receivers
+            rx[tpdo_cob_id(layout.tpdo_position, node_id)] = (node_id, Received.POSITION)
+            rx[tpdo_cob_id(layout.tpdo_velocity, node_id)] = (node_id, Received.VELOCITY)
+            rx[CobBase.EMCY + node_id] = (node_id, Received.EMCY)
+            rx[CobBase.SDO_TX + node_id] = (node_id, Received.SDO)
+            rx[CobBase.HEARTBEAT + node_id] = (node_id, Received.HEARTBEAT)
         #: node ID -> command RPDO COB-ID (every cycle sends one per node).
-        self._rpdo_ids = {
+        self.rpdo_ids = {
             node_id: rpdo_cob_id(layout.rpdo, node_id) for node_id, layout in self.nodes.items()
         }
 
     def rpdo(self, node_id: int, controlword: int, target: int) -> Frame:
         """The command RPDO of ``node_id`` (its configured RPDO number): controlword and
         target velocity (drive motor) or target position (steering actuator)."""
-        return make_rpdo(self._rpdo_ids[node_id], controlword, target)
-
-    def encode_command(self, commands: Mapping[int, float]) -> tuple[Frame, ...]:
-        """RPDOs with controlword ENABLE OPERATION (0x000F) and the rounded target velocity.
-
-        :param commands: node ID -> target velocity in device units (0x60FF).
-        :raises EncodeError: if a value is not finite or out of the int32 range.
-        """
-        lo, hi = INT32_RANGE
-        out = []
-        for node_id, v in commands.items():
-            raw = round(v) if math.isfinite(v) else None
-            if raw is None or not lo <= raw <= hi:  # raises; the message is built only here
-                raw = velocity_to_raw(v, f"target velocity for node {node_id}")
-            out.append(self.rpdo(node_id, 0x000F, raw))
-        return tuple(out)
+        return make_rpdo(self.rpdo_ids[node_id], controlword, target)
 
     def decode(self, frame: Frame) -> Cia402Message | None:
         """Decode a frame from one of our nodes; ``None`` for any other frame.
@@ -302,7 +290,7 @@ class Cia402Codec(MotorCodec[Cia402Message]):
         """
         if frame.is_extended_id:
             return None  # CANopen uses 11-bit COB-IDs; a 29-bit frame is another device's
-        hit = self._rx.get(frame.arbitration_id)
+        hit = self.receivers.get(frame.arbitration_id)
         if hit is None:
             return None
         node_id, kind = hit
@@ -311,11 +299,11 @@ class Cia402Codec(MotorCodec[Cia402Message]):
                 f"Expected an 11-bit {kind.value} data frame from node {node_id}, but got "
                 f"{frame.to_cansend()}."
             )
-        if kind is _Kind.SDO:
+        if kind is Received.SDO:
             return parse_sdo_response(frame)
-        if kind is _Kind.HEARTBEAT:
+        if kind is Received.HEARTBEAT:
             return _decode_heartbeat(frame, node_id)
-        if kind is _Kind.EMCY:
+        if kind is Received.EMCY:
             if len(frame.data) != _EMCY.size:
                 raise DecodeError(
                     f"Expected 8 data bytes in the EMCY of node {node_id}, "
@@ -329,7 +317,7 @@ class Cia402Codec(MotorCodec[Cia402Message]):
         if len(data) != _PDO_SIZE:
             unpack_pdo(frame, f"{kind.value} of node {node_id}")
         word, value = _PDO_UNPACK(data)
-        fb = FeedbackKind.POSITION if kind is _Kind.POSITION else FeedbackKind.VELOCITY
+        fb = FeedbackKind.POSITION if kind is Received.POSITION else FeedbackKind.VELOCITY
         return PdoFeedback(node_id, fb, word, value)
 
 

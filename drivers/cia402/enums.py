@@ -20,8 +20,6 @@ from gateway.core.errors import EncodeError, IllegalTransitionError
 
 #: COB-ID bit 31 of a PDO communication parameter: the PDO is not valid (switched off).
 PDO_COB_INVALID = 1 << 31
-#: COB-ID bit 30: no RTR allowed on this PDO.
-PDO_COB_NO_RTR = 1 << 30
 #: Largest node ID (CiA 301).
 MAX_NODE_ID = 127
 
@@ -243,20 +241,6 @@ class OperationMode(enum.IntEnum):
 def supported_mode_bit(mode: OperationMode) -> int:
     """The bit of 0x6502 (supported drive modes) that stands for ``mode`` (bit = mode - 1)."""
     return 1 << (int(mode) - 1)
-
-
-class ControlwordBit(enum.IntFlag):
-    """Bits of the controlword (0x6040)."""
-
-    NONE = 0
-    SWITCH_ON = 0x0001
-    ENABLE_VOLTAGE = 0x0002
-    #: Active low: 0 requests a quick stop.
-    QUICK_STOP = 0x0004
-    ENABLE_OPERATION = 0x0008
-    #: Acts on the rising edge.
-    FAULT_RESET = 0x0080
-    HALT = 0x0100
 
 
 class StatuswordBit(enum.IntFlag):

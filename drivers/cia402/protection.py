@@ -28,8 +28,9 @@ controlword, and read back; only then is the protection confirmed and the drive 
 (:data:`~drivers.cia402.options.MIN_TIMEOUT_PERIODS`): CiA 301 leaves the margin to the
 integrator, and a consumer time of 1.5 to 3 producer periods is the usual choice.
 
-The heartbeat's COB-ID is declared the way every frame the gateway sends is: a fresh driver's
-:meth:`~drivers.cia402.driver.Cia402Driver.poll` returns it, so
+The heartbeat's COB-ID is declared the way every frame the gateway sends is: it is one of the
+driver's claims (:meth:`~drivers.cia402.driver.Cia402Driver.claims`, sent, of no motor), and a
+fresh driver's :meth:`~drivers.cia402.driver.Cia402Driver.poll` returns it, so
 :func:`gateway.drive.filters.own_id_collisions` checks it against ``gateway.can_ids``; a drive with
 the same node ID (whose own heartbeat has that COB-ID) is refused here.
 """
@@ -40,14 +41,15 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from drivers.cia402.codec import make_heartbeat
-from drivers.cia402.enums import NmtState
+from drivers.cia402.enums import CobBase, NmtState
+from drivers.cia402.options import DEFAULT_HOST_HEARTBEAT_S, DEFAULT_HOST_NODE_ID
 from gateway.core.errors import ConfigError
 from gateway.core.protection import Guard, Protection
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
 
-    from drivers.cia402.options import NodeOptions
+    from drivers.cia402.options import Cia402Options
     from gateway.core.types import Frame, MotorConfig
 
 #: What the drive does when the heartbeat stops, per abort connection option code (0x6007).
@@ -77,31 +79,23 @@ class HostSettings:
     period_s: float
 
 
-def host_settings(motors: Sequence[MotorConfig], opts: Sequence[NodeOptions]) -> HostSettings:
-    """The one heartbeat of a bus, from its motors' ``host_node_id`` and ``host_heartbeat_s``.
+def host_settings(motors: Sequence[MotorConfig], opts: Sequence[Cia402Options]) -> HostSettings:
+    """The one heartbeat of a bus, from its motors' ``host_node_id`` and ``host_heartbeat_s``
+    (keys every motor of the bus shares: the driver's ``BUS_WIDE``).
 
-    :raises ConfigError: if two motors disagree on them (one gateway heartbeat per bus), or a
-        drive has the gateway's node ID.
+    :raises ConfigError: if a drive has the gateway's node ID.
     """
     if not motors:
-        return HostSettings(127, 0.05)
-    first, ref = motors[0], opts[0]
-    for m, o in zip(motors, opts, strict=True):
-        where = f"wheel {m.wheel!r} (node {m.node_id})"
-        for key, want, got in (("host_node_id", ref.host_node_id, o.host_node_id),
-                               ("host_heartbeat_s", ref.host_heartbeat_s, o.host_heartbeat_s)):
-            if got != want:
-                raise ConfigError(
-                    f"{where}.{key}: expected {want!r} as for wheel {first.wheel!r} (the gateway "
-                    f"sends one heartbeat per bus), got {got!r}"
-                )
-        if m.node_id == ref.host_node_id:
+        return HostSettings(DEFAULT_HOST_NODE_ID, DEFAULT_HOST_HEARTBEAT_S)
+    host = opts[0].host_node_id
+    for m in motors:
+        if m.node_id == host:
             raise ConfigError(
-                f"{where}.host_node_id: expected a node ID that no drive on the bus uses (the "
-                f"gateway's heartbeat goes out on 0x{0x700 + ref.host_node_id:03X}), got "
-                f"{ref.host_node_id}, the node ID of wheel {m.wheel!r}"
+                f"motor {m.wheel!r}.host_node_id: expected a node ID that no drive on the bus "
+                f"uses (the gateway's heartbeat goes out on 0x{CobBase.HEARTBEAT + host:03X}), "
+                f"got {host}, the node ID of wheel {m.wheel!r}"
             )
-    return HostSettings(ref.host_node_id, ref.host_heartbeat_s)
+    return HostSettings(host, opts[0].host_heartbeat_s)
 
 
 class HostHeartbeat:
@@ -128,7 +122,7 @@ class HostHeartbeat:
         return [self.frame]
 
 
-def describe(opts: NodeOptions) -> Protection:
+def describe(opts: Cia402Options) -> Protection:
     """A drive's protection as the gateway configures it (:attr:`Guard.CONFIGURED`)."""
     option = opts.abort_connection_option
     return Protection(

@@ -17,11 +17,10 @@ The controller-side protection steps (:func:`~drivers.cia402.steps.protection_st
 heartbeat consumer 0x1016:01 and the abort connection option code 0x6007, written, then read
 back) come before NMT start, so before any controlword.  :attr:`NodeSequencer.protection` says
 where they stand; when one fails (an abort, no answer within :attr:`NodeSequencer.SDO_TIMEOUT_S`,
-a read-back other than written) the driver learns why from
-:meth:`NodeSequencer.take_protection_error`, and the sequence either ends there
-(:attr:`NodeSequencer.protection_required`, ``controller_watchdog: required``: the drive stays
-pre-operational, no controlword reaches it) or skips the rest of the protection and goes on
-(``warn``).
+a read-back other than written) :attr:`NodeSequencer.protection_error` says why, and the
+driver's :meth:`~gateway.drive.driver.MotorDriver.may_arm` decides: if not
+(``controller_watchdog: required``) the sequence ends there, the drive stays pre-operational and
+no controlword reaches it; if so (``warn``) it skips the rest of the protection and goes on.
 
 Nothing here blocks or reads the clock: the driver passes ``now_s`` and sends what comes back.
 """
@@ -50,6 +49,8 @@ from gateway.core.protection import ProtectionState
 from gateway.core.types import DriveFault
 
 if TYPE_CHECKING:
+    from collections.abc import Callable
+
     from drivers.cia402.codec import Cia402Codec
     from drivers.cia402.sdo import SdoResponse
     from drivers.cia402.steps import Step
@@ -94,6 +95,8 @@ class NodeSequencer:
     :param codec: builds the command RPDO for controlword steps.
     :param steps: from :func:`~drivers.cia402.steps.configuration_steps`.
     :param position: a steering actuator in cyclic synchronous position mode (see above).
+    :param may_arm: asked when the protection failed: whether the drive may be armed all the
+        same (default: never).
     """
 
     #: Deadline for each SDO answer (s).
@@ -114,7 +117,8 @@ class NodeSequencer:
     MAX_WALK_STEPS = 8
 
     def __init__(self, node_id: int, label: str, codec: Cia402Codec,
-                 steps: tuple[Step, ...], *, position: bool = False) -> None:
+                 steps: tuple[Step, ...], *, position: bool = False,
+                 may_arm: Callable[[], bool] | None = None) -> None:
         self.node_id = node_id
         self.label = label
         self.codec = codec
@@ -146,13 +150,13 @@ class NodeSequencer:
         #: Where the controller-side protection stands (NOT_APPLICABLE without its steps).
         self.protection = (ProtectionState.PENDING if self._has_protection
                            else ProtectionState.NOT_APPLICABLE)
-        #: Whether a failed protection ends the sequence (``controller_watchdog: required``);
-        #: if not, the sequence skips the rest of the protection and goes on.
-        self.protection_required = True
+        #: Whether a drive whose protection failed may be armed all the same (see above).
+        self.may_arm: Callable[[], bool] = may_arm or (lambda: False)
         #: Whether the sequence ended because the protection failed (:attr:`error` then only
-        #: repeats what :meth:`take_protection_error` gave the driver).
+        #: repeats :attr:`protection_error`).
         self.halted_by_protection = False
-        self._protection_error = ""
+        #: Why the protection failed since the last start ("" if it did not).
+        self.protection_error = ""
 
     # ----------------------------------------------------------------- inputs
 
@@ -160,11 +164,10 @@ class NodeSequencer:
         """Begin (or restart) the enable sequence."""
         self.phase = Phase.CONFIGURING
         self.error, self.error_flags = "", DriveFault.NONE
-        self.halted_by_protection, self._protection_error = False, ""
+        self.halted_by_protection, self.protection_error = False, ""
         if self._has_protection:
             self.protection = ProtectionState.PENDING
-        self._i, self._awaiting, self._retry_s = 0, False, now_s
-        self._step_s = now_s
+        self._i, self._awaiting, self._retry_s, self._step_s = 0, False, now_s, now_s
         self._edge, self._edges = None, 0
         if self.position:
             self.hold = None  # only a position read after this start counts
@@ -237,11 +240,6 @@ class NodeSequencer:
             self._awaiting = False
             self._step_failed(self.steps[self._i], str(err), DriveFault.COMMUNICATION, now_s)
 
-    def take_protection_error(self) -> str:
-        """Why the protection failed since the last call ("" if it did not)."""
-        why, self._protection_error = self._protection_error, ""
-        return why
-
     # ----------------------------------------------------------------- periodic
 
     def poll(self, now_s: float) -> list[Frame]:
@@ -272,9 +270,7 @@ class NodeSequencer:
 
     def _advance(self, now_s: float) -> None:
         self._i += 1
-        self._retry_s = now_s
-        self._step_s = now_s
-        self._last_read = None
+        self._retry_s, self._step_s, self._last_read = now_s, now_s, None
         if (self.protection is ProtectionState.PENDING
                 and getattr(self.steps[self._i - 1], "protection", False)
                 and not any(getattr(st, "protection", False) for st in self.steps[self._i:])):
@@ -284,12 +280,12 @@ class NodeSequencer:
 
     def _step_failed(self, step: Step, message: str, flags: DriveFault, now_s: float) -> None:
         """A configuration step failed: the sequence ends, unless it is a protection step
-        and the protection is not required (then its other steps are skipped)."""
+        and the drive may be armed all the same (then its other steps are skipped)."""
         if not getattr(step, "protection", False):
             self.fail(message, flags)
             return
-        self.protection, self._protection_error = ProtectionState.FAILED, message
-        if self.protection_required:  # (the driver logs it, with the fix)
+        self.protection, self.protection_error = ProtectionState.FAILED, message
+        if not self.may_arm():  # (the driver reports it, with the fix)
             self.phase, self.halted_by_protection = Phase.FAILED, True
             self.error = f"{self.label}: controller watchdog not confirmed: {message}"
             self.error_flags = DriveFault.WATCHDOG

@@ -3,7 +3,8 @@
 The device decodes controlwords from their bits (CiA 402 "device control commands"), not from
 the driver's transition table, so the driver is tested against an independent reading of the
 standard.  Its default PDO mapping is deliberately not the gateway's (TPDO3 carries velocity,
-RPDO4 and TPDO4 are off, TPDO1/2 are on): a driver that does not remap fails the tests.
+RPDO4 and TPDO4 are off, TPDO1/2 are on): a driver that does not remap fails the tests.  The
+PDO exchange (RPDOs, SYNC, TPDOs) is :mod:`drivers.cia402.sim_pdo`.
 
 Quantisation follows a real drive: position actual value (0x6064) is an int32 count that wraps
 modulo 2^32 (``initial_position`` lets a test start near the wrap), velocities are int32
@@ -54,7 +55,7 @@ from drivers.cia402.enums import (
     supported_mode_bit,
 )
 from drivers.cia402.faults import ErrorRegister, SdoAbortCode
-from drivers.cia402.options import NodeOptions
+from drivers.cia402.options import Cia402Options
 from drivers.cia402.sdo import (
     make_sdo_abort,
     make_sdo_download_ack,
@@ -68,14 +69,14 @@ from drivers.cia402.sim_control import (
 )
 from drivers.cia402.sim_device import POWERED, DriveControl
 from drivers.cia402.sim_od import SimObjectDictionary
+from drivers.cia402.sim_pdo import PdoExchange
 from gateway.core.errors import DecodeError
-from gateway.core.types import Frame
 from gateway.sim.device import DeviceSimulator
 
 if TYPE_CHECKING:
     from collections.abc import Iterable
 
-    from gateway.core.types import MotorConfig
+    from gateway.core.types import Frame, MotorConfig
     from gateway.sim.device import MotorModel
 
 log = logging.getLogger(__name__)
@@ -93,7 +94,13 @@ def _clamp32(value: int) -> int:
     return max(-(1 << 31), min((1 << 31) - 1, value))
 
 
-class Cia402Simulator(DriveControl, DeviceSimulator):
+def simulator_for(motor: MotorConfig) -> Cia402Simulator:
+    """A simulated CiA 402 drive for ``motor`` at factory settings (for tests and ``--sim``,
+    :mod:`gateway.sim.registry`)."""
+    return Cia402Simulator(motor)
+
+
+class Cia402Simulator(PdoExchange, DriveControl, DeviceSimulator):
     """The device side of one CiA 402 drive in profile velocity mode.
 
     :param motor: the motor block (node ID, ``velocity_factor``, ``counts_per_rev``).
@@ -129,7 +136,7 @@ class Cia402Simulator(DriveControl, DeviceSimulator):
         fault_code: int = 0x2310, fault_register: int = 0x03,
     ) -> None:
         super().__init__(motor, model)
-        self.opts = NodeOptions.from_motor(motor)
+        self.opts = Cia402Options.from_block(motor.options, f"motor {motor.wheel!r}")
         self.node_id = motor.node_id
         self.initial_position = _wrap32(initial_position)
         self.command_timeout_s = command_timeout_s
@@ -186,12 +193,9 @@ class Cia402Simulator(DriveControl, DeviceSimulator):
     def _reset_comm_state(self) -> None:
         #: The heartbeat consumer (0x1016:01), which reset communication clears too.
         self.consumer = HeartbeatConsumer()
-        self._pending: dict[int, bytes] = {}
         self._emcy_out: list[Frame] = []
         self._last_hb_s: float | None = None
-        self._tpdo_last_s = [0.0] * 4
-        self._tpdo_last_sw: list[int | None] = [None] * 4
-        self._sync_counter = [0] * 4
+        self._reset_pdos()
 
     def _statusword(self) -> int:
         sw = int(self.state) | StatuswordBit.REMOTE
@@ -318,53 +322,7 @@ class Cia402Simulator(DriveControl, DeviceSimulator):
         self.aborts += 1
         return [make_sdo_abort(n, req.index, req.subindex, abort)]
 
-    def _on_rpdo(self, k: int, data: bytes) -> None:
-        mapped = self.od.mapped(0x1600 + k)
-        if len(data) < sum(bits for _, _, bits in mapped) // 8:
-            self.pdo_errors += 1
-            return
-        if self.od.get(0x1400 + k, 2) <= 240:
-            self._pending[k] = data  # synchronous: acts at the next SYNC
-        else:
-            self._apply_rpdo(k, data)
-
-    def _apply_rpdo(self, k: int, data: bytes) -> None:
-        self.rpdos += 1
-        self._last_rpdo_s = self._now
-        offset = 0
-        for index, sub, bits in self.od.mapped(0x1600 + k):
-            size = bits // 8
-            self._write(index, sub, data[offset:offset + size], sdo=False)
-            offset += size
-
-    def _on_sync(self) -> list[Frame]:
-        self.syncs += 1
-        for k, data in sorted(self._pending.items()):
-            self._apply_rpdo(k, data)
-        self._pending.clear()
-        self._step_states()
-        out = []
-        for k in range(4):
-            tx_type = self.od.get(0x1800 + k, 2)
-            if tx_type > 240 or not self._tpdo_on(k):
-                continue
-            self._sync_counter[k] += 1
-            if self._sync_counter[k] >= max(tx_type, 1):
-                self._sync_counter[k] = 0
-                out.append(self._tpdo(k))
-        return out
-
-    # ----------------------------------------------------------------- frames out
-
-    def _tpdo_on(self, k: int) -> bool:
-        return self.od.pdo_valid(0x1800 + k)
-
-    def _tpdo(self, k: int) -> Frame:
-        self._refresh()
-        payload = self.od.pack(0x1A00 + k)
-        self._tpdo_last_s[k] = self._now
-        self._tpdo_last_sw[k] = self.od.get(0x6041)
-        return Frame(self.od.get(0x1800 + k, 1) & 0x7FF, payload)
+    # ----------------------------------------------------------------- device
 
     def _step_states(self) -> None:
         """Automatic transitions, the RPDO watchdog, and what the motor is told to do."""
@@ -417,13 +375,5 @@ class Cia402Simulator(DriveControl, DeviceSimulator):
             self._last_hb_s = now_s
             out.append(make_heartbeat(self.node_id, self.nmt))
         if self.nmt is NmtState.OPERATIONAL:
-            sw = self.od.get(0x6041)
-            for k in range(4):
-                if self.od.get(0x1800 + k, 2) < 254 or not self._tpdo_on(k):
-                    continue
-                timer_ms = self.od.get(0x1800 + k, 5)
-                due = timer_ms and now_s - self._tpdo_last_s[k] >= timer_ms / 1000.0 - 1e-9
-                mapped_sw = any(i == 0x6041 for i, _, _ in self.od.mapped(0x1A00 + k))
-                if due or (mapped_sw and sw != self._tpdo_last_sw[k]):
-                    out.append(self._tpdo(k))
+            out += self._event_tpdos(now_s)
         return out

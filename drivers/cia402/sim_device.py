@@ -23,7 +23,7 @@ from drivers.cia402.sim_od import FACTORY_QUICK_STOP_OPTION
 from gateway.sim.device import SimFault
 
 if TYPE_CHECKING:
-    from drivers.cia402.options import NodeOptions
+    from drivers.cia402.options import Cia402Options
     from drivers.cia402.sim_control import HeartbeatConsumer, Timing
     from drivers.cia402.sim_od import SimObjectDictionary
     from gateway.core.types import Frame
@@ -44,7 +44,7 @@ class DriveControl:
     """
 
     node_id: int
-    opts: NodeOptions
+    opts: Cia402Options
     od: SimObjectDictionary
     model: MotorModel
     faults: SimFault

@@ -40,7 +40,7 @@ from drivers.cia402.enums import (
 )
 
 if TYPE_CHECKING:
-    from drivers.cia402.options import NodeOptions
+    from drivers.cia402.options import Cia402Options
 
 
 #: How step descriptions name the modes the driver selects.
@@ -132,7 +132,7 @@ def consumer_entry(host_node_id: int, time_ms: int) -> int:
     return (host_node_id << 16) | time_ms
 
 
-def protection_steps(opts: NodeOptions) -> list[Step]:
+def protection_steps(opts: Cia402Options) -> list[Step]:
     """The controller-side protection: 0x1016:01 (watch the gateway's heartbeat) and 0x6007
     (abort connection option code) written by expedited SDO, then both read back."""
     entry = consumer_entry(opts.host_node_id, opts.consumer_time_ms)
@@ -148,20 +148,25 @@ def protection_steps(opts: NodeOptions) -> list[Step]:
     ]
 
 
-def configuration_steps(node_id: int, opts: NodeOptions) -> tuple[Step, ...]:
+def configuration_steps(
+    node_id: int, opts: Cia402Options, *, position: bool = False
+) -> tuple[Step, ...]:
     """Everything written into a node before NMT start, in order, ending with NMT start.
 
     :param node_id: the node (1..127).
-    :param opts: its options (PDO numbers, SYNC or event-driven, heartbeat time, protection,
-        mode).
+    :param opts: its options (PDO numbers, SYNC or event-driven, heartbeat time, protection).
+    :param position: a steering actuator: cyclic synchronous position mode, the target
+        position in the command RPDO (else profile velocity mode, the target velocity).
     """
+    mode = (OperationMode.CYCLIC_SYNCHRONOUS_POSITION if position
+            else OperationMode.PROFILE_VELOCITY)
     lay = opts.layout
     tx_type = TransmissionType.SYNC_EVERY if opts.sync else TransmissionType.EVENT_PROFILE
     timer = None if opts.sync else opts.event_timer_ms
     steps: list[Step] = [NmtStep(NmtCommand.ENTER_PRE_OPERATIONAL)]
     steps += _pdo_steps("RPDO", lay.rpdo, rpdo_cob_id(lay.rpdo, node_id),
                         ObjectIndex.RPDO_COMMUNICATION, ObjectIndex.RPDO_MAPPING,
-                        RPDO_POSITION_MAP if opts.position_mode else RPDO_MAP, tx_type, None)
+                        RPDO_POSITION_MAP if position else RPDO_MAP, tx_type, None)
     for number, entries in ((lay.tpdo_position, TPDO_POSITION_MAP),
                             (lay.tpdo_velocity, TPDO_VELOCITY_MAP)):
         steps += _pdo_steps("TPDO", number, tpdo_cob_id(number, node_id),
@@ -177,9 +182,9 @@ def configuration_steps(node_id: int, opts: NodeOptions) -> tuple[Step, ...]:
                               DataType.UNSIGNED16, "producer heartbeat time"))
     steps += protection_steps(opts)
     steps += [
-        SdoWriteStep(ObjectIndex.MODES_OF_OPERATION, 0, opts.mode, DataType.INTEGER8,
-                     f"modes of operation = {MODE_TEXT[opts.mode]}"),
-        SdoExpectStep(ObjectIndex.MODES_OF_OPERATION_DISPLAY, 0, opts.mode,
+        SdoWriteStep(ObjectIndex.MODES_OF_OPERATION, 0, mode, DataType.INTEGER8,
+                     f"modes of operation = {MODE_TEXT[mode]}"),
+        SdoExpectStep(ObjectIndex.MODES_OF_OPERATION_DISPLAY, 0, mode,
                       DataType.INTEGER8, "modes of operation display"),
         NmtStep(NmtCommand.START),
     ]

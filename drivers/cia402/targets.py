@@ -2,7 +2,8 @@
 a steering actuator.
 
 A drive motor's target velocity (0x60FF) is the wheel speed at the motor in device velocity
-units (``velocity_factor``), rounded and checked against ``max_rpm`` and the int32 range.
+units (``velocity_factor``), rounded and checked against the int32 range (the driver's base
+has checked it against ``max_rpm``; :class:`~drivers.cia402.axis.Axis`).
 
 **Steering actuators** (:attr:`~drivers.cia402.driver.Cia402Driver.STEERING`) run in cyclic
 synchronous position mode (CSP, 0x6060 = 8; drive motors stay in profile velocity, 3), with the
@@ -30,16 +31,10 @@ modulo 2^32, so the angle stays right across the int32 wrap.
 
 from __future__ import annotations
 
-import math
 from typing import TYPE_CHECKING
 
-from drivers.cia402.codec import INT32_RANGE, position_to_raw, velocity_to_raw
-from gateway.core.errors import EncodeError
-
 if TYPE_CHECKING:
-    from collections.abc import Sequence
-
-    from drivers.cia402.options import NodeOptions
+    from drivers.cia402.options import Cia402Options
     from gateway.core.types import MotorConfig
 
 _INT32_SPAN = 1 << 32
@@ -54,50 +49,7 @@ def wrap_delta(previous: int, current: int) -> int:
     return (current - previous + (1 << 31)) % _INT32_SPAN - (1 << 31)
 
 
-def target_counts(m: MotorConfig, opts: NodeOptions, angle: float) -> float:
-    """The target position (counts, unwrapped) of steering angle ``angle`` (rad).
-
-    :raises EncodeError: if the angle is not finite.
-    """
-    if not math.isfinite(angle):
-        raise EncodeError(
-            f'Expected a finite steering angle in rad for node {m.node_id} ("{m.wheel}"), '
-            f"but got {angle!r}."
-        )
+def target_counts(m: MotorConfig, opts: Cia402Options, angle: float) -> float:
+    """The target position (counts, unwrapped, not rounded) of steering angle ``angle`` (rad)
+    (the driver has checked that it is finite)."""
     return opts.rad_to_counts(m.steer_to_motor_rad(angle))
-
-
-def raw_targets(
-    motors: Sequence[MotorConfig], kinds: Sequence[tuple[NodeOptions, bool]],
-    limits: Sequence[float], setpoints: Sequence[float],
-) -> list[int]:
-    """Every motor's RPDO target: velocity units, or a steering actuator's target position
-    for the angle itself (int32, wrapped).
-
-    :param kinds: per motor, its options and whether it is a steering actuator.
-    :param limits: per motor, ``max_wheel_rad_s``.
-    :param setpoints: per motor, the wheel speed (rad/s) or the steering angle (rad).
-    :raises EncodeError: for a wrong count, a speed that is not finite or beyond ``max_rpm``,
-        an angle that is not finite.
-    """
-    if len(setpoints) != len(motors):
-        raise EncodeError(f"Expected {len(motors)} wheel speeds, but got {len(setpoints)}.")
-    raws: list[int] = []
-    lo, hi = INT32_RANGE
-    for m, (opts, steer), limit, w in zip(motors, kinds, limits, setpoints, strict=True):
-        if steer:
-            raws.append(position_to_raw(target_counts(m, opts, w),
-                                        f"target position for node {m.node_id}"))
-            continue
-        if not math.isfinite(w) or abs(w) > limit * (1.0 + 1e-9):
-            raise EncodeError(
-                f'Expected velocity for node {m.node_id} ("{m.wheel}") between '
-                f"{-limit:.4g} and {limit:.4g} rad/s, but got {w!r}."
-            )
-        units = opts.rad_s_to_units(m.wheel_to_motor_rad_s(w))
-        raw = round(units) if math.isfinite(units) else None
-        if raw is None or not lo <= raw <= hi:
-            # velocity_to_raw raises; its message is only built on this path.
-            raw = velocity_to_raw(units, f"target velocity for node {m.node_id}")
-        raws.append(raw)
-    return raws

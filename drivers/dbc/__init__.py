@@ -9,27 +9,27 @@ Vector's "DBC File Format Documentation" (v1.0.5); ``config/example_controller.d
 commented example and ODrive's official ``odrive-cansimple.dbc``
 (https://github.com/odriverobotics/ODrive/blob/master/tools/odrive-cansimple.dbc) works too.
 
-Modules: :mod:`~drivers.dbc.options` (the protocol keys and unit conversions),
-:mod:`~drivers.dbc.binding` (names -> cantools messages and signals),
-:mod:`~drivers.dbc.codec` (the pure :class:`DbcCodec`), :mod:`~drivers.dbc.driver`
-(:class:`DbcDriver`) and :mod:`~drivers.dbc.sim` (:class:`DbcSimulator`).
+Modules: :mod:`~drivers.dbc.options` (the protocol keys), :mod:`~drivers.dbc.units` (unit
+conversions), :mod:`~drivers.dbc.binding` (names -> cantools messages and signals),
+:mod:`~drivers.dbc.frames` and :mod:`~drivers.dbc.codec` (the pure :class:`DbcCodec`),
+:mod:`~drivers.dbc.axis` (one motor's state) and :mod:`~drivers.dbc.driver`
+(:class:`DbcDriver`).  The device simulator, :mod:`drivers.dbc.sim`, is for tests and
+``--sim`` only: nothing here imports it.
 """
 
 from __future__ import annotations
 
 from drivers.dbc.codec import DbcCodec, DbcReading, DbcRequest, Role, describe_fault
 from drivers.dbc.driver import DbcDriver
-from drivers.dbc.options import OPTIONS, DbcOptions, UnitConversion, parse_options
-from drivers.dbc.sim import DbcSimulator
+from drivers.dbc.options import DbcOptions, parse_options
+from drivers.dbc.units import UnitConversion
 
 __all__ = [
-    "OPTIONS",
     "DbcCodec",
     "DbcDriver",
     "DbcOptions",
     "DbcReading",
     "DbcRequest",
-    "DbcSimulator",
     "Role",
     "UnitConversion",
     "describe_fault",

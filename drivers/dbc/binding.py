@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any
 
 import cantools
 
-from drivers.dbc.options import UnitConversion
+from drivers.dbc.units import UnitConversion
 from gateway.core.errors import ConfigError
 from gateway.core.types import MAX_EXTENDED_ID, MAX_STANDARD_ID
 

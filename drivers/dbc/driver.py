@@ -26,7 +26,7 @@ controller of ``config/example_controller.dbc``)::
 
 Frame IDs on the wire are the DBC ID plus ``node_id << node_id_shift`` (``node_id_in_frame:
 add``, the default) or the DBC IDs as they are (``none``, for DBCs with one message per node
-such as ODrive's ``Axis3_...``).  See :data:`drivers.dbc.options.OPTIONS` for every key,
+such as ODrive's ``Axis3_...``).  See :class:`drivers.dbc.options.DbcOptions` for every key,
 Vector's "DBC File Format Documentation" for the format and https://cantools.readthedocs.io/
 for the codec library.
 
@@ -65,36 +65,39 @@ states what was set with the vendor's tool, ``controller_timeout_s: 0.2``
 (:attr:`~gateway.core.protection.Guard.STATED`); without it ``wheelgate check`` and the start-up log
 warn (:attr:`~gateway.core.protection.Guard.UNSTATED`).  The simulator stops its motor that long
 after the last command frame, and holds the last command for ever when none is stated.
+
+Each motor's state is one :class:`~drivers.dbc.axis.Axis`.  The frames of the driver are the
+messages its motors bind (:meth:`DbcDriver.claims`): the feedback messages it takes, the
+command, mode and enable messages it sends, named as in the DBC file
+(:meth:`DbcDriver.message_name`).
 """
 
 from __future__ import annotations
 
 import logging
-import math
 from typing import TYPE_CHECKING, ClassVar
 
+from drivers.dbc.axis import Axis
 from drivers.dbc.binding import DatabaseCache, bind_motor
 from drivers.dbc.codec import DbcCodec, describe_fault
-from drivers.dbc.options import OPTIONS, UnitConversion, motor_where, parse_options
-from drivers.dbc.sim import DbcSimulator
-from gateway.core.errors import DecodeError, EncodeError
+from drivers.dbc.options import DbcOptions, motor_where, parse_options
 from gateway.core.types import WheelFeedback
+from gateway.drive.claims import FrameClaim
 from gateway.drive.driver import MotorDriver
-from gateway.drive.filters import CanFilter
 
 if TYPE_CHECKING:
     from collections.abc import Mapping, Sequence
+    from typing import Any
 
     from drivers.dbc.binding import MotorBinding
-    from drivers.dbc.codec import DbcReading
-    from drivers.dbc.options import DbcOptions
-    from gateway.core.options import OptionSpec
+    from drivers.dbc.frames import FeedbackSlot
     from gateway.core.types import Frame, MotorConfig
+    from gateway.drive.options import DriverOptions
 
 log = logging.getLogger(__name__)
 
 
-class DbcDriver(MotorDriver):
+class DbcDriver(MotorDriver[DbcOptions]):
     """Drives every ``driver: dbc`` motor on one bus through the messages of its DBC file.
 
     The DBC file, messages and signals are checked when the driver is built.  Drive motors
@@ -107,7 +110,7 @@ class DbcDriver(MotorDriver):
         whose position signals cannot carry its travel.
     """
 
-    OPTIONS: ClassVar[Mapping[str, OptionSpec]] = OPTIONS
+    Options: ClassVar[type[DriverOptions]] = DbcOptions
     NODE_ID_RANGE: ClassVar[tuple[int, int]] = (0, 0x7FF)
     STEERING: ClassVar[bool] = True
     PROTOCOL: ClassVar[str] = "DBC"
@@ -120,31 +123,28 @@ class DbcDriver(MotorDriver):
     )
 
     def __init__(self, motors: Sequence[MotorConfig]) -> None:
+        motors = tuple(motors)
+        for m in motors:  # the rules between keys and of the role, named by the block's path
+            parse_options(m.options, motor_where(m), m.role)
         super().__init__(motors)
         cache = DatabaseCache()
-        self._opts: tuple[DbcOptions, ...] = tuple(
-            parse_options(m.options, motor_where(m), m.role) for m in self.motors
-        )
-        self.liveness_s = self._opts[0].liveness_s if self._opts else self.liveness_s
-        self._units = tuple(
-            UnitConversion.build(m, o) for m, o in zip(self.motors, self._opts, strict=True)
-        )
         self.bindings: tuple[MotorBinding, ...] = tuple(
             bind_motor(m, o, cache, motor_where(m))
-            for m, o in zip(self.motors, self._opts, strict=True)
+            for m, o in zip(self.motors, self.opts, strict=True)
         )
         #: The pure codec for all motors of this driver.
         self.codec = DbcCodec(self.bindings)
-        n = len(self.motors)
-        self._velocity: list[float | None] = [None] * n
-        self._position: list[float | None] = [None] * n
-        self._pos_first: list[int | float | None] = [None] * n
-        self._pos_last: list[int | float] = [0] * n
-        self._pos_total: list[int] = [0] * n
-        #: Per steering actuator, the last position command sent (signal units).
-        self._target: list[float | None] = [None] * n
-        #: Per steering actuator, the absolute motor position last measured (rad).
-        self._motor_rad: list[float | None] = [None] * n
+        self._axes = tuple(
+            Axis(m, o, b) for m, o, b in zip(self.motors, self.opts, self.bindings, strict=True)
+        )
+        self._rx = self.codec.rx
+        #: Per motor, the command signal value of this cycle (reused).
+        self._values: list[float] = [0.0] * len(self.motors)
+        self._claims = self._declare()
+        self._names = {
+            (g.frame_id, g.extended): str(g.message.name)
+            for g in (*self.codec.rx.values(), *self.codec.tx.values())
+        }
 
     @classmethod
     def validate_options(cls, raw: Mapping[str, object], where: str) -> dict[str, object]:
@@ -159,14 +159,37 @@ class DbcDriver(MotorDriver):
         parse_options(out, where)
         return out
 
+    # ----------------------------------------------------------------- frames
+
+    def _declare(self) -> tuple[FrameClaim, ...]:
+        """The feedback messages (sorted by ID) and the command messages (in configuration
+        order), each of one motor or, shared, of none."""
+        rx = sorted(self.codec.rx.values(), key=lambda g: (g.frame_id, g.extended))
+        out = []
+        for receive, groups in ((True, rx), (False, list(self.codec.tx.values()))):
+            for g in groups:
+                owners = {m.index for m in g.members}
+                motor = owners.pop() if len(owners) == 1 else None
+                out.append(FrameClaim.exact(g.frame_id, g.extended, motor, receive))
+        return tuple(out)
+
+    def claims(self) -> tuple[FrameClaim, ...]:
+        """The messages the motors bind: the feedback, velocity, position and fault messages
+        it takes (``receive=True``), the command, mode and enable messages it sends."""
+        return self._claims
+
+    def message_name(self, arbitration_id: int, is_extended_id: bool) -> str | None:
+        """The DBC file's name of a claimed message (``WD_Feedback``)."""
+        return self._names.get((arbitration_id, is_extended_id))
+
     # ----------------------------------------------------------------- hooks
 
-    def enable(self, now_s: float) -> list[Frame]:
+    def _enable(self, now_s: float) -> list[Frame]:
         """Position-mode selection (steering actuators that configure it), a zero velocity
         command (drive motors) or a hold-where-it-stands position command (steering
         actuators), then the arming frames (if an enable signal is set)."""
         hold = self._hold()
-        frames = list(self.codec.encode_mode(self._steer_nodes(), hold))
+        frames = self.codec.encode_mode(hold)
         for i in range(len(self.motors)):
             self.set_armed(i, True)
         return frames + [f for f in self._with_enable(True, hold) if f not in frames]
@@ -178,172 +201,71 @@ class DbcDriver(MotorDriver):
             self.set_armed(i, False)
         return self._with_enable(False, self._hold())
 
-    def command(self, wheel_rad_s: Sequence[float], now_s: float) -> list[Frame]:
-        """Command frames: a velocity per drive motor (zero while disarmed), a position per
-        steering actuator (where it stands while disarmed).
+    def _command(self, setpoints: Sequence[float], now_s: float) -> list[Frame]:
+        """A velocity per drive motor (zero while disarmed), a position per steering actuator
+        (where it stands while disarmed).
 
-        :param wheel_rad_s: per motor, the wheel speed (rad/s) or the steering angle (rad).
-        :raises EncodeError: for the wrong number of setpoints, a setpoint that is not finite,
-            or a command outside the signal's range.
+        :raises EncodeError: for a command outside the signal's range.
         """
-        if len(wheel_rad_s) != len(self.motors):
-            raise EncodeError(
-                f"Expected {len(self.motors)} wheel speeds, but got {len(wheel_rad_s)}."
-            )
-        commands: dict[int, float] = {}
-        for i, (m, value) in enumerate(zip(self.motors, wheel_rad_s, strict=True)):
-            if m.steering:
-                commands[m.node_id] = self._steer_command(i, m, value)
-                continue
-            if not math.isfinite(value):
-                raise EncodeError(
-                    f'Expected a finite speed for node {m.node_id} ("{m.wheel}"), '
-                    f"but got {value!r}."
-                )
-            commands[m.node_id] = self._units[i].wheel_to_command(value) if self._armed[i] else 0.0
-        return list(self.codec.encode_command(commands, self._armed_map()))
+        values, armed = self._values, self._armed
+        for i, ax in enumerate(self._axes):
+            if not ax.steering:
+                values[i] = ax.units.wheel_to_command(setpoints[i]) if armed[i] else 0.0
+            elif armed[i]:
+                values[i] = ax.target = ax.units.motor_to_target(
+                    ax.motor.steer_to_motor_rad(setpoints[i]))
+            else:
+                values[i] = ax.hold_value()
+        return self.codec.encode_command(values, armed)
 
-    def receive_filters(self) -> tuple[CanFilter, ...]:
-        """The feedback messages of the motors' DBC bindings (exact frame IDs and types)."""
-        return tuple(CanFilter.exact(i, ext) for i, ext in sorted(self.codec.received_ids))
-
-    def on_frame(self, frame: Frame) -> bool:
-        """Take feedback; malformed frames of configured messages are counted, never raised."""
-        try:
-            readings = self.codec.decode(frame)
-        except DecodeError as err:
-            self.reject("malformed", err)
-            return True
-        if readings is None:
-            return False
-        for reading in readings:
-            index = self.index_of(reading.node_id)
-            if index is not None:
-                self._take(index, reading, frame.timestamp_s)
+    def _on_frame(self, frame: Frame) -> bool:
+        """Take the feedback messages of the motors' bindings."""
+        group = self._rx.get(frame.arbitration_id)
+        if group is None or frame.is_extended_id != group.extended:
+            return False  # another ID, or the same number as the other ID type: not ours
+        raw = group.read(frame)  # DecodeError: malformed, counted by on_frame
+        for slot in group.slots:
+            self._take(slot, raw, frame.timestamp_s)
         return True
-
-    @classmethod
-    def make_simulator(cls, motor: MotorConfig) -> DbcSimulator:
-        """A generic simulator of ``motor`` that speaks its DBC messages and stops the motor
-        ``controller_timeout_s`` after the last command, if the block states one (else never)."""
-        return DbcSimulator(motor)
 
     # ----------------------------------------------------------------- internals
 
-    def _nodes(self) -> list[int]:
-        return [m.node_id for m in self.motors]
+    def _take(self, slot: FeedbackSlot, raw: Mapping[str, Any], timestamp_s: float) -> None:
+        i = slot.index
+        ax = self._axes[i]
+        if slot.fault is not None:
+            code = int(raw[slot.fault])
+            if code != ax.fault_code:
+                ax.fault_code = code
+                self._fault(i, ax, slot.fault_signal, code)
+        velocity, position = slot.velocity, slot.position
+        if velocity is None and position is None:
+            return
+        if velocity is not None:
+            ax.velocity = ax.units.velocity_to_wheel(raw[velocity] * slot.scale + slot.offset)
+        if position is not None:
+            ax.position = ax.angle(raw[position])
+        if ax.velocity is not None and ax.position is not None:
+            self.store_feedback(i, WheelFeedback(ax.position, ax.velocity, timestamp_s))
 
-    def _steer_nodes(self) -> list[int]:
-        return [m.node_id for m in self.motors if m.steering]
+    def _fault(self, i: int, ax: Axis, signal: Any, code: int) -> None:
+        """A new fault code of motor ``i`` (in the cantools ``signal``): its flags and text;
+        a fault disarms the motor."""
+        flags, detail = describe_fault(signal, code)
+        if flags and not self.faults(i):
+            log.warning("node %d (%s) reports %s", ax.binding.node_id, ax.binding.label, detail)
+            self.set_armed(i, False)
+        self.set_fault(i, flags, detail)
 
-    def _armed_map(self) -> dict[int, bool]:
-        return {m.node_id: self._armed[i] for i, m in enumerate(self.motors)}
+    def _hold(self) -> list[float | None]:
+        """Per motor, where a steering actuator stands (signal units); ``None`` for a drive
+        motor."""
+        return [ax.hold_value() if ax.steering else None for ax in self._axes]
 
-    def _steer_command(self, i: int, m: MotorConfig, angle: float) -> float:
-        """The position command value (signal units) for steering angle ``angle`` (rad)."""
-        if not math.isfinite(angle):
-            raise EncodeError(
-                f'Expected a finite steering angle in rad for node {m.node_id} ("{m.wheel}"), '
-                f"but got {angle!r}."
-            )
-        if not self._armed[i]:
-            return self._hold_value(i)
-        value = self._units[i].motor_to_target(m.steer_to_motor_rad(angle))
-        self._target[i] = value
-        return value
-
-    def _hold_value(self, i: int) -> float:
-        """Where steering actuator ``i`` stands (signal units): measured, else the last
-        command, else its neutral position."""
-        measured = self._motor_rad[i]
-        if measured is not None:
-            return self._units[i].motor_to_target(measured)
-        last = self._target[i]
-        if last is not None:
-            return last
-        return self._units[i].motor_to_target(self.motors[i].zero_rad)
-
-    def _hold(self) -> dict[int, float]:
-        return {m.node_id: self._hold_value(i) for i, m in enumerate(self.motors) if m.steering}
-
-    def _with_enable(self, enable: bool, hold: Mapping[int, float]) -> list[Frame]:
+    def _with_enable(self, enable: bool, hold: list[float | None]) -> list[Frame]:
         """Zero (or hold) commands, then arming frames (those not already sent: the enable
         signal may share the command message)."""
-        commands = {
-            m.node_id: hold[m.node_id] if m.steering else 0.0 for m in self.motors
-        }
-        frames = list(self.codec.encode_command(commands, self._armed_map()))
-        frames += [
-            f for f in self.codec.encode_enable(self._nodes(), enable, hold) if f not in frames
-        ]
+        commands = [0.0 if h is None else h for h in hold]
+        frames = self.codec.encode_command(commands, self._armed)
+        frames += [f for f in self.codec.encode_enable(enable, hold) if f not in frames]
         return frames
-
-    def _take(self, i: int, reading: DbcReading, timestamp_s: float) -> None:
-        binding = self.bindings[i]
-        if reading.fault is not None and binding.fault is not None:
-            flags, detail = describe_fault(binding.fault.signal, reading.fault)
-            if flags and not self._faults[i]:
-                log.warning("node %d (%s) reports %s", binding.node_id, binding.label, detail)
-                self.set_armed(i, False)
-            self.set_fault(i, flags, detail)
-        if reading.velocity is not None:
-            self._velocity[i] = self._units[i].velocity_to_wheel(reading.velocity)
-        if reading.position_raw is not None:
-            self._position[i] = self._angle(i, reading.position_raw)
-        vel, pos = self._velocity[i], self._position[i]
-        if (
-            vel is not None
-            and pos is not None
-            and (reading.velocity is not None or reading.position_raw is not None)
-        ):
-            self.store_feedback(i, WheelFeedback(pos, vel, timestamp_s))
-
-    def _angle(self, i: int, raw: int | float) -> float:
-        """The wheel angle (drive motor, from the first sample) or the steering angle
-        (steering actuator, absolute) for a raw position value (rad)."""
-        steps = self._unwrap(i, raw)
-        ref = self.bindings[i].position
-        if not self.motors[i].steering:
-            return self._units[i].position_to_wheel(steps * ref.scale)
-        base = ref.to_physical(self._base_raw(i))
-        motor_rad = self._units[i].position_to_motor(base + steps * ref.scale)
-        self._motor_rad[i] = motor_rad
-        return self.motors[i].motor_to_steer_rad(motor_rad)
-
-    def _base_raw(self, i: int) -> int | float:
-        """The absolute raw value of steering actuator ``i``'s first sample.
-
-        A counter that wraps modulo ``2**position_wrap_bits`` gives the position only up to
-        whole wraps: of the values it may stand for, take the one nearest the neutral position
-        ``zero_rad`` (exact while the travel is shorter than half a wrap either way, which
-        :func:`~drivers.dbc.binding.check_travel` ensures).
-        """
-        first = self._pos_first[i]
-        if first is None:
-            raise DecodeError(f"No position sample yet for node {self.motors[i].node_id}.")
-        bits = self._opts[i].position_wrap_bits
-        if not bits or not isinstance(first, int):
-            return first
-        ref, units = self.bindings[i].position, self._units[i]
-        zero_phys = units.motor_to_position(self.motors[i].zero_rad)
-        zero_raw = (zero_phys - float(ref.signal.offset)) / ref.scale
-        modulus = 1 << bits
-        return first + round((zero_raw - first) / modulus) * modulus
-
-    def _unwrap(self, i: int, raw: int | float) -> int | float:
-        """Raw steps since the first sample, undoing counter wrap-around exactly."""
-        first = self._pos_first[i]
-        if first is None:
-            self._pos_first[i] = first = raw
-            self._pos_last[i] = raw
-            self._pos_total[i] = 0
-        bits = self._opts[i].position_wrap_bits
-        if bits and isinstance(raw, int):
-            modulus = 1 << bits
-            step = (raw - int(self._pos_last[i])) % modulus
-            if step >= modulus // 2:
-                step -= modulus
-            self._pos_total[i] += step
-            self._pos_last[i] = raw
-            return self._pos_total[i]
-        return raw - first

@@ -1,10 +1,11 @@
-"""Protocol keys of a ``driver: dbc`` motor block and the unit conversions they imply.
+"""Protocol keys of a ``driver: dbc`` motor block.
 
-Every key is described once in :data:`OPTIONS` (an :class:`~gateway.drive.driver.OptionSpec` each);
-:func:`parse_options` turns a validated mapping into the frozen :class:`DbcOptions` and checks
-the rules that involve several keys.  :class:`UnitConversion` derives, from the options and the
-motor block (gear ratio, inversion), the factors between wheel rad/s and the signal values.
-Nothing here reads the DBC file; :mod:`drivers.dbc.binding` does.
+Every key is declared once, as a field of the frozen :class:`DbcOptions` (an
+:func:`~gateway.drive.options.option` each: type, default, bounds, choices, help);
+``liveness_s`` and ``controller_timeout_s`` are the keys every protocol shares
+(:class:`~gateway.drive.options.StatedTimeout`).  :func:`parse_options` validates a block and
+checks the rules that involve several keys.  Nothing here reads the DBC file;
+:mod:`drivers.dbc.binding` does, and :mod:`drivers.dbc.units` derives the unit conversions.
 
 A drive motor names its velocity command (``command_message``, ``command_signal``); a steering
 actuator (a ``steering:`` block) names its position command instead
@@ -17,22 +18,17 @@ least one is complete, the driver checks the right one (:func:`parse_options` wi
 
 from __future__ import annotations
 
-import logging
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
-from types import MappingProxyType
 from typing import TYPE_CHECKING
 
 from gateway.core.errors import ConfigError
-from gateway.core.options import OptionSpec, validate_block
 from gateway.core.types import MotorRole
-from gateway.drive.driver import CONTROLLER_TIMEOUT_OPTION
+from gateway.drive.options import StatedTimeout, option
 
 if TYPE_CHECKING:
     from gateway.core.types import MotorConfig
-
-log = logging.getLogger(__name__)
 
 _TWO_PI = 2.0 * math.pi
 
@@ -52,77 +48,8 @@ POSITION_UNITS: dict[str, float] = {
     "counts": 1.0 / _TWO_PI,
 }
 _SIDES = ("motor", "wheel")
-_NO_VALUES: Mapping[str, object] = MappingProxyType({})
-
-#: The protocol keys of a ``driver: dbc`` motor block.  ``""`` means "not used" or
-#: "same as another key", as each help text says.
-OPTIONS: dict[str, OptionSpec] = {
-    "dbc": OptionSpec(str, help="path of the DBC file (absolute, or relative to config_dir)"),
-    "config_dir": OptionSpec(
-        str, "", help="directory relative DBC paths start from; '' = current directory"
-    ),
-    "command_message": OptionSpec(
-        str, "", help="DBC message that carries the velocity command (drive motors)"
-    ),
-    "command_signal": OptionSpec(str, "", help="signal of command_message with the velocity"),
-    "command_unit": OptionSpec(str, "rpm", tuple(VELOCITY_UNITS), help="unit of command_signal"),
-    "command_scale": OptionSpec(float, 1.0, help="signal value = speed in command_unit * this"),
-    "command_side": OptionSpec(
-        str, "motor", _SIDES, help="the command signal (speed or position) is motor or wheel side"
-    ),
-    "position_command_message": OptionSpec(
-        str, "", help="DBC message that carries the position command (steering actuators)"
-    ),
-    "position_command_signal": OptionSpec(
-        str, "", help="signal of position_command_message with the position"
-    ),
-    "position_command_unit": OptionSpec(
-        str, "rev", tuple(POSITION_UNITS), help="unit of position_command_signal"
-    ),
-    "position_command_scale": OptionSpec(
-        float, 1.0, help="signal value = angle in position_command_unit * this"
-    ),
-    "position_mode_message": OptionSpec(
-        str, "", help="message that selects position control in enable(); '' = none"
-    ),
-    "position_mode_values": OptionSpec(
-        Mapping, _NO_VALUES, help="signal of position_mode_message -> value that selects it"
-    ),
-    "pole_pairs": OptionSpec(int, 1, minimum=1, help="motor pole pairs, for the erpm unit"),
-    "feedback_message": OptionSpec(str, help="DBC message that carries the measured velocity"),
-    "velocity_signal": OptionSpec(str, help="signal of feedback_message with the velocity"),
-    "velocity_unit": OptionSpec(str, "rpm", tuple(VELOCITY_UNITS), help="unit of velocity_signal"),
-    "velocity_scale": OptionSpec(float, 1.0, help="signal value = speed in velocity_unit * this"),
-    "feedback_side": OptionSpec(
-        str, "", ("", *_SIDES), help="feedback is motor or wheel side; '' = as command_side"
-    ),
-    "position_message": OptionSpec(str, "", help="message with the position; '' = feedback one"),
-    "position_signal": OptionSpec(str, help="signal of position_message with the position"),
-    "position_unit": OptionSpec(str, "rev", tuple(POSITION_UNITS), help="unit of position_signal"),
-    "position_scale": OptionSpec(float, 1.0, help="signal value = angle in position_unit * this"),
-    "counts_per_rev": OptionSpec(int, 1, minimum=1, help="encoder counts per turn ('counts')"),
-    "position_wrap_bits": OptionSpec(
-        int, 0, minimum=0, maximum=64, help="raw position wraps modulo 2**bits; 0 = never"
-    ),
-    "node_id_in_frame": OptionSpec(
-        str, "add", ("add", "none"), help="frame ID = DBC ID + (node_id << shift), or DBC ID"
-    ),
-    "node_id_shift": OptionSpec(
-        int, 0, minimum=0, maximum=28, help="left shift of node_id before it is added"
-    ),
-    "enable_message": OptionSpec(str, "", help="DBC message that arms the drive; '' = none"),
-    "enable_signal": OptionSpec(str, "", help="signal of enable_message"),
-    "enable_value": OptionSpec(float, 1.0, help="enable_signal value that arms"),
-    "disable_value": OptionSpec(float, 0.0, help="enable_signal value that disarms"),
-    "fault_message": OptionSpec(str, "", help="message with a fault code; '' = feedback one"),
-    "fault_signal": OptionSpec(str, "", help="signal with a fault code (0 = healthy); '' = none"),
-    "liveness_s": OptionSpec(
-        float, 0.25, minimum=0.001, help="feedback older than this marks the motor OFFLINE (s)"
-    ),
-    # The controller's own stop when wheelgate dies: a DBC names no timeout parameter, so the
-    # block states what was set with the vendor's tool (0: not stated, a warning).
-    "controller_timeout_s": CONTROLLER_TIMEOUT_OPTION,
-}
+_VELOCITY = tuple(VELOCITY_UNITS)
+_POSITION = tuple(POSITION_UNITS)
 
 
 def motor_where(motor: MotorConfig) -> str:
@@ -130,45 +57,115 @@ def motor_where(motor: MotorConfig) -> str:
     return f"wheels[{motor.wheel!r}].motor"
 
 
-@dataclass(frozen=True, slots=True)
-class DbcOptions:
-    """The protocol keys of one motor block, validated; see :data:`OPTIONS` for each key."""
+@dataclass(frozen=True, kw_only=True)
+class DbcOptions(StatedTimeout):
+    """The protocol keys of one motor block, validated (``""``: "not used" or "same as
+    another key", as each help says).
 
-    dbc: str
-    config_dir: str
-    command_message: str
-    command_signal: str
-    command_unit: str
-    command_scale: float
-    command_side: str
-    position_command_message: str
-    position_command_signal: str
-    position_command_unit: str
-    position_command_scale: float
-    position_mode_message: str
-    position_mode_values: tuple[tuple[str, float], ...]
-    pole_pairs: int
-    feedback_message: str
-    velocity_signal: str
-    velocity_unit: str
-    velocity_scale: float
-    feedback_side: str
-    position_message: str
-    position_signal: str
-    position_unit: str
-    position_scale: float
-    counts_per_rev: int
-    position_wrap_bits: int
-    node_id_in_frame: str
-    node_id_shift: int
-    enable_message: str
-    enable_signal: str
-    enable_value: float
-    disable_value: float
-    fault_message: str
-    fault_signal: str
-    liveness_s: float
-    controller_timeout_s: float
+    Built from a block whose rules between keys :func:`parse_options` has checked, it
+    resolves the keys that default to others (``position_message`` and, with a fault signal,
+    ``fault_message`` to ``feedback_message``; ``feedback_side`` to ``command_side``) and keeps
+    ``position_mode_values`` as ``(signal, value)`` pairs.
+    """
+
+    dbc: str = option(str, help="path of the DBC file (absolute, or relative to config_dir)")
+    config_dir: str = option(
+        str, "", help="directory relative DBC paths start from; '' = current directory"
+    )
+    command_message: str = option(
+        str, "", help="DBC message that carries the velocity command (drive motors)"
+    )
+    command_signal: str = option(str, "", help="signal of command_message with the velocity")
+    command_unit: str = option(str, "rpm", choices=_VELOCITY, help="unit of command_signal")
+    command_scale: float = option(
+        float, 1.0, help="signal value = speed in command_unit * this"
+    )
+    command_side: str = option(
+        str, "motor", choices=_SIDES,
+        help="the command signal (speed or position) is motor or wheel side",
+    )
+    position_command_message: str = option(
+        str, "", help="DBC message that carries the position command (steering actuators)"
+    )
+    position_command_signal: str = option(
+        str, "", help="signal of position_command_message with the position"
+    )
+    position_command_unit: str = option(
+        str, "rev", choices=_POSITION, help="unit of position_command_signal"
+    )
+    position_command_scale: float = option(
+        float, 1.0, help="signal value = angle in position_command_unit * this"
+    )
+    position_mode_message: str = option(
+        str, "", help="message that selects position control in enable(); '' = none"
+    )
+    #: Given as a mapping (signal -> value), kept as ``(signal, value)`` pairs.
+    position_mode_values: tuple[tuple[str, float], ...] = option(
+        Mapping, {}, help="signal of position_mode_message -> value that selects it"
+    )
+    pole_pairs: int = option(int, 1, minimum=1, help="motor pole pairs, for the erpm unit")
+    feedback_message: str = option(
+        str, help="DBC message that carries the measured velocity"
+    )
+    velocity_signal: str = option(str, help="signal of feedback_message with the velocity")
+    velocity_unit: str = option(str, "rpm", choices=_VELOCITY, help="unit of velocity_signal")
+    velocity_scale: float = option(
+        float, 1.0, help="signal value = speed in velocity_unit * this"
+    )
+    feedback_side: str = option(
+        str, "", choices=("", *_SIDES), help="feedback is motor or wheel side; '' = as command_side"
+    )
+    position_message: str = option(
+        str, "", help="message with the position; '' = feedback one"
+    )
+    position_signal: str = option(str, help="signal of position_message with the position")
+    position_unit: str = option(str, "rev", choices=_POSITION, help="unit of position_signal")
+    position_scale: float = option(
+        float, 1.0, help="signal value = angle in position_unit * this"
+    )
+    counts_per_rev: int = option(int, 1, minimum=1, help="encoder counts per turn ('counts')")
+    position_wrap_bits: int = option(
+        int, 0, minimum=0, maximum=64, help="raw position wraps modulo 2**bits; 0 = never"
+    )
+    node_id_in_frame: str = option(
+        str, "add", choices=("add", "none"),
+        help="frame ID = DBC ID + (node_id << shift), or DBC ID",
+    )
+    node_id_shift: int = option(
+        int, 0, minimum=0, maximum=28, help="left shift of node_id before it is added"
+    )
+    enable_message: str = option(str, "", help="DBC message that arms the drive; '' = none")
+    enable_signal: str = option(str, "", help="signal of enable_message")
+    enable_value: float = option(float, 1.0, help="enable_signal value that arms")
+    disable_value: float = option(float, 0.0, help="enable_signal value that disarms")
+    fault_message: str = option(
+        str, "", help="message with a fault code; '' = feedback one"
+    )
+    fault_signal: str = option(
+        str, "", help="signal with a fault code (0 = healthy); '' = none"
+    )
+
+    def __post_init__(self) -> None:
+        resolved = {
+            "position_mode_values": _pairs(self.position_mode_values),
+            "position_message": self.position_message or self.feedback_message,
+            "fault_message": (self.fault_message or self.feedback_message)
+            if self.fault_signal else self.fault_message,
+            "feedback_side": self.feedback_side or self.command_side,
+        }
+        for key, value in resolved.items():
+            object.__setattr__(self, key, value)
+
+
+def _pairs(raw: object) -> tuple[tuple[str, float], ...]:
+    """``position_mode_values`` as pairs: from a mapping :func:`parse_options` has checked,
+    or pairs as they are."""
+    if isinstance(raw, Mapping):
+        return tuple((str(name), float(value)) for name, value in raw.items())
+    if isinstance(raw, tuple):
+        return raw
+    raise ConfigError(f"position_mode_values: expected a mapping of signal name to value, "
+                      f"got {raw!r}")
 
 
 def parse_options(
@@ -176,10 +173,9 @@ def parse_options(
 ) -> DbcOptions:
     """Validate a motor block's protocol keys and check the rules between keys.
 
-    Values that :meth:`~gateway.drive.driver.MotorDriver.validate_options` already normalised pass
-    through unchanged, so this may be applied twice (at config load and driver construction).
-    Keys ``position_message`` and ``fault_message`` default to ``feedback_message``, and
-    ``feedback_side`` to ``command_side``.
+    Values that :meth:`~gateway.drive.driver.MotorDriver.validate_options` already normalised
+    pass through unchanged, so this may be applied twice (at config load and driver
+    construction).
 
     :param values: the protocol keys of the block (defaults filled in for missing ones).
     :param where: file and key path of the block for messages.
@@ -189,7 +185,7 @@ def parse_options(
     :return: the typed options.
     :raises ConfigError: naming the key, for an unknown, missing or bad value.
     """
-    out = validate_block(values, OPTIONS, where, "protocol keys for this driver")
+    out = DbcOptions.validate(values, where)
     for key in ("dbc", "feedback_message", "velocity_signal", "position_signal"):
         if not out[key]:
             raise ConfigError(f"{where}.{key}: expected a non-empty name, got ''")
@@ -216,12 +212,8 @@ def parse_options(
             f"{where}.node_id_shift: only used with node_id_in_frame 'add', "
             f"got {out['node_id_shift']!r}"
         )
-    out["position_mode_values"] = _mode_values(out, where)
-    out["position_message"] = out["position_message"] or out["feedback_message"]
-    if out["fault_signal"]:
-        out["fault_message"] = out["fault_message"] or out["feedback_message"]
-    out["feedback_side"] = out["feedback_side"] or out["command_side"]
-    return DbcOptions(**out)  # type: ignore[arg-type]
+    _check_mode_values(out, where)
+    return DbcOptions.from_block(out, where)
 
 
 _VELOCITY_KEYS = ("command_message", "command_signal")
@@ -271,15 +263,12 @@ def _check_command_keys(out: Mapping[str, object], where: str, role: MotorRole |
             )
 
 
-def _mode_values(out: Mapping[str, object], where: str) -> tuple[tuple[str, float], ...]:
-    """``position_mode_values`` as (signal, value) pairs, checked against the message key."""
+def _check_mode_values(out: Mapping[str, object], where: str) -> None:
+    """``position_mode_values``: signal names with finite numbers, given with the message."""
     raw = out["position_mode_values"]
-    if isinstance(raw, tuple):  # already parsed
-        return raw
     key = f"{where}.position_mode_values"
     if not isinstance(raw, Mapping):
         raise ConfigError(f"{key}: expected a mapping of signal name to value, got {raw!r}")
-    pairs: list[tuple[str, float]] = []
     for name, value in raw.items():
         if not isinstance(name, str) or not name:
             raise ConfigError(f"{key}: expected signal names, got {name!r}")
@@ -287,107 +276,8 @@ def _mode_values(out: Mapping[str, object], where: str) -> tuple[tuple[str, floa
             raise ConfigError(f"{key}.{name}: expected a number, got {value!r}")
         if not math.isfinite(value):
             raise ConfigError(f"{key}.{name}: expected a finite number, got {value!r}")
-        pairs.append((name, float(value)))
-    if out["position_mode_message"] and not pairs:
+    if out["position_mode_message"] and not raw:
         raise ConfigError(f"{key}: required when position_mode_message is given")
-    if pairs and not out["position_mode_message"]:
+    if raw and not out["position_mode_message"]:
         raise ConfigError(f"{where}.position_mode_message: required when position_mode_values "
                           "is given")
-    return tuple(pairs)
-
-
-@dataclass(frozen=True, slots=True)
-class UnitConversion:
-    """Factors between wheel quantities and signal values for one motor.
-
-    A command signal value is ``wheel_rad_s * gear * sign * command_per_rad_s`` (motor side)
-    or ``wheel_rad_s * sign * command_per_rad_s`` (wheel side); feedback goes the other way
-    with its own side.  The simulator uses the inverse functions from the motor shaft
-    (:class:`gateway.sim.device.MotorModel` rad and rad/s, already inverted).
-
-    :param command_per_rad_s: command signal value per rad/s on the command side.
-    :param velocity_per_rad_s: velocity signal value per rad/s on the feedback side.
-    :param position_per_rad: position signal value per rad on the feedback side.
-    :param target_per_rad: position command signal value per rad on the command side.
-    :param command_gear: gear ratio if the command is motor side, else 1.
-    :param feedback_gear: gear ratio if the feedback is motor side, else 1.
-    :param sign: -1.0 for an inverted motor, else 1.0.
-    :param gear_ratio: motor turns per wheel turn.
-    """
-
-    command_per_rad_s: float
-    velocity_per_rad_s: float
-    position_per_rad: float
-    target_per_rad: float
-    command_gear: float
-    feedback_gear: float
-    sign: float
-    gear_ratio: float
-
-    @classmethod
-    def build(cls, motor: MotorConfig, opts: DbcOptions) -> UnitConversion:
-        """The conversion for ``motor`` with the protocol keys ``opts``."""
-        cmd = VELOCITY_UNITS[opts.command_unit] * opts.command_scale
-        if opts.command_unit == "erpm":
-            cmd *= opts.pole_pairs
-        vel = VELOCITY_UNITS[opts.velocity_unit] * opts.velocity_scale
-        if opts.velocity_unit == "erpm":
-            vel *= opts.pole_pairs
-        pos = POSITION_UNITS[opts.position_unit] * opts.position_scale
-        if opts.position_unit == "counts":
-            pos *= opts.counts_per_rev
-        target = POSITION_UNITS[opts.position_command_unit] * opts.position_command_scale
-        if opts.position_command_unit == "counts":
-            target *= opts.counts_per_rev
-        return cls(
-            command_per_rad_s=cmd,
-            velocity_per_rad_s=vel,
-            position_per_rad=pos,
-            target_per_rad=target,
-            command_gear=motor.gear_ratio if opts.command_side == "motor" else 1.0,
-            feedback_gear=motor.gear_ratio if opts.feedback_side == "motor" else 1.0,
-            sign=motor.sign,
-            gear_ratio=motor.gear_ratio,
-        )
-
-    def wheel_to_command(self, wheel_rad_s: float) -> float:
-        """Command signal value for a wheel speed (rad/s)."""
-        return wheel_rad_s * self.command_gear * self.sign * self.command_per_rad_s
-
-    def velocity_to_wheel(self, value: float) -> float:
-        """Wheel speed (rad/s) for a velocity signal value."""
-        return value / self.velocity_per_rad_s * self.sign / self.feedback_gear
-
-    def position_to_wheel(self, delta: float) -> float:
-        """Wheel angle (rad) for a change of the position signal value."""
-        return delta / self.position_per_rad * self.sign / self.feedback_gear
-
-    # Steering actuators: absolute positions in the controller's frame, motor rad (the sign is
-    # already in MotorConfig.steer_to_motor_rad).
-
-    def motor_to_target(self, motor_rad: float) -> float:
-        """Position command signal value for a motor position (rad, controller frame)."""
-        return motor_rad * self.command_gear / self.gear_ratio * self.target_per_rad
-
-    def position_to_motor(self, value: float) -> float:
-        """Motor position (rad, controller frame) for a position signal value (absolute)."""
-        return value / self.position_per_rad * self.gear_ratio / self.feedback_gear
-
-    # Device side, for the simulator: the motor model turns at the (inverted) shaft speed.
-
-    def target_to_motor(self, value: float) -> float:
-        """Motor position (rad) that a position command signal value asks for."""
-        return value / self.target_per_rad * self.gear_ratio / self.command_gear
-
-    def command_to_motor(self, value: float) -> float:
-        """Motor shaft speed (rad/s) that a command signal value asks for."""
-        side = value / self.command_per_rad_s
-        return side * (self.gear_ratio / self.command_gear)
-
-    def motor_to_velocity(self, motor_rad_s: float) -> float:
-        """Velocity signal value a device reports for a motor shaft speed (rad/s)."""
-        return motor_rad_s * self.feedback_gear / self.gear_ratio * self.velocity_per_rad_s
-
-    def motor_to_position(self, motor_rad: float) -> float:
-        """Position signal value a device reports for a motor shaft angle (rad)."""
-        return motor_rad * self.feedback_gear / self.gear_ratio * self.position_per_rad

@@ -36,7 +36,8 @@ from typing import TYPE_CHECKING
 
 from drivers.dbc.binding import DatabaseCache, bind_motor
 from drivers.dbc.codec import DbcCodec, DbcReading, Role
-from drivers.dbc.options import UnitConversion, motor_where, parse_options
+from drivers.dbc.options import motor_where, parse_options
+from drivers.dbc.units import UnitConversion
 from gateway.core.errors import DecodeError
 from gateway.sim.device import DeviceSimulator, SimFault
 
@@ -209,3 +210,10 @@ class DbcSimulator(DeviceSimulator):
 
     def _on_fault(self) -> None:
         self._latched = self.fault_code
+
+
+def simulator_for(motor: MotorConfig) -> DbcSimulator:
+    """A generic simulator of ``motor`` that speaks its DBC messages and stops the motor
+    ``controller_timeout_s`` after the last command, if the block states one (else never)
+    (registered in :data:`drivers.BUILTIN_SIMULATORS`)."""
+    return DbcSimulator(motor)

@@ -27,10 +27,9 @@ from typing import TYPE_CHECKING
 
 from gateway.core.errors import DecodeError, EncodeError
 from gateway.core.types import Frame
-from gateway.drive.codec import MotorCodec
 
 if TYPE_CHECKING:
-    from collections.abc import Mapping
+    from collections.abc import Iterable, Mapping, Sequence
 
 #: Encoder counts per rotor turn (13-bit angle).
 COUNTS_PER_REV = 8192
@@ -124,11 +123,6 @@ _FEEDBACK_UNPACK = FEEDBACK_STRUCT.unpack
 _FEEDBACK_SIZE = FEEDBACK_STRUCT.size
 
 
-def group_id(esc_id: int) -> DjiFrameId:
-    """The command frame that carries ``esc_id`` (1..8)."""
-    return DjiFrameId.COMMAND_ESC_1_4 if esc_id <= ESCS_PER_GROUP else DjiFrameId.COMMAND_ESC_5_8
-
-
 def feedback_id(esc_id: int) -> int:
     """The feedback arbitration ID of ``esc_id``."""
     return FEEDBACK_ID_BASE + esc_id
@@ -202,8 +196,29 @@ def _check_shape(frame: Frame, what: str) -> None:
         )
 
 
+def feedback_fields(frame: Frame) -> tuple[int, int, int, int, int]:
+    """The fields of an ESC feedback frame, whatever its ID: rotor angle (0..8191), rotor speed
+    (rpm), actual current (command scale), temperature (degC) and the reserved byte.
+
+    The driver calls this for every feedback frame (no object beyond the tuple).
+
+    :raises DecodeError: for a 29-bit ID, RTR, DLC other than 8, or an angle above 8191.
+    """
+    data = frame.data
+    # Every feedback frame: _check_shape's three tests inline, the call only to raise.
+    if frame.is_extended_id or frame.is_remote_frame or len(data) != _FEEDBACK_SIZE:
+        _check_shape(frame, "feedback")
+    fields: tuple[int, int, int, int, int] = _FEEDBACK_UNPACK(data)
+    if fields[0] >= COUNTS_PER_REV:
+        raise DecodeError(
+            f"Expected rotor angle for ESC {frame.arbitration_id - FEEDBACK_ID_BASE} between 0 "
+            f"and {COUNTS_PER_REV - 1}, but got {fields[0]}."
+        )
+    return fields
+
+
 def decode_feedback(frame: Frame) -> DjiFeedback | None:
-    """Decode an ESC feedback frame.
+    """Decode an ESC feedback frame (:func:`feedback_fields` as a :class:`DjiFeedback`).
 
     :return: the feedback, or ``None`` if the ID is not ``0x201..0x208``.
     :raises DecodeError: for a feedback ID with a 29-bit ID, RTR, DLC other than 8, or an
@@ -212,16 +227,7 @@ def decode_feedback(frame: Frame) -> DjiFeedback | None:
     esc_id = frame.arbitration_id - FEEDBACK_ID_BASE
     if not ESC_ID_MIN <= esc_id <= ESC_ID_MAX:
         return None
-    data = frame.data
-    # Every feedback frame: _check_shape's three tests inline, the call only to raise.
-    if frame.is_extended_id or frame.is_remote_frame or len(data) != _FEEDBACK_SIZE:
-        _check_shape(frame, "feedback")
-    angle, speed, current, temp, _reserved = _FEEDBACK_UNPACK(data)
-    if angle >= COUNTS_PER_REV:
-        raise DecodeError(
-            f"Expected rotor angle for ESC {esc_id} between 0 and {COUNTS_PER_REV - 1}, "
-            f"but got {angle}."
-        )
+    angle, speed, current, temp, _reserved = feedback_fields(frame)
     return DjiFeedback(esc_id, angle, speed, current, temp)
 
 
@@ -243,63 +249,44 @@ def decode_command(frame: Frame) -> dict[int, int] | None:
     return {first + k: v for k, v in enumerate(values)}
 
 
-#: The two command frames' IDs as plain ints, in sending order.
-_COMMAND_IDS = (int(DjiFrameId.COMMAND_ESC_1_4), int(DjiFrameId.COMMAND_ESC_5_8))
+#: The command frames' IDs as plain ints, by group (ESC 1-4, ESC 5-8): the sending order.
+COMMAND_IDS = (int(DjiFrameId.COMMAND_ESC_1_4), int(DjiFrameId.COMMAND_ESC_5_8))
+_COMMAND_PACK = COMMAND_STRUCT.pack
 
 
-class DjiCodec(MotorCodec[DjiFeedback]):
-    """Current commands and feedback of C620 / C610 ESCs.
+def group_of(esc_id: int) -> int:
+    """The command group (index into :data:`COMMAND_IDS`) that carries ``esc_id`` (1..8)."""
+    return (esc_id - 1) // ESCS_PER_GROUP
 
-    :param esc_models: ESC type per ESC ID, for range checks; ESCs not listed are C620s.
+
+def encode_command(raw: Sequence[int], groups: Iterable[int]) -> list[Frame]:
+    """The current command frames of ``groups``, in the order given.
+
+    The driver calls this every cycle, so nothing is checked that its current limit already
+    guarantees: every value must be within its ESC's full scale (C620 16384, C610 10000).
+
+    :param raw: the raw current set points of ESC 1..8 (``raw[esc_id - 1]``), 8 ints.
+    :param groups: which frames: 0 for ``0x200`` (ESC 1-4), 1 for ``0x1FF`` (ESC 5-8).
+    :raises EncodeError: for a value that does not fit an int16.
     """
+    frames = []
+    try:
+        for g in groups:
+            k = g * ESCS_PER_GROUP
+            frames.append(Frame(COMMAND_IDS[g], _COMMAND_PACK(raw[k], raw[k + 1], raw[k + 2],
+                                                              raw[k + 3])))
+    except struct.error as err:
+        raise EncodeError(
+            f"Expected int16 current set points for DJI ESCs, but got {list(raw)}: {err}."
+        ) from err
+    return frames
 
-    def __init__(self, esc_models: Mapping[int, EscModel] | None = None) -> None:
-        self._models: dict[int, EscModel] = dict(esc_models or {})
 
-    def model(self, esc_id: int) -> EscModel:
-        """The ESC type of ``esc_id``."""
-        return self._models.get(esc_id, C620)
-
-    def encode_command(self, commands: Mapping[int, float]) -> tuple[Frame, ...]:
-        """Current command frames for the groups that hold at least one given ESC.
-
-        Slots of ESCs not in ``commands`` are 0.  ``0x200`` comes before ``0x1FF``.
-
-        :param commands: ESC ID (1..8) -> raw current (rounded to an integer).
-        :raises EncodeError: for a bad ESC ID, a value that is not finite, or one beyond the
-            ESC's full scale.
-        """
-        slots = [0] * (2 * ESCS_PER_GROUP)
-        used = [False, False]
-        models = self._models
-        for esc_id, value in commands.items():
-            # Runs every cycle: a plain int ID in range passes with one test.
-            if not (type(esc_id) is int and ESC_ID_MIN <= esc_id <= ESC_ID_MAX):
-                _check_esc_id(esc_id)
-            model = models.get(esc_id, C620)
-            fs = model.full_scale_raw
-            if not math.isfinite(value):
-                raise EncodeError(
-                    f"Expected current for ESC {esc_id} between {-fs} and {fs}, but got {value}."
-                )
-            raw = round(value)
-            if not -fs <= raw <= fs:
-                raise EncodeError(
-                    f"Expected current for ESC {esc_id} between {-fs} and {fs} "
-                    f"({model.name.upper()} raw), but got {value}."
-                )
-            slots[esc_id - 1] = raw
-            used[(esc_id - 1) // ESCS_PER_GROUP] = True
-        frames = []
-        for g, ident in enumerate(_COMMAND_IDS):
-            if used[g]:
-                part = slots[g * ESCS_PER_GROUP : (g + 1) * ESCS_PER_GROUP]
-                frames.append(Frame(ident, COMMAND_STRUCT.pack(*part)))
-        return tuple(frames)
-
-    def decode(self, frame: Frame) -> DjiFeedback | None:
-        """Decode an ESC feedback frame (see :func:`decode_feedback`).
-
-        :raises DecodeError: if it is a malformed feedback frame.
-        """
-        return decode_feedback(frame)
+def message_name(arbitration_id: int) -> str | None:
+    """The protocol's name of an 11-bit frame: a :class:`DjiFrameId` name, or
+    ``FEEDBACK_ESC_<n>`` for ``0x200 + n``; ``None`` for any other ID."""
+    try:
+        return DjiFrameId(arbitration_id).name
+    except ValueError:
+        esc = arbitration_id - FEEDBACK_ID_BASE
+        return f"FEEDBACK_ESC_{esc}" if ESC_ID_MIN <= esc <= ESC_ID_MAX else None

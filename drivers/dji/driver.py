@@ -3,7 +3,7 @@
 Protocol reference: DJI's `Development-Board-C-Examples
 <https://github.com/RoboMaster/Development-Board-C-Examples>`_ (``14.CAN``) and
 the RoboMaster C620/C610 user guides' CAN protocol sections.  The wire format lives in
-:mod:`drivers.dji.codec`.
+:mod:`drivers.dji.codec`, the motor-block keys in :mod:`drivers.dji.options`.
 
 The ESCs take only a current set point, so this driver closes the wheel-speed loop on the host
 (:class:`drivers.dji.pi.SpeedPi`, one per motor) every time :meth:`DjiDriver.command` is called,
@@ -44,99 +44,68 @@ rotor turn of it** (``pi / gear_ratio`` at the wheel's plane: 9.4 degrees throug
 gearbox, 5 degrees through an M2006's); powered up further away, every angle is off by whole
 rotor turns and nothing detects it.  Turns made while feedback is lost are lost too.
 
-Motor-block keys (``OPTIONS``): ``esc`` (``"c620"`` default, or ``"c610"``), ``kp`` (A per rad/s
-of **rotor** speed error, default 0.1), ``ki`` (A per rad of integrated rotor speed error,
-default 1.0), ``max_current_a`` (0 = the ESC's full scale: 20 A C620, 10 A C610),
-``liveness_s`` (0.1, the same for every motor of the bus), ``max_temp_c`` (80 degC) and the
-required ``no_controller_stop: acknowledged``; for a
-steering actuator only (an error in a drive motor's block) ``steer_kp`` (default 35 1/s) and
-``steer_kd`` (default 0.7), see :data:`drivers.dji.position.STEERING_OPTIONS`.
 The common ``gear_ratio`` must be set to the gearbox ratio: 3591/187 (~19.2032) for the M3508,
 36 for the M2006; ``max_rpm`` is at the rotor (about 9000 for an M3508 at 24 V).
+
+Per cycle (:meth:`DjiDriver._command`, :meth:`DjiDriver._on_frame`) the driver builds no
+object but the frames, the feedback and the unpacked fields: the per-motor constants and state
+are one :class:`~drivers.dji.axis.Axis` record per motor.
 """
 
 from __future__ import annotations
 
 import logging
 import math
-from types import MappingProxyType
 from typing import TYPE_CHECKING, ClassVar
 
+from drivers.dji.axis import Axis
 from drivers.dji.codec import (
+    COMMAND_IDS,
     COUNTS_PER_REV,
-    ESC_MODELS,
+    HALF_REV_COUNTS,
     RAD_S_PER_RPM,
-    DjiCodec,
     DjiFeedback,
-    decode_feedback,
+    encode_command,
+    feedback_fields,
     feedback_id,
-    unwrap_delta,
+    message_name,
 )
-from drivers.dji.pi import SpeedPi
-from drivers.dji.position import STEERING_OPTIONS, PositionLoop, power_up_position_rad
-from drivers.dji.protection import ACK_KEY, ACK_OPTION, ACTION, check_acknowledged
+from drivers.dji.options import DjiOptions
+from drivers.dji.position import STEERING_OPTIONS, power_up_position_rad
+from drivers.dji.protection import ACTION
 from drivers.dji.protection import protection as dji_protection
-from drivers.dji.sim import DjiSimulator
-from gateway.core.errors import ConfigError, DecodeError, EncodeError
-from gateway.core.types import DriveFault, DriveState, WheelFeedback
-from gateway.drive.driver import MotorDriver, OptionSpec
-from gateway.drive.filters import CanFilter
+from gateway.core.errors import ConfigError
+from gateway.core.types import DriveFault, WheelFeedback
+from gateway.drive.claims import FrameClaim
+from gateway.drive.driver import MotorDriver
 
 if TYPE_CHECKING:
-    from collections.abc import Mapping, Sequence
+    from collections.abc import Sequence
 
-    from drivers.dji.codec import EscModel
     from gateway.core.protection import Protection
     from gateway.core.types import Frame, MotorConfig
+
+__all__ = ["TEMP_HYSTERESIS_C", "DjiDriver"]
 
 log = logging.getLogger(__name__)
 
 #: The over-temperature flag clears this far below ``max_temp_c`` (degC).
 TEMP_HYSTERESIS_C = 5.0
+#: Rotor rad per encoder count.
+_RAD_PER_COUNT = 2.0 * math.pi / COUNTS_PER_REV
 
 
-def _number(opts: Mapping[str, object], key: str) -> float:
-    value = opts[key]
-    if not isinstance(value, (int, float)):  # validate_options guarantees it
-        raise ConfigError(f"{key}: expected a number, got {value!r}")
-    return float(value)
-
-
-class DjiDriver(MotorDriver):
+class DjiDriver(MotorDriver[DjiOptions]):
     """Host-side speed control of up to eight C620 / C610 ESCs on one bus.
 
     :param motors: the motors, ``node_id`` = ESC ID 1..8 (set with the ESC's button).
     :raises ConfigError: for a bad option, a motor block without ``no_controller_stop:
-        acknowledged``, a repeated ESC ID, a current limit above the ESC's full scale, or
-        different ``liveness_s`` values.
+        acknowledged``, a repeated ESC ID, a current limit above the ESC's full scale, a
+        steering key in a drive motor's block, or different ``liveness_s`` values.
     """
 
-    OPTIONS: ClassVar[Mapping[str, OptionSpec]] = MappingProxyType(
-        {
-            "esc": OptionSpec(
-                str, "c620", choices=tuple(ESC_MODELS), help="ESC type: c620 (M3508), c610 (M2006)"
-            ),
-            "kp": OptionSpec(
-                float, 0.1, minimum=0.0, help="proportional gain, A per rad/s of rotor speed error"
-            ),
-            "ki": OptionSpec(
-                float, 1.0, minimum=0.0, help="integral gain, A per rad of integrated rotor error"
-            ),
-            "max_current_a": OptionSpec(
-                float, 0.0, minimum=0.0, maximum=20.0, help="current limit in A, 0 = full scale"
-            ),
-            "liveness_s": OptionSpec(
-                float, 0.1, minimum=0.001, help="feedback older than this is OFFLINE (s)"
-            ),
-            "max_temp_c": OptionSpec(
-                float, 80.0, minimum=0.0, maximum=255.0, help="C620 over-temperature limit (degC)"
-            ),
-            ACK_KEY: ACK_OPTION,
-            **STEERING_OPTIONS,
-        }
-    )
+    Options = DjiOptions
     NODE_ID_RANGE: ClassVar[tuple[int, int]] = (1, 8)
-    DEFAULT_LIVENESS_S: ClassVar[float] = 0.1
     HOST_SPEED_LOOP: ClassVar[bool] = True
     STEERING: ClassVar[bool] = True
     PROTOCOL: ClassVar[str] = "DJI"
@@ -144,96 +113,35 @@ class DjiDriver(MotorDriver):
 
     def __init__(self, motors: Sequence[MotorConfig]) -> None:
         super().__init__(motors)
-        self._esc: list[EscModel] = []
-        self._pi: list[SpeedPi] = []
-        self._max_temp_c: list[float] = []
-        #: Per motor, the position loop of a steering actuator, ``None`` for a drive motor.
-        self._position: list[PositionLoop | None] = []
-        liveness: set[float] = set()
         for m in self.motors:
-            where = f"motor {m.wheel!r}"
-            opts = self.validate_options(m.options, where)
-            self._position.append(self._position_loop(m, opts, where))
-            esc = ESC_MODELS[str(opts["esc"])]
-            limit = _number(opts, "max_current_a") or esc.full_scale_a
-            if limit > esc.full_scale_a:
+            given = sorted(k for k in STEERING_OPTIONS if k in m.options)
+            if given and not m.steering:
                 raise ConfigError(
-                    f"{where}.max_current_a: expected at most {esc.full_scale_a:g} A for a "
-                    f"{esc.name.upper()}, got {limit:g}"
+                    f"motor {m.wheel!r}.{given[0]}: expected only in a steering actuator's "
+                    f"block (steering:), got it in a drive motor's block"
                 )
-            self._esc.append(esc)
-            self._pi.append(SpeedPi(_number(opts, "kp"), _number(opts, "ki"), limit))
-            self._max_temp_c.append(_number(opts, "max_temp_c"))
-            liveness.add(_number(opts, "liveness_s"))
-            if m.gear_ratio == 1.0:
-                log.warning(
-                    "%s: gear_ratio is 1.0; an %s needs %.6g", where, esc.motor, esc.gear_ratio
-                )
-        if len(liveness) > 1:
-            raise ConfigError(
-                f"DJI motors: expected one liveness_s for every motor, got {sorted(liveness)}"
-            )
-        self.liveness_s = liveness.pop() if liveness else self.DEFAULT_LIVENESS_S
-        self.codec = DjiCodec({m.node_id: e for m, e in zip(self.motors, self._esc, strict=True)})
-        self._feedback_index = {feedback_id(m.node_id): i for i, m in enumerate(self.motors)}
-        n = len(self.motors)
-        self._integral_a = [0.0] * n
-        self._current_a = [0.0] * n
-        self._rotor_rad_s = [0.0] * n
-        self._last_count: list[int | None] = [None] * n
-        self._count_sum = [0] * n
-        #: Rotor position (rad) at the first sample: 0 for a drive motor (its position counts
-        #: from there), the absolute power-up position for a steering actuator.
-        self._origin_rad = [0.0] * n
-        #: Rotor position (rad) of the latest sample, from ``_origin_rad``.
-        self._rotor_rad = [0.0] * n
-        #: A steering actuator's rotor target of the previous cycle, for the feed-forward.
-        self._last_target_rad: list[float | None] = [None] * n
-        self._raw: list[DjiFeedback | None] = [None] * n
-        self._last_command_s: float | None = None
-        #: (speed bound in rad/s, gear ratio, sign, steering) per motor, for the per-cycle
-        #: paths.
-        self._scale = tuple(
-            (m.max_wheel_rad_s * (1.0 + 1e-9), m.gear_ratio, m.sign, m.steering)
-            for m in self.motors
+        #: One record per motor, in :attr:`motors` order.
+        self._axes: tuple[Axis, ...] = tuple(
+            Axis.of(i, m, o, scale)
+            for i, (m, o, scale) in enumerate(zip(self.motors, self.opts, self.motor_scale,
+                                                  strict=True))
         )
-
-    @classmethod
-    def validate_options(cls, raw: Mapping[str, object], where: str) -> dict[str, object]:
-        """Validate the protocol keys and fill in defaults, except the steering keys.
-
-        ``steer_kp`` and ``steer_kd`` are checked but left out unless given: they mean nothing
-        to a drive motor, whose block must not carry them; a steering actuator without them
-        gets their defaults when the driver is built.
-
-        :raises ConfigError: for an unknown key, a bad value, or a block without
-            ``no_controller_stop: acknowledged``
-            (:func:`drivers.dji.protection.check_acknowledged`).
-        """
-        out = super().validate_options(raw, where)
-        check_acknowledged(out, where)
-        for key in STEERING_OPTIONS:
-            if key not in raw:
-                del out[key]
-        return out
-
-    @staticmethod
-    def _position_loop(
-        m: MotorConfig, opts: Mapping[str, object], where: str
-    ) -> PositionLoop | None:
-        if not m.steering:
-            given = sorted(k for k in STEERING_OPTIONS if k in opts)
-            if given:
-                raise ConfigError(
-                    f"{where}.{given[0]}: expected only in a steering actuator's block "
-                    f"(steering:), got it in a drive motor's block"
-                )
-            return None
-        return PositionLoop.from_options(opts, m.max_rpm * RAD_S_PER_RPM)
+        for ax, m in zip(self._axes, self.motors, strict=True):
+            if m.gear_ratio == 1.0:
+                log.warning("motor %r: gear_ratio is 1.0; an %s needs %.6g",
+                            m.wheel, ax.esc.motor, ax.esc.gear_ratio)
+        #: Feedback identifier -> its motor's record: the dispatch of :meth:`_on_frame`.
+        self._by_feedback_id = {feedback_id(m.node_id): ax
+                                for m, ax in zip(self.motors, self._axes, strict=True)}
+        #: The command groups that hold a configured ESC (0: ``0x200``, 1: ``0x1FF``).
+        self._groups: tuple[int, ...] = tuple(sorted({ax.group for ax in self._axes}))
+        #: The raw current set points of ESC 1..8 (those of unconfigured ESCs stay 0).
+        self._raw = [0] * 8
+        self._last_command_s: float | None = None
 
     # ----------------------------------------------------------------- hooks
 
-    def enable(self, now_s: float) -> list[Frame]:
+    def _enable(self, now_s: float) -> list[Frame]:
         """Arm the host-side loops of every motor that is not in fault (no frames).
 
         A steering actuator's cascade (position loop, then speed loop) is the DJI stand-in for
@@ -241,8 +149,8 @@ class DjiDriver(MotorDriver):
         """
         self._reset_loops()
         for i, m in enumerate(self.motors):
-            if self._faults[i]:
-                log.warning("ESC %d (%s) stays disarmed: %s", m.node_id, m.wheel, self._detail[i])
+            if self.faults(i):
+                log.warning("ESC %d (%s) stays disarmed: %s", m.node_id, m.wheel, self.detail(i))
                 continue
             self.set_armed(i, True)
         return []
@@ -250,11 +158,14 @@ class DjiDriver(MotorDriver):
     def disable(self, now_s: float) -> list[Frame]:
         """Disarm every motor; zero-current frames for every group that holds a motor."""
         self._reset_loops()
-        for i in range(len(self.motors)):
-            self.set_armed(i, False)
-        return self._frames([0.0] * len(self.motors))
+        raw = self._raw
+        for ax in self._axes:
+            self.set_armed(ax.index, False)
+            ax.current_a = 0.0
+            raw[ax.slot] = 0
+        return encode_command(raw, self._groups)
 
-    def command(self, wheel_rad_s: Sequence[float], now_s: float) -> list[Frame]:
+    def _command(self, setpoints: Sequence[float], now_s: float) -> list[Frame]:
         """Run every motor's loops once and pack the currents.
 
         A drive motor's speed loop follows its wheel speed; a steering actuator's position loop
@@ -262,80 +173,106 @@ class DjiDriver(MotorDriver):
         target since the previous call as feed-forward (none on the first call after
         :meth:`enable`).  A motor gets zero current (and an empty integrator) unless it is
         ENABLED, i.e. armed, with fresh feedback and no fault.
-
-        :param wheel_rad_s: one setpoint per motor: a drive motor's wheel speed in rad/s within
-            ``max_rpm``, a steering actuator's steering angle in rad.
-        :raises EncodeError: for a wrong number of setpoints, a speed that is not finite or
-            above the motor's ``max_rpm``, or a steering angle that is not finite.
         """
-        targets = self._rotor_targets(wheel_rad_s)
-        dt = 0.0 if self._last_command_s is None else now_s - self._last_command_s
-        dt = min(max(dt, 0.0), self.liveness_s)
+        live = self.live
+        stale_s = live.liveness_s
+        last = self._last_command_s
+        dt = 0.0 if last is None else now_s - last
+        if dt < 0.0:
+            dt = 0.0
+        elif dt > stale_s:
+            dt = stale_s
         self._last_command_s = now_s
-        currents = []
-        for i, target in enumerate(targets):
-            speed = target
-            loop = self._position[i]
-            if loop is not None:  # a steering actuator: target is a rotor position
-                last, self._last_target_rad[i] = self._last_target_rad[i], target
-                ff = 0.0 if last is None or dt <= 0.0 else (target - last) / dt
-                speed = loop.speed_target(target - self._rotor_rad[i], ff, self._rotor_rad_s[i])
-            if self.state(i, now_s) is not DriveState.ENABLED:
-                self._integral_a[i] = 0.0
-                currents.append(0.0)
-                continue
-            current, self._integral_a[i] = self._pi[i].step(
-                self._integral_a[i], speed - self._rotor_rad_s[i], dt
-            )
-            currents.append(current)
-        return self._frames(currents)
+        # MotorDriver.state written out (no ENABLING here): ENABLED = armed, no fault, alive.
+        heard, armed, faults = live.oldest, self._armed, self._faults
+        raw = self._raw
+        for ax, w in zip(self._axes, setpoints):  # noqa: B905 - the base checked the count
+            loop = ax.loop
+            if loop is None:
+                speed = w * ax.scale
+            else:  # a steering actuator: w is an angle, the target a rotor position
+                target = ax.zero_rad + w * ax.scale
+                previous, ax.last_target_rad = ax.last_target_rad, target
+                ff = 0.0 if previous is None or dt <= 0.0 else (target - previous) / dt
+                speed = loop.speed_target(target - ax.rotor_rad, ff, ax.rotor_rad_s)
+            i = ax.index
+            t = heard[i]
+            if armed[i] and not faults[i] and t is not None and now_s - t <= stale_s:
+                current, ax.integral_a = ax.pi.step(ax.integral_a, speed - ax.rotor_rad_s, dt)
+            else:
+                current = ax.integral_a = 0.0
+            ax.current_a = current
+            # EscModel.amps_to_raw written out
+            raw[ax.slot] = round(current * ax.full_scale_raw / ax.full_scale_a)
+        return encode_command(raw, self._groups)
 
-    def preview_command(self, wheel_rad_s: Sequence[float]) -> list[Frame]:
+    def preview_command(self, setpoints: Sequence[float]) -> list[Frame]:
         """The frames :meth:`command` would send for zero measured speed and empty integrators.
 
-        A steering actuator is assumed at rest at its neutral angle (rotor at ``zero_rad``,
-        as at power-up) with no feed-forward (a first cycle).  Pure: ignores armed state and
-        feedback and changes nothing (for ``frames`` output).
+        A fresh driver for the same motors, armed, every motor taken as alive and at rest
+        (a steering actuator at its neutral angle, rotor at ``zero_rad``, as at power-up), runs
+        one first cycle (no feed-forward).  Changes nothing here (for ``frames`` output).
 
         :raises EncodeError: as :meth:`command`.
         """
-        targets = self._rotor_targets(wheel_rad_s)
-        currents = []
-        for m, loop, pi, target in zip(self.motors, self._position, self._pi, targets, strict=True):
-            speed = target if loop is None else loop.speed_target(target - m.zero_rad, 0.0, 0.0)
-            currents.append(pi.preview(speed))
-        return list(self.codec.encode_command(self._raw_currents(currents)))
+        fresh = type(self)(self.motors)
+        fresh.enable(0.0)
+        for ax in fresh._axes:
+            ax.rotor_rad = ax.zero_rad
+            fresh.heard(ax.index, 0, 0.0)
+        return fresh.command(setpoints, 0.0)
 
-    def receive_filters(self) -> tuple[CanFilter, ...]:
-        """The feedback identifiers of the configured ESCs (``0x200 + ESC ID``, 11-bit)."""
-        return tuple(CanFilter.exact(i, False) for i in sorted(self._feedback_index))
-
-    def on_frame(self, frame: Frame) -> bool:
+    def _on_frame(self, frame: Frame) -> bool:
         """Take a feedback frame of a configured ESC (others are not this driver's).
 
-        :return: whether it was the feedback ID of a configured ESC; malformed ones are
-            counted in :attr:`rejected`.
+        :raises DecodeError: for a malformed feedback frame of a configured ESC.
         """
-        if frame.is_extended_id:
-            return False  # DJI ESCs use 11-bit IDs; a 29-bit frame is another device's
-        index = self._feedback_index.get(frame.arbitration_id)
-        if index is None:
+        ax = self._by_feedback_id.get(frame.arbitration_id)
+        if ax is None or frame.is_extended_id:  # DJI ESCs use 11-bit IDs: 29-bit is another's
             return False
-        try:
-            fb = decode_feedback(frame)  # what self.codec.decode does, one call less per frame
-        except DecodeError as err:
-            self.reject("malformed feedback", err)
-            return True
-        if fb is None:  # cannot happen for a feedback ID; keeps mypy honest
-            return False
-        self._take_feedback(index, fb, frame.timestamp_s)
+        fields = ax.fields = feedback_fields(frame)
+        t = frame.timestamp_s
+        angle = fields[0]
+        last = ax.last_count
+        if last < 0:  # the first sample
+            if ax.loop is not None:
+                ax.origin_rad = power_up_position_rad(angle, ax.zero_rad)
+        else:
+            d = angle - last  # codec.unwrap_delta written out: the shorter way round
+            if d > HALF_REV_COUNTS:
+                d -= COUNTS_PER_REV
+            elif d < -HALF_REV_COUNTS:
+                d += COUNTS_PER_REV
+            ax.count_sum += d
+            if t - ax.last_s > self.live.liveness_s:
+                self._resumed(ax, t)
+        ax.last_count = angle
+        ax.last_s = t
+        rotor_rad_s = ax.rotor_rad_s = fields[1] * RAD_S_PER_RPM
+        rotor_rad = ax.rotor_rad = ax.origin_rad + ax.count_sum * _RAD_PER_COUNT
+        # Wheel side as MotorConfig.motor_to_wheel_rad_s (x * sign / gear); a steering
+        # actuator's position as motor_to_steer_rad, from zero_rad (0 for a drive motor).
+        self.store_feedback(ax.index, WheelFeedback(
+            (rotor_rad - ax.zero_rad) * ax.sign / ax.gear, rotor_rad_s * ax.sign / ax.gear, t
+        ))
+        if fields[3] > ax.max_temp_c or ax.hot:
+            self._temperature(ax, fields[3])
         return True
 
-    @classmethod
-    def make_simulator(cls, motor: MotorConfig) -> DjiSimulator:
-        """A simulated ESC with a current-driven motor for ``motor``: it holds its last current
-        for ever, as the real one is assumed to (:mod:`drivers.dji.protection`)."""
-        return DjiSimulator(motor)
+    def claims(self) -> tuple[FrameClaim, ...]:
+        """The feedback of every configured ESC (``0x200 + ESC ID``, 11-bit, its motor's),
+        and the command frames this driver sends (``0x200`` / ``0x1FF``, every motor's)."""
+        feedback = sorted((feedback_id(m.node_id), i) for i, m in enumerate(self.motors))
+        return (
+            *(FrameClaim.exact(ident, False, i) for ident, i in feedback),
+            *(FrameClaim.exact(COMMAND_IDS[g], False, None, receive=False)
+              for g in self._groups),
+        )
+
+    def message_name(self, arbitration_id: int, is_extended_id: bool) -> str | None:
+        """``COMMAND_ESC_1_4``, ``COMMAND_ESC_5_8`` or ``FEEDBACK_ESC_<n>``
+        (:func:`drivers.dji.codec.message_name`); ``None`` for a 29-bit identifier."""
+        return None if is_extended_id else message_name(arbitration_id)
 
     def protection(self, index: int) -> Protection:
         """:attr:`~gateway.core.protection.Guard.NONE`: the ESC has no known command timeout and is
@@ -347,108 +284,51 @@ class DjiDriver(MotorDriver):
     @property
     def currents_a(self) -> tuple[float, ...]:
         """The currents of the last frames built, per motor (A)."""
-        return tuple(self._current_a)
+        return tuple(ax.current_a for ax in self._axes)
+
+    @property
+    def integrals_a(self) -> tuple[float, ...]:
+        """The speed loops' integrator states, per motor (A)."""
+        return tuple(ax.integral_a for ax in self._axes)
 
     def measurement(self, index: int) -> DjiFeedback | None:
         """The last decoded feedback of motor ``index`` (raw device units)."""
-        return self._raw[index]
+        ax = self._axes[index]
+        if ax.fields is None:
+            return None
+        angle, speed, current, temp, _reserved = ax.fields
+        return DjiFeedback(self.motors[index].node_id, angle, speed, current, temp)
 
     # ----------------------------------------------------------------- internals
 
     def _reset_loops(self) -> None:
-        self._integral_a = [0.0] * len(self.motors)
-        self._last_target_rad = [None] * len(self.motors)
+        for ax in self._axes:
+            ax.integral_a = 0.0
+            ax.last_target_rad = None
         self._last_command_s = None
 
-    def _rotor_targets(self, wheel_rad_s: Sequence[float]) -> list[float]:
-        """Rotor speed (drive motor) or rotor position (steering actuator) targets, rad(/s)."""
-        if len(wheel_rad_s) != len(self.motors):
-            what = "setpoints" if any(m.steering for m in self.motors) else "wheel speeds"
-            raise EncodeError(
-                f"Expected {len(self.motors)} {what} for the DJI motors, "
-                f"but got {len(wheel_rad_s)}."
-            )
-        out: list[float] = []
-        # Per-motor constants from __init__; the same arithmetic as m.max_wheel_rad_s and
-        # m.wheel_to_motor_rad_s(w) (w * gear * sign).
-        for (bound, gear, sign, steer), w in zip(self._scale, wheel_rad_s, strict=True):
-            if steer:
-                m = self.motors[len(out)]
-                if not math.isfinite(w):
-                    raise EncodeError(
-                        f"Expected a finite steering angle in rad for node {m.node_id} "
-                        f'("{m.wheel}"), but got {w}.'
-                    )
-                out.append(m.steer_to_motor_rad(w))
-                continue
-            if not (math.isfinite(w) and abs(w) <= bound):
-                m = self.motors[len(out)]
-                lim = m.max_wheel_rad_s
-                raise EncodeError(
-                    f'Expected velocity for node {m.node_id} ("{m.wheel}") between '
-                    f"{-lim:.4g} and {lim:.4g} rad/s, but got {w}."
-                )
-            out.append(w * gear * sign)
-        return out
+    def _resumed(self, ax: Axis, t: float) -> None:
+        m = self.motors[ax.index]
+        log.warning("ESC %d (%s): feedback resumed after %.3f s; turns made meanwhile are lost",
+                    m.node_id, m.wheel, t - ax.last_s)
 
-    def _raw_currents(self, currents_a: Sequence[float]) -> dict[int, int]:
-        rows = zip(self.motors, self._esc, currents_a, strict=True)
-        return {m.node_id: esc.amps_to_raw(a) for m, esc, a in rows}
-
-    def _frames(self, currents_a: list[float]) -> list[Frame]:
-        self._current_a = list(currents_a)
-        return list(self.codec.encode_command(self._raw_currents(currents_a)))
-
-    def _take_feedback(self, i: int, fb: DjiFeedback, t: float) -> None:
-        m = self.motors[i]
-        last = self._last_count[i]
-        if last is not None:
-            prev = self._feedback[i]
-            if prev is not None and t - prev.timestamp_s > self.liveness_s:
-                log.warning(
-                    "ESC %d (%s): feedback resumed after %.3f s; turns made meanwhile are lost",
-                    m.node_id,
-                    m.wheel,
-                    t - prev.timestamp_s,
-                )
-            self._count_sum[i] += unwrap_delta(last, fb.angle_count)
-        elif m.steering:
-            self._origin_rad[i] = power_up_position_rad(fb.angle_count, m.zero_rad)
-        self._last_count[i] = fb.angle_count
-        self._raw[i] = fb
-        rotor_rad_s = self._rotor_rad_s[i] = fb.speed_rpm * RAD_S_PER_RPM
-        rotor_rad = self._rotor_rad[i] = (
-            self._origin_rad[i] + self._count_sum[i] * 2.0 * math.pi / COUNTS_PER_REV
-        )
-        _, gear, sign, steer = self._scale[i]
-        # Wheel side as m.motor_to_wheel_rad_s: x * sign / gear; a steering actuator's
-        # position as m.motor_to_steer_rad: from zero_rad.
-        position = (rotor_rad - m.zero_rad if steer else rotor_rad) * sign / gear
-        self._feedback[i] = WheelFeedback(position, rotor_rad_s * sign / gear, t)
-        if self._esc[i].reports_temperature:
-            self._check_temperature(i, fb)
-
-    def _check_temperature(self, i: int, fb: DjiFeedback) -> None:
-        if not self._esc[i].reports_temperature:
-            return
-        limit = self._max_temp_c[i]
-        if fb.temperature_c > limit:
-            if not self._faults[i]:
+    def _temperature(self, ax: Axis, temp_c: int) -> None:
+        """The host-side over-temperature check of a C620 (a C610's limit is infinite)."""
+        i, limit = ax.index, ax.max_temp_c
+        if temp_c > limit:
+            if not ax.hot:
                 m = self.motors[i]
-                log.error(
-                    "ESC %d (%s): %d degC is above max_temp_c %g; disarmed",
-                    m.node_id,
-                    m.wheel,
-                    fb.temperature_c,
-                    limit,
-                )
+                log.error("ESC %d (%s): %d degC is above max_temp_c %g; disarmed",
+                          m.node_id, m.wheel, temp_c, limit)
+            ax.hot = True
             self.set_fault(
                 i,
                 DriveFault.OVER_TEMPERATURE,
-                f"temperature {fb.temperature_c} degC above max_temp_c {limit:g} (host-side)",
+                f"temperature {temp_c} degC above max_temp_c {limit:g} (host-side)",
             )
             self.set_armed(i, False)
-            self._integral_a[i] = 0.0
-        elif self._faults[i] and fb.temperature_c <= limit - TEMP_HYSTERESIS_C:
-            log.info("ESC %d: back to %d degC", self.motors[i].node_id, fb.temperature_c)
+            ax.integral_a = 0.0
+        elif temp_c <= limit - TEMP_HYSTERESIS_C:
+            log.info("ESC %d: back to %d degC", self.motors[i].node_id, temp_c)
+            ax.hot = False
             self.set_fault(i, DriveFault.NONE)

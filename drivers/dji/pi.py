@@ -38,28 +38,30 @@ class SpeedPi:
     ki_a_per_rad: float
     limit_a: float
 
-    def _clip(self, value: float) -> float:
-        return min(max(value, -self.limit_a), self.limit_a)
-
     def step(self, integral_a: float, error_rad_s: float, dt_s: float) -> tuple[float, float]:
-        """One controller update.
+        """One controller update (every motor, every cycle: the clipping is written out).
 
         :param integral_a: integrator state from the previous update (A).
         :param error_rad_s: target minus measured rotor speed (rad/s).
-        :param dt_s: time since the previous update (s, >= 0).
+        :param dt_s: time since the previous update (s, >= 0; a negative value counts as 0).
         :return: ``(current_a, new_integral_a)``; the current is within the limit.
         """
         if not math.isfinite(error_rad_s):
             return 0.0, 0.0
+        lim = self.limit_a
         p = self.kp_a_per_rad_s * error_rad_s
-        integral = self._clip(integral_a + self.ki_a_per_rad * error_rad_s * max(dt_s, 0.0))
-        unsaturated = p + integral
-        if (unsaturated > self.limit_a and error_rad_s > 0.0) or (
-            unsaturated < -self.limit_a and error_rad_s < 0.0
-        ):
-            integral = self._clip(integral_a)
-        return self._clip(p + integral), integral
-
-    def preview(self, error_rad_s: float) -> float:
-        """The output for ``error_rad_s`` with an empty integrator and no elapsed time (A)."""
-        return self._clip(self.kp_a_per_rad_s * error_rad_s)
+        integral = integral_a + self.ki_a_per_rad * error_rad_s * dt_s if dt_s > 0.0 else integral_a
+        if integral > lim:
+            integral = lim
+        elif integral < -lim:
+            integral = -lim
+        out = p + integral
+        if (out > lim and error_rad_s > 0.0) or (out < -lim and error_rad_s < 0.0):
+            # Saturated and the error pushes further: hold the integrator.
+            integral = lim if integral_a > lim else -lim if integral_a < -lim else integral_a
+            out = p + integral
+        if out > lim:
+            return lim, integral
+        if out < -lim:
+            return -lim, integral
+        return out, integral

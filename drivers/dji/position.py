@@ -32,7 +32,6 @@ from types import MappingProxyType
 from typing import TYPE_CHECKING
 
 from drivers.dji.codec import COUNTS_PER_REV
-from gateway.core.errors import ConfigError
 from gateway.core.options import OptionSpec
 
 if TYPE_CHECKING:
@@ -74,20 +73,6 @@ class PositionLoop:
     kd: float
     max_speed_rad_s: float
 
-    @classmethod
-    def from_options(cls, opts: Mapping[str, object], max_speed_rad_s: float) -> PositionLoop:
-        """The loop for a motor block's validated protocol keys (defaults where absent).
-
-        :raises ConfigError: if a gain is not a number (validation guarantees it is).
-        """
-        gains = []
-        for key, spec in STEERING_OPTIONS.items():
-            value = opts.get(key, spec.default)
-            if not isinstance(value, (int, float)):
-                raise ConfigError(f"{key}: expected a number, got {value!r}")
-            gains.append(float(value))
-        return cls(gains[0], gains[1], max_speed_rad_s)
-
     def speed_target(self, error_rad: float, ff_rad_s: float, measured_rad_s: float) -> float:
         """The rotor-speed set point for the speed loop.
 
@@ -101,7 +86,9 @@ class PositionLoop:
         if not math.isfinite(speed):
             return 0.0
         limit = self.max_speed_rad_s
-        return min(max(speed, -limit), limit)
+        if speed > limit:
+            return limit
+        return -limit if speed < -limit else speed
 
 
 def power_up_position_rad(angle_count: int, zero_rad: float) -> float:

@@ -16,8 +16,8 @@ What the simulated ESC does:
   (:mod:`drivers.dji.protection`), and the simulator does the same: it is never kinder than the
   assumption, so no test can pass because a simulated ESC stopped a wheel that a real one might
   not.  ``command_timeout_s`` defaults to ``None`` (hold) and no configuration sets it
-  (:meth:`drivers.dji.DjiDriver.make_simulator` never does); a test may give a number to
-  model an ESC that zeroes its output after that long without a command frame;
+  (:func:`simulator_for` never does); a test may give a number to model an ESC that zeroes
+  its output after that long without a command frame;
 * injected ``SimFault.FAULT`` reports ``fault_temperature_c`` and switches the output off (the
   ESC protecting itself); clearing it restores the normal temperature, and the next command
   frame switches the output on again (DJI has no clear command);
@@ -232,3 +232,10 @@ class DjiSimulator(DeviceSimulator):
             current_raw=min(max(current, -_INT16_MAX), _INT16_MAX),
             temperature_c=min(max(temp, 0), 0xFF),
         )
+
+
+def simulator_for(motor: MotorConfig) -> DjiSimulator:
+    """A simulated ESC with a current-driven motor for ``motor`` (registered in
+    :data:`drivers.BUILTIN_SIMULATORS`): it holds its last current for ever, as the real one is
+    assumed to (:mod:`drivers.dji.protection`)."""
+    return DjiSimulator(motor)

@@ -10,10 +10,14 @@ Reference: the `ODrive CAN protocol
 * :mod:`drivers.odrive.messages`: every message's layout, the decoded messages and the
   axis-state transition table, as data.
 * :mod:`drivers.odrive.codec`: the pure :class:`OdriveCodec`.
-* :mod:`drivers.odrive.options`: the protocol keys of a motor block and the bus-wide settings.
+* :mod:`drivers.odrive.options`: the protocol keys of a motor block (:class:`OdriveOptions`).
 * :mod:`drivers.odrive.faults`: heartbeat and error-reply words mapped onto faults and text.
+* :mod:`drivers.odrive.watchdog` and :mod:`drivers.odrive.protection`: the axis watchdog,
+  set over CAN on 0.6 (endpoint IDs, the write and read-back), stated on 0.5.
+* :mod:`drivers.odrive.axis`: the driver's record of one axis and its enable sequence.
 * :mod:`drivers.odrive.driver`: the stateful :class:`OdriveDriver` (registry name ``odrive``).
-* :mod:`drivers.odrive.sim`: :class:`OdriveSimulator`, the device side for tests and ``--sim``.
+* :mod:`drivers.odrive.sim`: ``OdriveSimulator``, the device side for tests and ``--sim``
+  (found through :data:`drivers.BUILTIN_SIMULATORS`; the driver never imports it).
 """
 
 from __future__ import annotations
@@ -21,7 +25,7 @@ from __future__ import annotations
 from drivers.odrive.codec import OdriveCodec
 from drivers.odrive.driver import OdriveDriver
 from drivers.odrive.enums import AxisError, AxisError05, AxisState, ControlMode, Firmware, InputMode
-from drivers.odrive.sim import OdriveSimulator
+from drivers.odrive.options import OdriveOptions
 
 __all__ = [
     "AxisError",
@@ -32,5 +36,5 @@ __all__ = [
     "InputMode",
     "OdriveCodec",
     "OdriveDriver",
-    "OdriveSimulator",
+    "OdriveOptions",
 ]

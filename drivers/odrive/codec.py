@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import math
 from types import MappingProxyType
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from drivers.odrive.enums import AxisState, CmdId, ControlMode, Firmware, InputMode, ProcedureResult
 from drivers.odrive.messages import (
@@ -36,7 +36,6 @@ from drivers.odrive.messages import (
     GET_ERROR_06,
     GET_MOTOR_ERROR_05,
     HEARTBEAT,
-    INPUT_POS_FF_MAX,
     INPUT_POS_FF_SCALE,
     MAX_EXTENDED_NODE_ID,
     MAX_STANDARD_NODE_ID,
@@ -46,7 +45,6 @@ from drivers.odrive.messages import (
     SET_INPUT_VEL,
     TRAJ_DONE_05,
     TRANSITIONS,
-    U32_MAX,
     ClearErrors,
     Command,
     EncoderEstimates,
@@ -62,17 +60,21 @@ from drivers.odrive.messages import (
     SetInputPos,
     SetInputVel,
     Step,
+    check_float32,
+    check_u32,
+    ff_counts,
 )
 from gateway.core.errors import ConfigError, DecodeError, EncodeError, IllegalTransitionError
 from gateway.core.types import Frame
-from gateway.drive.codec import MotorCodec
 
 if TYPE_CHECKING:
     from collections.abc import Mapping
 
 #: Bound methods of the two messages on the hot path (a command per wheel per cycle, an
-#: estimate per wheel per feedback period): one attribute lookup fewer each.
+#: estimate per wheel per feedback period): one attribute lookup fewer each; and the command's
+#: ID as a plain int.
 _SET_INPUT_VEL_PACK = SET_INPUT_VEL.packer.pack
+_SET_INPUT_VEL_CMD = int(CmdId.SET_INPUT_VEL)
 _ESTIMATES_UNPACK = ENCODER_ESTIMATES.packer.unpack
 
 
@@ -84,7 +86,7 @@ _PROCEDURE_RESULTS: Mapping[int, ProcedureResult] = MappingProxyType(
 )
 
 
-class OdriveCodec(MotorCodec[Feedback]):
+class OdriveCodec:
     """Frames of one ODrive CAN bus configuration.
 
     :param firmware: firmware family of the axes (heartbeat layout, Clear_Errors DLC, 0x03).
@@ -147,14 +149,6 @@ class OdriveCodec(MotorCodec[Feedback]):
 
     # ------------------------------------------------------------------ host -> axis
 
-    def encode_command(self, commands: Mapping[int, float]) -> tuple[Frame, ...]:
-        """One Set_Input_Vel per node, in the mapping's order.
-
-        :param commands: node ID -> velocity in turns/s (torque feed-forward 0).
-        :raises EncodeError: for a value that is not a finite float32 or a bad node ID.
-        """
-        return tuple(self.make_set_input_vel(n, v) for n, v in commands.items())
-
     def make_set_input_vel(
         self, node_id: int, vel_turns_s: float, torque_ff_nm: float = 0.0
     ) -> Frame:
@@ -171,10 +165,12 @@ class OdriveCodec(MotorCodec[Feedback]):
         except TypeError:
             ok = False
         if not ok:
-            _check_float32("Input_Vel", node_id, vel_turns_s, "turns/s")
-            _check_float32("Input_Torque_FF", node_id, torque_ff_nm, "Nm")
+            check_float32("Input_Vel", node_id, vel_turns_s, "turns/s")
+            check_float32("Input_Torque_FF", node_id, torque_ff_nm, "Nm")
+        if not 0 <= node_id <= self.max_node_id:
+            self.arbitration_id(node_id, _SET_INPUT_VEL_CMD)  # raises, naming the ID mode
         return Frame(
-            self.arbitration_id(node_id, CmdId.SET_INPUT_VEL),
+            node_id << CMD_BITS | _SET_INPUT_VEL_CMD,
             _SET_INPUT_VEL_PACK(vel_turns_s, torque_ff_nm),
             self.extended_id,
         )
@@ -194,11 +190,11 @@ class OdriveCodec(MotorCodec[Feedback]):
         :param torque_ff_nm: torque feed-forward in N*m, as ``vel_ff_turns_s``.
         :raises EncodeError: for a non-finite position or feed-forward, or a bad node ID.
         """
-        _check_float32("Input_Pos", node_id, pos_turns, "turns")
-        _check_float32("Vel_FF", node_id, vel_ff_turns_s, "turns/s")
-        _check_float32("Torque_FF", node_id, torque_ff_nm, "Nm")
+        check_float32("Input_Pos", node_id, pos_turns, "turns")
+        check_float32("Vel_FF", node_id, vel_ff_turns_s, "turns/s")
+        check_float32("Torque_FF", node_id, torque_ff_nm, "Nm")
         return self._frame(
-            node_id, SET_INPUT_POS, pos_turns, _ff_counts(vel_ff_turns_s), _ff_counts(torque_ff_nm)
+            node_id, SET_INPUT_POS, pos_turns, ff_counts(vel_ff_turns_s), ff_counts(torque_ff_nm)
         )
 
     def make_set_axis_state(self, node_id: int, state: int) -> Frame:
@@ -206,7 +202,7 @@ class OdriveCodec(MotorCodec[Feedback]):
 
         :raises EncodeError: if ``state`` is not a u32 or the node ID is bad.
         """
-        _check_u32("Axis_Requested_State", node_id, state)
+        check_u32("Axis_Requested_State", node_id, state)
         return self._frame(node_id, SET_AXIS_STATE, state)
 
     def make_set_controller_mode(self, node_id: int, control_mode: int, input_mode: int) -> Frame:
@@ -214,8 +210,8 @@ class OdriveCodec(MotorCodec[Feedback]):
 
         :raises EncodeError: if a mode is not a u32 or the node ID is bad.
         """
-        _check_u32("Control_Mode", node_id, control_mode)
-        _check_u32("Input_Mode", node_id, input_mode)
+        check_u32("Control_Mode", node_id, control_mode)
+        check_u32("Input_Mode", node_id, input_mode)
         return self._frame(node_id, SET_CONTROLLER_MODE, control_mode, input_mode)
 
     def make_clear_errors(self, node_id: int, identify: bool = False) -> Frame:
@@ -278,13 +274,13 @@ class OdriveCodec(MotorCodec[Feedback]):
         else:
             flags7 = (TRAJ_DONE_05 if hb.trajectory_done else 0) | int(hb.controller_error)
             tail = (int(hb.motor_error), int(hb.encoder_error), flags7)
-        _check_u32("Axis_Error", hb.node_id, hb.axis_error)
+        check_u32("Axis_Error", hb.node_id, hb.axis_error)
         return self._frame(hb.node_id, HEARTBEAT, hb.axis_error, int(hb.axis_state), *tail)
 
     def make_encoder_estimates(self, node_id: int, pos_turns: float, vel_turns_s: float) -> Frame:
         """Get_Encoder_Estimates reply (both values rounded to float32 like the firmware's)."""
-        _check_float32("Pos_Estimate", node_id, pos_turns, "turns")
-        _check_float32("Vel_Estimate", node_id, vel_turns_s, "turns/s")
+        check_float32("Pos_Estimate", node_id, pos_turns, "turns")
+        check_float32("Vel_Estimate", node_id, vel_turns_s, "turns/s")
         return self._frame(node_id, ENCODER_ESTIMATES, pos_turns, vel_turns_s)
 
     def make_error_status(self, status: ErrorStatus | MotorErrorStatus) -> Frame:
@@ -317,33 +313,13 @@ class OdriveCodec(MotorCodec[Feedback]):
         if layout is None or (frame.dlc == 0 and self.firmware is Firmware.V0_5):
             return None
         if layout is ENCODER_ESTIMATES:
-            return EncoderEstimates(node, *self.unpack_estimates(node, frame))
-        values = _unpack(layout, node, frame)
+            return EncoderEstimates(node, *unpack_estimates(node, frame))
+        values = layout.unpack(node, frame)
         if layout is HEARTBEAT:
             return self._heartbeat(node, values)
         if layout is GET_ERROR_06:
             return ErrorStatus(node, int(values[0]), int(values[1]))
         return MotorErrorStatus(node, int(values[0]))
-
-    @staticmethod
-    def unpack_estimates(node: int, frame: Frame) -> tuple[float, float]:
-        """``(position turns, velocity turns/s)`` of a Get_Encoder_Estimates data frame.
-
-        The driver's per-frame path: most of the feedback traffic, so it gives the two floats
-        without building an :class:`EncoderEstimates`.
-
-        :raises DecodeError: for a wrong DLC or a non-finite estimate.
-        """
-        data = frame.data
-        if frame.dlc != 8 or len(data) != 8:
-            _unpack(ENCODER_ESTIMATES, node, frame)  # raises, naming the message
-        pos, vel = _ESTIMATES_UNPACK(data)
-        if not (math.isfinite(pos) and math.isfinite(vel)):
-            raise DecodeError(
-                f"Expected finite encoder estimates from ODrive node {node}, "
-                f"but got position {pos} turns, velocity {vel} turns/s."
-            )
-        return pos, vel
 
     def _heartbeat(self, node: int, values: tuple[int, ...]) -> Heartbeat:
         # Every field of the heartbeat's struct is an integer ("<IBBBB"): no int() needed.
@@ -378,59 +354,44 @@ class OdriveCodec(MotorCodec[Feedback]):
         if frame.is_remote_frame or (getter and frame.dlc == 0 and self.firmware is Firmware.V0_5):
             return Request(node, CmdId(cmd)) if getter else None
         if cmd == CmdId.SET_INPUT_VEL:
-            vel, torque = _unpack(SET_INPUT_VEL, node, frame)
+            vel, torque = SET_INPUT_VEL.unpack(node, frame)
             return SetInputVel(node, vel, torque)
         if cmd == CmdId.SET_INPUT_POS:
-            pos, vel_ff, torque_ff = _unpack(SET_INPUT_POS, node, frame)
+            pos, vel_ff, torque_ff = SET_INPUT_POS.unpack(node, frame)
             return SetInputPos(
                 node, pos, vel_ff * INPUT_POS_FF_SCALE, torque_ff * INPUT_POS_FF_SCALE
             )
         if cmd == CmdId.SET_AXIS_STATE:
-            (state,) = _unpack(SET_AXIS_STATE, node, frame)
+            (state,) = SET_AXIS_STATE.unpack(node, frame)
             state = int(state)
             return SetAxisState(node, _AXIS_STATES.get(state, state))
         if cmd == CmdId.SET_CONTROLLER_MODE:
-            control, inp = _unpack(SET_CONTROLLER_MODE, node, frame)
+            control, inp = SET_CONTROLLER_MODE.unpack(node, frame)
             return SetControllerMode(node, int(control), int(inp))
         if cmd == CmdId.CLEAR_ERRORS:
-            values = _unpack(self.clear_errors_layout, node, frame)
+            values = self.clear_errors_layout.unpack(node, frame)
             return ClearErrors(node, bool(values and values[0]))
         if cmd == CmdId.ESTOP:
-            _unpack(ESTOP, node, frame)
+            ESTOP.unpack(node, frame)
             return Estop(node)
         return None
 
 
-def _unpack(layout: Layout, node: int, frame: Frame) -> tuple[Any, ...]:
-    if frame.dlc not in layout.dlcs or len(frame.data) != frame.dlc:
-        expected = " or ".join(str(d) for d in layout.dlcs)
+def unpack_estimates(node: int, frame: Frame) -> tuple[float, float]:
+    """``(position turns, velocity turns/s)`` of a Get_Encoder_Estimates data frame of ``node``.
+
+    The driver's per-frame path: most of the feedback traffic, so it gives the two floats
+    without building an :class:`~drivers.odrive.messages.EncoderEstimates`.
+
+    :raises DecodeError: for a wrong DLC or a non-finite estimate.
+    """
+    data = frame.data
+    if frame.dlc != 8 or len(data) != 8:
+        ENCODER_ESTIMATES.unpack(node, frame)  # raises, naming the message
+    pos, vel = _ESTIMATES_UNPACK(data)
+    if not (math.isfinite(pos) and math.isfinite(vel)):
         raise DecodeError(
-            f"Expected {expected} data bytes in {layout.name} of ODrive node {node} "
-            f"(ID {frame.arbitration_id:#x}), but got {len(frame.data)}."
+            f"Expected finite encoder estimates from ODrive node {node}, "
+            f"but got position {pos} turns, velocity {vel} turns/s."
         )
-    return layout.packer.unpack_from(frame.data)
-
-
-def _ff_counts(value: float) -> int:
-    """A Set_Input_Pos feed-forward in int16 counts of 0.001, clipped."""
-    clipped = min(max(value, -INPUT_POS_FF_MAX), INPUT_POS_FF_MAX)
-    return round(clipped / INPUT_POS_FF_SCALE)
-
-
-def _check_float32(name: str, node_id: int, value: float, unit: str) -> None:
-    try:
-        ok = -FLOAT32_MAX <= value <= FLOAT32_MAX  # False for NaN and +-inf
-    except TypeError:
-        ok = False
-    if not ok:
-        raise EncodeError(
-            f"Expected {name} for node {node_id} between {-FLOAT32_MAX:.7g} and "
-            f"{FLOAT32_MAX:.7g} {unit}, but got {value!r}."
-        )
-
-
-def _check_u32(name: str, node_id: int, value: int) -> None:
-    if not (isinstance(value, int) and 0 <= value <= U32_MAX):
-        raise EncodeError(
-            f"Expected {name} for node {node_id} between 0 and {U32_MAX}, but got {value!r}."
-        )
+    return pos, vel

@@ -3,8 +3,8 @@
 Each message is a :class:`Layout` (command ID, precompiled ``struct.Struct``, the official
 DBC's signal names and the DLCs accepted); :class:`~drivers.odrive.codec.OdriveCodec`, the
 device simulator, the tests' cantools cross-check and the benchmarks all derive from these
-tables.  Beside them: the decoded messages as frozen dataclasses, the identifier and range
-constants, and the table of allowed axis-state transitions.
+tables.  Beside them: the identifier and range constants with the checks of field values, the
+decoded messages as frozen dataclasses, and the table of allowed axis-state transitions.
 """
 
 from __future__ import annotations
@@ -13,12 +13,15 @@ import enum
 import struct
 from dataclasses import dataclass, field
 from types import MappingProxyType
-from typing import TYPE_CHECKING, TypeAlias
+from typing import TYPE_CHECKING, Any, TypeAlias
 
 from drivers.odrive.enums import AxisState, CmdId, Firmware, ProcedureResult
+from gateway.core.errors import DecodeError, EncodeError
 
 if TYPE_CHECKING:
     from collections.abc import Mapping
+
+    from gateway.core.types import Frame
 
 #: Bits of the command ID in the arbitration ID.
 CMD_BITS = 5
@@ -62,6 +65,19 @@ class Layout:
         """The payload for ``values``, zero-padded to the encoded DLC."""
         data = self.packer.pack(*values)
         return data + self.padding if self.padding else data
+
+    def unpack(self, node: int, frame: Frame) -> tuple[Any, ...]:
+        """The fields of ``frame``, a message of ``node``.
+
+        :raises DecodeError: for a data length other than :attr:`dlcs`, naming the message.
+        """
+        if frame.dlc not in self.dlcs or len(frame.data) != frame.dlc:
+            expected = " or ".join(str(d) for d in self.dlcs)
+            raise DecodeError(
+                f"Expected {expected} data bytes in {self.name} of ODrive node {node} "
+                f"(ID {frame.arbitration_id:#x}), but got {len(frame.data)}."
+            )
+        return self.packer.unpack_from(frame.data)
 
 
 SET_INPUT_VEL = Layout(
@@ -116,6 +132,36 @@ GET_MOTOR_ERROR_05 = Layout(
 #: 0.5 heartbeat byte 7: bit 7 trajectory done, the rest the controller error flags.
 TRAJ_DONE_05 = 0x80
 CONTROLLER_ERROR_05 = 0x01
+
+
+# ----------------------------------------------------------------------------- field values
+
+
+def ff_counts(value: float) -> int:
+    """A Set_Input_Pos feed-forward in int16 counts of 0.001, clipped."""
+    clipped = min(max(value, -INPUT_POS_FF_MAX), INPUT_POS_FF_MAX)
+    return round(clipped / INPUT_POS_FF_SCALE)
+
+
+def check_float32(name: str, node_id: int, value: float, unit: str) -> None:
+    """:raises EncodeError: unless ``value`` is a finite float32 (field ``name``, in ``unit``)."""
+    try:
+        ok = -FLOAT32_MAX <= value <= FLOAT32_MAX  # False for NaN and +-inf
+    except TypeError:
+        ok = False
+    if not ok:
+        raise EncodeError(
+            f"Expected {name} for node {node_id} between {-FLOAT32_MAX:.7g} and "
+            f"{FLOAT32_MAX:.7g} {unit}, but got {value!r}."
+        )
+
+
+def check_u32(name: str, node_id: int, value: int) -> None:
+    """:raises EncodeError: unless ``value`` is an int that fits a u32 (field ``name``)."""
+    if not (isinstance(value, int) and 0 <= value <= U32_MAX):
+        raise EncodeError(
+            f"Expected {name} for node {node_id} between 0 and {U32_MAX}, but got {value!r}."
+        )
 
 
 # ----------------------------------------------------------------------------- messages

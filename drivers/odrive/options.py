@@ -1,96 +1,100 @@
-"""Protocol keys of a ``driver: odrive`` motor block, described once, and the bus they imply.
+"""Protocol keys of a ``driver: odrive`` motor block, declared once as :class:`OdriveOptions`.
 
-Every key is an :class:`~gateway.drive.driver.OptionSpec` in :data:`OPTIONS`;
-:func:`bus_settings` checks that the motors of one bus agree on the keys that hold for the
-whole bus (firmware family and ID mode).
+The keys every protocol shares come from :mod:`gateway.drive.options`: ``liveness_s`` (here
+the silence of either the heartbeat or the encoder estimates) and ``controller_timeout_s``
+(here the axis watchdog: written over CAN on 0.6, stated on 0.5, see
+:mod:`drivers.odrive.watchdog`).  ``firmware`` and ``extended_id`` hold for the whole bus: the
+driver lists them in its ``BUS_WIDE`` keys.
 """
 
 from __future__ import annotations
 
+import dataclasses
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from drivers.odrive.enums import Firmware, InputMode
 from drivers.odrive.messages import DEFAULT_EXTENDED_ID, DEFAULT_FIRMWARE
-from gateway.core.errors import ConfigError
-from gateway.drive.driver import MotorDriver, OptionSpec
+from gateway.drive.options import (
+    CONTROLLER_TIMEOUT_OPTION,
+    DriverOptions,
+    StatedTimeout,
+    option,
+    spec_field,
+)
 
 if TYPE_CHECKING:
-    from collections.abc import Mapping, Sequence
+    from collections.abc import Mapping
 
-    from gateway.core.types import MotorConfig
+__all__ = ["OdriveOptions"]
 
-#: Every protocol key of a ``driver: odrive`` motor block.
-OPTIONS: dict[str, OptionSpec] = {
-    "firmware": OptionSpec(
+_LIVENESS = DriverOptions.specs()["liveness_s"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class OdriveOptions(StatedTimeout):
+    """The validated protocol keys of one ODrive motor block.
+
+    :param firmware: the firmware family, ``"0.5"`` or ``"0.6"`` (:attr:`firmware_family`).
+    :param extended_id: 29-bit identifiers (``axis.config.can.is_extended``).
+    :param input_mode: the controller input mode when arming (1 passthrough, 2 vel_ramp).
+    :param encoder_request: ``"cyclic"`` estimates, or ``"rtr"``: one request per poll.
+    :param flat_endpoints: 0.6: the firmware's ``flat_endpoints.json`` (watchdog endpoint IDs).
+    :param watchdog_endpoints: 0.6: the watchdog's endpoint IDs, instead of ``flat_endpoints``.
+    :param config_dir: the directory a relative ``flat_endpoints`` starts from.
+    """
+
+    liveness_s: float = spec_field(
+        dataclasses.replace(
+            _LIVENESS,
+            help="seconds without heartbeat or encoder estimates before a motor is OFFLINE",
+        )
+    )
+    controller_timeout_s: float = spec_field(
+        dataclasses.replace(
+            CONTROLLER_TIMEOUT_OPTION,
+            help="the axis watchdog timeout (s): on 0.6 written over CAN and read back (0: "
+            "0.25 s); on 0.5 a statement of what odrivetool set (0: not stated)",
+        )
+    )
+    firmware: str = option(
         str,
         DEFAULT_FIRMWARE.value,
         choices=tuple(f.value for f in Firmware),
         help="firmware family: 0.5 (ODrive v3.x) or 0.6 (ODrive Pro, S1, Micro)",
-    ),
-    "extended_id": OptionSpec(
+    )
+    extended_id: bool = option(
         bool, DEFAULT_EXTENDED_ID, help="29-bit identifiers (axis.config.can.is_extended)"
-    ),
-    "input_mode": OptionSpec(
+    )
+    input_mode: int = option(
         int,
         int(InputMode.PASSTHROUGH),
         choices=(int(InputMode.PASSTHROUGH), int(InputMode.VEL_RAMP)),
         help="controller input mode: 1 passthrough, 2 vel_ramp (the axis ramps speed)",
-    ),
-    "encoder_request": OptionSpec(
+    )
+    encoder_request: str = option(
         str,
         "cyclic",
         choices=("cyclic", "rtr"),
         help="cyclic encoder estimates, or an RTR request on every poll",
-    ),
-    "controller_timeout_s": OptionSpec(
-        float,
-        0.0,
-        minimum=0.0,
-        maximum=60.0,
-        help="the axis watchdog timeout (s): on 0.6 written over CAN and read back (0: "
-        "0.25 s); on 0.5 a statement of what odrivetool set (0: not stated)",
-    ),
-    "flat_endpoints": OptionSpec(
+    )
+    flat_endpoints: str = option(
         str,
         "",
         help="0.6: the firmware's flat_endpoints.json (from docs.odriverobotics.com/releases/"
         "firmware), for the watchdog's endpoint IDs",
-    ),
-    "watchdog_endpoints": OptionSpec(
+    )
+    watchdog_endpoints: Mapping[str, object] = option(
         dict,
         {},
         help="0.6: {fw_version, enable_watchdog, watchdog_timeout[, hw_version]}: the "
         "watchdog's endpoint IDs of that firmware version, instead of flat_endpoints",
-    ),
-    "config_dir": OptionSpec(
+    )
+    config_dir: str = option(
         str, "", help="directory a relative flat_endpoints starts from; '' = current directory"
-    ),
-    "liveness_s": OptionSpec(
-        float,
-        MotorDriver.DEFAULT_LIVENESS_S,
-        minimum=0.001,
-        help="seconds without heartbeat or encoder estimates before a motor is OFFLINE",
-    ),
-}
+    )
 
-
-def bus_settings(
-    motors: Sequence[MotorConfig], opts: Sequence[Mapping[str, object]]
-) -> tuple[Firmware, bool]:
-    """The firmware family and ID mode of one bus, which every motor on it must share.
-
-    :param motors: the motors of the bus.
-    :param opts: their validated protocol keys, in the same order.
-    :return: ``(firmware, extended_id)``; the defaults for no motors.
-    :raises ConfigError: if a motor disagrees with the first on ``firmware`` or
-        ``extended_id``.
-    """
-    first = opts[0] if opts else {"firmware": DEFAULT_FIRMWARE.value, "extended_id": False}
-    for m, o in zip(motors, opts, strict=True):
-        for key in ("firmware", "extended_id"):
-            if o[key] != first[key]:
-                raise ConfigError(
-                    f"motor {m.wheel!r}.{key}: expected {first[key]!r} like motor "
-                    f"{motors[0].wheel!r} on the same ODrive bus, got {o[key]!r}"
-                )
-    return Firmware(first["firmware"]), bool(first["extended_id"])
+    @property
+    def firmware_family(self) -> Firmware:
+        """:attr:`firmware` as a :class:`~drivers.odrive.enums.Firmware`."""
+        return Firmware(self.firmware)

@@ -67,11 +67,13 @@ from drivers.odrive.messages import (
     SetInputPos,
     SetInputVel,
 )
+from drivers.odrive.options import OdriveOptions
 from drivers.odrive.watchdog import (
     OPCODE_READ,
     OPCODE_WRITE,
     RX_SDO,
     TX_SDO,
+    endpoints_from_options,
     parse_sdo,
     version_reply,
 )
@@ -361,3 +363,18 @@ def _next_due(previous: float | None, now_s: float, period_s: float) -> float:
     """The next due time of a periodic frame, without bursts after a gap."""
     nxt = (now_s if previous is None else previous) + period_s
     return nxt if nxt > now_s else now_s + period_s
+
+
+def simulator_for(motor: MotorConfig) -> DeviceSimulator:
+    """An :class:`OdriveSimulator` for ``motor``, as the motor block says it was configured:
+    at factory settings (watchdog off) with the 0.6 endpoint IDs it names, or with the watchdog
+    it states (``controller_timeout_s``) saved (:data:`drivers.BUILTIN_SIMULATORS`).
+
+    :raises ConfigError: for a bad protocol key or bad endpoint keys.
+    """
+    where = f"motor {motor.wheel!r}"
+    options = OdriveOptions.from_block(motor.options, where)
+    endpoints = endpoints_from_options(options, where)
+    if endpoints is not None:
+        return OdriveSimulator(motor, endpoints=endpoints)
+    return OdriveSimulator(motor, watchdog_timeout_s=options.controller_timeout_s)

@@ -36,10 +36,11 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from gateway.core.errors import ConfigError
+from gateway.core.protection import ProtectionState
 from gateway.core.types import Frame
 
 if TYPE_CHECKING:
-    from collections.abc import Mapping
+    from drivers.odrive.options import OdriveOptions
 
 #: RxSdo / TxSdo command IDs (0.6; on 0.5 these are Get_Encoder_Error / Get_Sensorless_Error).
 RX_SDO = 0x04
@@ -114,24 +115,22 @@ def version_reply(fw_version: str, hw_version: str = "") -> bytes:
 # ----------------------------------------------------------------------- configuration
 
 
-def endpoints_from_options(
-    options: Mapping[str, object], where: str, config_dir: str = ""
-) -> WatchdogEndpoints | None:
+def endpoints_from_options(options: OdriveOptions, where: str) -> WatchdogEndpoints | None:
     """The watchdog endpoints a 0.6 motor block names, or ``None`` if it names none.
 
-    :param options: the validated protocol keys (``flat_endpoints``, ``watchdog_endpoints``).
+    :param options: the motor block's protocol keys (``flat_endpoints``, relative to
+        ``config_dir``, or ``watchdog_endpoints``).
     :param where: the motor block, for messages.
-    :param config_dir: the configuration file's directory, for a relative ``flat_endpoints``.
     :raises ConfigError: for both keys at once, a missing or unreadable file, a missing
         endpoint or a bad ``watchdog_endpoints`` mapping.
     """
-    path = str(options.get("flat_endpoints") or "")
-    ids = options.get("watchdog_endpoints") or {}
+    path, ids = options.flat_endpoints, options.watchdog_endpoints
     if path and ids:
         raise ConfigError(
             f"{where}: expected flat_endpoints or watchdog_endpoints, got both"
         )
     if path:
+        config_dir = options.config_dir
         return _from_file(Path(config_dir, path) if config_dir else Path(path), where)
     if ids:
         return _from_mapping(ids, where)
@@ -223,6 +222,9 @@ class Step(enum.Enum):
     FAILED = "failed"
 
 
+_STATES = {Step.CONFIRMED: ProtectionState.CONFIRMED, Step.FAILED: ProtectionState.FAILED}
+
+
 class WatchdogSetup:
     """Set and confirm one 0.6 axis' watchdog: Get_Version, two writes, two reads.
 
@@ -251,13 +253,26 @@ class WatchdogSetup:
         self.endpoints = endpoints
         self.timeout_s = timeout_s
         self._rx, self._version, self._ext = rx_sdo_id, version_id, extended
-        self.step = Step.IDLE
+        #: The setup as the driver contract reports it (kept with :attr:`step`): CONFIRMED,
+        #: FAILED, or PENDING (not started, or under way); read on every poll.
+        self.state = ProtectionState.PENDING
+        self._step = Step.IDLE
         #: Why the setup failed (empty otherwise).
         self.why = ""
         self._sent_s = 0.0
         self._attempts = 0
         #: The read-back values, by endpoint ID (``None`` until read).
         self._read: dict[int, object] = {}
+
+    @property
+    def step(self) -> Step:
+        """Where the setup stands."""
+        return self._step
+
+    @step.setter
+    def step(self, step: Step) -> None:
+        self._step = step
+        self.state = _STATES.get(step, ProtectionState.PENDING)
 
     def start(self, now_s: float) -> list[Frame]:
         """Begin (again): ask Get_Version."""

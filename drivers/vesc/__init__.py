@@ -3,14 +3,17 @@
 Protocol reference: https://github.com/vedderb/bldc/blob/master/documentation/comm_can.md
 (simple commands and status messages) and ``comm/comm_can.c``.
 
-* :mod:`drivers.vesc.codec`: the pure frame builders and parsers (:class:`VescCodec`).
-* :mod:`drivers.vesc.driver`: :class:`VescDriver`, the stateful driver (registry name ``vesc``).
-* :mod:`drivers.vesc.sim`: :class:`VescSimulator`, the controller side for tests and ``--sim``,
-  at the firmware's factory settings unless built from a configuration.
-* :mod:`drivers.vesc.settings`: the VESC Tool settings a motor block states (timeout, status
-  messages, minimum ERPM), with their factory values.
+* :mod:`drivers.vesc.codec`: the pure frame builders and parsers.
+* :mod:`drivers.vesc.driver`: :class:`VescDriver`, the stateful driver (registry name ``vesc``);
+  :mod:`drivers.vesc.axis`: what it keeps per motor, and the unit conversions.
+* :mod:`drivers.vesc.settings`: the protocol keys of a motor block (:class:`VescOptions`): the
+  VESC Tool settings it states (timeout, status messages, minimum ERPM), with their factory
+  values.
 * :mod:`drivers.vesc.min_erpm`: the wheel speeds below ``s_pid_min_erpm`` that a VESC does not
   speed-control.
+* :mod:`drivers.vesc.sim`: ``VescSimulator``, the controller side for tests and ``--sim``, at
+  the firmware's factory settings unless built from a configuration (``simulator_for``); not
+  imported here: production code carries no test device.
 """
 
 from __future__ import annotations
@@ -19,7 +22,6 @@ from drivers.vesc.codec import (
     BROADCAST_ID,
     CanPacketId,
     HwType,
-    VescCodec,
     VescCommand,
     VescPing,
     VescPong,
@@ -27,19 +29,17 @@ from drivers.vesc.codec import (
     VescStatus5,
 )
 from drivers.vesc.driver import VescDriver
-from drivers.vesc.sim import SimMode, VescSimulator
+from drivers.vesc.settings import VescOptions
 
 __all__ = [
     "BROADCAST_ID",
     "CanPacketId",
     "HwType",
-    "SimMode",
-    "VescCodec",
     "VescCommand",
     "VescDriver",
+    "VescOptions",
     "VescPing",
     "VescPong",
-    "VescSimulator",
     "VescStatus",
     "VescStatus5",
 ]

@@ -3,7 +3,7 @@
 Reference: the firmware's own description, ``documentation/comm_can.md``, and its
 implementation ``comm/comm_can.c`` (``decode_msg``, ``comm_can_send_status1..6``) and
 ``datatypes.h`` (``CAN_PACKET_ID``, ``HW_TYPE``) in https://github.com/vedderb/bldc
-(read at ``b9d287b3``); digested in section 2 of ``can-protocols.md``.
+(read at ``b9d287b3``).
 
 * 29-bit extended identifiers only: ``eid = (packet << 8) | vesc_id``.  Standard-ID frames are
   never VESC frames (the firmware hands them to its Lisp and BMS hooks).
@@ -13,7 +13,8 @@ implementation ``comm/comm_can.c`` (``decode_msg``, ``comm_can_send_status1..6``
 * Status frames (STATUS, STATUS_5) are cyclic only; there is no RTR.  They carry no fault code.
 
 Everything here is pure: no I/O, no clock.  Host side: :func:`make_command` (and its
-``make_set_*`` shorthands), :func:`make_ping`, :func:`decode`.  Device side (the simulator):
+``make_set_*`` shorthands), :func:`make_ping`, :func:`decode` (and :func:`unpack_status`, the
+fields of a status frame, for the driver's receive path).  Device side (the simulator):
 :func:`decode_command`, :func:`make_status`, :func:`make_status5`, :func:`make_pong`.  The host
 side rounds a command's value to the field; the device side truncates toward zero, as the
 firmware's casts do.
@@ -29,7 +30,6 @@ from typing import TYPE_CHECKING, TypeAlias
 
 from gateway.core.errors import DecodeError, EncodeError
 from gateway.core.types import Frame
-from gateway.drive.codec import MotorCodec
 
 if TYPE_CHECKING:
     from collections.abc import Mapping
@@ -75,6 +75,7 @@ class CanPacketId(enum.IntEnum):
 
 _STATUS_ID = int(CanPacketId.STATUS)
 _STATUS_5_ID = int(CanPacketId.STATUS_5)
+_SET_RPM_BASE = int(CanPacketId.SET_RPM) << 8
 
 
 class HwType(enum.IntEnum):
@@ -190,7 +191,9 @@ class VescPing:
 VescMessage: TypeAlias = VescStatus | VescStatus5 | VescPong
 
 
-def _eid(packet: CanPacketId, node_id: int) -> int:
+def arbitration_id(packet: CanPacketId, node_id: int) -> int:
+    """The 29-bit identifier of ``packet`` to or from controller ``node_id`` (``packet << 8 |
+    node_id``; a PONG's low byte is the pinger's ID)."""
     return (int(packet) << 8) | node_id
 
 
@@ -229,7 +232,10 @@ def make_command(packet: CanPacketId, node_id: int, value: float) -> Frame:
 
 
 def make_set_rpm(node_id: int, erpm: float) -> Frame:
-    """SET_RPM: run the speed controller at ``erpm`` electrical RPM."""
+    """SET_RPM: run the speed controller at ``erpm`` electrical RPM (:func:`make_command`)."""
+    if type(erpm) is int and type(node_id) is int and 0 <= node_id <= 0xFF:
+        if _I32_MIN <= erpm <= _I32_MAX:  # every cycle, per motor: the frame at once
+            return Frame(_SET_RPM_BASE | node_id, _I32_PACK(erpm), True)
     return make_command(CanPacketId.SET_RPM, node_id, erpm)
 
 
@@ -250,14 +256,7 @@ def make_ping(node_id: int, sender_id: int) -> Frame:
     """
     _check_id(node_id)
     _check_id(sender_id, "sender ID")
-    return Frame(_eid(CanPacketId.PING, node_id), bytes((sender_id,)), is_extended_id=True)
-
-
-def _split(frame: Frame) -> tuple[int, int] | None:
-    """(packet, node ID) of a frame that may be VESC's, else ``None``."""
-    if not frame.is_extended_id:
-        return None
-    return frame.arbitration_id >> 8, frame.arbitration_id & 0xFF
+    return Frame(arbitration_id(CanPacketId.PING, node_id), bytes((sender_id,)), True)
 
 
 def _check_data(frame: Frame, packet: CanPacketId, node_id: int, sizes: tuple[int, ...]) -> None:
@@ -273,6 +272,21 @@ def _check_data(frame: Frame, packet: CanPacketId, node_id: int, sizes: tuple[in
         )
 
 
+def unpack_status(frame: Frame) -> tuple[int, int, int]:
+    """The raw fields of a STATUS or STATUS_5 frame (one layout: int32, int16, int16; STATUS:
+    eRPM, current * 10, duty * 1000; STATUS_5: tachometer, input voltage * 10, reserved).
+
+    :raises DecodeError: for a remote frame or a length other than 8.
+    """
+    data = frame.data
+    if frame.is_remote_frame or len(data) != 8:
+        # Off the per-frame path: the packet's enum member is built only to raise.
+        arb = frame.arbitration_id
+        _check_data(frame, CanPacketId(arb >> 8), arb & 0xFF, (8,))
+    fields: tuple[int, int, int] = _STATUS_UNPACK(data)
+    return fields
+
+
 def decode(frame: Frame) -> VescMessage | None:
     """Decode a frame a controller sent (STATUS, STATUS_5, PONG).
 
@@ -285,38 +299,18 @@ def decode(frame: Frame) -> VescMessage | None:
         return None
     arb = frame.arbitration_id
     packet, node_id = arb >> 8, arb & 0xFF
-    if packet in (_STATUS_ID, _STATUS_5_ID):
-        # The per-frame path: the checks of _check_data inline, which builds the message (and
-        # the packet's enum member) only to raise.
-        data = frame.data
-        if frame.is_remote_frame or len(data) != 8:
-            _check_data(frame, CanPacketId(packet), node_id, (8,))
-        first, second, third = _STATUS_UNPACK(data)
-        if packet == _STATUS_ID:
-            return VescStatus(node_id, first, second / 10.0, third / 1000.0)
-        return VescStatus5(node_id, first, second / 10.0)
+    if packet == _STATUS_ID:
+        erpm, current, duty = unpack_status(frame)
+        return VescStatus(node_id, erpm, current / 10.0, duty / 1000.0)
+    if packet == _STATUS_5_ID:
+        tacho, v_in, _ = unpack_status(frame)
+        return VescStatus5(node_id, tacho, v_in / 10.0)
     if packet == CanPacketId.PONG:
         _check_data(frame, CanPacketId.PONG, node_id, (1, 2))
         # ``decode_msg``: a one-byte PONG means HW_TYPE_VESC.
         hw = frame.data[1] if len(frame.data) == 2 else HwType.VESC
         return VescPong(frame.data[0], node_id, int(hw))
     return None
-
-
-class VescCodec(MotorCodec[VescMessage]):
-    """The :class:`~gateway.drive.codec.MotorCodec` of VESC: SET_RPM out, status frames in."""
-
-    def encode_command(self, commands: Mapping[int, float]) -> tuple[Frame, ...]:
-        """One SET_RPM frame per controller, in the mapping's order.
-
-        :param commands: VESC ID -> electrical RPM.
-        :raises EncodeError: if an ID or a speed cannot be encoded.
-        """
-        return tuple(make_set_rpm(node_id, erpm) for node_id, erpm in commands.items())
-
-    def decode(self, frame: Frame) -> VescMessage | None:
-        """See :func:`decode`."""
-        return decode(frame)
 
 
 # ----------------------------------------------------------------------- device side
@@ -329,10 +323,9 @@ def decode_command(frame: Frame) -> VescCommand | VescPing | None:
     :raises DecodeError: for one of those packets as a remote frame or with the wrong length
         (only the 4-byte command forms are accepted).
     """
-    split = _split(frame)
-    if split is None:
+    if not frame.is_extended_id:
         return None
-    packet, node_id = split
+    packet, node_id = frame.arbitration_id >> 8, frame.arbitration_id & 0xFF
     if packet == CanPacketId.PING:
         _check_data(frame, CanPacketId.PING, node_id, (1,))
         return VescPing(node_id, frame.data[0])
@@ -368,7 +361,7 @@ def make_status(node_id: int, erpm: float, current_a: float, duty: float) -> Fra
     raw_current = _fixed(current_a, 10.0, name="current", node_id=node_id, lo=_I16_MIN, hi=_I16_MAX)
     raw_duty = _fixed(duty, 1000.0, name="duty", node_id=node_id, lo=_I16_MIN, hi=_I16_MAX)
     data = _STATUS.pack(raw_erpm, raw_current, raw_duty)
-    return Frame(_eid(CanPacketId.STATUS, node_id), data, is_extended_id=True)
+    return Frame(arbitration_id(CanPacketId.STATUS, node_id), data, is_extended_id=True)
 
 
 def make_status5(node_id: int, tachometer: int, v_in_v: float) -> Frame:
@@ -383,7 +376,7 @@ def make_status5(node_id: int, tachometer: int, v_in_v: float) -> Frame:
     )
     raw_v = _fixed(v_in_v, 10.0, name="input voltage", node_id=node_id, lo=_I16_MIN, hi=_I16_MAX)
     data = _STATUS.pack(raw_tacho, raw_v, 0)
-    return Frame(_eid(CanPacketId.STATUS_5, node_id), data, is_extended_id=True)
+    return Frame(arbitration_id(CanPacketId.STATUS_5, node_id), data, is_extended_id=True)
 
 
 def make_pong(to_id: int, responder_id: int, hw_type: HwType = HwType.VESC) -> Frame:
@@ -394,7 +387,7 @@ def make_pong(to_id: int, responder_id: int, hw_type: HwType = HwType.VESC) -> F
     _check_id(to_id, "pinger ID")
     _check_id(responder_id)
     data = _PONG.pack(responder_id, int(hw_type))
-    return Frame(_eid(CanPacketId.PONG, to_id), data, is_extended_id=True)
+    return Frame(arbitration_id(CanPacketId.PONG, to_id), data, is_extended_id=True)
 
 
 def wrap_int32(value: int) -> int:

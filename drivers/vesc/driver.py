@@ -1,8 +1,8 @@
 """The stateful VESC driver: wheel rad/s to eRPM, tachometer odometry, liveness.
 
 Protocol reference: https://github.com/vedderb/bldc/blob/master/documentation/comm_can.md and
-``comm/comm_can.c`` (section 2 of ``can-protocols.md``); the frames are built and parsed by
-:mod:`drivers.vesc.codec`.
+``comm/comm_can.c``; the frames are built and parsed by :mod:`drivers.vesc.codec`, the units
+converted per motor by :mod:`drivers.vesc.axis`.
 
 Behaviour that follows from the protocol:
 
@@ -33,11 +33,12 @@ Behaviour that follows from the protocol:
   most once per 5 s.  :meth:`uncontrolled_band` gives the wheel speeds concerned.
 * **Feedback.**  Velocity comes from STATUS (eRPM), position from the STATUS_5 tachometer
   (6 steps per electrical revolution, int32, unwrapped modulo 2**32 so odometry is exact to one
-  step).  Both streams are needed; the VESC sends neither until they are ticked in VESC Tool
-  (App Settings > General: Can Messages Rate 1, Status 1 and Status 5; ``can_status_msgs_r1``
-  bits 0 and 4; none from the factory, and the motor setup wizard ticks Status 1 to 4 only).
-  A motor missing a stream says so in its status detail, and the driver logs it once after
-  enable.  ``status_rate_hz`` states the rate that was set (Can Status Rate 1).
+  step).  Both streams are needed (:attr:`LIVENESS_STREAMS`); the VESC sends neither until they
+  are ticked in VESC Tool (App Settings > General: Can Messages Rate 1, Status 1 and Status 5;
+  ``can_status_msgs_r1`` bits 0 and 4; none from the factory, and the motor setup wizard ticks
+  Status 1 to 4 only).  A motor missing a stream says so in its status detail, and the driver
+  logs it once after enable.  ``status_rate_hz`` states the rate that was set (Can Status
+  Rate 1).
 * **Faults.**  The simple status frames carry no fault code (that takes COMM_GET_VALUES over
   the multi-frame buffer protocol, not implemented).  A VESC fault releases the motor, makes the
   firmware ignore commands for ``m_fault_stop_time_ms`` and then clears itself; the gateway sees
@@ -49,97 +50,68 @@ Behaviour that follows from the protocol:
 
 from __future__ import annotations
 
-import collections
 import dataclasses
 import logging
 import math
-from dataclasses import dataclass
-from typing import TYPE_CHECKING, ClassVar, cast
+from typing import TYPE_CHECKING, ClassVar
 
+from drivers.vesc.axis import Axis
 from drivers.vesc.codec import (
-    RPM_PER_RAD_S,
-    TACHO_STEPS_PER_EREV,
     CanPacketId,
-    VescStatus,
-    VescStatus5,
+    arbitration_id,
     decode,
     make_set_current,
     make_set_rpm,
-    wrap_int32,
+    unpack_status,
 )
 from drivers.vesc.min_erpm import BELOW_MIN_ERPM, BandWatch, uncontrolled_band
-from drivers.vesc.settings import (
-    FACTORY_STATUS_MSGS,
-    FACTORY_STATUS_RATE_HZ,
-    FACTORY_TIMEOUT_S,
-    OPTIONS,
-    STATUS_1,
-    STATUS_5,
-    TIMEOUT_ACTION,
-    TIMEOUT_FIX,
-    UNSTATED_HOW,
-    check_options,
-    check_validated,
-    missing_status,
-)
-from drivers.vesc.sim import VescSimulator
-from gateway.core.errors import DecodeError, EncodeError
+from drivers.vesc.settings import TIMEOUT_ACTION, TIMEOUT_FIX, UNSTATED_HOW, VescOptions
+from gateway.core.errors import DecodeError
 from gateway.core.protection import Guard, Protection
 from gateway.core.types import DriveState, WheelFeedback
+from gateway.drive.claims import FrameClaim
 from gateway.drive.driver import MotorDriver
-from gateway.drive.filters import CanFilter
 
 if TYPE_CHECKING:
     from collections.abc import Mapping, Sequence
 
-    from gateway.core.options import OptionSpec
+    from drivers.vesc.codec import VescStatus, VescStatus5
     from gateway.core.types import Frame, MotorConfig
-    from gateway.sim.device import DeviceSimulator
 
 log = logging.getLogger(__name__)
 
-#: Status packets a VESC may send that this driver does not decode.
-_UNUSED_STATUS = frozenset(
-    {CanPacketId.STATUS_2, CanPacketId.STATUS_3, CanPacketId.STATUS_4, CanPacketId.STATUS_6}
+#: The liveness streams (:attr:`VescDriver.LIVENESS_STREAMS`), by index.
+_STATUS, _STATUS_5 = 0, 1
+#: Status packets of our VESCs that :meth:`VescDriver.on_frame` takes without decoding.
+_UNUSED = 2
+#: Every status packet :meth:`VescDriver.on_frame` takes, in packet order, with its use.
+_RECEIVED = (
+    (CanPacketId.STATUS, _STATUS),
+    (CanPacketId.STATUS_2, _UNUSED),
+    (CanPacketId.STATUS_3, _UNUSED),
+    (CanPacketId.STATUS_4, _UNUSED),
+    (CanPacketId.STATUS_5, _STATUS_5),
+    (CanPacketId.STATUS_6, _UNUSED),
 )
-#: Every status packet :meth:`VescDriver.on_frame` takes, in packet order.
-_RECEIVED_STATUS = tuple(sorted({CanPacketId.STATUS, CanPacketId.STATUS_5, *_UNUSED_STATUS}))
+#: Every PONG, whatever pinger's ID is in its low byte.
+_PONGS = FrameClaim(CanPacketId.PONG << 8, 0x1FFFFF00, True)
+#: The commands the driver sends.
+_SENT = (CanPacketId.SET_CURRENT, CanPacketId.SET_RPM)
 
 
-@dataclass(frozen=True, slots=True)
-class _Options:
-    pole_pairs: int
-    command_period_s: float
-    liveness_s: float
-    min_erpm: float
-
-
-@dataclass(slots=True)
-class _Track:
-    """What the driver keeps per motor."""
-
-    erpm: int = 0
-    sent_s: float | None = None
-    tacho: int | None = None
-    steps: int = 0
-    velocity_rad_s: float = 0.0
-    status: VescStatus | None = None
-    status_s: float | None = None
-    status5: VescStatus5 | None = None
-    status5_s: float | None = None
-    hinted: bool = False
-
-
-class VescDriver(MotorDriver):
+class VescDriver(MotorDriver[VescOptions]):
     """Every VESC on one bus, commanded in electrical RPM.
 
     :param motors: the motor blocks, each with ``driver: vesc`` and its protocol keys.
-    :raises ConfigError: for a node ID outside 0..254, a node ID used twice, or bad options.
+    :raises ConfigError: for a node ID outside 0..254, a node ID used twice, bad options, or
+        motors that disagree on ``liveness_s``.
     """
 
-    OPTIONS: ClassVar[Mapping[str, OptionSpec]] = OPTIONS
+    Options = VescOptions
     #: VESC controller IDs; 255 is broadcast.
     NODE_ID_RANGE: ClassVar[tuple[int, int]] = (0, 254)
+    #: A motor is OFFLINE while either status stream is older than ``liveness_s``.
+    LIVENESS_STREAMS: ClassVar[tuple[str, ...]] = ("STATUS", "STATUS_5")
     #: After :meth:`enable`, how long status frames may be missing before the hint is logged.
     STATUS_HINT_AFTER_S: ClassVar[float] = 1.0
     PROTOCOL: ClassVar[str] = "VESC"
@@ -150,39 +122,25 @@ class VescDriver(MotorDriver):
 
     def __init__(self, motors: Sequence[MotorConfig]) -> None:
         super().__init__(motors)
-        opts: list[_Options] = []
-        for m in self.motors:
-            where = f"motor {m.wheel!r}"
-            raw = self.validate_options(m.options, where)
-            opts.append(
-                _Options(
-                    pole_pairs=cast("int", raw["pole_pairs"]),
-                    command_period_s=cast("float", raw["command_period_s"]),
-                    liveness_s=cast("float", raw["liveness_s"]),
-                    min_erpm=cast("float", raw["min_erpm"]),
-                )
-            )
-        self._opts: tuple[_Options, ...] = tuple(opts)
-        #: (speed limit in rad/s, gear ratio, sign, pole pairs) per motor, for erpm_for.
-        self._scale = tuple(
-            (m.max_wheel_rad_s, m.gear_ratio, m.sign, o.pole_pairs)
-            for m, o in zip(self.motors, self._opts, strict=True)
+        self._axes = tuple(
+            Axis.of(i, m, o, s)
+            for i, (m, o, s) in enumerate(zip(self.motors, self.opts, self.motor_scale,
+                                              strict=True))
         )
-        self._node_ids = tuple(m.node_id for m in self.motors)
-        self._min_erpm = tuple(o.min_erpm for o in self._opts)
-        self._track = [_Track() for _ in self.motors]
+        #: Identifier of a status frame of ours -> (its motor, its stream or _UNUSED).
+        self._routes = {
+            arbitration_id(packet, a.node_id): (a, use)
+            for a in self._axes for packet, use in _RECEIVED
+        }
         self._enabled = False
         self._enabled_at_s: float | None = None
-        #: Commands sent that the VESC does not follow as given, by reason (``below_min_erpm``:
-        #: SET_RPM nonzero and below ``min_erpm``, counted once per :meth:`command`).
-        self.command_counts: collections.Counter[str] = collections.Counter()
         self._band_watch = BandWatch(self.BAND_LOG_EVERY_S)
-        for i in range(len(self.motors)):
-            self._say_missing_status(i)
+        for a in self._axes:
+            self.set_fault(a.index, self.faults(a.index), a.missing())
 
     @classmethod
     def validate_options(cls, raw: Mapping[str, object], where: str) -> dict[str, object]:
-        """Validate the protocol keys (:mod:`drivers.vesc.settings`); check
+        """Validate the protocol keys (:class:`~drivers.vesc.settings.VescOptions`), then check
         ``command_period_s`` against the VESC's timeout and ``liveness_s`` against the stated
         status rate.
 
@@ -190,26 +148,9 @@ class VescDriver(MotorDriver):
             name), a keep-alive period too long for the VESC's timeout, or a liveness time
             shorter than two status periods.
         """
-        check_options(raw, where)
         out = super().validate_options(raw, where)
-        check_validated(out, where)
+        VescOptions.from_block(out, where)  # the keys against each other
         return out
-
-    @classmethod
-    def make_simulator(cls, motor: MotorConfig) -> DeviceSimulator:
-        """A :class:`~drivers.vesc.sim.VescSimulator` for ``motor``, as the motor block says
-        the device was set up in VESC Tool: its stated timeout (``controller_timeout_s``, else
-        the factory 1 s), status messages (STATUS and STATUS_5 at ``status_rate_hz``, else
-        none, as from the factory) and ``min_erpm``."""
-        o = cls.validate_options(motor.options, f"motor {motor.wheel!r}")
-        rate = cast("float", o["status_rate_hz"])
-        return VescSimulator(
-            motor,
-            status_msgs=STATUS_1 | STATUS_5 if rate else FACTORY_STATUS_MSGS,
-            status_rate_hz=rate or FACTORY_STATUS_RATE_HZ,
-            timeout_s=cast("float", o["controller_timeout_s"]) or FACTORY_TIMEOUT_S,
-            min_erpm=cast("float", o["min_erpm"]),
-        )
 
     # ----------------------------------------------------------------- protection
 
@@ -225,229 +166,203 @@ class VescDriver(MotorDriver):
         """The wheel speeds (rad/s) motor ``index``'s VESC does not speed-control: ``(0.0,
         high)`` for every speed with ``0 < |speed| < high`` (``high`` is ``min_erpm`` at the
         wheel); ``None`` when ``min_erpm`` is 0 (:mod:`drivers.vesc.min_erpm`)."""
-        _, gear, _, pole_pairs = self._scale[index]
-        return uncontrolled_band(self._opts[index].min_erpm, pole_pairs, gear)
+        o = self.opts[index]
+        return uncontrolled_band(o.min_erpm, o.pole_pairs, self.motors[index].gear_ratio)
 
     # ----------------------------------------------------------------- units
 
     @property
     def keepalive_period_s(self) -> float:
         """Call :meth:`poll` at least this often (s) to keep every VESC from timing out."""
-        return min((o.command_period_s for o in self._opts), default=math.inf)
+        return min((o.command_period_s for o in self.opts), default=math.inf)
 
     def erpm_for(self, index: int, wheel_rad_s: float) -> int:
-        """The SET_RPM value for a wheel speed.
-
-        :param index: the motor's position in :attr:`motors`.
-        :param wheel_rad_s: wheel speed in rad/s, within the motor's ``max_rpm``.
-        :raises EncodeError: if the speed is not finite or beyond ``max_rpm``.
-        """
-        # Per-motor constants from __init__; the same arithmetic as m.max_wheel_rad_s and
-        # m.wheel_to_motor_rad_s (w * gear * sign).
-        limit, gear, sign, pole_pairs = self._scale[index]
-        if not (math.isfinite(wheel_rad_s) and -limit <= wheel_rad_s <= limit):
-            m = self.motors[index]
-            raise EncodeError(
-                f'Expected velocity for node {m.node_id} ("{m.wheel}") between {-limit:.1f} and '
-                f"{limit:.1f} rad/s, but got {wheel_rad_s!r}."
-            )
-        return round(wheel_rad_s * gear * sign * RPM_PER_RAD_S * pole_pairs)
+        """The SET_RPM value for a wheel speed of motor ``index`` (within its ``max_rpm``,
+        which :meth:`command` checks)."""
+        return round(wheel_rad_s * self._axes[index].erpm_per_rad_s)
 
     def wheel_rad_s_for(self, index: int, erpm: float) -> float:
         """The wheel speed in rad/s for an eRPM reading of motor ``index``."""
-        # Per-motor constants from __init__; the same arithmetic as
-        # m.motor_to_wheel_rad_s(erpm / pole_pairs / RPM_PER_RAD_S) (x * sign / gear).
-        _, gear, sign, pole_pairs = self._scale[index]
-        return erpm / pole_pairs / RPM_PER_RAD_S * sign / gear
+        return erpm * self._axes[index].rad_s_per_erpm
 
     def wheel_rad_for(self, index: int, steps: int) -> float:
         """The wheel angle in rad for ``steps`` tachometer steps of motor ``index``."""
-        _, gear, sign, pole_pairs = self._scale[index]
-        revs = steps / (TACHO_STEPS_PER_EREV * pole_pairs)
-        return revs * 2.0 * math.pi * sign / gear
+        return steps * self._axes[index].rad_per_step
 
-    # ----------------------------------------------------------------- hooks
+    # ----------------------------------------------------------------- commands
 
-    def enable(self, now_s: float) -> list[Frame]:
+    def _enable(self, now_s: float) -> list[Frame]:
         """Start the command stream: SET_RPM 0 to every motor (VESC has no arm state)."""
         self._enabled = True
         self._enabled_at_s = now_s
-        out = []
-        for i, m in enumerate(self.motors):
-            track = self._track[i]
-            track.erpm = 0
-            track.sent_s = now_s
-            track.hinted = False
-            self.set_armed(i, True)
-            out.append(make_set_rpm(m.node_id, 0))
-        return out
+        for a in self._axes:
+            a.erpm = 0
+            a.sent_s = now_s
+            a.hinted = False
+            self.set_armed(a.index, True)
+        return [make_set_rpm(a.node_id, 0) for a in self._axes]
 
     def disable(self, now_s: float) -> list[Frame]:
         """SET_CURRENT 0 to every motor, which releases it, and stop the command stream."""
         self._enabled = False
         self._enabled_at_s = None
-        for i, track in enumerate(self._track):
-            track.erpm = 0
-            track.sent_s = None
-            self.set_armed(i, False)
-        return [make_set_current(m.node_id, 0.0) for m in self.motors]
+        for a in self._axes:
+            a.erpm = 0
+            a.sent_s = None
+            self.set_armed(a.index, False)
+        return [make_set_current(a.node_id, 0.0) for a in self._axes]
 
-    def command(self, wheel_rad_s: Sequence[float], now_s: float) -> list[Frame]:
-        """SET_RPM for every motor; nothing while disabled (the speeds are checked anyway).
-
-        :raises EncodeError: for the wrong number of speeds, or a speed that is not finite or
-            beyond the motor's ``max_rpm``.
-        """
-        if len(wheel_rad_s) != len(self.motors):
-            raise EncodeError(
-                f"Expected {len(self.motors)} wheel speeds for the VESC driver, "
-                f"but got {len(wheel_rad_s)}."
-            )
-        erpm_for = self.erpm_for
-        erpms = [erpm_for(i, w) for i, w in enumerate(wheel_rad_s)]
+    def _command(self, setpoints: Sequence[float], now_s: float) -> list[Frame]:
+        """SET_RPM for every motor; nothing while disabled."""
         if not self._enabled:
             return []
         out = []
-        for i, (node_id, track, erpm, min_erpm) in enumerate(
-            zip(self._node_ids, self._track, erpms, self._min_erpm, strict=True)
-        ):
-            if erpm and -min_erpm < erpm < min_erpm:  # in_band, inlined (every cycle)
-                self._below_min_erpm(i, erpm, now_s)
-            track.erpm = erpm
-            track.sent_s = now_s
-            out.append(make_set_rpm(node_id, erpm))
+        for a, wheel_rad_s in zip(self._axes, setpoints):  # noqa: B905 - the base checked
+            erpm = round(wheel_rad_s * a.erpm_per_rad_s)  # erpm_for, inlined (every cycle)
+            if erpm and -a.min_erpm < erpm < a.min_erpm:  # min_erpm.in_band, inlined
+                self._below_min_erpm(a, erpm, now_s)
+            a.erpm = erpm
+            a.sent_s = now_s
+            out.append(make_set_rpm(a.node_id, erpm))
         return out
 
-    def _below_min_erpm(self, index: int, erpm: int, now_s: float) -> None:
+    def _below_min_erpm(self, a: Axis, erpm: int, now_s: float) -> None:
         """Count (and at most every :attr:`BAND_LOG_EVERY_S` log) a command in the band."""
         self.command_counts[BELOW_MIN_ERPM] += 1
-        m = self.motors[index]
-        line = self._band_watch.note(m.node_id, m.wheel, erpm, self._min_erpm[index], now_s)
+        line = self._band_watch.note(a.node_id, a.wheel, erpm, a.min_erpm, now_s)
         if line is not None:
             log.warning("%s", line)
 
-    def poll(self, now_s: float) -> list[Frame]:
+    def _poll(self, now_s: float) -> list[Frame]:
         """Resend the last command to every motor not commanded for ``command_period_s``."""
         out: list[Frame] = []
         if not self._enabled:
             return out
-        for i, (m, track) in enumerate(zip(self.motors, self._track, strict=True)):
-            if track.sent_s is None or now_s - track.sent_s >= self._opts[i].command_period_s:
-                track.sent_s = now_s
-                out.append(make_set_rpm(m.node_id, track.erpm))
-            if track.status_s is None or track.status5_s is None:
-                self._hint(i, now_s)  # (once both streams were seen, it has nothing to say)
+        for a in self._axes:
+            if a.sent_s is None or now_s - a.sent_s >= a.command_period_s:
+                a.sent_s = now_s
+                out.append(make_set_rpm(a.node_id, a.erpm))
+            if not a.hinted and (a.status_s is None or a.status5_s is None):
+                self._hint(a, now_s)  # (once both streams were seen, it has nothing to say)
         return out
 
-    def receive_filters(self) -> tuple[CanFilter, ...]:
-        """What :meth:`on_frame` takes, as 29-bit filters (``packet << 8 | controller ID``):
-        per controller, STATUS and STATUS_5 (used) and STATUS_2/3/4/6 (claimed), exact; and
-        every PONG, whatever pinger's ID is in its low byte (the answering controller is in
-        the payload, so the identifier cannot tell ours from another's; PONGs answer a PING,
-        which the gateway never sends, so they are rare).  A command another master sends one
-        of our controllers does not pass."""
+    def _hint(self, a: Axis, now_s: float) -> None:
+        """Log, once per enable and :attr:`STATUS_HINT_AFTER_S` after it, what a motor has
+        never sent."""
+        since = self._enabled_at_s
+        if since is None or now_s - since < self.STATUS_HINT_AFTER_S:
+            return
+        missing = a.missing()
+        if missing:
+            a.hinted = True
+            log.warning(
+                "VESC %d (%r), %.1f s after enable: %s (and check that it is on the bus in "
+                "CAN_MODE_VESC with this ID)",
+                a.node_id, a.wheel, now_s - since, missing,
+            )
+
+    # ----------------------------------------------------------------- frames
+
+    def claims(self) -> tuple[FrameClaim, ...]:
+        """The frames of our VESCs, as 29-bit identifiers (``packet << 8 | controller ID``):
+        per controller, STATUS and STATUS_5 (used) and STATUS_2/3/4/6 (taken, unused), exact;
+        every PONG, whatever pinger's ID is in its low byte (the answering controller is in the
+        payload, so the identifier cannot tell ours from another's; PONGs answer a PING, which
+        the gateway never sends, so they are rare); and the commands sent (SET_CURRENT,
+        SET_RPM), for the labels.  A command another master sends one of our controllers is
+        not taken."""
         return (
-            *(CanFilter.exact(packet << 8 | m.node_id, True)
-              for m in self.motors for packet in _RECEIVED_STATUS),
-            CanFilter(CanPacketId.PONG << 8, 0x1FFFFF00, True),
+            *(FrameClaim.exact(arbitration_id(packet, a.node_id), True, a.index)
+              for a in self._axes for packet, _ in _RECEIVED),
+            _PONGS,
+            *(FrameClaim.exact(arbitration_id(packet, a.node_id), True, a.index, receive=False)
+              for a in self._axes for packet in _SENT),
         )
 
-    def on_frame(self, frame: Frame) -> bool:
-        """Take the frames this driver's VESCs send (STATUS, STATUS_5 used; others claimed).
+    def message_name(self, arbitration_id: int, is_extended_id: bool) -> str | None:
+        """The ``CAN_PACKET_ID`` name of a VESC frame (``STATUS_5``), ``packet N`` for one
+        this driver does not know; ``None`` for an 11-bit frame (never VESC's)."""
+        if not is_extended_id:
+            return None
+        packet = (arbitration_id >> 8) & 0xFF
+        try:
+            return CanPacketId(packet).name
+        except ValueError:
+            return f"packet {packet}"
 
-        :return: whether the frame came from one of them (malformed ones are counted in
-            :attr:`rejected`).
+    def _on_frame(self, frame: Frame) -> bool:
+        """Take the frames our VESCs send: STATUS and STATUS_5 (used), STATUS_2/3/4/6 and a
+        PONG naming one of them (taken, unused).
+
+        :raises DecodeError: for a STATUS or STATUS_5 of ours, or a PONG to one of our IDs,
+            that is a remote frame or has the wrong length.
         """
+        route = self._routes.get(frame.arbitration_id)
+        if route is None or not frame.is_extended_id:
+            return self._on_pong(frame)
+        a, stream = route
+        if stream == _UNUSED:
+            return True  # ours, but nothing the gateway uses
+        fields = unpack_status(frame)
+        t = frame.timestamp_s
+        i = a.index
+        heard = self.live.heard
+        if stream == _STATUS:
+            first = a.status_s is None
+            a.status, a.status_s = fields, t
+            a.velocity_rad_s = fields[0] * a.rad_s_per_erpm
+            heard(i, _STATUS, t)
+            other = a.status5_s
+        else:
+            first = a.status5_s is None
+            if not first:  # wrap_int32 of the difference, inlined (every frame)
+                a.steps += (fields[0] - a.status5[0] + 0x80000000) % 0x100000000 - 0x80000000
+                a.position_rad = a.steps * a.rad_per_step
+            a.status5, a.status5_s = fields, t
+            heard(i, _STATUS_5, t)
+            other = a.status_s
+        if other is None:  # one stream only: no feedback yet
+            if first:
+                self.set_fault(i, self.faults(i), a.missing())
+            return True
+        # Stamped with the older of the two frames, so a stalled stream shows its age; each
+        # stream was heard above at its own time.
+        self.store_feedback(
+            i, WheelFeedback(a.position_rad, a.velocity_rad_s, other if other < t else t), None
+        )
+        if first:
+            self.set_fault(i, self.faults(i), a.missing())
+        return True
+
+    def _on_pong(self, frame: Frame) -> bool:
+        """A PONG that names one of our VESCs is ours (proof of life, but liveness is defined
+        by the status streams); so is a malformed PONG to one of our IDs."""
+        if not frame.is_extended_id or frame.arbitration_id >> 8 != CanPacketId.PONG:
+            return False
         try:
             msg = decode(frame)
-        except DecodeError as err:
+        except DecodeError:
             if self.index_of(frame.arbitration_id & 0xFF) is None:
                 return False
-            self.reject("malformed", err)
-            return True
-        if msg is None:
-            # STATUS_2/3/4/6 of our VESCs are ours too, but carry nothing the gateway uses.
-            return (
-                frame.is_extended_id
-                and frame.arbitration_id >> 8 in _UNUSED_STATUS
-                and self.index_of(frame.arbitration_id & 0xFF) is not None
-            )
-        index = self._index.get(msg.node_id)  # index_of, inlined (every frame)
-        if index is None:
-            return False
-        track = self._track[index]
-        if type(msg) is VescStatus:
-            first = track.status_s is None
-            track.status = msg
-            track.status_s = frame.timestamp_s
-            track.velocity_rad_s = self.wheel_rad_s_for(index, msg.erpm)
-        elif type(msg) is VescStatus5:
-            first = track.status5_s is None
-            if track.tacho is not None:
-                track.steps += wrap_int32(msg.tachometer - track.tacho)
-            track.tacho = msg.tachometer
-            track.status5 = msg
-            track.status5_s = frame.timestamp_s
-        else:  # a PONG: proof of life, but liveness is defined by the status streams
-            return True
-        if first:
-            self._say_missing_status(index)
-        if track.status_s is not None and track.status5_s is not None:
-            # Stamped with the older of the two frames, so a stalled stream shows its age.
-            stamp = min(track.status_s, track.status5_s)
-            position = self.wheel_rad_for(index, track.steps)
-            self._feedback[index] = WheelFeedback(position, track.velocity_rad_s, stamp)
-        return True
+            raise
+        return msg is not None and self.index_of(msg.node_id) is not None
 
     # ----------------------------------------------------------------- state
 
-    def state(self, index: int, now_s: float) -> DriveState:
-        """OFFLINE unless both status streams are fresh; ENABLING until they arrive after
-        :meth:`enable`; then ENABLED (DISABLED when not enabled).  Never FAULT (see module).
-        """
-        track = self._track[index]
-        if track.status_s is None or track.status5_s is None:
-            return DriveState.OFFLINE
-        oldest = min(track.status_s, track.status5_s)
-        if now_s - oldest > self._opts[index].liveness_s:
-            return DriveState.OFFLINE
+    def _ready_state(self, index: int) -> DriveState:
+        """ENABLING after :meth:`enable` until both status streams were heard again; then
+        ENABLED; DISABLED when not enabled.  Never FAULT (see the module)."""
         if not self._enabled:
             return DriveState.DISABLED
-        if self._enabled_at_s is not None and oldest < self._enabled_at_s:
+        since, oldest = self._enabled_at_s, self.live.oldest[index]
+        if since is not None and oldest is not None and oldest < since:
             return DriveState.ENABLING
         return DriveState.ENABLED
 
     def last_status(self, index: int) -> VescStatus | None:
         """The latest STATUS of motor ``index`` (current and duty), or ``None``."""
-        return self._track[index].status
+        return self._axes[index].last_status()
 
     def last_status5(self, index: int) -> VescStatus5 | None:
         """The latest STATUS_5 of motor ``index`` (tachometer and input voltage), or ``None``."""
-        return self._track[index].status5
-
-    def _missing_status(self, index: int) -> str:
-        """What motor ``index`` has never sent and how to switch it on ("" if nothing)."""
-        track = self._track[index]
-        return missing_status(track.status_s is not None, track.status5_s is not None)
-
-    def _say_missing_status(self, index: int) -> None:
-        """Put what motor ``index`` has never sent in its status detail (or clear it)."""
-        self.set_fault(index, self._faults[index], self._missing_status(index))
-
-    def _hint(self, index: int, now_s: float) -> None:
-        track = self._track[index]
-        if track.hinted or self._enabled_at_s is None:
-            return
-        if now_s - self._enabled_at_s < self.STATUS_HINT_AFTER_S:
-            return
-        missing = self._missing_status(index)
-        if missing:
-            track.hinted = True
-            log.warning(
-                "VESC %d (%r), %.1f s after enable: %s (and check that it is on the bus in "
-                "CAN_MODE_VESC with this ID)",
-                self.motors[index].node_id,
-                self.motors[index].wheel,
-                now_s - self._enabled_at_s,
-                missing,
-            )
+        return self._axes[index].last_status5()

@@ -3,7 +3,8 @@
 A VESC's command timeout, its CAN status messages and its minimum ERPM live in its app and
 motor configurations, written as a whole by VESC Tool (``COMM_SET_APPCONF`` and
 ``COMM_SET_MCCONF``, ``comm/commands.c`` in https://github.com/vedderb/bldc, read at
-``b9d287b3``), not by a simple CAN command.  The motor block states them:
+``b9d287b3``), not by a simple CAN command.  The motor block states them
+(:class:`VescOptions`):
 
 * ``controller_timeout_s``: App Settings > General > Timeout (``timeout_msec``; 1000 ms from
   the factory), after which ``timeout_thread`` (``timeout.c``) releases the motor and brakes
@@ -28,15 +29,36 @@ defaults to the factory value: state it only if you changed it.
 from __future__ import annotations
 
 import dataclasses
-from types import MappingProxyType
-from typing import TYPE_CHECKING, cast
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, TypeVar
 
 from drivers.vesc.min_erpm import FACTORY_MIN_ERPM
 from gateway.core.errors import ConfigError
-from gateway.drive.driver import CONTROLLER_TIMEOUT_OPTION, OptionSpec
+from gateway.drive.options import (
+    CONTROLLER_TIMEOUT_OPTION,
+    DEFAULT_LIVENESS_S,
+    StatedTimeout,
+    option,
+    spec_field,
+)
 
 if TYPE_CHECKING:
     from collections.abc import Mapping
+
+__all__ = [
+    "FACTORY_STATUS_MSGS",
+    "FACTORY_STATUS_RATE_HZ",
+    "FACTORY_TIMEOUT_S",
+    "STATUS_1",
+    "STATUS_5",
+    "TIMEOUT_ACTION",
+    "TIMEOUT_FIX",
+    "UNSTATED_HOW",
+    "VescOptions",
+    "missing_status",
+]
+
+_O = TypeVar("_O", bound="VescOptions")
 
 #: ``timeout_msec`` from the factory (s).
 FACTORY_TIMEOUT_S = 1.0
@@ -52,47 +74,115 @@ FACTORY_STATUS_MSGS = 0
 #: Where a VESC's status messages are switched on, for the messages about missing ones.
 STATUS_WHERE = "VESC Tool, App Settings > General > Can Messages Rate 1"
 
-#: The protocol keys of a VESC motor block.
-OPTIONS: Mapping[str, OptionSpec] = MappingProxyType(
-    {
-        "pole_pairs": OptionSpec(
-            int, minimum=1, help="motor pole pairs (poles / 2); eRPM = RPM * pole_pairs"
-        ),
-        "command_period_s": OptionSpec(
-            float,
-            0.02,
-            minimum=0.001,
-            help="resend the last command at least this often (s); less than half the VESC's "
-            "timeout (controller_timeout_s, else the factory 1 s)",
-        ),
-        "controller_timeout_s": dataclasses.replace(
+
+@dataclass(frozen=True, kw_only=True)
+class VescOptions(StatedTimeout):
+    """The protocol keys of a VESC motor block.
+
+    :param pole_pairs: motor pole pairs; eRPM = RPM * pole pairs.
+    :param command_period_s: the keep-alive: the last command is resent at least this often.
+    :param controller_timeout_s: the VESC's own timeout, as set in VESC Tool (0: not stated).
+    :param status_rate_hz: the rate of STATUS and STATUS_5 set in VESC Tool (0: not stated).
+    :param min_erpm: ``s_pid_min_erpm``: below it the VESC does not speed-control.
+    :param liveness_s: a status stream older than this makes the motor OFFLINE.
+    """
+
+    liveness_s: float = option(
+        float, DEFAULT_LIVENESS_S, minimum=0.001, help="status frames older than this: OFFLINE (s)"
+    )
+    controller_timeout_s: float = spec_field(
+        dataclasses.replace(
             CONTROLLER_TIMEOUT_OPTION,
             help="the VESC's own command timeout as set in VESC Tool, App Settings > General > "
             "Timeout (s; 1 s from the factory), after which it releases the motor; not "
             "readable over CAN; 0: not stated",
-        ),
-        "status_rate_hz": OptionSpec(
-            float,
-            0.0,
-            minimum=0.0,
-            maximum=10000.0,
-            help="the rate set in VESC Tool for STATUS and STATUS_5, App Settings > General > "
-            "Can Status Rate 1 (Hz), with Status 1 and Status 5 ticked in Can Messages Rate "
-            "1; 0: not stated (a factory VESC sends none)",
-        ),
-        "min_erpm": OptionSpec(
-            float,
-            FACTORY_MIN_ERPM,
-            minimum=0.0,
-            help="s_pid_min_erpm, VESC Tool: Motor Settings > PID Controllers > Minimum ERPM "
-            "(900 from the factory; state it if you changed it): below it the VESC does not "
-            "speed-control the motor",
-        ),
-        "liveness_s": OptionSpec(
-            float, 0.25, minimum=0.001, help="status frames older than this: OFFLINE (s)"
-        ),
-    }
-)
+        )
+    )
+    pole_pairs: int = option(
+        int, minimum=1, help="motor pole pairs (poles / 2); eRPM = RPM * pole_pairs"
+    )
+    command_period_s: float = option(
+        float,
+        0.02,
+        minimum=0.001,
+        help="resend the last command at least this often (s); less than half the VESC's "
+        "timeout (controller_timeout_s, else the factory 1 s)",
+    )
+    status_rate_hz: float = option(
+        float,
+        0.0,
+        minimum=0.0,
+        maximum=10000.0,
+        help="the rate set in VESC Tool for STATUS and STATUS_5, App Settings > General > "
+        "Can Status Rate 1 (Hz), with Status 1 and Status 5 ticked in Can Messages Rate "
+        "1; 0: not stated (a factory VESC sends none)",
+    )
+    min_erpm: float = option(
+        float,
+        FACTORY_MIN_ERPM,
+        minimum=0.0,
+        help="s_pid_min_erpm, VESC Tool: Motor Settings > PID Controllers > Minimum ERPM "
+        "(900 from the factory; state it if you changed it): below it the VESC does not "
+        "speed-control the motor",
+    )
+
+    @property
+    def timeout_s(self) -> float:
+        """The VESC's timeout (s): the stated one, else the factory's."""
+        return self.controller_timeout_s or FACTORY_TIMEOUT_S
+
+    @classmethod
+    def validate(cls, raw: Mapping[str, object], where: str) -> dict[str, object]:
+        """The keys checked one by one (:meth:`from_block` and
+        :meth:`~drivers.vesc.driver.VescDriver.validate_options` check them against each
+        other).
+
+        :raises ConfigError: for an unknown, missing or bad key (``timeout_s`` with its new
+            name).
+        """
+        if "timeout_s" in raw:
+            raise ConfigError(
+                f"{where}.timeout_s: renamed controller_timeout_s (the timeout set in VESC Tool, "
+                f"App Settings > General > Timeout, in s)"
+            )
+        return super().validate(raw, where)
+
+    @classmethod
+    def from_block(cls: type[_O], raw: Mapping[str, object], where: str) -> _O:
+        """The options of a motor block, checked one by one and against each other.
+
+        :raises ConfigError: as :meth:`validate` and :meth:`check`.
+        """
+        opts = super().from_block(raw, where)
+        opts.check(where)
+        return opts
+
+    def check(self, where: str) -> None:
+        """Check the keys against each other.
+
+        :raises ConfigError: for a keep-alive period not less than half the VESC's timeout (the
+            stated one, else the factory 1 s), or a liveness time shorter than two periods of
+            the stated status rate.
+        """
+        period, stated, timeout = self.command_period_s, self.controller_timeout_s, self.timeout_s
+        if not period < timeout / 2.0:
+            whose = (
+                f"controller_timeout_s {stated:g} s" if stated
+                else f"the factory {FACTORY_TIMEOUT_S:g} s, as controller_timeout_s is not stated"
+            )
+            raise ConfigError(
+                f"{where}.command_period_s: expected less than half the VESC's timeout ({whose}) "
+                f"= {timeout / 2:g} s (one lost frame must not let the VESC release the motor), "
+                f"got {period!r}"
+            )
+        rate, liveness = self.status_rate_hz, self.liveness_s
+        if rate and liveness < 2.0 / rate:
+            raise ConfigError(
+                f"{where}.liveness_s: expected at least two status periods at status_rate_hz "
+                f"{rate:g} ({2.0 / rate:g} s), or one late frame makes the motor OFFLINE; got "
+                f"{liveness!r}"
+            )
+
 
 #: What a VESC does when its timeout expires (``timeout.c``: ``timeout_thread``).
 TIMEOUT_ACTION = "releases the motor: it coasts (timeout_brake_current 0 A)"
@@ -106,48 +196,6 @@ UNSTATED_HOW = (
     "not stated: a VESC releases its motor after App Settings > General > Timeout (1000 ms "
     "from the factory, 0: never), which wheelgate cannot read over CAN"
 )
-
-
-def check_options(raw: Mapping[str, object], where: str) -> None:
-    """Refuse the renamed ``timeout_s`` before the keys are validated.
-
-    :raises ConfigError: naming the new key.
-    """
-    if "timeout_s" in raw:
-        raise ConfigError(
-            f"{where}.timeout_s: renamed controller_timeout_s (the timeout set in VESC Tool, "
-            f"App Settings > General > Timeout, in s)"
-        )
-
-
-def check_validated(out: Mapping[str, object], where: str) -> None:
-    """Check validated keys against each other.
-
-    :raises ConfigError: for a keep-alive period not less than half the VESC's timeout (the
-        stated one, else the factory 1 s), or a liveness time shorter than two periods of
-        the stated status rate.
-    """
-    period = cast("float", out["command_period_s"])
-    stated = cast("float", out["controller_timeout_s"])
-    timeout = stated or FACTORY_TIMEOUT_S
-    if not period < timeout / 2.0:
-        whose = (
-            f"controller_timeout_s {stated:g} s" if stated
-            else f"the factory {FACTORY_TIMEOUT_S:g} s, as controller_timeout_s is not stated"
-        )
-        raise ConfigError(
-            f"{where}.command_period_s: expected less than half the VESC's timeout ({whose}) "
-            f"= {timeout / 2:g} s (one lost frame must not let the VESC release the motor), "
-            f"got {period!r}"
-        )
-    rate = cast("float", out["status_rate_hz"])
-    liveness = cast("float", out["liveness_s"])
-    if rate and liveness < 2.0 / rate:
-        raise ConfigError(
-            f"{where}.liveness_s: expected at least two status periods at status_rate_hz "
-            f"{rate:g} ({2.0 / rate:g} s), or one late frame makes the motor OFFLINE; got "
-            f"{liveness!r}"
-        )
 
 
 def missing_status(status_seen: bool, status5_seen: bool) -> str:

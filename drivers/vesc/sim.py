@@ -37,8 +37,9 @@ override them):
   itself.  The motor stays released until the next command.  Status frames and PONGs go on
   meanwhile and carry no fault code, as on the device.
 
-:meth:`drivers.vesc.driver.VescDriver.make_simulator` builds one as a configuration says the
-device was set up (its ``controller_timeout_s``, ``status_rate_hz``, ``min_erpm``).
+:func:`simulator_for` builds one as a configuration says the device was set up (its
+``controller_timeout_s``, ``status_rate_hz``, ``min_erpm``); :data:`drivers.BUILTIN_SIMULATORS`
+names it for ``--sim`` and the tests (the driver never imports this module).
 """
 
 from __future__ import annotations
@@ -68,6 +69,7 @@ from drivers.vesc.settings import (
     FACTORY_TIMEOUT_S,
     STATUS_1,
     STATUS_5,
+    VescOptions,
 )
 from gateway.core.errors import ConfigError, DecodeError
 from gateway.sim.device import DeviceSimulator, SimFault
@@ -93,11 +95,30 @@ class SimMode(enum.IntEnum):
     BELOW_MIN_ERPM = 4
 
 
+def simulator_for(motor: MotorConfig) -> VescSimulator:
+    """A :class:`VescSimulator` for ``motor``, as the motor block says the device was set up
+    in VESC Tool: its stated timeout (``controller_timeout_s``, else the factory 1 s), status
+    messages (STATUS and STATUS_5 at ``status_rate_hz``, else none, as from the factory) and
+    ``min_erpm``.
+
+    :raises ConfigError: for a motor block the driver would refuse.
+    """
+    o = VescOptions.from_block(motor.options, f"motor {motor.wheel!r}")
+    rate = o.status_rate_hz
+    return VescSimulator(
+        motor,
+        status_msgs=STATUS_1 | STATUS_5 if rate else FACTORY_STATUS_MSGS,
+        status_rate_hz=rate or FACTORY_STATUS_RATE_HZ,
+        timeout_s=o.timeout_s,
+        min_erpm=o.min_erpm,
+    )
+
+
 class VescSimulator(DeviceSimulator):
     """One simulated VESC, at factory settings unless the keywords say otherwise.
 
     :param motor: the motor block; ``options["pole_pairs"]`` is required (the other options
-        are read by :meth:`~drivers.vesc.driver.VescDriver.make_simulator`, not here).
+        are read by :func:`simulator_for`, not here).
     :param model: the motor physics.
     :param status_msgs: ``can_status_msgs_r1``: :data:`STATUS_1` and :data:`STATUS_5` bits
         (0, none, from the factory).

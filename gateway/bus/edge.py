@@ -1,6 +1,7 @@
 """The gateway's side of the bus: one burst out, everything waiting in, counted and recorded.
 
-:class:`BusEdge` is the part of :class:`gateway.runtime.loop.Gateway` that touches python-can.
+:class:`BusEdge` is the object through which the gateway's loop touches python-can: it holds
+the bus (and reopens it), sends, receives, tallies and records.
 
 Sending keeps the promise of one burst per cycle as far as the bus allows.  A transmit queue
 that is full (``ENOBUFS`` from a SocketCAN interface whose controller is slower than the
@@ -18,12 +19,16 @@ Receiving drains the queue; error frames are decoded by class into :attr:`BusEdg
 CAN FD frames are counted and ignored, and receive errors are counted apart from send
 failures.  Every kind of trouble logs at most one line per :data:`LOG_EVERY_S`, with the count
 since the last.  Every frame is tallied by ID and nominal bits (for bus load) and handed to
-the recorder.
+the recorder.  The tally counts each frame's (ID, extended, remote, DLC) in C
+(``Counter.update`` over ``operator.itemgetter``); :attr:`BusEdge.id_counts` and
+:attr:`BusEdge.bits` are summed from those counts when read (at status rate).
 """
 
 from __future__ import annotations
 
+import collections
 import logging
+import operator
 import time
 from typing import TYPE_CHECKING, Any
 
@@ -44,8 +49,6 @@ from gateway.core.errors import BusError
 from gateway.wire.busload import frame_bits
 
 if TYPE_CHECKING:
-    import collections
-
     from gateway.core.settings import GatewayConfig
     from gateway.core.types import Frame
 
@@ -64,9 +67,9 @@ ROOM_POLL_S = 0.0002
 UNSENT_FAULT_CYCLES = 10
 #: The shortest time between two log lines about one kind of bus trouble (s).
 LOG_EVERY_S = 5.0
-#: Nominal bits of a standard / extended frame by data length 0..8 (busload.frame_bits).
-_STD_BITS = tuple(frame_bits(n, False) for n in range(9))
-_EXT_BITS = tuple(frame_bits(n, True) for n in range(9))
+#: A frame's (arbitration ID, extended, remote, DLC): what its tally and its bits depend on
+#: (``Frame`` is a NamedTuple: arbitration_id, data, is_extended_id, is_remote_frame, dlc, ...).
+_SHAPE = operator.itemgetter(0, 2, 3, 4)
 
 
 def bus_options(interface: str, filters: list[dict[str, Any]] | None) -> dict[str, Any]:
@@ -105,30 +108,42 @@ def _gone(err: BaseException) -> bool:
 
 
 class BusEdge:
-    """Sending, receiving, tallying and reopening, for :class:`gateway.runtime.loop.Gateway`.
+    """Sending, receiving, tallying and reopening, for the gateway's loop.
 
-    The gateway's constructor sets the attributes declared here and calls
-    :meth:`_setup_edge`.
+    :param config: the configuration (the bus section, for reopening and messages).
+    :param bus: an open python-can bus; opened from the config (with ``bus_kwargs``) when
+        ``None``, and then closed by :meth:`close` and reopened after failures.
+    :param counts: the gateway's event counters: this edge counts frames, failures and
+        reopens in them (and adds its own keys).
+    :param period_s: the loop period (the time a burst may wait for room is a share of it).
+    :param bus_kwargs: keyword arguments of every (re)open (:func:`bus_options`).
+    :param record: a python-can writer that gets every frame sent and received.
+    :param stamp_with_cycle_time: stamp received frames with the time :meth:`receive` is
+        given (simulated time in tests) instead of their own receive time.
     """
 
-    config: GatewayConfig
-    bus: can.BusABC
-    record: can.Listener | None
-    stamp_with_cycle_time: bool
-    counts: dict[str, int]
-    period_s: float
-    #: Frames seen per (arbitration ID, extended, transmitted), for monitors.
-    id_counts: collections.Counter[tuple[int, bool, bool]]
-    #: Nominal bits of every frame sent and received (bus load = rate / bitrate).
-    bits: int
-    _own_bus: bool
-    _bus_failures: int
-    _since_reopen: int
-
-    def _setup_edge(self, bus_kwargs: dict[str, Any]) -> None:
-        """The sending and receiving state (called by the gateway's constructor)."""
+    def __init__(
+        self,
+        config: GatewayConfig,
+        bus: can.BusABC | None,
+        counts: dict[str, int],
+        period_s: float,
+        bus_kwargs: dict[str, Any],
+        record: can.Listener | None = None,
+        stamp_with_cycle_time: bool = False,
+    ) -> None:
+        self.config = config
+        self.counts = counts
+        self.period_s = period_s
         #: Keyword arguments of every (re)open: kernel receive filters, FD frames.
         self.bus_kwargs = bus_kwargs
+        #: A python-can writer that gets every frame sent and received.
+        self.record = record
+        #: Stamp received frames with the cycle's time instead of their receive time.
+        self.stamp_with_cycle_time = stamp_with_cycle_time
+        for name in ("receive_failures", "frames_unsent", "partial_bursts", "send_waits",
+                     "fd_frames_ignored"):
+            counts[name] = 0
         #: Error frames by class and the controller's error state.
         self.bus_errors = BusErrors()
         #: The error state the last error frames moved to, until the loop takes it.
@@ -144,9 +159,14 @@ class BusEdge:
         self._error_log = LogThrottle(LOG_EVERY_S)
         self._odd: list[can.Message] = []
         self._last_send_error = ""
-        for name in ("receive_failures", "frames_unsent", "partial_bursts", "send_waits",
-                     "fd_frames_ignored"):
-            self.counts[name] = 0
+        self._bus_failures = 0
+        self._since_reopen = 0
+        # Frames by _SHAPE: received ([0]) and sent ([1]).
+        self._shapes: tuple[collections.Counter[tuple[int, bool, bool, int]], ...] = (
+            collections.Counter(), collections.Counter())
+        self._own_bus = bus is None
+        #: The python-can bus (a new object after a reopen).
+        self.bus: can.BusABC = bus if bus is not None else self._open()
 
     def _open(self) -> can.BusABC:
         bus = self.config.bus
@@ -303,20 +323,30 @@ class BusEdge:
         odd.clear()
 
     def _tally(self, frames: list[Frame], sent: bool) -> None:
-        counts = self.id_counts
-        get = counts.get
-        bits = self.bits
-        # Every frame sent and received: one tuple unpack (Frame is a NamedTuple) instead of
-        # five attribute reads.
-        for arb, _, extended, remote, dlc, _ in frames:
-            key = (arb, extended, sent)
-            counts[key] = get(key, 0) + 1
-            n = 0 if remote else dlc
-            if 0 <= n <= 8:
-                bits += (_EXT_BITS if extended else _STD_BITS)[n]
-            else:
-                bits += frame_bits(n, extended)
-        self.bits = bits
+        self._shapes[sent].update(map(_SHAPE, frames))
+
+    @property
+    def id_counts(self) -> collections.Counter[tuple[int, bool, bool]]:
+        """Frames seen per (arbitration ID, extended, transmitted), for monitors (a new
+        counter on every read)."""
+        out: collections.Counter[tuple[int, bool, bool]] = collections.Counter()
+        for sent, shapes in enumerate(self._shapes):
+            for (can_id, extended, _, _), n in shapes.items():
+                out[can_id, extended, bool(sent)] += n
+        return out
+
+    @property
+    def bits(self) -> int:
+        """Nominal bits of every frame sent and received (bus load = rate / bitrate)."""
+        return sum(n * frame_bits(0 if remote else dlc, extended)
+                   for shapes in self._shapes
+                   for (_, extended, remote, dlc), n in shapes.items())
+
+    @property
+    def errors_recent(self) -> bool:
+        """Whether the last burst failed or the controller is not error-active (the status's
+        BUS_ERRORS_RECENT flag)."""
+        return bool(self._bus_failures) or self.bus_errors.state is not BusErrorState.ACTIVE
 
     @property
     def bus_healthy(self) -> bool:

@@ -19,10 +19,28 @@ from typing import TYPE_CHECKING
 
 from gateway.core.kinematics import WheelType
 from gateway.core.options import OptionSpec
+from gateway.core.protection import WatchdogPolicy
+from gateway.core.settings import (
+    EstopRelease,
+    FaultAction,
+    FeedbackRecovery,
+    InfeasiblePolicy,
+    Linkage,
+    LoopConfig,
+)
 from gateway.core.tracking import DEFAULT_LIMITS
 
 if TYPE_CHECKING:
+    import enum
     from collections.abc import Mapping
+
+_DEFAULTS = LoopConfig()
+
+
+def _choices(kind: type[enum.Enum]) -> tuple[object, ...]:
+    """The YAML values of a choice enum, in definition order."""
+    return tuple(member.value for member in kind)
+
 
 #: The top-level keys of a configuration file.
 TOP_KEYS = frozenset(
@@ -52,7 +70,7 @@ STEERING_KEYS: Mapping[str, OptionSpec] = MappingProxyType({
 LINKAGE_KEYS: Mapping[str, OptionSpec] = MappingProxyType({
     "wheels": OptionSpec(list, [], help="the wheels a linkage turns; empty: the block's name "
                                         "is the wheel or steer group"),
-    "linkage": OptionSpec(str, "direct", choices=("direct", "ackermann"),
+    "linkage": OptionSpec(str, Linkage.DIRECT.value, choices=_choices(Linkage),
                           help="ackermann: the angle is that of a virtual wheel in the middle "
                                "of the wheels' axle"),
 })
@@ -89,17 +107,20 @@ GATEWAY_KEYS: Mapping[str, OptionSpec] = MappingProxyType({
     "cmd_timeout_s": OptionSpec(float, 0.5, minimum=0.0,
                                 help="no valid twist for this long ramps the wheels to zero; 0 "
                                      "disables"),
-    "infeasible_policy": OptionSpec(str, "reject", choices=("reject", "project")),
-    "feedback_recovery": OptionSpec(str, "auto", choices=("auto", "manual")),
-    "fault_action": OptionSpec(str, "zero", choices=("zero", "disarm")),
+    "infeasible_policy": OptionSpec(str, _DEFAULTS.infeasible_policy.value,
+                                    choices=_choices(InfeasiblePolicy)),
+    "feedback_recovery": OptionSpec(str, _DEFAULTS.feedback_recovery.value,
+                                    choices=_choices(FeedbackRecovery)),
+    "fault_action": OptionSpec(str, _DEFAULTS.fault_action.value, choices=_choices(FaultAction)),
     "enable_on_start": OptionSpec(bool, True),
-    "estop_release": OptionSpec(str, "socket", choices=("socket", "any"),
+    "estop_release": OptionSpec(str, _DEFAULTS.estop_release.value,
+                                choices=_choices(EstopRelease),
                                 help="who may release an e-stop: the control socket only, or "
                                      "also a CAN twist frame's ENABLE flag"),
     "state_file": OptionSpec(str, "", help="the e-stop latch file; empty: $STATE_DIRECTORY/"
                                            "estop, else ~/.local/state/wheelgate/"),
     "controller_watchdog": OptionSpec(
-        str, "required", choices=("required", "warn"),
+        str, _DEFAULTS.controller_watchdog.value, choices=_choices(WatchdogPolicy),
         help="a controller-side watchdog the protocol can set over CAN but that is not "
              "confirmed: refuse to arm the motor (required) or arm it with a warning (warn)"),
     "enable_timeout_s": OptionSpec(float, 5.0, minimum=0.1),

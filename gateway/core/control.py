@@ -14,6 +14,9 @@ States (:class:`~gateway.core.types.GatewayState`)::
     any      --e-stop--> ESTOP --enable--> ENABLING
     any      --disable--> DISABLED            ENABLING --timeout--> FAULT
 
+Every change of state goes through one method, checked against the table of
+:mod:`gateway.core.transitions`.
+
 Safety rules:
 
 * no valid twist for ``cmd_timeout_s`` (when > 0): the target becomes zero, reached within the
@@ -29,12 +32,20 @@ Safety rules:
 
 from __future__ import annotations
 
-import enum
-from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from gateway.core.errors import InfeasibleTwistError
+from gateway.core.supervision import (
+    Accepted,
+    Decision,
+    Fault,
+    MotorBoard,
+    Rejection,
+    Source,
+    StatusBoard,
+)
 from gateway.core.tracking import SteerMonitor, TrackingMonitor
+from gateway.core.transitions import Event, next_state
 from gateway.core.types import DriveState, ErrorCode, GatewayState, Twist
 
 if TYPE_CHECKING:
@@ -42,7 +53,9 @@ if TYPE_CHECKING:
 
     from gateway.core.kinematics import RobotModel
     from gateway.core.settings import LoopConfig
-    from gateway.core.types import MotorStatus
+
+__all__ = ["AUTO_RETRIES", "AUTO_RETRY_DELAY_S", "AUTO_RETRY_RESET_S", "ZERO", "Accepted",
+           "Decision", "Fault", "MotorBoard", "Rejection", "Source", "StatusBoard", "Supervisor"]
 
 ZERO = Twist()
 #: Automatic re-enable attempts after a fault, once every motor answers again.
@@ -57,68 +70,11 @@ AUTO_RETRY_DELAY_S = 0.5
 _FEEDBACK_FAULTS = frozenset({ErrorCode.FEEDBACK_TIMEOUT, ErrorCode.TRACKING_ERROR})
 
 
-class Source(enum.Enum):
-    """Where a command came from."""
-
-    SOCKET = "socket"
-    CAN = "can"
-    INTERNAL = "internal"
-
-
-@dataclass(frozen=True, slots=True)
-class Rejection:
-    """Why a command was refused.
-
-    :param code: the error class.
-    :param message: a sentence for people.
-    :param error: the kinematic error, for infeasible twists.
-    """
-
-    code: ErrorCode
-    message: str
-    error: InfeasibleTwistError | None = None
-
-
-@dataclass(frozen=True, slots=True)
-class Accepted:
-    """A twist that will be followed.
-
-    :param twist: the twist the gateway follows (the nearest feasible one when projected).
-    :param projected: whether it was projected from an infeasible request.
-    :param error: the kinematic error of the request, when projected.
-    """
-
-    twist: Twist
-    projected: bool = False
-    error: InfeasibleTwistError | None = None
-
-
-@dataclass(frozen=True, slots=True)
-class Fault:
-    """Why the gateway went to FAULT just now.
-
-    :param code: the error class (``MOTOR_FAULT``, ``FEEDBACK_TIMEOUT``, ``TRACKING_ERROR``).
-    :param message: a sentence naming every motor involved.
-    """
-
-    code: ErrorCode
-    message: str
-
-
-@dataclass(frozen=True, slots=True)
-class Decision:
-    """What to command this cycle.
-
-    :param twist: the target twist.
-    :param ramp: reach it through the acceleration limits (False: jump, for e-stop).
-    :param armed: whether the drives should be enabled.
-    :param cmd_timeout: whether the command timeout forced the zero target.
-    """
-
-    twist: Twist
-    ramp: bool
-    armed: bool
-    cmd_timeout: bool
+_HOLD = Decision(ZERO, ramp=True, armed=False, cmd_timeout=False)  # DISABLED, STOPPING
+_ESTOP = Decision(ZERO, ramp=False, armed=False, cmd_timeout=False)
+_ENABLING = Decision(ZERO, ramp=True, armed=True, cmd_timeout=False)
+_FAULT_ARMED = Decision(ZERO, ramp=False, armed=True, cmd_timeout=False)
+_FAULT_RELEASED = Decision(ZERO, ramp=False, armed=False, cmd_timeout=False)
 
 
 class Supervisor:
@@ -135,6 +91,7 @@ class Supervisor:
         self.model = model
         self.cfg = loop
         self.host_speed_loop = host_speed_loop
+        #: The gateway's state; changed only by :meth:`_go` (:mod:`gateway.core.transitions`).
         self.state = GatewayState.DISABLED
         self.target = ZERO
         self._last_twist_s: float | None = None
@@ -157,10 +114,24 @@ class Supervisor:
         self._now_hint = 0.0
         self._auto_attempts = 0
         self._running_since_s = 0.0
+        self._running = Decision(ZERO, ramp=True, armed=True, cmd_timeout=False)
         #: The tracking-error check (active while RUNNING).
         self.tracking = TrackingMonitor(loop.tracking)
         #: The steering actuators' angle check (active while RUNNING).
         self.steer_tracking = SteerMonitor(loop.tracking)
+
+    def _go(self, event: Event) -> bool:
+        """The one place that changes :attr:`state`: to where :mod:`gateway.core.transitions`
+        says ``event`` takes it.
+
+        :return: whether the state changed (``False``: the table ignores ``event`` here).
+        :raises IllegalTransitionError: for an event the table does not allow in this state.
+        """
+        target = next_state(self.state, event)
+        if target is None:
+            return False
+        self.state = target
+        return True
 
     # ----------------------------------------------------------------- commands
 
@@ -168,13 +139,14 @@ class Supervisor:
               ) -> Accepted | Rejection:
         """A twist from a client.
 
-        :param steer: current steering angles, for the feasibility check.
+        :param steer: current steering angles, for the feasibility check (and the solve that
+            :attr:`Accepted.ik` carries).
         """
         if self.state is not GatewayState.RUNNING:
             self.counts["rejected"] += 1
             return Rejection(*self._not_running())
         try:
-            self.model.ik(twist, steer)
+            ik = self.model.ik(twist, steer)
         except InfeasibleTwistError as err:
             self.counts["infeasible"] += 1
             self._last_twist_s = now_s
@@ -187,7 +159,7 @@ class Supervisor:
         self.target = twist
         self._last_twist_s = now_s
         self._timed_out = False
-        return Accepted(twist)
+        return Accepted(twist, ik=ik)
 
     def stop(self, now_s: float) -> None:
         """Zero twist, drives stay armed."""
@@ -198,19 +170,18 @@ class Supervisor:
         """Zero at once and disarm until an explicit enable."""
         if self.state is not GatewayState.ESTOP:
             self.counts["estops"] += 1
-        self.state = GatewayState.ESTOP
+        self._go(Event.ESTOP)
         self.reason = reason
         self.target = ZERO
 
     def enable(self, now_s: float) -> None:
         """Start (or restart) the enable sequence; also the way out of ESTOP and FAULT."""
         self._auto_attempts = 0
-        self._start_enable(now_s)
+        self._start_enable(now_s, Event.ENABLE)
 
-    def _start_enable(self, now_s: float) -> None:
-        if self.state in (GatewayState.RUNNING, GatewayState.ENABLING, GatewayState.STOPPING):
+    def _start_enable(self, now_s: float, event: Event) -> None:
+        if not self._go(event):
             return
-        self.state = GatewayState.ENABLING
         self._enable_started_s = now_s
         self._pending_enable = True
         self.target = ZERO
@@ -219,19 +190,18 @@ class Supervisor:
 
     def disable(self) -> None:
         """Ramp to zero and disarm (an e-stop stays latched: only enable releases it)."""
-        if self.state not in (GatewayState.STOPPING, GatewayState.ESTOP):
-            self.state = GatewayState.DISABLED
+        self._go(Event.DISABLE)
         self.target = ZERO
 
     def shutdown(self) -> None:
         """The process is stopping: zero and disarm for good."""
-        self.state = GatewayState.STOPPING
+        self._go(Event.SHUTDOWN)
         self.target = ZERO
 
     def enable_failed(self, why: str) -> str:
         """The drives refused the enable sequence: FAULT with ``why`` as the reason."""
         self.counts["faults"] += 1
-        self.state = GatewayState.FAULT
+        self._go(Event.ENABLE_REFUSED)
         self.target = ZERO
         self._fault_s = self._now_hint
         self.fault_code = ErrorCode.MOTOR_FAULT
@@ -252,63 +222,43 @@ class Supervisor:
 
     def motors(
         self,
-        statuses: Sequence[MotorStatus],
+        board: MotorBoard,
         now_s: float,
         command_rad_s: Sequence[float] | None = None,
         steer_rad: Sequence[float] | None = None,
     ) -> Fault | None:
-        """Take the motors' states; return the fault when one starts.
+        """Read the motors' states; return the fault when one starts.
 
+        :param board: the motors (drive motors first, then steering actuators); their states
+            are read while enabling, running or recovering, their feedback while running.
         :param command_rad_s: each drive motor's wheel speed as commanded the cycle before
-            (the order of ``statuses``, whose drive motors come first; steering actuators
-            follow), for the tracking-error check; ``None`` skips it.
+            (the order of ``board``), for the tracking-error check; ``None`` skips it.
         :param steer_rad: each steering actuator's angle as commanded the cycle before (the
-            order of the statuses after the drive motors), for the steering check.
+            order of the board's motors after the drive motors), for the steering check.
         """
         self._now_hint = now_s
-        if self.state is not GatewayState.RUNNING:
-            self.tracking.reset()
-            self.steer_tracking.reset()
-        bad = [s for s in statuses if s.state in (DriveState.FAULT, DriveState.OFFLINE)]
-        if self.state is GatewayState.ENABLING:
-            if statuses and all(s.state is DriveState.ENABLED for s in statuses):
-                self.state = GatewayState.RUNNING
+        state = self.state
+        if state is GatewayState.RUNNING:
+            return self._running_check(board, now_s, command_rad_s, steer_rad)
+        self.tracking.reset()
+        self.steer_tracking.reset()
+        if state is GatewayState.ENABLING:
+            states = board.states(now_s)
+            if states and states.count(DriveState.ENABLED) == len(states):
+                self._go(Event.ENABLED)
                 self._running_since_s = now_s
                 self._last_twist_s = now_s
                 return None
             if now_s - self._enable_started_s > self.cfg.enable_timeout_s:
-                late = [s for s in statuses if s.state is not DriveState.ENABLED]
-                return self._fault(late, "did not enable within "
-                                         f"{self.cfg.enable_timeout_s:g} s")
-            return None
-        if self.state is GatewayState.RUNNING:
-            if self._auto_attempts and now_s - self._running_since_s >= AUTO_RETRY_RESET_S:
-                self._auto_attempts = 0
-            if bad:
-                return self._fault(bad, "")
-            if command_rad_s is not None:
-                n = len(command_rad_s)
-                feedback = [s.feedback for s in statuses]
-                if len(feedback) != n:
-                    del feedback[n:]
-                off = self.tracking.check(command_rad_s, feedback, now_s)
-                if off is not None:
-                    return self._fault([statuses[off.index]], off.describe(),
-                                       ErrorCode.TRACKING_ERROR)
-                if steer_rad is not None:
-                    actuators = statuses[n:]
-                    turn = self.steer_tracking.check(
-                        steer_rad, [s.feedback for s in actuators], now_s
-                    )
-                    if turn is not None:
-                        return self._fault([actuators[turn.index]], turn.describe(),
-                                           ErrorCode.TRACKING_ERROR)
+                late = [i for i, s in enumerate(states) if s is not DriveState.ENABLED]
+                return self._fault(board, now_s, late, "did not enable within "
+                                                       f"{self.cfg.enable_timeout_s:g} s")
             return None
         if (
-            self.state is GatewayState.FAULT
+            state is GatewayState.FAULT
             and self.cfg.feedback_recovery == "auto"
-            and statuses
-            and not any(s.state is DriveState.OFFLINE for s in statuses)
+            and (states := board.states(now_s))
+            and DriveState.OFFLINE not in states
             and self.bus_ok
             and self._auto_attempts < AUTO_RETRIES
             and now_s - self._fault_s >= AUTO_RETRY_DELAY_S * (self._auto_attempts + 1)
@@ -321,14 +271,47 @@ class Supervisor:
             # speed loop closed on the host: that loop ran on the very feedback that failed it
             # (a late DJI stream makes it run away again after every re-enable).
             self._auto_attempts += 1
-            self._start_enable(now_s)
+            self._start_enable(now_s, Event.RETRY)
         return None
 
-    def _fault(self, motors: Sequence[MotorStatus], why: str,
+    def _running_check(
+        self,
+        board: MotorBoard,
+        now_s: float,
+        command_rad_s: Sequence[float] | None,
+        steer_rad: Sequence[float] | None,
+    ) -> Fault | None:
+        if self._auto_attempts and now_s - self._running_since_s >= AUTO_RETRY_RESET_S:
+            self._auto_attempts = 0
+        states = board.states(now_s)
+        if DriveState.FAULT in states or DriveState.OFFLINE in states:
+            bad = [i for i, s in enumerate(states)
+                   if s is DriveState.FAULT or s is DriveState.OFFLINE]
+            return self._fault(board, now_s, bad, "")
+        if command_rad_s is None:
+            return None
+        n = len(command_rad_s)
+        feedback = board.motor_feedback()
+        off = self.tracking.check(command_rad_s, feedback if len(feedback) == n
+                                  else feedback[:n], now_s)
+        if off is not None:
+            return self._fault(board, now_s, [off.index], off.describe(),
+                               ErrorCode.TRACKING_ERROR)
+        if steer_rad is not None:
+            turn = self.steer_tracking.check(steer_rad, feedback[n:], now_s)
+            if turn is not None:
+                return self._fault(board, now_s, [n + turn.index], turn.describe(),
+                                   ErrorCode.TRACKING_ERROR)
+        return None
+
+    def _fault(self, board: MotorBoard, now_s: float, which: Sequence[int], why: str,
                code: ErrorCode = ErrorCode.MOTOR_FAULT) -> Fault:
+        """FAULT, naming the motors at positions ``which`` of ``board``."""
+        statuses = board.status(now_s)
+        motors = [statuses[i] for i in which]
         self.counts["faults"] += 1
         self._fault_s = self._now_hint
-        self.state = GatewayState.FAULT
+        self._go(Event.FAULT)
         self.target = ZERO
         self.faulted = tuple(s.name for s in motors)
         parts = []
@@ -353,11 +336,10 @@ class Supervisor:
 
         :param names: the motors the message is about, when it names any.
         """
-        if self.state not in (GatewayState.RUNNING, GatewayState.ENABLING):
+        if not self._go(Event.BUS_FAULT):
             return None
         self.counts["faults"] += 1
         self._fault_s = self._now_hint
-        self.state = GatewayState.FAULT
         self.target = ZERO
         self.faulted = tuple(names)
         self.reason = message
@@ -368,18 +350,18 @@ class Supervisor:
         """The command for this cycle."""
         state = self.state
         if state is GatewayState.ESTOP:
-            return Decision(ZERO, ramp=False, armed=False, cmd_timeout=False)
-        if state in (GatewayState.DISABLED, GatewayState.STOPPING):
-            return Decision(ZERO, ramp=True, armed=False, cmd_timeout=False)
+            return _ESTOP
+        if state is GatewayState.DISABLED or state is GatewayState.STOPPING:
+            return _HOLD
         if state is GatewayState.FAULT:
             # Zero at once: with a motor gone, no wheel should keep driving on its own.  A speed
             # loop closed on the host cannot hold zero on feedback that is missing, late or not
             # followed (late DJI feedback makes it run away): release those motors.
             release = self.cfg.fault_action == "disarm" or (
                 self.host_speed_loop and self.fault_code in _FEEDBACK_FAULTS)
-            return Decision(ZERO, ramp=False, armed=not release, cmd_timeout=False)
+            return _FAULT_RELEASED if release else _FAULT_ARMED
         if state is GatewayState.ENABLING:
-            return Decision(ZERO, ramp=True, armed=True, cmd_timeout=False)
+            return _ENABLING
         timeout = self.cfg.cmd_timeout_s
         if (
             timeout > 0.0
@@ -391,7 +373,12 @@ class Supervisor:
             if not self._timed_out:
                 self.counts["cmd_timeouts"] += 1
             self._timed_out = True
-        return Decision(self.target, ramp=True, armed=True, cmd_timeout=self._timed_out)
+        last = self._running
+        if last.twist is not self.target or last.cmd_timeout is not self._timed_out:
+            # A new decision only when the target or the timeout changed (it is immutable).
+            last = self._running = Decision(self.target, ramp=True, armed=True,
+                                            cmd_timeout=self._timed_out)
+        return last
 
     def _not_running(self) -> tuple[ErrorCode, str]:
         if self.state is GatewayState.ESTOP:

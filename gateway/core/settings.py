@@ -5,6 +5,12 @@
 * :class:`BusConfig`: the ``bus:`` block, where the motor controllers are.
 * :class:`LoopConfig`: the ``gateway:`` block, the daemon's settings.
 
+The choices of the ``gateway:`` block (:class:`InfeasiblePolicy`, :class:`FeedbackRecovery`,
+:class:`FaultAction`, :class:`EstopRelease`) and of a steering block (:class:`Linkage`) are
+:class:`Choice` enums: each member is equal to, hashes as and prints as its YAML value, as
+Python 3.11's ``enum.StrEnum`` does (https://docs.python.org/3/library/enum.html#enum.StrEnum),
+so messages and comparisons with the YAML text stay as they were.
+
 Their defaults equal those of the keys in :mod:`gateway.config.keys`, so that a
 ``LoopConfig()`` made in code is what an empty ``gateway:`` block gives.  Code that receives a
 configuration imports them from :mod:`gateway.config`.
@@ -12,18 +18,102 @@ configuration imports them from :mod:`gateway.config`.
 
 from __future__ import annotations
 
+import enum
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, TypeVar
 
+from gateway.core.can_ids import CanIds
+from gateway.core.errors import ConfigError
 from gateway.core.protection import WatchdogPolicy
 from gateway.core.tracking import DEFAULT_LIMITS, TrackingLimits
-from gateway.wire.can import CanIds
 
 if TYPE_CHECKING:
     from collections.abc import Mapping
 
     from gateway.core.kinematics import Limits, RobotModel, Wheel
     from gateway.core.types import MotorConfig
+
+_C = TypeVar("_C", bound=enum.Enum)
+
+
+class Choice(str, enum.Enum):
+    """A configuration value out of a fixed set: a ``str`` whose ``str()`` and ``format()``
+    are its value (``enum.StrEnum`` needs Python 3.11; wheelgate supports 3.10)."""
+
+    def __str__(self) -> str:
+        return str(self.value)
+
+    def __format__(self, spec: str) -> str:
+        return format(str(self.value), spec)
+
+
+class InfeasiblePolicy(Choice):
+    """``gateway.infeasible_policy``: what an infeasible twist gets."""
+
+    #: An error to the sender; the wheels ramp to zero.
+    REJECT = "reject"
+    #: The nearest feasible twist is followed, with a warning counted.
+    PROJECT = "project"
+
+
+class FeedbackRecovery(Choice):
+    """``gateway.feedback_recovery``: how the gateway leaves a motor fault or lost feedback."""
+
+    #: Enabled again once every motor is healthy (a few tries).
+    AUTO = "auto"
+    #: Only an explicit enable.
+    MANUAL = "manual"
+
+
+class FaultAction(Choice):
+    """``gateway.fault_action``: what the motors get on a fault."""
+
+    #: Zero speed, drives stay armed.
+    ZERO = "zero"
+    #: Zero speed, then disarm.
+    DISARM = "disarm"
+
+
+class EstopRelease(Choice):
+    """``gateway.estop_release``: who may release an e-stop."""
+
+    #: The control socket's ``enable`` only.
+    SOCKET = "socket"
+    #: Also a CAN twist frame's ENABLE flag.
+    ANY = "any"
+
+
+class Linkage(Choice):
+    """A steering block's ``linkage``: how one actuator's angle turns its wheels."""
+
+    #: Every wheel at the actuator's angle.
+    DIRECT = "direct"
+    #: An Ackermann linkage: the angle is a virtual middle wheel's (:mod:`gateway.core.linkage`).
+    ACKERMANN = "ackermann"
+
+
+def choice(kind: type[_C], value: object, where: str) -> _C:
+    """``value`` as a member of ``kind`` (a member, or its value).
+
+    :raises ConfigError: naming ``where``, the choices and what came.
+    """
+    if isinstance(value, kind):
+        return value
+    try:
+        return kind(value)
+    except ValueError:
+        allowed = ", ".join(repr(m.value) for m in kind)
+        raise ConfigError(f"{where}: expected one of {allowed}, got {value!r}") from None
+
+
+#: The ``gateway:`` keys whose values are choices, with their enums.
+LOOP_CHOICES: dict[str, type[enum.Enum]] = {
+    "infeasible_policy": InfeasiblePolicy,
+    "feedback_recovery": FeedbackRecovery,
+    "fault_action": FaultAction,
+    "estop_release": EstopRelease,
+    "controller_watchdog": WatchdogPolicy,
+}
 
 
 @dataclass(frozen=True, slots=True)
@@ -46,15 +136,15 @@ class LoopConfig:
 
     :param rate_hz: control loop rate, 50 to 1000 Hz.
     :param cmd_timeout_s: no valid twist for this long ramps the wheels to zero (0: never).
-    :param infeasible_policy: ``"reject"`` (error to the sender, wheels ramp to zero) or
-        ``"project"`` (follow the nearest feasible twist, count a warning).
-    :param feedback_recovery: after a motor fault or lost feedback, ``"auto"`` re-enables when
-        every motor is healthy again, ``"manual"`` waits for an explicit enable.
-    :param fault_action: on a fault, ``"zero"`` commands zero speed, ``"disarm"`` also disarms.
+    :param infeasible_policy: ``reject`` (error to the sender, wheels ramp to zero) or
+        ``project`` (follow the nearest feasible twist, count a warning).
+    :param feedback_recovery: after a motor fault or lost feedback, ``auto`` re-enables when
+        every motor is healthy again, ``manual`` waits for an explicit enable.
+    :param fault_action: on a fault, ``zero`` commands zero speed, ``disarm`` also disarms.
     :param enable_on_start: enable the drives when the daemon starts (never out of a latched
         e-stop).
-    :param estop_release: who may release an e-stop: ``"socket"`` (the control socket's
-        ``enable`` only) or ``"any"`` (also a CAN twist frame's ENABLE flag).
+    :param estop_release: who may release an e-stop: ``socket`` (the control socket's
+        ``enable`` only) or ``any`` (also a CAN twist frame's ENABLE flag).
     :param state_file: the e-stop latch file (empty: see :mod:`gateway.runtime.latch`).
     :param controller_watchdog: what happens when a controller-side watchdog the protocol can
         set over CAN is not confirmed (:class:`gateway.core.protection.WatchdogPolicy`).
@@ -76,15 +166,18 @@ class LoopConfig:
     :param tracking_time_s: how long a wheel may stay outside its window before a FAULT
         (0: no tracking-error check); see :mod:`gateway.core.tracking`.
     :param tracking_steer_tolerance_rad: the steering-angle window of steering actuators (rad).
+
+    The choices may also be given as their values (``fault_action="disarm"``): they are turned
+    into their enums (:data:`LOOP_CHOICES`), and any other value raises :class:`ConfigError`.
     """
 
     rate_hz: float = 200.0
     cmd_timeout_s: float = 0.5
-    infeasible_policy: str = "reject"
-    feedback_recovery: str = "auto"
-    fault_action: str = "zero"
+    infeasible_policy: InfeasiblePolicy = InfeasiblePolicy.REJECT
+    feedback_recovery: FeedbackRecovery = FeedbackRecovery.AUTO
+    fault_action: FaultAction = FaultAction.ZERO
     enable_on_start: bool = True
-    estop_release: str = "socket"
+    estop_release: EstopRelease = EstopRelease.SOCKET
     state_file: str = ""
     controller_watchdog: WatchdogPolicy = WatchdogPolicy.REQUIRED
     enable_timeout_s: float = 5.0
@@ -103,6 +196,12 @@ class LoopConfig:
     tracking_tolerance_ratio: float = DEFAULT_LIMITS.tolerance_ratio
     tracking_time_s: float = DEFAULT_LIMITS.time_s
     tracking_steer_tolerance_rad: float = DEFAULT_LIMITS.steer_tolerance_rad
+
+    def __post_init__(self) -> None:
+        for name, kind in LOOP_CHOICES.items():
+            value = getattr(self, name)
+            if type(value) is not kind:
+                object.__setattr__(self, name, choice(kind, value, f"gateway.{name}"))
 
     @property
     def tracking(self) -> TrackingLimits:

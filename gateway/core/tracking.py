@@ -35,11 +35,16 @@ a healthy actuator follows within its own lag, and one that is blocked or has lo
 leaves the drive wheels pushing along a heading the robot does not have.
 
 Pure: no clock, no I/O; the loop calls :meth:`TrackingMonitor.check` once a cycle while the
-drives are running and :meth:`TrackingMonitor.reset` whenever they are not.
+drives are running and :meth:`TrackingMonitor.reset` whenever they are not.  A check whose
+commands and feedback objects are those of the check before, when every wheel was inside its
+window with a count of zero, changes nothing but the time of the last check (and the runaway
+test's period): :meth:`TrackingMonitor.check` then skips the per-wheel work (most cycles: the
+feedback comes at a fraction of the loop rate).
 """
 
 from __future__ import annotations
 
+import operator
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -138,6 +143,11 @@ class TrackingMonitor:
         #: :meth:`gateway.drive.driver.MotorDriver.uncontrolled_band`; ``None``: none): a command
         #: there is checked as zero, which is what the controller does with it.
         self.dead_bands: Sequence[tuple[float, float] | None] = ()
+        # The last full check, when it left every wheel inside its window with a zero count
+        # (``None`` otherwise): its commands, feedback, dead bands and each wheel's peak after
+        # a new runaway period (see ``check``).
+        self._quiet: tuple[tuple[float, ...], tuple[WheelFeedback | None, ...],
+                           Sequence[tuple[float, float] | None], list[float]] | None = None
 
     def reset(self) -> None:
         """Forget every wheel's history (the drives stopped following commands)."""
@@ -146,6 +156,7 @@ class TrackingMonitor:
         self._count = [0.0] * len(self._count)
         self._last_s = None
         self._period_start_s = None
+        self._quiet = None
 
     def check(
         self,
@@ -159,6 +170,32 @@ class TrackingMonitor:
         :param feedback: every checked wheel's latest feedback (``None``: none yet, skipped).
         :param now_s: the time of this check (s).
         """
+        quiet = self._quiet
+        if (
+            quiet is not None
+            and (command_rad_s is quiet[0] or command_rad_s == quiet[0])
+            and len(feedback) == len(quiet[1])
+            and all(map(operator.is_, feedback, quiet[1]))
+            and self.dead_bands is quiet[2]
+        ):
+            # Nothing changed since a check that left every wheel inside its window with a
+            # zero count: this one would leave every count at zero and every peak as it is.
+            self._last_s = now_s
+            start = self._period_start_s
+            if start is not None and now_s - start >= self.limits.time_s:
+                self._peak_before, self._peak, self._period_start_s = (
+                    self._peak, list(quiet[3]), now_s)
+            return None
+        return self._check_all(command_rad_s, feedback, now_s)
+
+    def _check_all(
+        self,
+        command_rad_s: Sequence[float],
+        feedback: Sequence[WheelFeedback | None],
+        now_s: float,
+    ) -> TrackingFault | None:
+        """:meth:`check`, wheel by wheel (the general path)."""
+        self._quiet = None
         limits = self.limits
         if not limits.enabled:
             return None
@@ -184,6 +221,8 @@ class TrackingMonitor:
         abs_tol, ratio = limits.tolerance_rad_s, limits.tolerance_ratio
         fault: TrackingFault | None = None
         bands = self.dead_bands
+        outside = False
+        fresh = [0.0] * n  # each wheel's peak at the start of a new period, after this check
         for i, (command, fb) in enumerate(zip(command_rad_s, feedback, strict=True)):
             band = bands[i] if i < len(bands) else None
             # In a band the controller does not speed-control, it stops the motor instead.
@@ -191,6 +230,7 @@ class TrackingMonitor:
             cmd = 0.0 if in_band else command
             size = abs(cmd)
             peak[i] = max(peak[i], size)
+            fresh[i] = max(0.0, size)
             if fb is None:
                 count[i] = 0.0
                 continue
@@ -199,6 +239,7 @@ class TrackingMonitor:
             error = abs(measured - cmd)
             # ``not <=`` so that a NaN speed counts as outside the window.
             if not error <= window:
+                outside = True
                 off = error / window if window > 0.0 else RUNAWAY_WEIGHT_MAX
                 self.worst_ratio = max(self.worst_ratio, off)
                 # A runaway counts by how far off it is (capped); lagging at the plain rate.
@@ -208,6 +249,8 @@ class TrackingMonitor:
                     fault = TrackingFault(i, cmd, fb.velocity_rad_s, window, count[i])
             else:
                 count[i] = max(count[i] - dt, 0.0)
+        if not outside and not any(count):
+            self._quiet = (tuple(command_rad_s), tuple(feedback), bands, fresh)
         return fault
 
 

@@ -132,17 +132,6 @@ class Twist:
         )
 
 
-@dataclass(frozen=True, slots=True)
-class VelocityCommand:
-    """A wheel velocity command, wheel side.
-
-    :param wheel_rad_s: wheel angular speed in rad/s, positive rolls the wheel forward along
-        its plane direction.
-    """
-
-    wheel_rad_s: float
-
-
 class DriveFault(enum.IntFlag):
     """Protocol-independent fault classes; each driver maps its own flags onto these."""
 

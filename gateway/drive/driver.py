@@ -1,14 +1,29 @@
-"""The :class:`MotorDriver` ABC: the stateful half of every protocol driver.
+"""The :class:`MotorDriver` contract: the stateful half of every protocol driver.
 
 One driver instance serves every motor of its protocol on one bus (DJI packs four ESCs into
 one frame; CANopen has one SYNC per bus).  The loop calls it with plain values and gets frames
 back; it never touches the bus itself, so it stays testable without threads or a clock (the
 caller passes ``now_s``, monotonic seconds).
 
-Per cycle the loop calls :meth:`MotorDriver.command` with every wheel's speed and sends all the
-frames of all drivers as one burst.  Received frames go to :meth:`MotorDriver.on_frame`.
-:meth:`MotorDriver.poll` returns housekeeping frames (RTR requests, enable-sequence steps, SYNC)
-and evaluates liveness.
+The contract is a template, as python-can's ``BusABC.recv`` wraps ``_recv_internal``: the public
+methods do what every protocol needs, once, and call small hooks that a protocol implements:
+
+* :meth:`command` checks the count, finiteness and range of every setpoint (an
+  :class:`EncodeError` naming the wheel, node and bounds), then calls :meth:`_command`;
+* :meth:`on_frame` calls :meth:`_on_frame` and counts a malformed frame (the hook raises
+  :class:`DecodeError`) instead of raising;
+* :meth:`enable` calls :meth:`_enable`, then forgets the last enable's protection faults;
+* :meth:`poll` calls :meth:`_poll`, then reports a controller-side protection that failed,
+  once per enable;
+* :meth:`state` gives OFFLINE from liveness (:mod:`gateway.drive.liveness`) and FAULT from the
+  fault flags, else asks :meth:`_ready_state`;
+* :meth:`claims` declares the frames of the protocol: dispatch, receive filters and labels
+  come from it (:mod:`gateway.drive.claims`).
+
+Protocol keys are a :class:`~gateway.drive.options.DriverOptions` dataclass (:attr:`Options`);
+the base validates every motor's block into :attr:`opts` and checks the keys that hold for the
+whole bus (:attr:`BUS_WIDE`).  Simulators are not part of a driver: they are registered apart
+(:mod:`gateway.sim.registry`), so a driver may ship none.
 """
 
 from __future__ import annotations
@@ -16,61 +31,64 @@ from __future__ import annotations
 import abc
 import collections
 import logging
-from typing import TYPE_CHECKING, ClassVar
+from typing import TYPE_CHECKING, ClassVar, Generic, TypeVar, cast
 
-from gateway.core.errors import ConfigError, DecodeError
-from gateway.core.options import OptionSpec, validate_block
-from gateway.core.protection import Guard, Protection, ProtectionState, WatchdogPolicy
+from gateway.core.errors import ConfigError, DecodeError, EncodeError
+from gateway.core.options import OptionSpec
+from gateway.core.protection import ProtectionState, WatchdogPolicy
 from gateway.core.types import DriveFault, DriveState, MotorConfig, MotorStatus, WheelFeedback
+from gateway.drive.guard import fault_text, stated_protection
+from gateway.drive.liveness import Liveness
+from gateway.drive.options import CONTROLLER_TIMEOUT_OPTION, DriverOptions
+from gateway.drive.setpoints import bounds, check_motors, setpoint_error
 
 __all__ = ["CONTROLLER_TIMEOUT_OPTION", "MotorDriver", "OptionSpec"]
-
-#: The common ``controller_timeout_s`` key of protocols that cannot set their controller's
-#: timeout over CAN: the timeout that was set with the vendor's tool, as a statement.
-CONTROLLER_TIMEOUT_OPTION = OptionSpec(
-    float,
-    0.0,
-    minimum=0.0,
-    maximum=60.0,
-    help="the command timeout set on the controller with the vendor's tool (s), after which "
-    "it stops the motor by itself; 0: not stated",
-)
 
 if TYPE_CHECKING:
     from collections.abc import Mapping, Sequence
 
+    from gateway.core.protection import Protection
     from gateway.core.types import Frame
+    from gateway.drive.claims import FrameClaim
     from gateway.drive.filters import CanFilter
-    from gateway.sim.device import DeviceSimulator
 
 log = logging.getLogger(__name__)
 
+OptT = TypeVar("OptT", bound=DriverOptions)
 
-class MotorDriver(abc.ABC):
+class MotorDriver(abc.ABC, Generic[OptT]):
     """Stateful protocol driver for a group of motors on one bus.
 
-    Subclasses fill in the hooks; the base keeps feedback, liveness, fault flags and the
-    counters of rejected frames so every protocol reports them the same way.
+    Subclasses declare their :attr:`Options` and :meth:`claims` and fill in the hooks; the
+    base keeps feedback, liveness, fault flags, arming and the counters of rejected frames so
+    every protocol reports them the same way.
 
-    :param motors: the motors this driver serves, in the order the loop passes speeds.
-    :raises ConfigError: if a node ID is out of range or used twice.
+    :param motors: the motors this driver serves, in the order the loop passes setpoints.
+    :raises ConfigError: if a node ID is out of range or used twice, a protocol key is bad, or
+        the motors disagree on a key of :attr:`BUS_WIDE`.
     """
 
-    #: Protocol keys accepted in a motor block, with their specs.
-    OPTIONS: ClassVar[Mapping[str, OptionSpec]] = {}
+    #: The protocol keys of a motor block (validated into :attr:`opts`).
+    Options: ClassVar[type[DriverOptions]] = DriverOptions
+    #: Protocol keys accepted in a motor block, with their specs (derived from :attr:`Options`).
+    OPTIONS: ClassVar[Mapping[str, OptionSpec]] = DriverOptions.specs()
+    #: Keys every motor of one bus must agree on (``liveness_s``: one liveness per driver).
+    BUS_WIDE: ClassVar[tuple[str, ...]] = ("liveness_s",)
     #: Valid node IDs for this protocol (inclusive).
     NODE_ID_RANGE: ClassVar[tuple[int, int]] = (0, 0x3F)
-    #: Feedback older than this marks a motor OFFLINE (s); overridable by the ``liveness_s`` key.
-    DEFAULT_LIVENESS_S: ClassVar[float] = 0.25
+    #: The streams whose silence makes a motor OFFLINE (each younger than ``liveness_s``
+    #: while alive); stream 0 is the feedback (:meth:`store_feedback`), the others are
+    #: reported with :meth:`heard`.
+    LIVENESS_STREAMS: ClassVar[tuple[str, ...]] = ("feedback",)
     #: Whether this driver closes the wheels' speed loop on the host from the feedback it
     #: decodes (DJI).  Holding such a wheel at zero speed needs that feedback, so on a fault
     #: about the feedback or the tracking the gateway releases these motors instead.
     HOST_SPEED_LOOP: ClassVar[bool] = False
     #: Whether this driver also commands steering actuators (motors with
-    #: :attr:`~gateway.core.types.MotorRole.STEER`): armed in position control, commanded with a
-    #: steering angle, reporting that angle (absolute, from ``zero_rad``) as feedback.
+    #: :attr:`~gateway.core.types.MotorRole.STEER`): armed in position control, commanded with
+    #: a steering angle, reporting that angle (absolute, from ``zero_rad``) as feedback.
     STEERING: ClassVar[bool] = False
-    #: The protocol's name in messages about controller-side protection.
+    #: The protocol's name in messages (protection, labels, errors).
     PROTOCOL: ClassVar[str] = "CAN"
     #: What the controller does when its stated timeout expires (:meth:`protection`).
     TIMEOUT_ACTION: ClassVar[str] = "as configured on the controller"
@@ -80,22 +98,20 @@ class MotorDriver(abc.ABC):
         "controller_timeout_s"
     )
 
+    def __init_subclass__(cls, **kwargs: object) -> None:
+        super().__init_subclass__(**kwargs)
+        if "Options" in cls.__dict__ and "OPTIONS" not in cls.__dict__:
+            cls.OPTIONS = cls.Options.specs()
+
     def __init__(self, motors: Sequence[MotorConfig]) -> None:
         self.motors: tuple[MotorConfig, ...] = tuple(motors)
-        owners: dict[int, str] = {}
-        for m in self.motors:
-            if m.steering and not self.STEERING:
-                raise ConfigError(
-                    f"motor {m.wheel!r}: the {m.driver} driver does not command steering "
-                    f"actuators"
-                )
-            where = f"motor {m.wheel!r}.node_id"
-            self.validate_node_id(m.node_id, where, m.options)
-            if m.node_id in owners:
-                raise ConfigError(
-                    f"{where}: node {m.node_id} is already used by wheel {owners[m.node_id]!r}"
-                )
-            owners[m.node_id] = m.wheel
+        check_motors(self.motors, self.STEERING, self.validate_node_id)
+        #: Every motor's validated protocol keys, in :attr:`motors` order.
+        self.opts: tuple[OptT, ...] = tuple(
+            cast("OptT", self.Options.from_block(m.options, f"motor {m.wheel!r}"))
+            for m in self.motors
+        )
+        self._check_bus_wide()
         self._index = {m.node_id: i for i, m in enumerate(self.motors)}
         n = len(self.motors)
         self._feedback: list[WheelFeedback | None] = [None] * n
@@ -104,6 +120,8 @@ class MotorDriver(abc.ABC):
         self._armed: list[bool] = [False] * n
         #: Per motor, why its controller-side protection failed under REQUIRED ("" if not).
         self._protection_failed: list[str] = [""] * n
+        #: Per motor, whether this enable's protection failure has been reported.
+        self._protection_reported: list[bool] = [False] * n
         #: What to do when a protection this driver configures is not confirmed; the drive
         #: set passes the configuration's ``gateway.controller_watchdog``.
         self.watchdog_policy = WatchdogPolicy.REQUIRED
@@ -115,13 +133,28 @@ class MotorDriver(abc.ABC):
         #: The detail of the last rejection of each reason (the counter's keys are a fixed
         #: set, so garbage traffic cannot grow it).
         self.last_rejection: dict[str, str] = {}
-        live = self.motors[0].options.get("liveness_s") if n else None
-        #: Feedback older than this (s) marks a motor OFFLINE.
-        self.liveness_s = (
-            float(live)
-            if isinstance(live, (int, float)) and not isinstance(live, bool)
-            else self.DEFAULT_LIVENESS_S
+        #: When each motor's liveness streams were last heard (:attr:`LIVENESS_STREAMS`).
+        self.live = Liveness(
+            n, self.LIVENESS_STREAMS,
+            self.opts[0].liveness_s if self.opts else self.Options().liveness_s,
         )
+        self._heard_s = self.live.oldest
+        #: Per motor, the largest setpoint magnitude :meth:`command` passes
+        #: (:func:`gateway.drive.setpoints.bounds`).
+        self.bounds: tuple[float, ...] = bounds(self.motors)
+        #: Per motor, wheel to motor side: ``gear_ratio * sign`` (motor = wheel * scale).
+        self.motor_scale: tuple[float, ...] = tuple(m.gear_ratio * m.sign for m in self.motors)
+
+    def _check_bus_wide(self) -> None:
+        first = self.opts[0] if self.opts else None
+        for m, o in zip(self.motors, self.opts, strict=True):
+            for key in self.BUS_WIDE:
+                want, got = getattr(first, key), getattr(o, key)
+                if got != want:
+                    raise ConfigError(
+                        f"motor {m.wheel!r}.{key}: expected {want!r} like motor "
+                        f"{self.motors[0].wheel!r} on the same {self.PROTOCOL} bus, got {got!r}"
+                    )
 
     # ----------------------------------------------------------------- configuration
 
@@ -133,7 +166,7 @@ class MotorDriver(abc.ABC):
         :param where: file and key path for messages, e.g. ``"robot.yaml: wheels[0].motor"``.
         :raises ConfigError: for an unknown key, a missing required key or a bad value.
         """
-        return validate_block(raw, cls.OPTIONS, where, "protocol keys for this driver")
+        return cls.Options.validate(raw, where)
 
     @classmethod
     def node_id_range(cls, options: Mapping[str, object] | None = None) -> tuple[int, int]:
@@ -154,51 +187,112 @@ class MotorDriver(abc.ABC):
         if not lo <= node_id <= hi:
             raise ConfigError(f"{where}: expected int {lo}..{hi}, got {node_id!r}")
 
-    # ----------------------------------------------------------------- hooks
+    # ----------------------------------------------------------------- the template
+
+    def command(self, setpoints: Sequence[float], now_s: float) -> list[Frame]:
+        """Command frames for this cycle.
+
+        :param setpoints: one per motor, in :attr:`motors` order: the wheel speed in rad/s for
+            a drive motor, the steering angle in rad (from the neutral plane angle,
+            counter-clockwise positive) for a steering actuator (:attr:`STEERING` drivers).
+        :raises EncodeError: for a number of setpoints other than the number of motors, a
+            setpoint that is not finite, or a speed beyond the motor's ``max_rpm``; nothing is
+            encoded then.
+        """
+        bounds = self.bounds
+        if len(setpoints) != len(bounds):
+            raise EncodeError(
+                f"Expected {len(bounds)} setpoints for the {self.PROTOCOL} motors "
+                f"({', '.join(m.wheel for m in self.motors)}), but got {len(setpoints)}."
+            )
+        for value, bound in zip(setpoints, bounds):  # noqa: B905 - lengths checked above
+            if not -bound <= value <= bound:  # also false for NaN
+                raise setpoint_error(self.motors, setpoints, self.PROTOCOL)
+        return self._command(setpoints, now_s)
 
     @abc.abstractmethod
+    def _command(self, setpoints: Sequence[float], now_s: float) -> list[Frame]:
+        """Hook of :meth:`command`: the frames for setpoints the base has checked."""
+
+    def on_frame(self, frame: Frame) -> bool:
+        """Take one received frame.
+
+        :return: whether the frame belonged to this driver.  A malformed frame of this
+            protocol (the hook raises :class:`DecodeError`) is counted in :attr:`rejected`
+            under ``malformed``, never raised.
+        """
+        try:
+            return self._on_frame(frame)
+        except DecodeError as err:
+            self.reject("malformed", err)
+            return True
+
+    @abc.abstractmethod
+    def _on_frame(self, frame: Frame) -> bool:
+        """Hook of :meth:`on_frame`: take a frame, or return ``False`` if it is not ours; raise
+        :class:`DecodeError` for a malformed frame of ours."""
+
     def enable(self, now_s: float) -> list[Frame]:
         """Start the enable sequence (clear errors, select velocity mode, or position mode for
-        a steering actuator, arm).
+        a steering actuator, arm); the last enable's protection faults are forgotten first.
 
         Sequences that wait for answers go on through :meth:`poll` and :meth:`on_frame`.
+
+        :raises IllegalTransitionError: if a controller cannot be enabled now (no frame is sent).
         """
+        frames = self._enable(now_s)  # may raise before anything is forgotten
+        for i in range(len(self.motors)):
+            self.clear_protection_fault(i)
+            self._protection_reported[i] = False
+        return frames
+
+    @abc.abstractmethod
+    def _enable(self, now_s: float) -> list[Frame]:
+        """Hook of :meth:`enable`: the frames that start the enable sequence."""
 
     @abc.abstractmethod
     def disable(self, now_s: float) -> list[Frame]:
         """Frames that command zero speed and disarm where the protocol can (a steering
         actuator is released where it stands)."""
 
+    def poll(self, now_s: float) -> list[Frame]:
+        """Housekeeping frames due at ``now_s`` (requests, sequence steps, SYNC); a
+        controller-side protection that failed since the last call is reported
+        (:meth:`protection_fault`), once per enable."""
+        frames = self._poll(now_s)
+        if self.CONFIGURES_PROTECTION:
+            for i in range(len(self.motors)):
+                if (not self._protection_reported[i]
+                        and self.protection_state(i) is ProtectionState.FAILED):
+                    self._protection_reported[i] = True
+                    self.protection_fault(i, self.protection_failure(i))
+        return frames
+
+    #: Whether this driver writes its controllers' protection itself (:attr:`Guard.CONFIGURED`
+    #: motors report :meth:`protection_state` and :meth:`protection_failure`).
+    CONFIGURES_PROTECTION: ClassVar[bool] = False
+
+    def _poll(self, now_s: float) -> list[Frame]:
+        """Hook of :meth:`poll` (default: nothing to send)."""
+        return []
+
     @abc.abstractmethod
-    def command(self, wheel_rad_s: Sequence[float], now_s: float) -> list[Frame]:
-        """Command frames for this cycle.
+    def claims(self) -> tuple[FrameClaim, ...]:
+        """The frames of this driver's motors (:mod:`gateway.drive.claims`): every frame
+        :meth:`on_frame` takes must be claimed with ``receive=True``; the frames it only sends
+        are claimed with ``receive=False`` (for the labels)."""
 
-        :param wheel_rad_s: one setpoint per motor, in :attr:`motors` order: the wheel speed in
-            rad/s for a drive motor, the steering angle in rad (from the neutral plane angle,
-            counter-clockwise positive) for a steering actuator (:attr:`STEERING` drivers).
-        :raises EncodeError: if a setpoint cannot be encoded (the loop limits speeds first).
-        """
-
-    @abc.abstractmethod
-    def on_frame(self, frame: Frame) -> bool:
-        """Take one received frame.
-
-        :return: whether the frame belonged to this driver.  Malformed frames of this protocol
-            are counted in :attr:`rejected` and never raise.
-        """
-
-    def receive_filters(self) -> tuple[CanFilter, ...] | None:
-        """The identifiers this driver's :meth:`on_frame` takes (feedback, replies, the
-        controllers' own messages), as receive filters: the kernel drops everything else
-        before the gateway sees it (:mod:`gateway.drive.filters`).
-
-        Every frame :meth:`on_frame` would claim must pass them; the built-in drivers are
-        checked for that against random frames.  ``None`` (the default) declares nothing:
-        the gateway then opens its bus unfiltered.
-        """
+    def message_name(self, arbitration_id: int, is_extended_id: bool) -> str | None:
+        """The protocol's name of a claimed frame's message (``Get_Encoder_Estimates``), for
+        labels; ``None`` when the protocol has none for it."""
         return None
 
-    def preview_command(self, wheel_rad_s: Sequence[float]) -> list[Frame]:
+    def receive_filters(self) -> tuple[CanFilter, ...]:
+        """The kernel receive filters of the frames :meth:`on_frame` takes (from
+        :meth:`claims`; the built-in drivers are checked against random frames for it)."""
+        return tuple(dict.fromkeys(c.as_filter() for c in self.claims() if c.receive))
+
+    def preview_command(self, setpoints: Sequence[float]) -> list[Frame]:
         """The frames :meth:`command` would send for these setpoints from a freshly
         enabled driver with no feedback (pure; for ``wheelgate frames`` and tests).
 
@@ -207,16 +301,7 @@ class MotorDriver(abc.ABC):
         """
         fresh = type(self)(self.motors)
         fresh.enable(0.0)
-        return fresh.command(wheel_rad_s, 0.0)
-
-    def poll(self, now_s: float) -> list[Frame]:
-        """Housekeeping frames due at ``now_s`` (requests, sequence steps, SYNC)."""
-        return []
-
-    @classmethod
-    @abc.abstractmethod
-    def make_simulator(cls, motor: MotorConfig) -> DeviceSimulator:
-        """A device simulator that speaks the device side of this protocol for ``motor``."""
+        return fresh.command(setpoints, 0.0)
 
     # ----------------------------------------------------------------- protection
 
@@ -228,21 +313,9 @@ class MotorDriver(abc.ABC):
         else :attr:`Guard.UNSTATED` with :attr:`TIMEOUT_FIX`.  Drivers that configure it
         themselves, or whose controllers have none, override this.
         """
-        stated = self.motors[index].options.get("controller_timeout_s")
-        if isinstance(stated, (int, float)) and not isinstance(stated, bool) and stated > 0:
-            return Protection(
-                Guard.STATED,
-                float(stated),
-                self.TIMEOUT_ACTION,
-                "set on the controller outside wheelgate; stated by controller_timeout_s "
-                "(not verifiable over CAN)",
-            )
-        return Protection(
-            Guard.UNSTATED,
-            None,
-            "unknown",
-            f"not stated: nothing known stops this {self.PROTOCOL} motor if wheelgate dies",
-            self.TIMEOUT_FIX,
+        return stated_protection(
+            self.PROTOCOL, self.TIMEOUT_ACTION, self.TIMEOUT_FIX,
+            getattr(self.opts[index], "controller_timeout_s", None) or 0.0,
         )
 
     def uncontrolled_band(self, index: int) -> tuple[float, float] | None:
@@ -254,8 +327,22 @@ class MotorDriver(abc.ABC):
 
     def protection_state(self, index: int) -> ProtectionState:
         """Where the configuring of motor ``index``'s protection stands (drivers with
-        :attr:`Guard.CONFIGURED` protection override this)."""
+        :attr:`CONFIGURES_PROTECTION` override this)."""
         return ProtectionState.NOT_APPLICABLE
+
+    def protection_failure(self, index: int) -> str:
+        """Why motor ``index``'s protection failed (what came back), for the fault text."""
+        return "not confirmed"
+
+    def may_arm(self, index: int) -> bool:
+        """Whether motor ``index`` may be armed as far as its protection goes: confirmed, not
+        configured by this driver, or failed under :attr:`WatchdogPolicy.WARN`."""
+        state = self.protection_state(index)
+        if state is ProtectionState.PENDING:
+            return False
+        if state is ProtectionState.FAILED:
+            return self.watchdog_policy is WatchdogPolicy.WARN
+        return True
 
     def protection_fault(self, index: int, why: str) -> None:
         """Record that motor ``index``'s protection could not be confirmed: a FAULT
@@ -266,11 +353,7 @@ class MotorDriver(abc.ABC):
         :meth:`clear_protection_fault` (a new enable).
         """
         m = self.motors[index]
-        fix = self.protection(index).fix
-        text = (
-            f"motor {m.wheel!r} ({self.PROTOCOL} node {m.node_id}): controller watchdog not "
-            f"confirmed: {why}" + (f"; fix: {fix}" if fix else "")
-        )
+        text = fault_text(m.wheel, self.PROTOCOL, m.node_id, why, self.protection(index).fix)
         if self.watchdog_policy is WatchdogPolicy.REQUIRED:
             log.error("%s; not arming it (gateway.controller_watchdog: required)", text)
             self._protection_failed[index] = text
@@ -296,9 +379,35 @@ class MotorDriver(abc.ABC):
         """The position of ``node_id`` in :attr:`motors`, or ``None``."""
         return self._index.get(node_id)
 
-    def store_feedback(self, index: int, feedback: WheelFeedback) -> None:
-        """Record new feedback for motor ``index``."""
+    def store_feedback(self, index: int, feedback: WheelFeedback, stream: int | None = 0) -> None:
+        """Record new feedback for motor ``index``, and liveness stream ``stream`` heard at its
+        time (``None``: the caller reports the streams itself, with :meth:`heard`, e.g. when
+        the feedback is stamped with the older of two frames)."""
         self._feedback[index] = feedback
+        if stream is not None:
+            self.live.heard(index, stream, feedback.timestamp_s)
+
+    def heard(self, index: int, stream: int, t: float) -> None:
+        """Motor ``index``'s liveness stream ``stream`` (an index into
+        :attr:`LIVENESS_STREAMS`) was heard at ``t``."""
+        self.live.heard(index, stream, t)
+
+    def alive(self, index: int, now_s: float) -> bool:
+        """Whether every liveness stream of motor ``index`` is younger than ``liveness_s``."""
+        return self.live.alive(index, now_s)
+
+    def silent_streams(self, index: int, now_s: float) -> list[str]:
+        """The names of motor ``index``'s liveness streams that are missing or too old."""
+        return self.live.silent(index, now_s)
+
+    @property
+    def liveness_s(self) -> float:
+        """Feedback older than this (s) marks a motor OFFLINE (``liveness_s``, one per bus)."""
+        return self.live.liveness_s
+
+    @liveness_s.setter
+    def liveness_s(self, value: float) -> None:
+        self.live.liveness_s = value
 
     def set_fault(self, index: int, faults: DriveFault, detail: str = "") -> None:
         """Record the fault flags (``DriveFault.NONE`` clears) of motor ``index``; a
@@ -322,33 +431,41 @@ class MotorDriver(abc.ABC):
         """The fault flags of motor ``index``."""
         return self._faults[index]
 
+    def detail(self, index: int) -> str:
+        """The fault text of motor ``index`` (empty when healthy)."""
+        return self._detail[index]
+
     def feedback(self, index: int) -> WheelFeedback | None:
         """Latest feedback of motor ``index``."""
         return self._feedback[index]
 
     def state(self, index: int, now_s: float) -> DriveState:
-        """What the driver believes of motor ``index`` at ``now_s``."""
-        fb = self._feedback[index]
-        if fb is None or now_s - fb.timestamp_s > self.liveness_s:
+        """What the driver believes of motor ``index`` at ``now_s``: OFFLINE while a liveness
+        stream is silent, FAULT while fault flags are set, else :meth:`_ready_state`."""
+        heard = self._heard_s[index]
+        if heard is None or now_s - heard > self.live.liveness_s:
             return DriveState.OFFLINE
         if self._faults[index]:
             return DriveState.FAULT
+        return self._ready_state(index)
+
+    def _ready_state(self, index: int) -> DriveState:
+        """Hook of :meth:`state` for a live motor without faults: ENABLED when armed, else
+        DISABLED (drivers with an enable sequence add ENABLING)."""
         return DriveState.ENABLED if self._armed[index] else DriveState.DISABLED
 
     def status(self, now_s: float) -> tuple[MotorStatus, ...]:
-        """A snapshot of every motor."""
-        # Called every cycle: locals and positional construction (no per-field keywords).
-        state, feedback, faults, detail = self.state, self._feedback, self._faults, self._detail
+        """A snapshot of every motor, for reports."""
         out = []
         for i, m in enumerate(self.motors):
-            fb = feedback[i]
+            fb = self._feedback[i]
             out.append(
                 MotorStatus(
                     m.wheel,
                     m.node_id,
-                    state(i, now_s),
-                    faults[i],
-                    detail[i],
+                    self.state(i, now_s),
+                    self._faults[i],
+                    self._detail[i],
                     None if fb is None else now_s - fb.timestamp_s,
                     fb,
                 )

@@ -16,9 +16,11 @@ which the odometry uses in place of the commanded one (:meth:`DriveSet.measured_
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from itertools import repeat
+from typing import TYPE_CHECKING, Any
 
 from gateway.core.linkage import virtual_angle, wheel_angle
+from gateway.drive.claims import FrameRouter
 from gateway.drive.registry import get_driver_class
 
 if TYPE_CHECKING:
@@ -26,10 +28,9 @@ if TYPE_CHECKING:
 
     from gateway.core.protection import Protection
     from gateway.core.settings import GatewayConfig
-    from gateway.core.types import Frame, MotorConfig, MotorStatus, WheelFeedback
+    from gateway.core.types import DriveState, Frame, MotorConfig, MotorStatus, WheelFeedback
     from gateway.drive.driver import MotorDriver
     from gateway.drive.filters import CanFilter
-    from gateway.sim.device import DeviceSimulator
 
 
 class DriveSet:
@@ -51,7 +52,7 @@ class DriveSet:
                 groups.setdefault(motor.driver, []).append(i)
         #: (driver, setpoint slots) pairs: a slot below the number of wheels is that wheel's
         #: speed (model order); slot ``wheels + k`` is steering actuator ``k``'s angle.
-        self.groups: tuple[tuple[MotorDriver, tuple[int, ...]], ...] = tuple(
+        self.groups: tuple[tuple[MotorDriver[Any], tuple[int, ...]], ...] = tuple(
             (
                 get_driver_class(name)([m for m in (slots[i] for i in idx) if m is not None]),
                 tuple(idx),
@@ -60,6 +61,10 @@ class DriveSet:
         )
         for drv, _ in self.groups:
             drv.watchdog_policy = config.loop.controller_watchdog
+        #: Who owns a received frame, from every driver's claims.
+        self._router: FrameRouter[MotorDriver[Any]] = FrameRouter(
+            (drv, drv.claims()) for drv, _ in self.groups
+        )
         index = config.model.index
         #: Per steering actuator, the model indices of the wheels it turns.
         self.steered_by: tuple[tuple[int, ...], ...] = tuple(
@@ -162,30 +167,18 @@ class DriveSet:
         return [f for drv, _ in self.groups for f in drv.poll(now_s)]
 
     def on_frame(self, frame: Frame) -> bool:
-        """Give a received frame to the driver it belongs to."""
-        for drv, _ in self.groups:
-            if drv.on_frame(frame):
-                return True
-        return False
+        """Give a received frame to the driver that claims it (:mod:`gateway.drive.claims`):
+        one dictionary lookup, whatever the number of drivers.
 
-    def receive_filters(self) -> tuple[CanFilter, ...] | None:
-        """The receive filters of every driver (:meth:`MotorDriver.receive_filters`), in
-        driver order without repeats: whatever :meth:`on_frame` would give a driver passes.
-
-        :return: ``None`` if a driver does not declare what it takes (:meth:`undeclared`):
-            it needs every frame of the bus.
+        :return: whether a driver took it.
         """
-        out: dict[CanFilter, None] = {}
-        for drv, _ in self.groups:
-            declared = drv.receive_filters()
-            if declared is None:
-                return None
-            out.update(dict.fromkeys(declared))
-        return tuple(out)
+        drv = self._router.owner(frame.arbitration_id, frame.is_extended_id)
+        return drv is not None and drv.on_frame(frame)
 
-    def undeclared(self) -> list[str]:
-        """The class names of the drivers that do not declare the identifiers they take."""
-        return [type(drv).__name__ for drv, _ in self.groups if drv.receive_filters() is None]
+    def receive_filters(self) -> tuple[CanFilter, ...]:
+        """The receive filters of every driver (:meth:`MotorDriver.receive_filters`), in
+        driver order without repeats: whatever :meth:`on_frame` would give a driver passes."""
+        return tuple(dict.fromkeys(f for drv, _ in self.groups for f in drv.receive_filters()))
 
     def protections(self) -> list[tuple[str, Protection]]:
         """Every motor's controller-side protection (:mod:`gateway.core.protection`), labelled
@@ -208,7 +201,8 @@ class DriveSet:
 
     def status(self, now_s: float) -> list[MotorStatus]:
         """Every motor's status: the drive motors in model order of their wheels, then the
-        steering actuators in the order of the ``steering:`` blocks."""
+        steering actuators in the order of the ``steering:`` blocks.  For reports and fault
+        messages; the loop reads :meth:`states` and :meth:`motor_feedback` every cycle."""
         out: list[MotorStatus] = []
         for drv, idx in self.groups:
             statuses = drv.status(now_s)
@@ -221,8 +215,31 @@ class DriveSet:
         order = self._status_order
         return out if order is None else [out[k] for k in order]
 
+    def states(self, now_s: float) -> list[DriveState]:
+        """Every motor's state (:meth:`MotorDriver.state`), in the order of :meth:`status`:
+        what the supervisor reads every cycle, without building a status per motor."""
+        out: list[DriveState] = []
+        for drv, idx in self.groups:
+            n = len(idx)
+            out += map(drv.state, range(n), repeat(now_s, n))
+        order = self._status_order
+        return out if order is None else [out[k] for k in order]
+
+    def motor_feedback(self) -> list[WheelFeedback | None]:
+        """Every motor's latest feedback (:meth:`MotorDriver.feedback`; ``None``: none yet),
+        in the order of :meth:`status`."""
+        out: list[WheelFeedback | None] = []
+        for drv, idx in self.groups:
+            out += map(drv.feedback, range(len(idx)))
+        order = self._status_order
+        return out if order is None else [out[k] for k in order]
+
     def feedback_by_wheel(self) -> list[WheelFeedback | None]:
         """The latest feedback of every wheel in model order (``None``: passive or none yet)."""
+        if self._whole:
+            # One driver for every wheel, in model order: its motors are the wheels.
+            drv = self.groups[0][0]
+            return list(map(drv.feedback, range(len(self.config.motors))))
         out = self._slot_feedback()
         return out[: len(self.config.motors)] if self.steered_by else out
 
@@ -255,6 +272,7 @@ class DriveSet:
                 out[i] = angle
         return commanded if out is None else tuple(out)
 
-    def simulators(self) -> list[DeviceSimulator]:
-        """A device simulator for every motor."""
-        return [drv.make_simulator(m) for drv, _ in self.groups for m in drv.motors]
+    def all_motors(self) -> list[MotorConfig]:
+        """Every motor, driver by driver (the order :func:`gateway.sim.registry.simulators_for`
+        gets them in for a robot's simulated controllers)."""
+        return [m for drv, _ in self.groups for m in drv.motors]

@@ -9,7 +9,7 @@ from __future__ import annotations
 import importlib
 import logging
 from importlib.metadata import entry_points
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from drivers import BUILTIN_DRIVERS
 from gateway.core.errors import DriverNotFoundError
@@ -36,7 +36,7 @@ def valid_drivers() -> frozenset[str]:
 VALID_DRIVERS: frozenset[str] = frozenset(BUILTIN_DRIVERS)
 
 
-def get_driver_class(name: str) -> type[MotorDriver]:
+def get_driver_class(name: str) -> type[MotorDriver[Any]]:
     """The driver class registered under ``name``.
 
     :raises DriverNotFoundError: if no driver has that name, or it cannot be loaded.

@@ -25,14 +25,16 @@ import can
 from gateway.config import default_socket_path
 from gateway.core.control import Accepted, Source
 from gateway.core.errors import GatewayError
+from gateway.core.settings import FeedbackRecovery
 from gateway.core.types import DriveState, ErrorCode, Frame, GatewayState
 from gateway.runtime.latch import EstopLatch, latch_path
 from gateway.runtime.loop import Gateway
-from gateway.runtime.report import status_dict
+from gateway.runtime.report import build_status
 from gateway.runtime.sdnotify import SystemdNotifier
 from gateway.runtime.server import ControlServer
 from gateway.runtime.timing import MissProbe, Scheduler, realtime_setup
 from gateway.sim.bus import SimulatedControllers
+from gateway.sim.registry import simulators_for
 from gateway.wire.socket import (
     CommandRequest,
     Op,
@@ -44,13 +46,16 @@ from gateway.wire.socket import (
     event,
     reply_error,
     reply_ok,
+    reply_ok_data,
     reply_protocol_error,
 )
+from gateway.wire.socket.status import odometry_to_json, status_to_json
 
 if TYPE_CHECKING:
     from types import FrameType
 
     from gateway.core.settings import GatewayConfig
+    from gateway.core.status import GatewayStatus
     from gateway.wire.socket import Request
 
 log = logging.getLogger(__name__)
@@ -113,7 +118,7 @@ class Daemon:
             self.sim: SimulatedControllers | None = None
             if sim:
                 # Started by run(), after realtime_setup (see there).
-                self.sim = SimulatedControllers(self.gateway.drives.simulators(),
+                self.sim = SimulatedControllers(simulators_for(self.gateway.drives.all_motors()),
                                                 config.bus.channel)
                 self._closers.append(self.sim.shutdown)
             path = socket_path or config.loop.socket or default_socket_path()
@@ -172,7 +177,8 @@ class Daemon:
             return
         if isinstance(request, ResetOdometryRequest):
             gw.odometry.reset(request.pose)
-            server.reply(client, reply_ok(rid, {"odometry": gw.odometry_dict()}))
+            odometry = odometry_to_json(gw.odometry.state)
+            server.reply(client, reply_ok(rid, {"odometry": odometry}))
             return
         if isinstance(request, SubscribeRequest):
             server.subscribe(client, request.topics)
@@ -196,7 +202,7 @@ class Daemon:
     def _command(self, client: int, request: CommandRequest, now_s: float) -> None:
         sup, rid = self.gateway.supervisor, request.id
         if request.op is Op.STATUS:
-            self.server.reply(client, reply_ok(rid, self.status()))
+            self.server.reply(client, reply_ok_data(rid, status_to_json(self.status())))
             return
         if request.op is Op.STOP:
             sup.stop(now_s)
@@ -211,9 +217,10 @@ class Daemon:
             self.server.unsubscribe(client)
         self.server.reply(client, reply_ok(rid, {"state": sup.state}))
 
-    def status(self) -> dict[str, object]:
-        """Everything a ``status`` request returns."""
-        return status_dict(self, time.monotonic())
+    def status(self) -> GatewayStatus:
+        """Everything a ``status`` request returns, now."""
+        return build_status(self.gateway, self.scheduler.timer.snapshot(), self.socket_path,
+                            self.server.counters, self.rt_notes, time.monotonic())
 
     # ----------------------------------------------------------------- loop
 
@@ -312,7 +319,8 @@ class Daemon:
         text = gw.state.name + (f": {reason}" if reason else "")
         if gw.state is GatewayState.ENABLING:
             return text + ": waiting for the motors to enable"
-        if gw.state is GatewayState.FAULT and self.config.loop.feedback_recovery == "auto":
+        if (gw.state is GatewayState.FAULT
+                and self.config.loop.feedback_recovery is FeedbackRecovery.AUTO):
             offline = [s.name for s in gw.drives.status(time.monotonic())
                        if s.state is DriveState.OFFLINE]
             if offline:

@@ -1,15 +1,19 @@
 """One control cycle of the gateway: receive, decide, solve, send one burst, integrate.
 
-:class:`Gateway` owns the bus, the drivers, the odometry and the supervisor.  Its
-:meth:`Gateway.cycle` is deterministic given the time it is called with, so tests run it on
-simulated time; :mod:`gateway.runtime.daemon` calls it from the real-time loop.
+:class:`Gateway` owns the drivers, the odometry and the supervisor, and three parts of its
+own: the bus (:class:`~gateway.bus.edge.BusEdge`: send, receive, tally, reopen), the CAN
+command input (:class:`~gateway.runtime.can_twist.CanTwists`) and the reports
+(:class:`~gateway.runtime.publish.Publisher`).  Its :meth:`Gateway.cycle` is deterministic
+given the time it is called with, so tests run it on simulated time;
+:mod:`gateway.runtime.daemon` calls it from the real-time loop.
 
 Each cycle:
 
 1. drain the bus: CAN twist frames go to the supervisor, feedback frames to the drivers
    (timestamped on receipt);
 2. the supervisor turns the motors' states and the newest valid twist into a target;
-3. inverse kinematics and limits (one scale factor, reported) give every wheel's speed;
+3. inverse kinematics and limits (one scale factor, reported) give every wheel's speed (one
+   solve per new target: the supervisor's feasibility check of an accepted twist is it);
 4. every wheel's frame (and every steering actuator's) is built, then all go out as one
    burst, so no two wheels act on commands from different cycles;
 5. odometry integrates the encoder positions exactly (SE(2)), with the steering angles the
@@ -19,7 +23,6 @@ Each cycle:
 
 from __future__ import annotations
 
-import collections
 import logging
 import time
 from typing import TYPE_CHECKING
@@ -27,36 +30,34 @@ from typing import TYPE_CHECKING
 from gateway.bus.edge import BusEdge, bus_options
 from gateway.bus.health import BusErrorState
 from gateway.core.control import Accepted, Rejection, Source, Supervisor
-from gateway.core.errors import DecodeError, GatewayError, KinematicsError
+from gateway.core.errors import GatewayError, KinematicsError
 from gateway.core.kinematics import Odometry, apply_limits
-from gateway.core.types import ConstraintCode, ErrorCode, Frame, GatewayState, Twist
+from gateway.core.odom_feed import OdomFeed
+from gateway.core.types import ErrorCode, Frame, GatewayState, Twist
 from gateway.drive.driveset import DriveSet
-from gateway.drive.filters import gateway_filters
+from gateway.drive.ownership import gateway_filters
+from gateway.runtime.can_twist import CanTwists
+from gateway.runtime.publish import Publisher
 from gateway.runtime.timing import LoopTimer
-from gateway.wire.can import (
-    NO_TWIST_COUNTER,
-    NO_WHEEL,
-    CounterKind,
-    CounterTracker,
-    ErrorReport,
-    StatusFlags,
-    StatusReport,
-    TwistFlags,
-    WgCodec,
-)
+from gateway.wire.can import NO_TWIST_COUNTER, StatusReport, WgCodec
 
 if TYPE_CHECKING:
+    import collections
+
     import can
 
+    from gateway.bus.health import BurstTracker, BusErrors
     from gateway.core.kinematics import IkResult, LimitReport
     from gateway.core.settings import GatewayConfig
     from gateway.drive.labels import FrameLabeler
 
 log = logging.getLogger(__name__)
 
+#: Every wheel's steering angle (``None``: not steered), as in ``IkResult.steer_rad``.
+Angles = tuple[float | None, ...]
 
 
-class Gateway(BusEdge):
+class Gateway:
     """The gateway's state and its cycle.
 
     :param config: the validated configuration.
@@ -81,33 +82,27 @@ class Gateway(BusEdge):
         self.supervisor = Supervisor(self.model, config.loop, self.drives.host_speed_loop)
         self.supervisor.tracking.dead_bands = self.drives.uncontrolled_bands()
         self.odometry = Odometry(self.model)
+        self._driven = tuple(i for i, m in enumerate(config.motors) if m is not None)
+        self.odom_feed = OdomFeed(self._driven)
         self.wg = WgCodec(config.loop.can_ids)
-        self.counter = CounterTracker()
-        self._last_can_twist_s: float | None = None
         self.timer = timer if timer is not None else LoopTimer(config.loop.rate_hz)
-        self.record = record
-        self.stamp_with_cycle_time = stamp_with_cycle_time
         self.period_s = 1.0 / config.loop.rate_hz
-        self._bus_failures = 0
-        self._since_reopen = 0
         #: Event counters for status reports.
         self.counts = {
             "cycles": 0, "frames_sent": 0, "frames_received": 0, "send_failures": 0,
             "bus_reopens": 0, "can_twists": 0, "can_duplicates": 0, "can_lost": 0,
             "bad_can_twists": 0, "errors_reported": 0, "odometry_errors": 0,
         }
-        #: The identifiers the gateway consumes (``None``: a driver does not say).
+        #: The identifiers the gateway consumes (its drivers' claims and its twist input).
         self.receive_filters = gateway_filters(config, self.drives)
-        self._setup_edge(bus_options(
-            config.bus.interface,
-            None if self.receive_filters is None
-            else [f.as_python_can() for f in self.receive_filters],
-        ))
-        self._own_bus = bus is None
-        self.bus = bus if bus is not None else self._open()
+        #: The bus: sending, receiving, tallying, reopening.
+        self.edge = BusEdge(
+            config, bus, self.counts, self.period_s,
+            bus_options(config.bus.interface, [f.as_python_can() for f in self.receive_filters]),
+            record, stamp_with_cycle_time,
+        )
         self._labeler: FrameLabeler | None = None
         self.prev: IkResult = self.model.ik(Twist())
-        self._driven = tuple(i for i, m in enumerate(config.motors) if m is not None)
         # The wheel each motor's name stands for (a steering actuator: its first wheel), for
         # the wheel field of WG_Error and the faulted-motor mask of WG_Status.
         self._wheel_of = {w.name: i for i, w in enumerate(self.model.wheels)}
@@ -116,8 +111,8 @@ class Gateway(BusEdge):
         # Every wheel driven (most robots): the commands are the IK's speeds as they are.
         self._all_driven = len(self._driven) == len(config.motors)
         self._steering = bool(config.steering)
-        # The last inverse-kinematics solve of the cycle (see _solve).
-        self._ik_key: tuple[Twist, tuple[float | None, ...]] | None = None
+        # The last inverse-kinematics solve (see _solve), and the steering angles it holds for.
+        self._ik_key: tuple[Twist, Angles, Angles] | None = None
         self._ik_result: IkResult = self.prev
         self._ik_static = not any(w.steered for w in self.model.wheels)
         self.limit_report: LimitReport | None = None
@@ -130,67 +125,27 @@ class Gateway(BusEdge):
         #: The longest time between two cycles' bursts (s): a loop stalled for seconds shows
         #: here as seconds, whatever the deadline statistics make of the skipped deadlines.
         self.burst_gap_max_s = 0.0
-        self._next_odom_s = 0.0
-        self._next_status_s = 0.0
-        self._odom_stamp = -1.0
-        self._status_counter = 0
-        self._error_count = 0
-        #: Frames seen per (arbitration ID, extended, transmitted), for monitors.
-        self.id_counts: collections.Counter[tuple[int, bool, bool]] = collections.Counter()
-        #: Nominal bits of every frame sent and received (bus load = rate / bitrate).
-        self.bits = 0
-        #: (client, source) pairs that want to hear about errors: filled by the daemon.
-        self.outbox: list[tuple[str, dict[str, object]]] = []
-        self.last_error: dict[str, object] | None = None
+        #: Odometry, status and errors, on CAN and in the outbox.
+        self.publisher = Publisher(config.loop, self.wg, self.supervisor, self.odometry,
+                                   self.timer, self._wheel_of)
+        #: (topic, payload) news for socket subscribers: emptied by the daemon every cycle.
+        self.outbox = self.publisher.outbox
+        #: WG_Twist_Cmd frames from the bus.
+        self.can_twists = CanTwists(self.wg, config.loop, self.supervisor, self.counts,
+                                    self.twist, self.report_error)
 
     # ----------------------------------------------------------------- inputs
 
-    def handle_can_twist(self, frame: Frame, now_s: float, out: list[Frame]) -> None:
-        """A WG_Twist_Cmd from the bus (counter checked; errors answered with WG_Error)."""
-        try:
-            cmd = self.wg.decode_twist(frame)
-        except DecodeError as err:
-            self.counts["bad_can_twists"] += 1
-            self.report_error(ErrorCode.BAD_COMMAND, str(err), out)
-            return
-        if cmd is None:
-            return
-        # A sender silent for longer than the command timeout is gone: its next frame starts
-        # a new sequence, even if it repeats the counter it stopped at (a restarted sender).
-        last, self._last_can_twist_s = self._last_can_twist_s, now_s
-        timeout = self.config.loop.cmd_timeout_s
-        if last is not None and timeout > 0.0 and now_s - last > timeout:
-            self.counter.reset()
-        kind, lost = self.counter.feed(cmd.counter)
-        self.counts["can_lost"] += lost
-        duplicate = kind is CounterKind.DUPLICATE
-        self.counts["can_duplicates" if duplicate else "can_twists"] += 1
-        if cmd.flags & TwistFlags.ESTOP:
-            # Taken even from a repeated frame: an e-stop only ever stops.
-            self.supervisor.estop("e-stop requested on CAN")
-            return
-        if duplicate:
-            return
-        if cmd.flags & TwistFlags.ENABLE:
-            if (self.supervisor.state is GatewayState.ESTOP
-                    and self.config.loop.estop_release == "socket"):
-                self.report_error(
-                    ErrorCode.ESTOP, "an e-stop is released only by an enable on the control "
-                    "socket (gateway.estop_release: socket); the CAN ENABLE flag was ignored",
-                    out, twist_counter=cmd.counter)
-                return
-            self.supervisor.enable(now_s)
-            return
-        if cmd.flags & TwistFlags.STOP:
-            self.supervisor.stop(now_s)
-            return
-        result = self.twist(cmd.twist, now_s, Source.CAN)
-        if isinstance(result, Rejection):
-            self.report_error(result.code, result.message, out, result, cmd.counter)
-
     def twist(self, twist: Twist, now_s: float, source: Source) -> Accepted | Rejection:
-        """A twist from any source; infeasible or refused twists are counted and logged."""
-        result = self.supervisor.twist(twist, now_s, self.prev.steer_rad)
+        """A twist from any source; infeasible or refused twists are counted and logged.
+
+        The supervisor's feasibility check solves the inverse kinematics from the current
+        steering angles, the very solve the next cycle needs: kept for it (:meth:`_solve`).
+        """
+        steer = self.prev.steer_rad
+        result = self.supervisor.twist(twist, now_s, steer)
+        if isinstance(result, Accepted) and result.ik is not None:
+            self._remember(result.twist, steer, result.ik)
         if isinstance(result, Accepted) and result.projected and result.error is not None:
             log.warning("%s twist projected: %s", source.value, result.error)
         elif isinstance(result, Rejection):
@@ -206,25 +161,13 @@ class Gateway(BusEdge):
         twist_counter: int = NO_TWIST_COUNTER,
         wheel: str | None = None,
     ) -> None:
-        """Put an error on CAN (WG_Error) and in the outbox for socket clients.
+        """Put an error on CAN (WG_Error, appended to ``out``) and in the outbox for socket
+        clients.
 
         :param wheel: the wheel the error is about, when it is not the rejection's.
         """
-        self._error_count += 1
         self.counts["errors_reported"] += 1
-        err = rejection.error if rejection is not None else None
-        if err is not None:
-            wheel = err.wheel
-        out.append(self.wg.encode_error(ErrorReport(
-            code=code,
-            wheel=NO_WHEEL if wheel is None else self._wheel_of[wheel],
-            constraint=ConstraintCode.from_name(err.constraint) if err else ConstraintCode.NONE,
-            twist_counter=twist_counter,
-            residual_m_s=err.residual_m_s if err else 0.0,
-            count=self._error_count,
-        )))
-        self.last_error = {"code": code.name.lower(), "message": message}
-        self.outbox.append(("error", dict(self.last_error)))
+        out.append(self.publisher.error(code, message, rejection, twist_counter, wheel))
 
     # ----------------------------------------------------------------- the cycle
 
@@ -232,7 +175,8 @@ class Gateway(BusEdge):
         """One control cycle at time ``now_s`` (monotonic seconds)."""
         self.counts["cycles"] += 1
         out: list[Frame] = []
-        frames = self.receive(now_s)
+        edge = self.edge
+        frames = edge.receive(now_s)
         if frames:
             drives = self.drives
             ids = self.wg.ids
@@ -240,20 +184,21 @@ class Gateway(BusEdge):
             twist_ext = ids.extended
             for frame in frames:
                 if frame.arbitration_id == twist_id and frame.is_extended_id == twist_ext:
-                    self.handle_can_twist(frame, now_s, out)
+                    self.can_twists.handle(frame, now_s, out)
                 else:
                     drives.on_frame(frame)
         sup = self.supervisor
-        if self.starved is not None or self.bus_state_change is not None:
+        if edge.starved is not None or edge.bus_state_change is not None:
             self._bus_trouble(out)
-        elif (self.bus_errors.state is BusErrorState.BUS_OFF
+        elif (edge.bus_errors.state is BusErrorState.BUS_OFF
               and sup.state in (GatewayState.ENABLING, GatewayState.RUNNING)):
             self._bus_trouble(out, BusErrorState.BUS_OFF)
-        speeds = self.prev.wheel_rad_s
+        prev = self.prev
+        speeds = prev.wheel_rad_s
         if not self._all_driven:
             speeds = tuple(speeds[i] for i in self._driven)
-        steer = self.drives.steer_setpoints(self.prev.steer_rad) if self._steering else None
-        fault = sup.motors(self.drives.status(now_s), now_s, speeds, steer)
+        steer = self.drives.steer_setpoints(prev.steer_rad) if self._steering else None
+        fault = sup.motors(self.drives, now_s, speeds, steer)
         if fault is not None:
             log.error("fault: %s", fault.message)
             self.report_error(fault.code, fault.message, out,
@@ -273,12 +218,12 @@ class Gateway(BusEdge):
         result = self._solve(decision.twist)
         if not decision.ramp:
             self._prev_limited = False
-        elif not (result is self.prev and self._prev_limited):
+        elif not (result is prev and self._prev_limited):
             # (Skipped when the solve is the very command the limits passed last cycle -- any
             # change would have been a new object: no change means no acceleration and no
             # steering, the same report.)
             result, self.limit_report = apply_limits(
-                self.model, result, self.config.limits, self.prev, dt
+                self.model, result, self.config.limits, prev, dt
             )
             self._prev_limited = True
         if decision.armed:
@@ -289,78 +234,62 @@ class Gateway(BusEdge):
             out.extend(self.drives.disable(now_s))
         out.extend(self.drives.poll(now_s))
         self.prev = result
-        self.send(out, now_s)
+        edge.send(out, now_s)
         sent = time.perf_counter()
         if self.burst_sent_s and sent - self.burst_sent_s > self.burst_gap_max_s:
             self.burst_gap_max_s = sent - self.burst_sent_s
         self.burst_sent_s = sent
         self._integrate()
-        self._publish(now_s)
+        if now_s >= self.publisher.next_due_s:
+            edge.send(self.publisher.publish(now_s, self.limit_report, edge.errors_recent),
+                      now_s, tracked=False)
 
     def _solve(self, twist: Twist) -> IkResult:
         """Inverse kinematics of the target (zero if infeasible), remembered while the target
         and the steering angles it starts from are the same objects: the supervisor keeps
-        its target object until it changes, and the solve is a pure function of both."""
+        its target object until it changes, and the solve is a pure function of both (the
+        supervisor's own solve of an accepted twist is remembered by :meth:`twist`)."""
         steer = self.prev.steer_rad
         key = self._ik_key
-        if key is not None and key[0] is twist and (self._ik_static or key[1] is steer):
+        if key is not None and key[0] is twist and (
+                self._ik_static or key[1] is steer or key[2] is steer):
             return self._ik_result
-        result = self.model.try_ik(twist, steer) or self.model.ik(Twist())
+        return self._remember(twist, steer,
+                              self.model.try_ik(twist, steer) or self.model.ik(Twist()))
+
+    def _remember(self, twist: Twist, steer: Angles, result: IkResult) -> IkResult:
+        """Keep ``result``, the solve of ``twist`` from ``steer``, for :meth:`_solve`."""
         # Steering that starts where this solve ends gives this solve again: keyed by the
-        # result's own angles, the memo holds once the wheels have turned (they become the
-        # next cycle's starting angles when the limits pass the result unchanged).
-        self._ik_key = (twist, result.steer_rad if result.steer_rad == steer else steer)
+        # result's own angles too, the memo holds once the wheels have turned (they become
+        # the next cycle's starting angles when the limits pass the result unchanged).
+        self._ik_key = (twist, steer, result.steer_rad if result.steer_rad == steer else steer)
         self._ik_result = result
         return result
 
     def _integrate(self) -> None:
-        feedback = self.drives.feedback_by_wheel()
-        newest = self._odom_stamp
-        for fb in feedback:
-            if fb is not None and fb.timestamp_s > newest:
-                newest = fb.timestamp_s
-        if newest <= self._odom_stamp:
+        got = self.odom_feed.sample(self.drives.feedback_by_wheel())
+        if got is None:
             return
-        self._odom_stamp = newest
-        positions = [None if fb is None else fb.position_rad for fb in feedback]
-        for i in self._driven:
-            if positions[i] is None:
-                return  # integrate once every driven wheel has reported
         try:
-            self.odometry.update(positions, newest, self.drives.measured_steer(self.prev.steer_rad))
+            self.odometry.update(got[1], got[0], self.drives.measured_steer(self.prev.steer_rad))
         except KinematicsError as err:
             self.counts["odometry_errors"] += 1
             log.warning("odometry update skipped: %s", err)
 
-    def _publish(self, now_s: float) -> None:
-        loop = self.config.loop
-        frames: list[Frame] = []
-        if now_s >= self._next_odom_s:
-            self._next_odom_s = now_s + 1.0 / loop.odom_rate_hz
-            st = self.odometry.state
-            frames.append(self.wg.encode_pose(st.pose))
-            frames.append(self.wg.encode_velocity(st.twist, st.slip_m_s))
-            self.outbox.append(("odometry", self.odometry_dict()))
-        if now_s >= self._next_status_s:
-            self._next_status_s = now_s + 1.0 / loop.status_rate_hz
-            frames.append(self.wg.encode_status(self.status_report()))
-            self.outbox.append(("status", {"state": self.supervisor.state,
-                                           "reason": self.supervisor.reason}))
-        self.send(frames, now_s, tracked=False)
-
     def _bus_trouble(self, out: list[Frame], change: BusErrorState | None = None) -> None:
         """Act on what the bus reported: bus-off, or a command that does not go out, is a
         fault that names it; leaving bus-off lets the recovery go on."""
+        edge = self.edge
         if change is None:
-            change, self.bus_state_change = self.bus_state_change, None
-        starved, self.starved = self.starved, None
+            change, edge.bus_state_change = edge.bus_state_change, None
+        starved, edge.starved = edge.starved, None
         sup = self.supervisor
         bus = self.config.bus
         messages: list[tuple[str, tuple[str, ...]]] = []
         if change is BusErrorState.BUS_OFF:
             sup.bus_ok = False
             messages.append((
-                f"CAN bus-off on {bus.interface}:{bus.channel} ({self.bus_errors.last}): the "
+                f"CAN bus-off on {bus.interface}:{bus.channel} ({edge.bus_errors.last}): the "
                 f"CAN controller stopped sending after too many transmit errors; check the "
                 f"wiring, termination and bitrate of every node (the kernel restarts it with "
                 f"'ip link set {bus.channel} type can restart-ms 100')", ()))
@@ -388,40 +317,81 @@ class Gateway(BusEdge):
     # ----------------------------------------------------------------- reports
 
     def status_report(self) -> StatusReport:
-        """The WG_Status content."""
-        sup = self.supervisor
-        mask = 0
-        for name in sup.faulted:
-            mask |= 1 << min(self._wheel_of[name], 7)  # wheels 8 and up share bit 7
-        flags = StatusFlags(0)
-        if sup.cmd_timeout_active:
-            flags |= StatusFlags.CMD_TIMEOUT_ACTIVE
-        if self.limit_report is not None and self.limit_report.speed_scale < 1.0:
-            flags |= StatusFlags.SPEED_LIMITED
-        if sup.counts["projected"]:
-            flags |= StatusFlags.PROJECTED
-        if self._bus_failures or self.bus_errors.state is not BusErrorState.ACTIVE:
-            flags |= StatusFlags.BUS_ERRORS_RECENT
-        self._status_counter = (self._status_counter + 1) & 0xFF
-        return StatusReport(
-            state=sup.state,
-            faulted_motors=mask,
-            counter=self._status_counter,
-            flags=flags,
-            missed_cycles=self.timer.missed,
-            infeasible_count=sup.counts["infeasible"],
-        )
+        """The WG_Status content (each call advances its counter)."""
+        return self.publisher.status_report(self.limit_report, self.edge.errors_recent)
 
     def odometry_dict(self) -> dict[str, object]:
         """The odometry as a JSON-able mapping."""
-        st = self.odometry.state
-        return {
-            "x": st.pose.x_m, "y": st.pose.y_m, "theta": st.pose.theta_rad,
-            "vx": st.twist.vx_m_s, "vy": st.twist.vy_m_s, "wz": st.twist.wz_rad_s,
-            "slip": st.slip_m_s, "distance": st.distance_m, "t": st.timestamp_s,
-        }
+        return self.publisher.odometry_dict()
+
+    @property
+    def last_error(self) -> dict[str, object] | None:
+        """The last error reported, as ``{"code": ..., "message": ...}``."""
+        return self.publisher.last_error
 
     @property
     def state(self) -> GatewayState:
         """The supervisor's state."""
         return self.supervisor.state
+
+    # ----------------------------------------------------------------- the bus (self.edge)
+
+    @property
+    def bus(self) -> can.BusABC:
+        """The python-can bus (a new object after a reopen)."""
+        return self.edge.bus
+
+    @property
+    def record(self) -> can.Listener | None:
+        """A python-can writer that gets every frame sent and received."""
+        return self.edge.record
+
+    @record.setter
+    def record(self, writer: can.Listener | None) -> None:
+        self.edge.record = writer
+
+    @property
+    def stamp_with_cycle_time(self) -> bool:
+        """Whether received frames are stamped with the cycle's time."""
+        return self.edge.stamp_with_cycle_time
+
+    @stamp_with_cycle_time.setter
+    def stamp_with_cycle_time(self, value: bool) -> None:
+        self.edge.stamp_with_cycle_time = value
+
+    @property
+    def bus_errors(self) -> BusErrors:
+        """Error frames by class and the controller's error state."""
+        return self.edge.bus_errors
+
+    @property
+    def bursts(self) -> BurstTracker:
+        """The frames left out of recent bursts."""
+        return self.edge.bursts
+
+    @property
+    def bus_healthy(self) -> bool:
+        """Whether frames go out and the controller is not bus-off."""
+        return self.edge.bus_healthy
+
+    @property
+    def id_counts(self) -> collections.Counter[tuple[int, bool, bool]]:
+        """Frames seen per (arbitration ID, extended, transmitted), for monitors."""
+        return self.edge.id_counts
+
+    @property
+    def bits(self) -> int:
+        """Nominal bits of every frame sent and received (bus load = rate / bitrate)."""
+        return self.edge.bits
+
+    def send(self, frames: list[Frame], now_s: float | None = None, tracked: bool = True) -> bool:
+        """Send one burst (:meth:`BusEdge.send`)."""
+        return self.edge.send(frames, now_s, tracked)
+
+    def receive(self, now_s: float) -> list[Frame]:
+        """Everything waiting on the bus (:meth:`BusEdge.receive`)."""
+        return self.edge.receive(now_s)
+
+    def close(self) -> None:
+        """Close the bus if this gateway opened it (safe to call twice)."""
+        self.edge.close()

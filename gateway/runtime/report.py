@@ -1,92 +1,152 @@
-"""The gateway's status as a JSON-able mapping (socket ``status`` and ``wheelgate status``)."""
+"""The gateway's status (:class:`gateway.core.status.GatewayStatus`), built from the running
+parts: the cycle's :class:`~gateway.runtime.loop.Gateway`, the loop's timing and the control
+server's counters.
+
+:func:`build_status` is a pure function of what it is given (the daemon passes the clock's
+time); the daemon answers a ``status`` request with its JSON form
+(:func:`gateway.wire.socket.status.status_to_json`).
+"""
 
 from __future__ import annotations
 
-import dataclasses
 import math
+from types import MappingProxyType
 from typing import TYPE_CHECKING
 
+from gateway.core.status import (
+    BusHealth,
+    BusReport,
+    CanErrorState,
+    CommandReport,
+    ControllerStop,
+    Counters,
+    Direction,
+    FrameCount,
+    GatewayStatus,
+    LastError,
+    MotorReport,
+    SocketReport,
+    TimingReport,
+    TrackingReport,
+)
+from gateway.core.types import ErrorCode
+
 if TYPE_CHECKING:
-    from gateway.runtime.daemon import Daemon
+    from collections.abc import Mapping, Sequence
+
+    from gateway.core.status import ServerCounters
+    from gateway.core.types import MotorStatus
+    from gateway.runtime.loop import Gateway
+    from gateway.runtime.timing import TimingStats
+
+__all__ = ["build_status", "timing_report"]
 
 
 def _finite(value: float | None) -> float | None:
     return None if value is None or not math.isfinite(value) else value
 
 
-def status_dict(daemon: Daemon, now_s: float) -> dict[str, object]:
-    """Everything a status request returns: state, motors, odometry, counters, timing."""
-    gw = daemon.gateway
+def timing_report(stats: TimingStats, burst_gap_max_s: float) -> TimingReport:
+    """The loop's timing statistics and the longest gap between two bursts, as reported."""
+    return TimingReport(
+        cycles=stats.cycles, missed=stats.missed, rate_hz=stats.rate_hz,
+        achieved_hz=stats.achieved_hz, lateness_p50_us=stats.lateness_p50_us,
+        lateness_p99_us=stats.lateness_p99_us, lateness_max_us=stats.lateness_max_us,
+        cost_p50_us=stats.cost_p50_us, cost_p99_us=stats.cost_p99_us,
+        cost_max_us=stats.cost_max_us, latency_samples=stats.latency_samples,
+        latency_p50_us=stats.latency_p50_us, latency_p99_us=stats.latency_p99_us,
+        latency_max_us=stats.latency_max_us, late_on_cpu=stats.late_on_cpu,
+        late_runnable=stats.late_runnable, late_asleep=stats.late_asleep,
+        burst_gap_max_ms=burst_gap_max_s * 1000.0,
+    )
+
+
+def _motor(st: MotorStatus, stops: Mapping[str, ControllerStop]) -> MotorReport:
+    fb = st.feedback
+    return MotorReport(
+        st.name, int(st.node_id), st.state, st.faults, st.detail, _finite(st.feedback_age_s),
+        None if fb is None else _finite(fb.position_rad),
+        None if fb is None else _finite(fb.velocity_rad_s),
+        stops.get(st.name),
+    )
+
+
+def _by_driver(counts: Sequence[tuple[str, Mapping[str, int]]]) -> Mapping[str, Mapping[str, int]]:
+    return MappingProxyType({name: MappingProxyType(dict(n)) for name, n in counts if n})
+
+
+def _last_error(error: Mapping[str, object] | None) -> LastError | None:
+    """The loop's last error (``{"code": <lower-case ErrorCode name>, "message": ...}``)."""
+    if error is None:
+        return None
+    return LastError(ErrorCode[str(error["code"]).upper()], str(error["message"]))
+
+
+def build_status(
+    gw: Gateway,
+    timing: TimingStats,
+    socket_path: str,
+    server: ServerCounters,
+    realtime: Sequence[str],
+    now_s: float,
+) -> GatewayStatus:
+    """Everything a status request returns: state, motors, odometry, counters, timing.
+
+    :param gw: the gateway whose cycle runs.
+    :param timing: the loop's timing statistics (:meth:`LoopTimer.snapshot
+        <gateway.runtime.timing.LoopTimer.snapshot>`).
+    :param socket_path: the control socket's path.
+    :param server: the control server's counters.
+    :param realtime: what the real-time set-up did.
+    :param now_s: the monotonic clock, s.
+    """
     sup = gw.supervisor
-    protection = {}
+    stops: dict[str, ControllerStop] = {}
     for drv, _ in gw.drives.groups:
         for i, m in enumerate(drv.motors):
             prot = drv.protection(i)
-            protection[m.wheel] = {"guard": prot.guard.value, "timeout_s": prot.timeout_s,
-                                   "state": drv.protection_state(i).value}
-    motors = []
-    for st in gw.drives.status(now_s):
-        fb = st.feedback
-        motors.append({
-            "name": st.name,
-            "node_id": st.node_id,
-            "state": st.state,
-            "faults": st.faults,
-            "detail": st.detail,
-            "feedback_age_s": _finite(st.feedback_age_s),
-            "position_rad": None if fb is None else fb.position_rad,
-            "velocity_rad_s": None if fb is None else fb.velocity_rad_s,
-            "controller_stop": protection.get(st.name),
-        })
-    rejected = {
-        type(drv).__name__: dict(drv.rejected) for drv, _ in gw.drives.groups if drv.rejected
-    }
-    not_followed = {
-        type(drv).__name__: dict(drv.command_counts)
-        for drv, _ in gw.drives.groups
-        if drv.command_counts
-    }
+            stops[m.wheel] = ControllerStop(prot.guard, prot.timeout_s, drv.protection_state(i))
     limit = gw.limit_report
-    timing = {**dataclasses.asdict(daemon.scheduler.timer.snapshot()),
-              "burst_gap_max_ms": gw.burst_gap_max_s * 1000.0}
-    return {
-        "robot": gw.config.name,
-        "state": sup.state,
-        "reason": sup.reason,
-        "command": {
-            "target": sup.target,
-            "applied": gw.prev.twist,
-            "cmd_timeout_active": sup.cmd_timeout_active,
-            "speed_scale": 1.0 if limit is None else limit.speed_scale,
-            "accel_scale": 1.0 if limit is None else limit.accel_scale,
-        },
-        "motors": motors,
-        "tracking": {
-            **dataclasses.asdict(sup.tracking.limits),
-            "worst_ratio": sup.tracking.worst_ratio,
-            "steer_worst_ratio": sup.steer_tracking.worst_ratio,
-        },
-        "odometry": gw.odometry_dict(),
-        "counters": {**gw.counts, **sup.counts, "rejected_frames": rejected,
-                     "commands_not_followed": not_followed},
-        "socket": {"path": daemon.socket_path,
-                   **dataclasses.asdict(daemon.server.counters)},
-        "timing": timing,
-        "last_error": gw.last_error,
-        "realtime": daemon.rt_notes,
-        "bus": {
-            "interface": gw.config.bus.interface,
-            "channel": gw.config.bus.channel,
-            "bitrate": gw.config.bus.bitrate,
-            "healthy": gw.bus_healthy,
-            "error_state": gw.bus_errors.state.value,
-            "error_frames": dict(gw.bus_errors.counts),
-            "last_error_frame": gw.bus_errors.last,
-            "bits": gw.bits,
-            "time_s": now_s,
-            "frames": [
-                {"id": can_id, "extended": ext, "direction": "tx" if sent else "rx", "count": n}
+    errors = gw.bus_errors
+    cfg = gw.config
+    return GatewayStatus(
+        robot=cfg.name,
+        state=sup.state,
+        reason=sup.reason,
+        command=CommandReport(
+            target=sup.target,
+            applied=gw.prev.twist,
+            cmd_timeout_active=sup.cmd_timeout_active,
+            speed_scale=1.0 if limit is None else limit.speed_scale,
+            accel_scale=1.0 if limit is None else limit.accel_scale,
+        ),
+        motors=tuple(_motor(st, stops) for st in gw.drives.status(now_s)),
+        tracking=TrackingReport(sup.tracking.limits, sup.tracking.worst_ratio,
+                                sup.steer_tracking.worst_ratio),
+        odometry=gw.odometry.state,
+        counters=Counters(
+            events=MappingProxyType({**gw.counts, **sup.counts}),
+            rejected_frames=_by_driver(
+                [(type(drv).__name__, drv.rejected) for drv, _ in gw.drives.groups]),
+            commands_not_followed=_by_driver(
+                [(type(drv).__name__, drv.command_counts) for drv, _ in gw.drives.groups]),
+        ),
+        socket=SocketReport(socket_path, server),
+        timing=timing_report(timing, gw.burst_gap_max_s),
+        last_error=_last_error(gw.last_error),
+        realtime=tuple(realtime),
+        bus=BusReport(
+            interface=cfg.bus.interface,
+            channel=cfg.bus.channel,
+            bitrate=cfg.bus.bitrate,
+            health=BusHealth(gw.bus_healthy, CanErrorState(errors.state.value),
+                             MappingProxyType(dict(errors.counts)), errors.last),
+            bits=gw.bits,
+            time_s=now_s,
+            frames=tuple(
+                # int(): a driver's ID may be an IntEnum member (CiA 402's NMT, SYNC)
+                FrameCount(int(can_id), ext, Direction.TX if sent else Direction.RX, n)
                 for (can_id, ext, sent), n in sorted(gw.id_counts.items())
-            ],
-        },
-    }
+            ),
+        ),
+    )

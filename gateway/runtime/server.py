@@ -27,9 +27,9 @@ No client can stall the loop or lock the others out:
   :class:`gateway.runtime.connections.Connections` for the bounds on each client's memory.
 
 Access control -- the socket file's mode and the peers' credentials -- is described in
-:mod:`gateway.runtime.access`; the clients' side -- lines in, replies and events out, subscriptions
---
-is :class:`gateway.runtime.connections.Connections`, which the server extends.
+:mod:`gateway.runtime.access`; the clients' side -- lines in, replies and events out,
+subscriptions -- is :class:`gateway.runtime.connections.Connections` (and its base
+:class:`gateway.runtime.clients.ClientTable`), which the server extends.
 
 A client that shuts down its writing side after its requests (``socat``, ``nc -q``) is kept
 until the replies queued for it are sent, then closed at the start of the next poll.
@@ -48,6 +48,7 @@ from typing import TYPE_CHECKING, ClassVar
 
 from gateway.core.errors import ConfigError
 from gateway.core.lifecycle import Closing
+from gateway.core.status import ServerCounters
 from gateway.runtime.access import (
     ControlSocketError,
     admitted_uids,
@@ -57,7 +58,7 @@ from gateway.runtime.access import (
     remove_own_socket,
     remove_stale_socket,
 )
-from gateway.runtime.connections import Budget, Connection, Connections, Events, ServerCounters
+from gateway.runtime.connections import Budget, Connection, Connections, Events
 from gateway.wire.socket import MAX_REQUEST_BYTES, Op
 
 if TYPE_CHECKING:

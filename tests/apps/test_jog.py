@@ -22,11 +22,15 @@ from gateway.apps.jog.keys import (
     key_name,
     split_keys,
 )
-from gateway.apps.jog.screen import DaemonView, MotorView, Screen, daemon_view, render, reply_error
+from gateway.apps.jog.screen import Screen, read_status, render, reply_error
 from gateway.cli import COMMANDS, main
 from gateway.config import load_config
+from gateway.core.kinematics.odometry import OdometryState, Pose
+from gateway.core.status import CommandReport
 from gateway.core.types import Twist
+from gateway.wire.socket.status import status_to_json
 from tests.conftest import CONFIG_DIR
+from tests.wire.status_samples import sample_status
 
 if TYPE_CHECKING:
     from click.testing import CliRunner
@@ -282,30 +286,18 @@ def test_request_payloads() -> None:
 
 # --------------------------------------------------------------------- daemon replies, screen
 
-STATUS = {
-    "ok": True, "robot": "turtlebot3_burger", "state": "running", "reason": "",
-    "command": {"applied": {"vx_m_s": 0.25, "vy_m_s": 0.0, "wz_rad_s": 0.5},
-                "speed_scale": 0.5, "accel_scale": 1.0},
-    "odometry": {"x": 1.5, "y": -0.25, "theta": 0.125, "vx": 0.25, "vy": 0.0, "wz": 0.5},
-    "motors": [
-        {"name": "left", "state": "enabled", "faults": [], "feedback_age_s": 0.002,
-         "velocity_rad_s": 6.0},
-        {"name": "right", "state": "fault", "faults": ["over_temp"], "feedback_age_s": None,
-         "velocity_rad_s": None},
-    ],
-}
+STATUS = sample_status(
+    robot="turtlebot3_burger",
+    command=CommandReport(Twist(0.25, 0.0, 0.5), Twist(0.25, 0.0, 0.5), False, 0.5, 1.0),
+    odometry=OdometryState(Pose(1.5, -0.25, 0.125), Twist(0.25, 0.0, 0.5), 0.0, 1.0, 3.0),
+)
 
 
-def test_daemon_view() -> None:
-    view = daemon_view(STATUS)
-    assert view == DaemonView(
-        "turtlebot3_burger", "running", "", (1.5, -0.25, 0.125, 0.25, 0.0, 0.5),
-        Twist(0.25, 0.0, 0.5), 0.5, 1.0,
-        (MotorView("left", "enabled", (), 0.002, 6.0),
-         MotorView("right", "fault", ("over_temp",), None, None)))
-    empty = daemon_view({"ok": True})
-    assert empty.state == "?" and empty.applied is None and empty.motors == ()
-    assert all(math.isnan(v) for v in empty.odometry)
+def test_the_status_is_read_from_its_reply() -> None:
+    assert read_status({"ok": True, "id": 4, **status_to_json(STATUS)}) == (STATUS, "")
+    reply = {"ok": True, "id": 4, **status_to_json(STATUS), "motors": [{"name": "left"}]}
+    assert read_status(reply) == (
+        None, "status: status.motors[0].node_id: expected an integer, got nothing")
 
 
 def test_reply_error() -> None:
@@ -321,7 +313,7 @@ def test_render_moving_with_status() -> None:
     lim = jog_limits(load_config(CONFIG_DIR / "turtlebot3_burger.yaml"))
     state = JogState.start(lim).on_key("u", 0.0).state
     lines = render(Screen("turtlebot3_burger", "burger (differential)", "connected: /s", state,
-                          daemon_view(STATUS),
+                          STATUS,
                           "Twist is infeasible: " + "x" * 150, ("WARNING a: b",)), width=80)
     text = "\n".join(lines)
     assert all(len(ln) <= 80 for ln in lines)
@@ -337,14 +329,15 @@ def test_render_moving_with_status() -> None:
     assert "odometry: x=+1.500 m y=-0.250 m theta=+0.125 rad   v=(+0.250, +0.000, +0.500)" \
         in text
     assert "  left           enabled   wheel   +6.00 rad/s  feedback    2.0 ms  no faults" in lines
-    assert "  right          fault     wheel             -  feedback         -  over_temp" in lines
+    assert ("  right          fault     wheel             -  feedback         -  "
+            "over_tempera") in lines  # cut at the width
     assert lines[-1] == "log: WARNING a: b"
     assert not any(ln.startswith("warning:") for ln in lines)
 
 
 def test_render_warns_when_the_daemon_drives_another_robot() -> None:
     screen = Screen("default", "default (mecanum)", "connected: /s", JogState.start(HOLO),
-                    daemon_view(STATUS))
+                    STATUS)
     assert ("warning: the daemon drives 'turtlebot3_burger', but the key limits are those of "
             "'default' (pass its configuration with -c)") in render(screen, width=200)
 

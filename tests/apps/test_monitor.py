@@ -6,24 +6,37 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-from typing import TYPE_CHECKING, Any
+from types import MappingProxyType
+from typing import TYPE_CHECKING
 
 import pytest
 
 from gateway.apps.monitor import BusMonitor, FrameLabeler, StatusMonitor, render, snapshot_json
 from gateway.config import load_config
 from gateway.core.errors import DecodeError
-from gateway.core.types import Frame
+from gateway.core.status import (
+    BusHealth,
+    BusReport,
+    CanErrorState,
+    Counters,
+    Direction,
+    FrameCount,
+    MotorReport,
+)
+from gateway.core.types import DriveFault, DriveState, Frame
 from gateway.drive.driveset import DriveSet
 from gateway.sim.device import SimFault
+from gateway.sim.registry import simulators_for
 from gateway.wire.can import CanIds
 from tests.conftest import CONFIG_DIR
+from tests.wire.status_samples import sample_status
 
 if TYPE_CHECKING:
-    from collections.abc import Callable, Sequence
+    from collections.abc import Sequence
 
     from gateway.apps.monitor import MonitorSnapshot, MotorView
     from gateway.core.settings import GatewayConfig
+    from gateway.core.status import GatewayStatus
 
 #: Bits of one 8-byte standard frame: nominal and with worst-case stuffing (by hand:
 #: 34 + 64 + 13 = 111; plus floor((34 + 64 - 1) / 4) = 24 stuff bits).
@@ -49,7 +62,7 @@ class Session:
 
     def __init__(self, config: GatewayConfig, step_s: float = 0.005) -> None:
         self.host = DriveSet(config)
-        self.sims = self.host.simulators()
+        self.sims = simulators_for(self.host.all_motors())
         self.step_s = step_s
         self.t = 0.0
         self._tx = self.host.enable(0.0)
@@ -321,20 +334,20 @@ def test_render_and_json_of_a_session() -> None:
 # --------------------------------------------------------------------- daemon status
 
 
-def daemon_status(t: float, count: int, bits: int, **bus: Any) -> dict[str, Any]:
-    """A status reply as the daemon sends it (gateway/runtime/report.py), trimmed to what
-    matters."""
-    return {
-        "robot": "demo_mecanum", "state": "running", "reason": None,
-        "motors": [{"name": "front_right", "node_id": 2, "state": "enabled", "faults": [],
-                    "detail": "", "feedback_age_s": 0.004, "position_rad": 1.5,
-                    "velocity_rad_s": 2.0}],
-        "counters": {"send_failures": 2, "bus_reopens": 0, "bad_can_twists": 1,
-                     "rejected_frames": {"OdriveDriver": {"malformed: short": 3}}},
-        "bus": {"bitrate": 1_000_000, "healthy": True, "bits": bits, "time_s": t,
-                "frames": [{"id": 0x069, "extended": False, "direction": "rx", "count": count}],
-                **bus},
-    }
+def daemon_status(t: float, count: int, bits: int, healthy: bool = True) -> GatewayStatus:
+    """A daemon's status: one motor, one frame ID, a few counters."""
+    return sample_status(
+        robot="demo_mecanum",
+        motors=(MotorReport("front_right", 2, DriveState.ENABLED, DriveFault.NONE, "", 0.004,
+                            1.5, 2.0),),
+        counters=Counters(
+            MappingProxyType({"send_failures": 2, "bus_reopens": 0, "bad_can_twists": 1}),
+            MappingProxyType({"OdriveDriver": MappingProxyType({"malformed: short": 3})}),
+            MappingProxyType({})),
+        bus=BusReport("virtual", "wheelgate", 1_000_000,
+                      BusHealth(healthy, CanErrorState.ACTIVE, MappingProxyType({}), ""), bits, t,
+                      (FrameCount(0x069, False, Direction.RX, count),)),
+    )
 
 
 def test_status_monitor_rates_from_successive_replies() -> None:
@@ -346,7 +359,7 @@ def test_status_monitor_rates_from_successive_replies() -> None:
     assert [(i.label.text, i.rate_hz, i.count) for i in snap.ids] == [
         ("ODrive node 3 Get_Encoder_Estimates (rear_left)", 100.0, 200)]
     assert snap.load.nominal_percent == pytest.approx(100 * 100 * STD8_NOMINAL / 1e6)
-    assert snap.load.worst_percent is None
+    assert snap.load.worst_percent is None  # the daemon does not count worst-case bits
     assert "n/a worst case" in render(snap)
     assert snap.state == "running"
     assert snap.notes == ()
@@ -357,36 +370,41 @@ def test_status_monitor_rates_from_successive_replies() -> None:
                                  "frames unsent": 0, "receive failures": 0,
                                  "bus reopens": 0, "bad can twists": 1, "fd frames ignored": 0}
     # The window slides: the reply at 10 s is dropped once the one at 11 s is 2 s old.
-    mon.update(daemon_status(13.0, 400, 400 * STD8_NOMINAL,
-                             worst_bits=400 * STD8_WORST, healthy=False))
+    mon.update(daemon_status(13.0, 400, 400 * STD8_NOMINAL, healthy=False))
     snap = mon.snapshot()
     assert snap.ids[0].rate_hz == 150.0
-    assert snap.load.worst_percent is None  # the older reply had no worst-case bits
     assert snap.notes == ("the daemon reports its CAN bus as unhealthy",)
 
 
-def test_status_monitor_worst_case_load_and_robot_mismatch() -> None:
+def test_status_monitor_robot_mismatch() -> None:
     mon = StatusMonitor(config_at("turtlebot3_burger.yaml"))
     for t, n in ((0.0, 0), (1.0, 100)):
-        mon.update(daemon_status(t, n, n * STD8_NOMINAL, worst_bits=n * STD8_WORST))
+        mon.update(daemon_status(t, n, n * STD8_NOMINAL))
     snap = mon.snapshot()
-    assert snap.load.worst_percent == pytest.approx(100 * 100 * STD8_WORST / 1e6)
     assert "the daemon runs robot 'demo_mecanum'" in snap.notes[0]
     assert snap.motors[0].motor_rpm is None  # no such wheel in this config
 
 
-@pytest.mark.parametrize(("mutate", "message"), [
-    (lambda s: s.pop("bus"), "expected status.bus of type dict, got None"),
-    (lambda s: s["bus"].update(time_s="x"), "expected bus.time_s of type"),
-    (lambda s: s["bus"]["frames"][0].update(count=None),
-     "expected bus.frames[0].count of type int, got None"),
-])
-def test_status_monitor_names_a_bad_reply(mutate: Callable[[dict[str, Any]], object],
-                                          message: str) -> None:
-    status = daemon_status(0.0, 0, 0)
-    mutate(status)
-    with pytest.raises(DecodeError, match=message.replace("[", r"\[").replace("]", r"\]")):
-        StatusMonitor(default_config()).update(status)
+def test_status_monitor_shows_the_bus_errors_and_the_faults() -> None:
+    config = config_at("turtlebot3_burger.yaml")
+    mon = StatusMonitor(config)
+    status = sample_status(robot=config.name)
+    health = status.bus.health
+    assert health is not None
+    mon.update(dataclasses.replace(status, reason="motor 'right' faulted", bus=dataclasses.replace(
+        status.bus, health=dataclasses.replace(health, error_state=CanErrorState.BUS_OFF,
+                                               last_error_frame="bus-off"))))
+    snap = mon.snapshot()
+    assert snap.notes == ("CAN controller bus-off: bus-off", "gateway: motor 'right' faulted")
+    errors = dict(snap.errors)
+    assert (errors["error frames"], errors["error frames: no ack"],
+            errors["error frames: bus off"]) == (2, 2, 0)
+    assert "error frames: tx timeout" not in errors  # zero counts are left out
+    right = snap.motors[1]
+    assert (right.state, right.faults, right.detail) == (
+        "fault", ("over_temperature", "encoder"), "MOTOR_OVERTEMP")
+    mon.update(dataclasses.replace(status, bus=dataclasses.replace(status.bus, health=None)))
+    assert not any(name.startswith("error frames") for name, _ in mon.snapshot().errors)
 
 
 def test_status_monitor_needs_a_reply_first() -> None:

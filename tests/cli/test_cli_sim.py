@@ -21,6 +21,7 @@ from gateway.config import load_config
 from gateway.core.control import Source
 from gateway.core.types import Twist
 from gateway.drive.driveset import DriveSet
+from gateway.sim.registry import simulators_for
 from gateway.sim.truth import SimTruth, state_line
 from tests.conftest import CONFIG_DIR
 from tests.e2e_helpers import Rig, path_legs, virtual_config
@@ -75,7 +76,7 @@ def test_the_sim_truth_is_the_end_to_end_truth(name: str, channel: str) -> None:
 def test_a_wheel_steered_without_an_actuator_has_no_truth(channel: str) -> None:
     cfg = dataclasses.replace(virtual_config(CONFIG_DIR / "swerve.yaml", channel), steering=())
     drives = DriveSet(cfg)
-    sims = drives.simulators()
+    sims = simulators_for(drives.all_motors())
     truth = SimTruth(cfg, drives, sims)
     assert not truth.available
     assert truth.unsimulated == ("front_left", "front_right", "rear_left", "rear_right")
@@ -117,7 +118,7 @@ def test_announce_lines_name_every_device_then_the_bus(channel: str) -> None:
     cfg = load_config(CONFIG_DIR / "ackermann.yaml", {"interface": "virtual",
                                                        "channel": channel})
     drives = DriveSet(cfg)
-    sims = drives.simulators()
+    sims = simulators_for(drives.all_motors())
     truth = SimTruth(cfg, drives, sims)
     assert announce_lines(cfg, sims, truth, 1000.0, as_json=False) == [
         "sim: rear_left vesc node 1 (drive motor)",

@@ -2,10 +2,15 @@
 
 from __future__ import annotations
 
+import ast
 import dataclasses
+from pathlib import Path
+from typing import TYPE_CHECKING
 
 import pytest
 
+import gateway
+from gateway.core import control
 from gateway.core.control import (
     AUTO_RETRIES,
     AUTO_RETRY_DELAY_S,
@@ -13,10 +18,13 @@ from gateway.core.control import (
     Accepted,
     Fault,
     Rejection,
+    StatusBoard,
     Supervisor,
 )
+from gateway.core.errors import IllegalTransitionError
 from gateway.core.kinematics import PRESETS, RobotModel
 from gateway.core.settings import LoopConfig
+from gateway.core.transitions import IGNORED, TRANSITIONS, Event, next_state
 from gateway.core.types import (
     DriveFault,
     DriveState,
@@ -27,15 +35,18 @@ from gateway.core.types import (
     WheelFeedback,
 )
 
+if TYPE_CHECKING:
+    from collections.abc import Callable
+
 MODEL = RobotModel(PRESETS["differential"].wheels(wheel_radius=0.05, track=0.3))
 
 
-def motors(*states: DriveState, age: float | None = 0.01) -> list[MotorStatus]:
-    return [
+def motors(*states: DriveState, age: float | None = 0.01) -> StatusBoard:
+    return StatusBoard([
         MotorStatus(name, i + 1, st, DriveFault.MOTOR if st is DriveState.FAULT else
                     DriveFault.NONE, "phase loss" if st is DriveState.FAULT else "", age, None)
         for i, (name, st) in enumerate(zip(("left", "right"), states, strict=False))
-    ]
+    ])
 
 
 def state_of(sup: Supervisor) -> GatewayState:
@@ -215,8 +226,9 @@ def test_tracking_fault_of_a_host_side_speed_loop_waits_for_enable(host_loop: bo
     t, fault = 0.1, None
     while fault is None and t < 2.0:  # the right wheel turns at 10 rad/s on a command of 0
         t += 0.01
-        status = [dataclasses.replace(m, feedback=WheelFeedback(0.0, 10.0 * k, t))
-                  for k, m in enumerate(motors(DriveState.ENABLED, DriveState.ENABLED))]
+        status = StatusBoard([
+            dataclasses.replace(m, feedback=WheelFeedback(0.0, 10.0 * k, t))
+            for k, m in enumerate(motors(DriveState.ENABLED, DriveState.ENABLED).statuses)])
         fault = sup.motors(status, t, (0.0, 0.0))
     assert fault is not None and fault.code is ErrorCode.TRACKING_ERROR
     assert "'right'" in fault.message
@@ -224,3 +236,88 @@ def test_tracking_fault_of_a_host_side_speed_loop_waits_for_enable(host_loop: bo
     # The drive's own loop is re-enabled as usual; a loop closed on the host ran away on its
     # own feedback and is not restarted without an explicit enable.
     assert state_of(sup) is (GatewayState.FAULT if host_loop else GatewayState.RUNNING)
+
+
+# -- the state table ---------------------------------------------------------------------------
+
+
+def in_state(state: GatewayState) -> Supervisor:
+    """A supervisor brought to ``state`` the way the gateway gets there."""
+    sup = Supervisor(MODEL, LoopConfig())
+    if state is GatewayState.ENABLING:
+        sup.enable(0.0)
+    elif state is GatewayState.RUNNING:
+        sup = running()
+    elif state is GatewayState.FAULT:
+        sup = running()
+        sup.motors(motors(DriveState.FAULT, DriveState.ENABLED), 0.2)
+    elif state is GatewayState.ESTOP:
+        sup.estop()
+    elif state is GatewayState.STOPPING:
+        sup.shutdown()
+    assert state_of(sup) is state
+    return sup
+
+
+_D, _EN, _R = GatewayState.DISABLED, GatewayState.ENABLING, GatewayState.RUNNING
+_F, _E, _S = GatewayState.FAULT, GatewayState.ESTOP, GatewayState.STOPPING
+#: What each command does in each state (DISABLED, ENABLING, RUNNING, FAULT, ESTOP, STOPPING),
+#: as the supervisor did before its state changes were a table.
+COMMANDS: dict[str, tuple[tuple[GatewayState, ...], Callable[[Supervisor], object]]] = {
+    "enable": ((_EN, _EN, _R, _EN, _EN, _S), lambda s: s.enable(1.0)),
+    "disable": ((_D, _D, _D, _D, _E, _S), lambda s: s.disable()),
+    "estop": ((_E,) * 6, lambda s: s.estop("test")),
+    "shutdown": ((_S,) * 6, lambda s: s.shutdown()),
+    "enable_failed": ((_F,) * 6, lambda s: s.enable_failed("refused")),
+    "bus_fault": ((_D, _F, _F, _F, _E, _S), lambda s: s.bus_fault("bus-off")),
+}
+
+
+@pytest.mark.parametrize("command", sorted(COMMANDS))
+@pytest.mark.parametrize("state", list(GatewayState), ids=lambda s: s.name)
+def test_every_command_in_every_state_goes_where_it_did(command: str,
+                                                        state: GatewayState) -> None:
+    expected, act = COMMANDS[command]
+    sup = in_state(state)
+    act(sup)
+    assert state_of(sup) is expected[list(GatewayState).index(state)]
+
+
+def test_the_table_answers_every_pair_or_refuses_it() -> None:
+    assert not TRANSITIONS.keys() & IGNORED
+    for state in GatewayState:
+        for event in Event:
+            if (state, event) in TRANSITIONS:
+                assert next_state(state, event) is TRANSITIONS[state, event]
+            elif (state, event) in IGNORED:
+                assert next_state(state, event) is None
+            else:
+                with pytest.raises(IllegalTransitionError, match=(
+                        f"expected the event {event.value!r} in .*, but the gateway is "
+                        f"{state.name}")):
+                    next_state(state, event)
+    # The events only the supervisor's own checks raise are refused where they cannot happen.
+    with pytest.raises(IllegalTransitionError, match="expected the event 'enabled' in ENABLING"):
+        next_state(GatewayState.RUNNING, Event.ENABLED)
+    sup = running()
+    with pytest.raises(IllegalTransitionError, match="'retry' in FAULT, but the gateway is "
+                                                     "RUNNING"):
+        sup._go(Event.RETRY)
+    assert state_of(sup) is GatewayState.RUNNING
+
+
+def test_the_state_changes_in_one_place() -> None:
+    """``Supervisor.state`` is assigned only by ``_go`` (and its first value in ``__init__``);
+    nothing else in the package assigns a supervisor's state."""
+    tree = ast.parse(Path(control.__file__).read_text())
+    where = [
+        func.name
+        for func in ast.walk(tree) if isinstance(func, ast.FunctionDef)
+        for node in ast.walk(func) if isinstance(node, (ast.Assign, ast.AugAssign, ast.AnnAssign))
+        for target in (node.targets if isinstance(node, ast.Assign) else [node.target])
+        if isinstance(target, ast.Attribute) and target.attr == "state"
+    ]
+    assert sorted(where) == ["__init__", "_go"]
+    for path in Path(gateway.__file__).parent.rglob("*.py"):
+        text = path.read_text()
+        assert "supervisor.state =" not in text and "sup.state =" not in text, path

@@ -10,7 +10,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from gateway.config import parse_config
-from gateway.core.control import Fault, Supervisor
+from gateway.core.control import Fault, StatusBoard, Supervisor
 from gateway.core.errors import ConfigError
 from gateway.core.kinematics import PRESETS, RobotModel
 from gateway.core.settings import LoopConfig
@@ -182,9 +182,10 @@ def test_property_a_stopped_wheel_faults_by_time_s_plus_a_check(seconds: float,
 MODEL = RobotModel(PRESETS["differential"].wheels(wheel_radius=0.05, track=0.3))
 
 
-def statuses(left: float, right: float, t: float) -> list[MotorStatus]:
-    return [MotorStatus(name, i + 1, DriveState.ENABLED, DriveFault.NONE, "", 0.0, fb(v, t))
-            for i, (name, v) in enumerate((("left", left), ("right", right)))]
+def statuses(left: float, right: float, t: float) -> StatusBoard:
+    return StatusBoard([MotorStatus(name, i + 1, DriveState.ENABLED, DriveFault.NONE, "", 0.0,
+                                    fb(v, t))
+                        for i, (name, v) in enumerate((("left", left), ("right", right)))])
 
 
 def running(**cfg: object) -> Supervisor:

@@ -6,12 +6,16 @@ memo and the limits it skips while nothing changes, the drive set's status order
 and ``to_message``, and the daemon's wait, which
 must never ask epoll (whole milliseconds, rounded up) for more time than is left.  Also the
 drivers' per-frame shortcuts: received frames built past ``Frame.__new__``, the CiA 402
-statusword table and the ODrive error-word mapping on plain ints.
+statusword table and the ODrive error-word mapping on plain ints.  And those of issue 15: the
+supervisor's solve of an accepted twist reused by the loop (one solve per new twist), the
+drive set's per-cycle states and feedback (no status objects), the tracking check's skip while
+nothing changes, the supervisor's reused decisions and the bus edge's frame tallies counted in C.
 """
 
 from __future__ import annotations
 
 import copy
+import dataclasses
 import math
 import random
 from typing import TYPE_CHECKING, Any
@@ -24,11 +28,21 @@ from drivers.cia402.enums import STATUSWORD_MASK, state_from_statusword
 from drivers.odrive.enums import AXIS_ERROR_05_FAULTS, AXIS_ERROR_FAULTS, Firmware, error_faults
 from gateway.bus.can_bus import drain, to_frame, to_message
 from gateway.config import load_config, parse_config
-from gateway.core.control import Source
+from gateway.core.control import Accepted, Source, StatusBoard, Supervisor
 from gateway.core.errors import KinematicsError
 from gateway.core.kinematics import apply_limits
 from gateway.core.kinematics.odometry import Pose, _advance, compose, se2_exp
-from gateway.core.types import DriveFault, Frame, GatewayState, Twist
+from gateway.core.settings import LoopConfig
+from gateway.core.tracking import TrackingLimits, TrackingMonitor
+from gateway.core.types import (
+    DriveFault,
+    DriveState,
+    Frame,
+    GatewayState,
+    MotorStatus,
+    Twist,
+    WheelFeedback,
+)
 from gateway.drive.driveset import DriveSet
 from gateway.runtime.daemon import Daemon
 from gateway.runtime.loop import Gateway
@@ -172,21 +186,7 @@ def lockstep(rigs: list[Rig]) -> None:
 
 
 def test_drive_set_status_in_model_order_across_drivers() -> None:
-    raw = {
-        "name": "mixed", "drive": "mecanum",
-        "geometry": {"wheel_radius": 0.05, "wheelbase": 0.4, "track": 0.36},
-        "motor_defaults": {"gear_ratio": 10.0, "max_rpm": 3000},
-        "motors": {
-            "front_left": {"driver": "vesc", "node_id": 1, "pole_pairs": 7},
-            "front_right": {"driver": "odrive", "node_id": 2,
-                            "watchdog_endpoints": SIM_ODRIVE_ENDPOINTS},
-            "rear_left": {"driver": "vesc", "node_id": 3, "pole_pairs": 7},
-            "rear_right": {"driver": "odrive", "node_id": 4,
-                           "watchdog_endpoints": SIM_ODRIVE_ENDPOINTS},
-        },
-        "bus": {"interface": "virtual", "channel": "unused"},
-    }
-    cfg = parse_config(raw, "<mixed>")
+    cfg = parse_config(_MIXED, "<mixed>")
     drives = DriveSet(cfg)
     names = [s.name for s in drives.status(0.0)]
     assert names == [w.name for w in cfg.model.wheels]
@@ -321,16 +321,205 @@ def test_odrive_error_faults_match_the_flag_tables(firmware: Firmware) -> None:
 
 def test_tally_counts_ids_and_bits_as_frame_bits_does(channel: str) -> None:
     frames = [Frame(0x123, b"\x01\x02"), Frame(0x1ABCDEF, b"", True, True, 4),
-              Frame(0x123, bytes(8)), Frame(0x7FF, b"", False, True, 8), Frame(0x10, b"")]
+              Frame(0x123, bytes(8)), Frame(0x7FF, b"", False, True, 8), Frame(0x10, b""),
+              Frame(0x124, bytes(12), dlc=12)]
     gw = Gateway(load_config(None, {"interface": "virtual", "channel": channel}))
     try:
-        gw._tally(frames, True)
-        gw._tally(frames[:2], False)
+        gw.edge._tally(frames, True)
+        gw.edge._tally(frames[:2], False)
+        gw.edge._tally([], False)
         assert gw.id_counts == {(0x123, False, True): 2, (0x1ABCDEF, True, True): 1,
                                 (0x7FF, False, True): 1, (0x10, False, True): 1,
+                                (0x124, False, True): 1,
                                 (0x123, False, False): 1, (0x1ABCDEF, True, False): 1}
         expected = sum(frame_bits(0 if f.is_remote_frame else f.dlc, f.is_extended_id)
                        for f in frames + frames[:2])
         assert gw.bits == expected
+        # The same, frame by frame, as the tally was written before it counted in C.
+        rng = random.Random(9)
+        pool = [Frame(rng.choice((0x10, 0x123, 0x7FF, 0x1ABCDEF)), bytes(rng.randrange(9)),
+                      rng.random() < 0.3, rng.random() < 0.2) for _ in range(40)]
+        ids: dict[tuple[int, bool, bool], int] = dict(gw.id_counts)
+        bits = gw.bits
+        for _ in range(50):
+            burst = rng.sample(pool, rng.randrange(6))
+            sent = rng.random() < 0.5
+            gw.edge._tally(burst, sent)
+            for f in burst:
+                key = (f.arbitration_id, f.is_extended_id, sent)
+                ids[key] = ids.get(key, 0) + 1
+                bits += frame_bits(0 if f.is_remote_frame else f.dlc, f.is_extended_id)
+        assert gw.id_counts == ids
+        assert gw.bits == bits
     finally:
         gw.close()
+
+
+@pytest.mark.parametrize("robot", ["mecanum.yaml", "swerve.yaml"])
+def test_one_inverse_kinematics_solve_per_new_twist(
+        channel: str, robot: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The supervisor's feasibility check of an accepted twist is the solve the loop uses: a
+    new twist costs one solve, the cycle that follows it none; on a robot without steered
+    wheels no cycle after it solves again (steered wheels turning through the steering-rate
+    limit start each cycle from new angles, a new solve each)."""
+    cfg = virtual_config(CONFIG_DIR / robot, channel)
+    # No acceleration limit: the limits then solve nothing themselves.
+    cfg = dataclasses.replace(cfg, limits=dataclasses.replace(
+        cfg.limits, max_wheel_accel_rad_s2=math.inf))
+    with Rig(cfg) as rig:
+        rig.enable()
+        model = rig.gw.model
+        calls = [0]
+        real = type(model)._solve
+
+        def counting(self: RobotModel, *args: Any) -> Any:
+            calls[0] += self is model
+            return real(self, *args)
+
+        monkeypatch.setattr(type(model), "_solve", counting)
+        for twist in (Twist(0.3, 0.0, 0.0), Twist(0.3, 0.2, 0.1), Twist(0.0, 0.0, 0.4)):
+            calls[0] = 0
+            result = rig.gw.twist(twist, rig.t, Source.INTERNAL)
+            assert isinstance(result, Accepted) and result.ik is not None
+            assert calls[0] == 1
+            rig.advance(rig.period)
+            assert calls[0] == 1
+            assert rig.gw.prev.twist == twist
+            rig.advance(30 * rig.period)
+            if robot == "mecanum.yaml":
+                assert calls[0] == 1
+        assert rig.gw.state is GatewayState.RUNNING
+
+
+def test_ik_of_an_accepted_twist_is_the_loops_own_solve(channel: str) -> None:
+    """The solve the supervisor hands over equals the loop's own for that twist."""
+    for robot in ("mecanum.yaml", "swerve.yaml", "ackermann.yaml"):
+        with Rig(virtual_config(CONFIG_DIR / robot, f"{channel}-{robot}")) as rig:
+            rig.enable()
+            rng = random.Random(4)
+            for _ in range(15):
+                twist = Twist(rng.uniform(-0.5, 0.5), rng.uniform(-0.3, 0.3),
+                              rng.uniform(-0.6, 0.6))
+                steer = rig.gw.prev.steer_rad
+                result = rig.gw.twist(twist, rig.t, Source.INTERNAL)
+                if isinstance(result, Accepted) and result.ik is not None:
+                    assert rig.gw._solve(twist) is result.ik
+                    assert result.ik == rig.gw.model.try_ik(twist, steer)
+                rig.advance(rng.choice((1, 5)) * rig.period)
+
+
+def test_drive_set_states_and_feedback_match_the_statuses(channel: str) -> None:
+    """The per-cycle accessors give what the statuses would, motor for motor."""
+    for robot in ("mecanum.yaml", "swerve.yaml", "ackermann.yaml", "differential_tub.yaml"):
+        with Rig(virtual_config(CONFIG_DIR / robot, f"{channel}-{robot}")) as rig:
+            drives = rig.gw.drives
+            checks = 0
+            for k in range(30):
+                if k == 5:
+                    rig.gw.supervisor.enable(rig.t)
+                rig.advance(rig.period)
+                statuses = drives.status(rig.t)
+                assert drives.states(rig.t) == [s.state for s in statuses]
+                got = drives.motor_feedback()
+                assert all(a is b.feedback for a, b in zip(got, statuses, strict=True))
+                assert drives.feedback_by_wheel() == drives._slot_feedback()[:rig.gw.model.n]
+                checks += sum(f is not None for f in got)
+            assert checks > 0
+    cfg = parse_config(_MIXED, "<mixed>")
+    drives = DriveSet(cfg)
+    assert drives._status_order is not None
+    assert drives.states(0.0) == [s.state for s in drives.status(0.0)]
+    assert drives.motor_feedback() == [s.feedback for s in drives.status(0.0)]
+
+
+def _monitor_state(mon: TrackingMonitor) -> tuple[object, ...]:
+    return (list(mon._count), mon._last_s, list(mon._peak), list(mon._peak_before),
+            mon._period_start_s, mon.worst_ratio)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_tracking_skip_matches_the_full_check(seed: int) -> None:
+    """``check`` (which skips while nothing changes) and the wheel-by-wheel path agree on every
+    fault and every piece of state, over commands and feedback that change now and then."""
+    rng = random.Random(seed)
+    limits = TrackingLimits(tolerance_rad_s=1.0, tolerance_ratio=0.2, time_s=0.2)
+    fast, full = TrackingMonitor(limits), TrackingMonitor(limits)
+    bands: list[tuple[float, float] | None] = [None, (0.5, 2.0), None] if seed % 2 else []
+    fast.dead_bands = full.dead_bands = bands
+    n = 3
+    command = tuple(rng.uniform(-5, 5) for _ in range(n))
+    feedback: list[WheelFeedback | None] = [None] * n
+    full_checks = [0]
+    check_all = fast._check_all
+
+    def counting(*args: Any) -> Any:
+        full_checks[0] += 1
+        return check_all(*args)
+
+    fast._check_all = counting  # type: ignore[method-assign,assignment]
+    t, steps = 0.0, 3000
+    for step in range(steps):
+        t += 0.001
+        roll = rng.random()
+        if roll < 0.004:
+            command = tuple(rng.choice((0.0, 1.0, -1.5, rng.uniform(-8, 8))) for _ in range(n))
+        elif roll < 0.02:
+            command = (*command[:-1], command[-1])  # equal, not the same object
+        if rng.random() < 0.1:
+            i = rng.randrange(n)
+            # Mostly inside the window, so that the check has quiet spells to skip (a wheel
+            # that leaves it keeps a count for a while after it is back).
+            off = rng.choice((0.0, 0.1, -0.3, 0.5))
+            if rng.random() < 0.004:
+                off = rng.choice((3.0, -9.0, math.nan))
+            band = bands[i] if i < len(bands) else None
+            # A controller stops its motor on a command in its dead band.
+            speed = 0.0 if band and band[0] < abs(command[i]) < band[1] else command[i]
+            feedback[i] = WheelFeedback(0.0, speed + off, t)
+        if step % 700 == 699:
+            fast.reset()
+            full.reset()
+        fb = list(feedback)
+        a = fast.check(command, fb, t)
+        b = full._check_all(command, fb, t)
+        assert a == b
+        assert _monitor_state(fast) == _monitor_state(full)
+    assert full_checks[0] < 0.7 * steps  # the skip was taken
+
+
+def test_supervisor_decisions_are_reused_only_while_equal() -> None:
+    model = load_config(None).model
+    sup = Supervisor(model, LoopConfig(cmd_timeout_s=0.5))
+    sup.enable(0.0)
+    assert sup.decide(0.0) is sup.decide(0.1)  # ENABLING: one constant decision
+    enabled = [MotorStatus(w.name, k + 1, DriveState.ENABLED, DriveFault.NONE, "", 0.0, None)
+               for k, w in enumerate(model.wheels)]
+    sup.motors(StatusBoard(enabled), 0.0)
+    assert sup.state is GatewayState.RUNNING
+    decisions = []
+    for k, twist in enumerate((Twist(0.1, 0, 0), Twist(0.1, 0, 0), Twist(0.2, 0, 0))):
+        sup.twist(twist, k * 0.1)
+        first, again = sup.decide(k * 0.1), sup.decide(k * 0.1 + 0.01)
+        assert first is again and first.twist is twist and not first.cmd_timeout
+        assert (first.ramp, first.armed) == (True, True)
+        decisions.append(first)
+    assert decisions[0] is not decisions[1]  # equal twists, new objects: new decisions
+    timed_out = sup.decide(5.0)
+    assert timed_out.cmd_timeout and timed_out.twist == Twist()
+    assert sup.decide(5.1) is timed_out
+
+
+_MIXED: dict[str, object] = {
+    "name": "mixed", "drive": "mecanum",
+    "geometry": {"wheel_radius": 0.05, "wheelbase": 0.4, "track": 0.36},
+    "motor_defaults": {"gear_ratio": 10.0, "max_rpm": 3000},
+    "motors": {
+        "front_left": {"driver": "vesc", "node_id": 1, "pole_pairs": 7},
+        "front_right": {"driver": "odrive", "node_id": 2,
+                        "watchdog_endpoints": SIM_ODRIVE_ENDPOINTS},
+        "rear_left": {"driver": "vesc", "node_id": 3, "pole_pairs": 7},
+        "rear_right": {"driver": "odrive", "node_id": 4,
+                       "watchdog_endpoints": SIM_ODRIVE_ENDPOINTS},
+    },
+    "bus": {"interface": "virtual", "channel": "unused"},
+}

@@ -15,8 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import logging
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import pytest
 from hypothesis import HealthCheck, given, settings
@@ -27,9 +26,10 @@ from gateway.config import load_config, parse_config
 from gateway.config.yaml_text import load_yaml
 from gateway.core.errors import ConfigError
 from gateway.core.types import Frame, MotorConfig, Twist
-from gateway.drive.driver import MotorDriver
 from gateway.drive.driveset import DriveSet
-from gateway.drive.filters import EXT_MASK, STD_MASK, CanFilter, gateway_filters, matches_any
+from gateway.drive.filters import EXT_MASK, STD_MASK, CanFilter, matches_any
+from gateway.drive.ownership import gateway_filters
+from gateway.sim.registry import simulator_for
 from tests.conftest import CONFIG_DIR, REPO
 from tests.e2e_helpers import Rig, virtual_config
 
@@ -38,6 +38,7 @@ if TYPE_CHECKING:
     from pathlib import Path
 
     from gateway.core.settings import GatewayConfig
+    from gateway.drive.driver import MotorDriver
 
 #: The embedded default robot (``None``), the shipped configurations, and robots made from
 #: them for declarations no shipped file exercises.
@@ -62,12 +63,12 @@ def config(name: str | None) -> GatewayConfig:
     return load_config(None if name is None else CONFIG_DIR / name)
 
 
-def drivers(name: str | None) -> list[MotorDriver]:
+def drivers(name: str | None) -> list[MotorDriver[Any]]:
     """Fresh drivers of every protocol of configuration ``name``."""
     return [drv for drv, _ in DriveSet(config(name)).groups]
 
 
-def declared(drv: MotorDriver) -> tuple[CanFilter, ...]:
+def declared(drv: MotorDriver[Any]) -> tuple[CanFilter, ...]:
     filters = drv.receive_filters()
     assert filters is not None, f"{type(drv).__name__} declares no receive filters"
     return filters
@@ -81,7 +82,7 @@ def setpoints(motors: Sequence[MotorConfig]) -> list[float]:
     return [0.1 if m.steering else 2.0 for m in motors]
 
 
-def converse(driver: type[MotorDriver], motors: tuple[MotorConfig, ...], seconds: float = 0.4,
+def converse(driver: type[MotorDriver[Any]], motors: tuple[MotorConfig, ...], seconds: float = 0.4,
              step_s: float = 0.001) -> tuple[list[Frame], list[Frame]]:
     """A fresh driver of ``motors`` and their simulators talking, without a bus: the enable
     sequence, then commands every 10 ms, the simulators stepped every ``step_s`` (DJI ESCs
@@ -90,7 +91,7 @@ def converse(driver: type[MotorDriver], motors: tuple[MotorConfig, ...], seconds
     :return: the frames the simulators sent, and the frames the driver sent.
     """
     drv = driver(motors)
-    sims = [drv.make_simulator(m) for m in motors]
+    sims = [simulator_for(m) for m in motors]
     from_sims: list[Frame] = []
     from_driver: list[Frame] = []
     out = drv.enable(0.0)
@@ -404,19 +405,6 @@ def test_can_filter_semantics() -> None:
 
 
 # ----------------------------------------------------------------------------- the gateway
-
-
-def test_an_undeclared_driver_opens_the_bus_unfiltered_with_a_warning(
-    monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
-) -> None:
-    cfg = config(None)
-    drives = DriveSet(cfg)
-    monkeypatch.setattr(type(drives.groups[0][0]), "receive_filters", MotorDriver.receive_filters)
-    assert drives.receive_filters() is None
-    assert drives.undeclared() == ["OdriveDriver"]
-    with caplog.at_level(logging.WARNING, logger="gateway.drive.filters"):
-        assert gateway_filters(cfg, drives) is None
-    assert "OdriveDriver does not declare the CAN IDs it takes" in caplog.text
 
 
 def test_no_twist_filter_without_can_input(tmp_path: Path) -> None:

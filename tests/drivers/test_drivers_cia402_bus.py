@@ -1,122 +1,29 @@
-"""The CiA 402 driver against its simulator on a python-can virtual bus, and the SDO client
-against canopen's server (and canopen's client against the simulator)."""
+"""The CiA 402 driver against its simulated drives on a python-can virtual bus
+(:mod:`tests.drivers.cia402_bench`): enabling from any state, feedback, SYNC, faults and their
+recovery, silence, stopping, and drives that take their time."""
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 from typing import TYPE_CHECKING
 
-import can
-import canopen
 import pytest
-from canopen.sdo.exceptions import SdoAbortedError
 
-from drivers.cia402 import Cia402Driver, Cia402Simulator
-from drivers.cia402.codec import (
-    make_nmt,
-    make_sync,
-    make_tpdo,
-)
-from drivers.cia402.enums import (
-    DataType,
-    NmtCommand,
-    NmtState,
-    ServerCommand,
-    State,
-)
-from drivers.cia402.sdo import (
-    make_sdo_download,
-    make_sdo_upload,
-    parse_sdo_response,
-)
+from drivers.cia402.codec import make_nmt, make_sync, make_tpdo
+from drivers.cia402.enums import NmtCommand, NmtState, State
 from drivers.cia402.sequence import Phase
-from gateway.bus.can_bus import drain, send_frames
 from gateway.core.types import DriveFault, DriveState, Frame, MotorConfig
-from gateway.sim.bus import SimulatedControllers
 from gateway.sim.device import SimFault
-from tests.drivers.test_drivers_cia402 import DT, TWO_PI, hexb
+from tests.drivers.cia402_bench import COUNT_RAD, DT, LEFT, RIGHT, TWO_PI, Bench, benches, hexb
 
 if TYPE_CHECKING:
-    from collections.abc import Callable, Iterator, Sequence
-
-
-@dataclasses.dataclass
-class Bench:
-    drv: Cia402Driver
-    sims: Sequence[Cia402Simulator]
-    gw: can.BusABC
-    ctl: SimulatedControllers
-    t: float = 0.0
-    seen: list[Frame] = dataclasses.field(default_factory=list)
-    sent: list[Frame] = dataclasses.field(default_factory=list)
-
-    def send(self, frames: Sequence[Frame]) -> None:
-        send_frames(self.gw, frames)
-        self.sent += frames
-
-    def run(self, seconds: float, speeds: Sequence[float] | None = None,
-            until: Callable[[], bool] | None = None) -> bool:
-        """Step simulated time; ``speeds`` None means the loop does not call command()."""
-        for _ in range(round(seconds / DT)):
-            self.t += DT
-            self.ctl.step(self.t)
-            for raw in drain(self.gw):
-                f = raw.stamped(self.t)
-                self.seen.append(f)
-                self.drv.on_frame(f)
-            out = self.drv.poll(self.t)
-            if speeds is not None:
-                out += self.drv.command(speeds, self.t)
-            self.send(out)
-            if until is not None and until():
-                return True
-        return until is None
-
-    def state(self, i: int = 0) -> DriveState:
-        return self.drv.state(i, self.t)
-
-    def enable(self, speeds: Sequence[float] | None = None, seconds: float = 0.5) -> bool:
-        self.send(self.drv.enable(self.t))
-        return self.run(seconds, speeds, until=lambda: all(
-            self.state(i) is DriveState.ENABLED for i in range(len(self.sims))))
-
-
-@contextlib.contextmanager
-def benches(channel: str) -> Iterator[Callable[..., Bench]]:
-    """A maker of benches on ``channel``, shutting every bench down at the end."""
-    made: list[Bench] = []
-
-    def make(motors: Sequence[MotorConfig], sim_class: type[Cia402Simulator] = Cia402Simulator,
-             **sim_kwargs: object) -> Bench:
-        drv = Cia402Driver(motors)
-        sims = [sim_class(m, **sim_kwargs) for m in motors]  # type: ignore[arg-type]
-        ctl = SimulatedControllers(sims, channel)
-        try:
-            gw = can.Bus(interface="virtual", channel=channel)
-        except Exception:
-            ctl.shutdown()
-            raise
-        made.append(Bench(drv, sims, gw, ctl))
-        return made[-1]
-
-    try:
-        yield make
-    finally:
-        for b in made:
-            b.gw.shutdown()
-            b.ctl.shutdown()
+    from collections.abc import Callable, Iterator
 
 
 @pytest.fixture
 def bench(channel: str) -> Iterator[Callable[..., Bench]]:
     with benches(channel) as make:
         yield make
-
-
-LEFT = MotorConfig("left", "cia402", 3, gear_ratio=10.0)
-RIGHT = MotorConfig("right", "cia402", 5, gear_ratio=10.0, invert=True)
-COUNT_RAD = TWO_PI / 4096 / 10.0  # one position count at the wheel
 
 
 def test_enable_drive_and_read_position(bench: Callable[..., Bench]) -> None:
@@ -339,76 +246,40 @@ def test_nmt_change_while_armed(
     assert expected in status.detail and DriveFault.COMMUNICATION in status.faults
 
 
-# ===================================================================== canopen cross-checks
+# ===================================================================== drives that take their time
 
 
-def _od(*entries: tuple[int, int, int]) -> canopen.ObjectDictionary:
-    od = canopen.ObjectDictionary()  # type: ignore[no-untyped-call]
-    for index, dtype, default in entries:
-        var = canopen.objectdictionary.ODVariable(f"x{index:04X}", index, 0)
-        var.data_type, var.access_type, var.default = dtype, "rw", default
-        od.add_object(var)
-    return od
+def test_the_statusword_lags_the_controlword_and_the_driver_waits(
+    bench: Callable[..., Bench]
+) -> None:
+    b = bench([LEFT])
+    sim = b.sims[0]
+    assert sim.timing.enable_s == 0.03  # the default: a device, not an instant double
+    enable_sent: list[float] = []  # when ENABLE OPERATION went out during the walk
+    b.send(b.drv.enable(b.t))
+    for _ in range(500):
+        start = len(b.sent)
+        b.run(DT, [0.0])
+        if any(f.arbitration_id == 0x503 and f.data[0] == 0x0F for f in b.sent[start:]):
+            enable_sent.append(b.t)
+        if sim.state is State.OPERATION_ENABLED:
+            break
+    assert sim.state is State.OPERATION_ENABLED
+    assert b.t - enable_sent[0] >= 0.03 - 1e-9  # the statusword lagged by the brake's time
+    assert len(enable_sent) >= 2  # the driver resent the controlword meanwhile
+    assert b.run(0.1, [0.0], until=lambda: b.state() is DriveState.ENABLED)
 
 
-def _recv(bus: can.BusABC, cob: int) -> Frame:
-    for _ in range(200):
-        msg = bus.recv(0.02)
-        if msg is not None and msg.arbitration_id == cob:
-            return Frame(cob, bytes(msg.data))
-    raise AssertionError(f"no frame 0x{cob:03X}")
-
-
-def test_our_sdo_client_frames_against_canopen_server(channel: str) -> None:
-    net = canopen.Network()
-    net.NOTIFIER_CYCLE = 0.02
-    node = canopen.LocalNode(3, _od((0x6060, canopen.objectdictionary.INTEGER8, 1),
-                                    (0x60FF, canopen.objectdictionary.INTEGER32, 0)))
-    net.add_node(node)
-    net.connect(interface="virtual", channel=channel)
-    gw = can.Bus(interface="virtual", channel=channel)
-    try:
-        send_frames(gw, [make_sdo_download(3, 0x60FF, 0, -1000, DataType.INTEGER32)])
-        ack = parse_sdo_response(_recv(gw, 0x583))
-        assert (ack.command, ack.index) == (ServerCommand.INITIATE_DOWNLOAD, 0x60FF)
-        assert node.get_data(0x60FF, 0) == (-1000).to_bytes(4, "little", signed=True)
-        send_frames(gw, [make_sdo_upload(3, 0x6060, 0)])
-        assert parse_sdo_response(_recv(gw, 0x583)).value(DataType.INTEGER8) == 1
-        send_frames(gw, [make_sdo_upload(3, 0x2000, 0)])
-        abort = parse_sdo_response(_recv(gw, 0x583))
-        assert abort.abort_code == 0x06020000
-    finally:
-        gw.shutdown()
-        net.disconnect()
-
-
-def test_canopen_client_against_our_simulator(channel: str) -> None:
-    # An instant device: canopen's client reads 0x6061 and 0x6041 right after each write,
-    # within the few ms a drive takes to switch (the driver waits; this client does not).
-    sim = Cia402Simulator(LEFT, state_delay_s=0.0, switch_on_delay_s=0.0, enable_delay_s=0.0,
-                          mode_switch_delay_s=0.0)
-    net = canopen.Network()
-    net.NOTIFIER_CYCLE = 0.02
-    with SimulatedControllers([sim], channel) as ctl:
-        ctl.start()
-        node = canopen.RemoteNode(3, canopen.ObjectDictionary())  # type: ignore[no-untyped-call]
-        net.add_node(node)
-        net.connect(interface="virtual", channel=channel)
-        try:
-            node.sdo.RESPONSE_TIMEOUT = 2.0
-            node.sdo.download(0x6060, 0, b"\x03")
-            assert node.sdo.upload(0x6061, 0) == b"\x03"
-            assert node.sdo.upload(0x6502, 0) == (0x6D).to_bytes(4, "little")
-            node.sdo.download(0x6040, 0, b"\x06\x00")
-            assert node.sdo.upload(0x6041, 0)[0] & 0x6F == State.READY_TO_SWITCH_ON
-            with pytest.raises(SdoAbortedError) as err:
-                node.sdo.upload(0x2000, 0)
-            assert err.value.code == 0x06020000
-            with pytest.raises(SdoAbortedError) as err:
-                node.sdo.download(0x6041, 0, b"\x00\x00")
-            assert err.value.code == 0x06010002
-            with pytest.raises(SdoAbortedError) as err:  # remap while the PDO is valid
-                node.sdo.download(0x1A00, 0, b"\x00")
-            assert err.value.code == 0x08000022
-        finally:
-            net.disconnect()
+@pytest.mark.parametrize(("enable_delay_s", "ok"), [(0.3, True), (0.7, False)])
+def test_a_slow_drive_is_waited_for_up_to_the_step_timeout(
+    bench: Callable[..., Bench], enable_delay_s: float, ok: bool
+) -> None:
+    b = bench([LEFT], enable_delay_s=enable_delay_s)
+    b.send(b.drv.enable(b.t))
+    b.run(1.5, [0.0], until=lambda: b.drv.phase(0) in (Phase.ARMED, Phase.FAILED))
+    assert (b.drv.phase(0) is Phase.ARMED) is ok
+    if not ok:
+        assert ("no transition SWITCHED ON -> OPERATION ENABLED within 0.5 s after controlword "
+                "0x000F") in b.drv.status(b.t)[0].detail
+        b.run(1.0, [0.0])  # the driver's SHUTDOWN overtook the slow transition
+        assert b.sims[0].state is State.READY_TO_SWITCH_ON

@@ -9,10 +9,13 @@ the official ODrive DBC (``tests/data/odrive-cansimple-0.5.6.dbc``, a pinned cop
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import hashlib
 import math
 import struct
+import subprocess
+import sys
 from typing import TYPE_CHECKING, ClassVar
 
 import cantools
@@ -24,17 +27,18 @@ from drivers.dbc import (
     DbcCodec,
     DbcDriver,
     DbcReading,
-    DbcSimulator,
     Role,
     UnitConversion,
     describe_fault,
     parse_options,
 )
 from drivers.dbc.options import POSITION_UNITS, VELOCITY_UNITS
+from drivers.dbc.sim import DbcSimulator
 from gateway.core.errors import ConfigError, EncodeError
 from gateway.core.types import DriveFault, DriveState, Frame, MotorConfig
+from gateway.drive.claims import FrameClaim
 from gateway.drive.registry import get_driver_class
-from tests.conftest import CONFIG_DIR, DATA_DIR
+from tests.conftest import CONFIG_DIR, DATA_DIR, REPO
 
 if TYPE_CHECKING:
     from collections.abc import Mapping
@@ -257,7 +261,9 @@ def test_odrive_heartbeat_axis_error_is_a_fault() -> None:
 
 
 def test_out_of_range_command_names_signal_node_range_and_value() -> None:
-    drv = DbcDriver([motor(3, gear=1.0, command_unit="rad/s")])
+    # A max_rpm beyond the signal's range: the signal's own limit is what refuses.
+    drv = DbcDriver([dataclasses.replace(motor(3, gear=1.0, command_unit="rad/s"),
+                                         max_rpm=300000.0)])
     drv.enable(0.0)
     with pytest.raises(EncodeError) as info:
         drv.command([20000.0], 0.0)
@@ -267,20 +273,26 @@ def test_out_of_range_command_names_signal_node_range_and_value() -> None:
     )
 
 
-@pytest.mark.parametrize("speed", [math.nan, math.inf, -math.inf])
-def test_non_finite_speed_is_refused(speed: float) -> None:
-    drv = DbcDriver([motor(3)])
-    with pytest.raises(EncodeError, match=r'finite speed for node 3 \("left"\)'):
+@pytest.mark.parametrize("speed", [math.nan, math.inf, -math.inf, 31.5])
+def test_speed_beyond_max_rpm_or_not_finite_is_refused(speed: float) -> None:
+    drv = DbcDriver([motor(3, gear=10.0)])  # max_rpm 3000: 31.4159 rad/s at the wheel
+    drv.enable(0.0)
+    with pytest.raises(EncodeError) as info:
         drv.command([speed], 0.0)
+    assert str(info.value) == (
+        'Expected a wheel speed for DBC node 3 ("left") between -31.4159 and 31.4159 rad/s '
+        f"(max_rpm 3000), but got {speed}."
+    )
 
 
 def test_wrong_number_of_speeds_is_refused() -> None:
-    with pytest.raises(EncodeError, match="Expected 1 wheel speeds, but got 2"):
+    with pytest.raises(EncodeError) as info:
         DbcDriver([motor(3)]).command([0.0, 0.0], 0.0)
+    assert str(info.value) == "Expected 1 setpoints for the DBC motors (left), but got 2."
 
 
 def test_float32_signal_refuses_values_beyond_float32() -> None:
-    drv = DbcDriver([odrive_motor(3)])
+    drv = DbcDriver([dataclasses.replace(odrive_motor(3), max_rpm=1e42)])
     drv.enable(0.0)
     with pytest.raises(EncodeError, match=r'"Input_Vel".*between -3.40282e\+38 and'):
         drv.command([1e40], 0.0)
@@ -336,7 +348,7 @@ def test_simulator_counts_malformed_commands() -> None:
 @given(st.floats(-10000.0, 10000.0))
 def test_command_round_trip_within_one_step(value: float) -> None:
     codec = DbcDriver([motor(3)]).codec
-    (frame,) = codec.encode_command({3: value})
+    (frame,) = codec.encode_command([value])
     requests = codec.decode_request(frame)
     assert requests is not None and len(requests) == 1
     assert (requests[0].node_id, requests[0].role) == (3, Role.COMMAND)
@@ -347,7 +359,7 @@ def test_command_round_trip_within_one_step(value: float) -> None:
 @given(st.floats(width=32, allow_nan=False, allow_infinity=False))
 def test_float32_command_round_trip_is_exact(value: float) -> None:
     codec = odrive_codec()
-    (frame,) = codec.encode_command({3: value})
+    (frame,) = codec.encode_command([value])
     requests = codec.decode_request(frame)
     assert requests is not None and requests[0].value == value
 
@@ -368,7 +380,7 @@ def test_feedback_round_trip(vel_raw: int, pos_raw: int, fault: int) -> None:
 def test_wheel_speed_reaches_the_simulated_motor_within_one_step(
     wheel: float, gear: float, invert: bool
 ) -> None:
-    m = motor(3, gear=gear, invert=invert)
+    m = dataclasses.replace(motor(3, gear=gear, invert=invert), max_rpm=4000.0)  # 3667 rpm
     drv, sim = DbcDriver([m]), DbcSimulator(m)
     for frame in drv.enable(0.0) + drv.command([wheel], 0.0):
         sim.handle(frame, 0.0)
@@ -699,9 +711,69 @@ def test_two_motors_share_one_command_and_one_extended_status_message() -> None:
 def test_codec_is_reusable_on_its_own() -> None:
     drv = DbcDriver([motor(3)])
     codec = DbcCodec(drv.bindings)
-    assert codec.encode_command({3: 150.0}) == (Frame(0x203, struct.pack("<iBHx", 1500, 2, 1000)),)
-    assert codec.encode_enable([3], True) == (Frame(0x183, b"\x01"),)
+    assert codec.encode_command([150.0]) == [Frame(0x203, struct.pack("<iBHx", 1500, 2, 1000))]
+    assert codec.encode_enable(True) == [Frame(0x183, b"\x01")]
     assert codec.decode(Frame(0x7FF, b"")) is None
+
+
+def test_feedback_frames_carry_only_the_given_motors() -> None:
+    codec = DbcDriver([motor(3), motor(4, "right")]).codec
+    (frame,) = codec.encode_feedback([DbcReading(4, 1.5, 7, 0)])
+    assert frame == Frame(0x284, struct.pack("<hiBb", 3, 7, 0, 0))
+
+
+# ----------------------------------------------------------------------------- claims
+
+
+def test_claims_are_the_bound_messages_with_their_dbc_names() -> None:
+    drv = DbcDriver([motor(1, extra=ANGLE), motor(2, "right")])
+    assert drv.claims() == (
+        FrameClaim.exact(0x281, False, 0),  # WD_Feedback, feedback first, by ID
+        FrameClaim.exact(0x282, False, 1),
+        FrameClaim.exact(0x301, False, 0),  # WD_Angle
+        FrameClaim.exact(0x201, False, 0, receive=False),  # WD_Velocity_Command
+        FrameClaim.exact(0x181, False, 0, receive=False),  # WD_Enable
+        FrameClaim.exact(0x202, False, 1, receive=False),
+        FrameClaim.exact(0x182, False, 1, receive=False),
+    )
+    assert [str(f) for f in drv.receive_filters()] == ["281/7FF", "282/7FF", "301/7FF"]
+    names = {c.can_id: drv.message_name(c.can_id, c.extended) for c in drv.claims()}
+    assert names == {0x281: "WD_Feedback", 0x282: "WD_Feedback", 0x301: "WD_Angle",
+                     0x201: "WD_Velocity_Command", 0x202: "WD_Velocity_Command",
+                     0x181: "WD_Enable", 0x182: "WD_Enable"}
+    assert drv.message_name(0x281, True) is None  # the other ID type
+    assert drv.message_name(0x283, False) is None  # another node's
+
+
+def test_a_shared_message_is_claimed_for_no_single_motor() -> None:
+    drv = DbcDriver(dual_motors())
+    assert drv.claims() == (
+        FrameClaim.exact(0x18FF0120, True, None),
+        FrameClaim.exact(0x110, False, None, receive=False),
+    )
+    assert drv.message_name(0x18FF0120, True) == "Dual_Status"
+    assert drv.message_name(0x110, False) == "Dual_Command"
+
+
+def test_every_frame_the_driver_sends_or_takes_is_claimed() -> None:
+    m = motor(3, extra=ANGLE)
+    drv, sim = DbcDriver([m]), DbcSimulator(m)
+    sent = drv.enable(0.0) + drv.command([1.0], 0.0) + drv.disable(0.0)
+    received = sim.tick(0.0)
+    claims = drv.claims()
+    for frame, receive in [*((f, False) for f in sent), *((f, True) for f in received)]:
+        assert [c.receive for c in claims
+                if c.matches(frame.arbitration_id, frame.is_extended_id)] == [receive], frame
+        assert drv.on_frame(frame) is receive
+
+
+def test_the_driver_never_imports_its_simulator() -> None:
+    code = ("import sys, drivers.dbc; "
+            "print(sorted(m for m in sys.modules if m.startswith(('drivers.dbc.sim', "
+            "'gateway.sim'))))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True, cwd=REPO)
+    assert out.stdout.strip() == "[]"
 
 
 def test_a_config_file_with_dbc_motors_loads_and_builds_the_driver(tmp_path: Path) -> None:
@@ -715,17 +787,30 @@ def test_a_config_file_with_dbc_motors_loads_and_builds_the_driver(tmp_path: Pat
         "  - {name: left, type: fixed, alpha: 1.5707963267948966, l: 0.2, beta: 0.0,\n"
         "     radius: 0.05, motor: {node_id: 1}}\n"
         "  - {name: right, type: fixed, alpha: -1.5707963267948966, l: 0.2,\n"
-        "     beta: 3.141592653589793, radius: 0.05, motor: {node_id: 2, liveness_s: 1}}\n"
+        "     beta: 3.141592653589793, radius: 0.05,\n"
+        "     motor: {node_id: 2, controller_timeout_s: 0.3}}\n"
         "  - {name: castor, type: castor, alpha: 3.141592653589793, l: 0.25,\n"
         "     beta: -1.5707963267948966, radius: 0.025, d: 0.03}\n"
     )
     cfg = load_config(tmp_path / "robot.yaml")
     motors = [m for m in cfg.motors if m is not None]
-    assert motors[1].options["liveness_s"] == 1.0 and motors[0].options["command_scale"] == 1.0
+    assert motors[1].options["controller_timeout_s"] == 0.3
+    assert motors[0].options["command_scale"] == 1.0
     drv = DbcDriver(motors)
+    assert [drv.opts[i].controller_timeout_s for i in (0, 1)] == [0.0, 0.3]
     drv.enable(0.0)
     assert [f.arbitration_id for f in drv.command([rpm(15.0), rpm(15.0)], 0.0)] == [0x201, 0x202]
     bad = (tmp_path / "robot.yaml").read_text().replace("velocity_unit: rpm", "velocity_unit: x")
     (tmp_path / "bad.yaml").write_text(bad)
     with pytest.raises(ConfigError, match=r"bad\.yaml: wheels\[0\]\.motor\.velocity_unit"):
         load_config(tmp_path / "bad.yaml")
+
+
+def test_the_motors_of_one_bus_share_one_liveness() -> None:
+    with pytest.raises(ConfigError) as info:
+        DbcDriver([motor(1), motor(2, "right", liveness_s=1.0)])
+    assert str(info.value) == (
+        "motor 'right'.liveness_s: expected 0.25 like motor 'left' on the same DBC bus, got 1.0"
+    )
+    drv = DbcDriver([motor(1, liveness_s=0.5), motor(2, "right", liveness_s=0.5)])
+    assert drv.liveness_s == 0.5

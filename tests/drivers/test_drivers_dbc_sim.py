@@ -14,7 +14,8 @@ from typing import TYPE_CHECKING
 import can
 import pytest
 
-from drivers.dbc import DbcDriver, DbcSimulator
+from drivers.dbc import DbcDriver
+from drivers.dbc.sim import DbcSimulator, simulator_for
 from gateway.bus.can_bus import drain, send_frames
 from gateway.core.errors import ConfigError
 from gateway.core.types import DriveFault, DriveState, Frame
@@ -208,7 +209,7 @@ def test_simulator_stops_when_commands_stop(channel: str) -> None:
 def test_odrive_dbc_drives_a_simulated_odrive(channel: str) -> None:
     m = odrive_motor(3)
     drv = DbcDriver([m])
-    sim = DbcDriver.make_simulator(m)
+    sim = simulator_for(m)
     sim.fault_code = 0x40  # MOTOR_FAILED
     with rig(channel, drv, [sim]) as r:
         r.run(0.05, [TWO_PI])

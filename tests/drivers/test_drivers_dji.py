@@ -8,6 +8,8 @@ examples" table), which were checked against DJI's ``CAN_receive.c``.
 from __future__ import annotations
 
 import math
+import subprocess
+import sys
 from typing import TYPE_CHECKING
 
 import can
@@ -15,18 +17,17 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+import drivers.dji.sim
 from drivers.dji import (
     C610,
     C620,
     M2006_GEAR_RATIO,
     M3508_GEAR_RATIO,
     TEMP_HYSTERESIS_C,
-    DjiCodec,
     DjiDriver,
     DjiFeedback,
     DjiFrameId,
-    DjiMotorModel,
-    DjiSimulator,
+    DjiOptions,
     EscModel,
     SpeedPi,
 )
@@ -34,15 +35,23 @@ from drivers.dji.codec import (
     COMMAND_STRUCT,
     decode_command,
     decode_feedback,
+    encode_command,
     encode_feedback,
+    feedback_fields,
+    message_name,
     unwrap_delta,
 )
+from drivers.dji.protection import ACK_KEY
+from drivers.dji.sim import DjiMotorModel, DjiSimulator
 from gateway.bus.can_bus import drain, send_frames
 from gateway.core.errors import ConfigError, DecodeError, EncodeError
 from gateway.core.types import DriveFault, DriveState, Frame, MotorConfig
+from gateway.drive.claims import FrameClaim
 from gateway.drive.registry import get_driver_class
 from gateway.sim.bus import SimulatedControllers
 from gateway.sim.device import SimFault
+from gateway.sim.registry import simulator_for
+from tests.conftest import REPO
 
 if TYPE_CHECKING:
     from collections.abc import Callable, Sequence
@@ -88,30 +97,40 @@ def currents_in(frames: Sequence[Frame]) -> dict[int, int]:
 # ===================================================================== codec: golden bytes
 
 
+def slots(**by_esc: int) -> list[int]:
+    """The eight raw set points of ESC 1..8, ``e<n>=value`` for the ones that are not 0."""
+    raw = [0] * 8
+    for key, value in by_esc.items():
+        raw[int(key[1:]) - 1] = value
+    return raw
+
+
 def test_golden_command_esc_1_4() -> None:
     # spec section 4, worked example 1: 4000, -4000, 0, 1000 on 0x200.
-    frames = DjiCodec().encode_command({1: 4000, 2: -4000, 3: 0, 4: 1000})
-    assert frames == (Frame(0x200, bytes.fromhex("0FA0F060000003E8")),)
+    frames = encode_command(slots(e1=4000, e2=-4000, e4=1000), (0,))
+    assert frames == [Frame(0x200, bytes.fromhex("0FA0F060000003E8"))]
     assert C620.raw_to_amps(4000) == pytest.approx(4.88, abs=0.005)
 
 
 def test_golden_command_esc_5_8() -> None:
     # spec section 4, worked example 2: ESC5 = -16384 (-20 A), ESC6 = +16384 on 0x1FF.
-    frames = DjiCodec().encode_command({5: -16384, 6: 16384})
-    assert frames == (Frame(0x1FF, bytes.fromhex("C000400000000000")),)
+    frames = encode_command(slots(e5=-16384, e6=16384), (1,))
+    assert frames == [Frame(0x1FF, bytes.fromhex("C000400000000000"))]
     assert C620.amps_to_raw(-20.0) == -16384
 
 
 def test_golden_feedback() -> None:
     # spec section 4, worked example 3: ecd 8191, 1500 rpm, -200 current, 35 degC on 0x201.
     frame = Frame(0x201, bytes.fromhex("1FFF05DCFF382300"))
-    assert DjiCodec().decode(frame) == DjiFeedback(1, 8191, 1500, -200, 35)
+    assert decode_feedback(frame) == DjiFeedback(1, 8191, 1500, -200, 35)
+    assert feedback_fields(frame) == (8191, 1500, -200, 35, 0)
     assert encode_feedback(DjiFeedback(1, 8191, 1500, -200, 35)) == frame
 
 
 def test_golden_feedback_through_driver_gives_output_rpm() -> None:
     # 1500 rotor rpm = 78.11 rpm at the M3508 output (spec worked example 3).
     drv = DjiDriver([motor(1)])
+    assert drv.measurement(0) is None
     assert drv.on_frame(Frame(0x201, bytes.fromhex("1FFF05DCFF382300"), timestamp_s=1.0))
     fb = drv.feedback(0)
     assert fb is not None
@@ -128,49 +147,26 @@ def test_golden_wrap() -> None:
     assert unwrap_delta(0, 4097) == -4095
 
 
-def test_only_groups_with_motors_and_zero_slots() -> None:
-    codec = DjiCodec()
-    assert codec.encode_command({2: 100}) == (Frame(0x200, bytes.fromhex("0000006400000000")),)
-    assert codec.encode_command({8: -1}) == (Frame(0x1FF, bytes.fromhex("000000000000FFFF")),)
-    both = codec.encode_command({7: 1, 3: 2})
+def test_only_the_groups_asked_for() -> None:
+    assert encode_command(slots(e2=100), (0,)) == [
+        Frame(0x200, bytes.fromhex("0000006400000000"))
+    ]
+    assert encode_command(slots(e8=-1), (1,)) == [Frame(0x1FF, bytes.fromhex("000000000000FFFF"))]
+    both = encode_command(slots(e7=1, e3=2), (0, 1))
     assert [f.arbitration_id for f in both] == [0x200, 0x1FF]
-    assert codec.encode_command({}) == ()
+    assert encode_command(slots(), ()) == []
 
 
-def test_encode_rounds_not_truncates() -> None:
-    assert currents_in(DjiCodec().encode_command({1: 99.6, 2: -99.6})) == {
-        1: 100,
-        2: -100,
-        3: 0,
-        4: 0,
-    }
+def test_encode_refuses_what_does_not_fit_an_int16() -> None:
+    with pytest.raises(EncodeError, match="Expected int16 current set points for DJI ESCs"):
+        encode_command(slots(e3=40000), (0,))
 
 
-@pytest.mark.parametrize(
-    ("commands", "message"),
-    [
-        ({1: math.nan}, "between -16384 and 16384, but got nan"),
-        ({1: math.inf}, "but got inf"),
-        ({1: 16385}, "Expected current for ESC 1 between -16384 and 16384 (C620 raw)"),
-        ({5: -16385}, "but got -16385"),
-        ({0: 0}, "Expected ESC ID between 1 and 8, but got 0."),
-        ({9: 0}, "but got 9."),
-        ({True: 0}, "Expected an int ESC ID"),
-    ],
-)
-def test_encode_rejects(commands: dict[int, float], message: str) -> None:
-    with pytest.raises(EncodeError, match=None) as info:
-        DjiCodec().encode_command(commands)
-    assert message in str(info.value)
-
-
-def test_c610_range() -> None:
-    codec = DjiCodec({3: C610})
-    assert codec.model(3) is C610 and codec.model(1) is C620
-    assert currents_in(codec.encode_command({3: 10000}))[3] == 10000
-    with pytest.raises(EncodeError, match=r"between -10000 and 10000 \(C610 raw\)"):
-        codec.encode_command({3: 10001})
-    assert C610.raw_to_amps(10000) == 10.0
+def test_message_names() -> None:
+    assert [message_name(i) for i in (0x200, 0x1FF, 0x700, 0x201, 0x208, 0x209, 0x069)] == [
+        "COMMAND_ESC_1_4", "COMMAND_ESC_5_8", "QUICK_ID_SET", "FEEDBACK_ESC_1",
+        "FEEDBACK_ESC_8", None, None,
+    ]
 
 
 @pytest.mark.parametrize(
@@ -184,9 +180,10 @@ def test_c610_range() -> None:
     ],
 )
 def test_decode_rejects_malformed(frame: Frame, message: str) -> None:
-    with pytest.raises(DecodeError) as info:
-        decode_feedback(frame)
-    assert message in str(info.value)
+    for decode in (decode_feedback, feedback_fields):
+        with pytest.raises(DecodeError) as info:
+            decode(frame)
+        assert message in str(info.value)
 
 
 @pytest.mark.parametrize("ident", [0x069, 0x200, 0x1FF, 0x209, 0x20B, 0x700])
@@ -214,13 +211,11 @@ def test_encode_feedback_range() -> None:
 _slot = st.integers(-16384, 16384)
 
 
-@given(st.dictionaries(st.integers(1, 8), st.floats(-16384.49, 16384.49)))
-def test_command_round_trip(commands: dict[int, float]) -> None:
-    frames = DjiCodec().encode_command(commands)
+@given(st.lists(_slot, min_size=8, max_size=8), st.sets(st.integers(0, 1)))
+def test_command_round_trip(raw: list[int], groups: set[int]) -> None:
+    frames = encode_command(raw, sorted(groups))
     decoded = currents_in(frames)
-    for esc_id, value in commands.items():
-        assert abs(decoded[esc_id] - value) <= 0.5
-    assert all(v == 0 for k, v in decoded.items() if k not in commands)
+    assert decoded == {k + 1: raw[k] for g in groups for k in range(4 * g, 4 * g + 4)}
     assert all(f.dlc == 8 and not f.is_extended_id for f in frames)
 
 
@@ -281,6 +276,37 @@ def test_pi_non_finite_error_gives_zero() -> None:
     assert SpeedPi(0.1, 1.0, 20.0).step(3.0, math.nan, 0.001) == (0.0, 0.0)
 
 
+def _clip(value: float, limit: float) -> float:
+    return min(max(value, -limit), limit)
+
+
+def _reference_step(
+    pi: SpeedPi, integral_a: float, error: float, dt: float
+) -> tuple[float, float]:
+    """The control law of drivers.dji.pi as its docstring states it, with min / max."""
+    lim = pi.limit_a
+    p = pi.kp_a_per_rad_s * error
+    integral = _clip(integral_a + pi.ki_a_per_rad * error * max(dt, 0.0), lim)
+    if (p + integral > lim and error > 0.0) or (p + integral < -lim and error < 0.0):
+        integral = _clip(integral_a, lim)  # conditional integration
+    return _clip(p + integral, lim), integral
+
+
+@given(
+    st.floats(-30.0, 30.0),
+    st.floats(-1e4, 1e4),
+    st.floats(-0.01, 0.1),
+    st.floats(0.0, 10.0),
+    st.floats(0.0, 100.0),
+    st.floats(0.1, 20.0),
+)
+def test_pi_step_is_the_stated_law(
+    integral: float, err: float, dt: float, kp: float, ki: float, limit: float
+) -> None:
+    pi = SpeedPi(kp, ki, limit)
+    assert pi.step(integral, err, dt) == _reference_step(pi, integral, err, dt)
+
+
 @given(
     st.floats(-10.0, 10.0),
     st.floats(-1e4, 1e4),
@@ -294,7 +320,6 @@ def test_pi_output_within_limit(
     pi = SpeedPi(kp, ki, 10.0)
     out, new_integral = pi.step(integral, err, dt)
     assert abs(out) <= 10.0 and abs(new_integral) <= 10.0
-    assert abs(pi.preview(err)) <= 10.0
 
 
 # ===================================================================== driver: config
@@ -315,6 +340,10 @@ def test_registry_and_options() -> None:
         "no_controller_stop": "acknowledged",
     }
     assert DjiDriver([motor(1)]).liveness_s == 0.1
+    assert DjiDriver.Options is DjiOptions
+    assert ACK_KEY in DjiOptions.specs()  # the acknowledgement is a key of its own name
+    assert DjiDriver.OPTIONS["liveness_s"].default == 0.1
+    assert DjiDriver.BUS_WIDE == ("liveness_s",)
 
 
 @pytest.mark.parametrize(
@@ -326,7 +355,10 @@ def test_registry_and_options() -> None:
         ([motor(1), motor(1)], "node 1 is already used by wheel 'w1'"),
         ([motor(0)], "expected int 1..8, got 0"),
         ([motor(9)], "expected int 1..8, got 9"),
-        ([motor(1), motor(2, liveness_s=0.2)], "one liveness_s for every motor"),
+        (
+            [motor(1), motor(2, liveness_s=0.2)],
+            "motor 'w2'.liveness_s: expected 0.1 like motor 'w1' on the same DJI bus, got 0.2",
+        ),
         ([motor(1, speed_kp=1.0)], "speed_kp: unknown key"),
         ([motor(1, kp="fast")], "expected float, got 'fast'"),
     ],
@@ -370,17 +402,34 @@ def test_command_only_high_group() -> None:
 
 def test_command_validation() -> None:
     drv = DjiDriver([motor(3)])
-    with pytest.raises(EncodeError, match=r"Expected 1 wheel speeds .*, but got 2\."):
+    with pytest.raises(EncodeError) as info:
         drv.command([1.0, 2.0], 0.0)
+    assert str(info.value) == "Expected 1 setpoints for the DJI motors (w3), but got 2."
     limit = 20000.0 * TWO_PI / 60.0 / M3508_GEAR_RATIO
     with pytest.raises(EncodeError) as info:
         drv.command([120.0], 0.0)
     assert str(info.value) == (
-        f'Expected velocity for node 3 ("w3") between {-limit:.4g} and {limit:.4g} rad/s, '
-        "but got 120.0."
+        f'Expected a wheel speed for DJI node 3 ("w3") between {-limit:.6g} and {limit:.6g} '
+        "rad/s (max_rpm 20000), but got 120.0."
     )
-    with pytest.raises(EncodeError, match="but got nan"):
-        drv.preview_command([math.nan])
+    for bad in (math.nan, -120.0):
+        with pytest.raises(EncodeError, match=f"but got {bad}"):
+            drv.preview_command([bad])
+
+
+def test_rounds_to_the_nearest_raw_value() -> None:
+    # C610, gear 1, kp 0.1: 0.996 rad/s -> 0.0996 A -> 99.6 raw: 100 (99 if truncated).
+    drv = DjiDriver([motor(1, esc="c610", gear=1.0), motor(2, esc="c610", gear=1.0)])
+    assert currents_in(drv.preview_command([0.996, -0.996])) == {1: 100, 2: -100, 3: 0, 4: 0}
+
+
+def test_c610_saturates_at_its_own_full_scale() -> None:
+    drv = DjiDriver([motor(3, esc="c610", gear=1.0), motor(4, gear=1.0)])
+    cur = currents_in(drv.preview_command([500.0, -500.0]))
+    assert (cur[3], cur[4]) == (10000, -16384)
+    assert C610.raw_to_amps(10000) == 10.0
+    limited = DjiDriver([motor(3, esc="c610", gear=1.0, max_current_a=2.5)])
+    assert currents_in(limited.preview_command([500.0]))[3] == 2500
 
 
 def test_invert_flips_current_and_feedback() -> None:
@@ -423,9 +472,40 @@ def test_on_frame_counts_malformed_and_ignores_others() -> None:
     assert not drv.on_frame(Frame(0x202, bytes(8), is_extended_id=True))  # another device's
     assert drv.on_frame(Frame(0x202, is_remote_frame=True, dlc=8))
     assert drv.on_frame(Frame(0x201, bytes.fromhex("FFFF000000000000")))
-    assert drv.rejected == {"malformed feedback": 3}
-    assert drv.last_rejection["malformed feedback"].startswith("Expected")
+    assert drv.rejected == {"malformed": 3}
+    assert drv.last_rejection["malformed"].startswith("Expected")
     assert drv.feedback(0) is None and drv.feedback(1) is None
+
+
+def test_claims_filters_and_names() -> None:
+    drv = DjiDriver([motor(6), motor(2)])
+    claims = drv.claims()
+    assert claims == (
+        FrameClaim.exact(0x202, False, 1),
+        FrameClaim.exact(0x206, False, 0),
+        FrameClaim.exact(0x200, False, None, receive=False),
+        FrameClaim.exact(0x1FF, False, None, receive=False),
+    )
+    filters = drv.receive_filters()
+    assert [(f.can_id, f.extended) for f in filters] == [(0x202, False), (0x206, False)]
+    assert drv.message_name(0x206, False) == "FEEDBACK_ESC_6"
+    assert drv.message_name(0x1FF, False) == "COMMAND_ESC_5_8"
+    assert drv.message_name(0x206, True) is None
+    for ident in range(0x1F0, 0x210):  # it takes exactly the frames it claims
+        for ext in (False, True):
+            claimed = any(c.receive and c.matches(ident, ext) for c in claims)
+            assert drv.on_frame(Frame(ident, bytes(8), ext)) is claimed, hex(ident)
+
+
+def test_the_driver_imports_no_simulator() -> None:
+    code = (
+        "import sys, drivers.dji; "
+        "print([m for m in sys.modules if m == 'drivers.dji.sim' or m.startswith('gateway.sim')])"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, check=True
+    )
+    assert out.stdout.strip() == "[]"
 
 
 @settings(max_examples=50)
@@ -502,6 +582,21 @@ def test_state_transitions(start: DriveState, event: str, end: DriveState) -> No
     assert (current != 0) == (end is DriveState.ENABLED)
 
 
+def test_current_only_when_the_base_says_enabled() -> None:
+    """The command loop's ENABLED test agrees with MotorDriver.state, whatever set the fault
+    (here a protection fault of the base, while armed)."""
+    drv = DjiDriver([motor(1), motor(2)])
+    for esc in (1, 2):
+        drv.on_frame(feedback_frame(esc, 0, t=0.0))
+    drv.enable(0.0)
+    drv.protection_fault(0, "test")  # gateway.controller_watchdog: required -> FAULT
+    assert drv.is_armed(0) and drv.state(0, 0.001) is DriveState.FAULT
+    assert drv.state(1, 0.001) is DriveState.ENABLED
+    cur = currents_in(drv.command([5.0, 5.0], 0.001))
+    assert cur[1] == 0 and cur[2] != 0
+    assert drv.integrals_a[0] == 0.0
+
+
 def test_fault_status_and_recovery_needs_enable() -> None:
     drv = DjiDriver([motor(1)])
     drv.on_frame(feedback_frame(1, 0, t=0.0))
@@ -564,10 +659,12 @@ def test_sim_command_timeout(timeout: float | None, held: bool) -> None:
     assert (sim.command_raw == 1000) == held
 
 
-def test_make_simulator() -> None:
-    sim = DjiDriver.make_simulator(motor(4, esc="c610"))
-    assert isinstance(sim, DjiSimulator)
-    assert sim.esc is C610 and sim.esc_id == 4
+def test_simulator_for() -> None:
+    for find in (drivers.dji.sim.simulator_for, simulator_for):
+        sim = find(motor(4, esc="c610"))
+        assert isinstance(sim, DjiSimulator)
+        assert sim.esc is C610 and sim.esc_id == 4
+        assert sim.command_timeout_s is None
 
 
 # ===================================================================== on the virtual bus
@@ -682,7 +779,7 @@ def test_silence_goes_offline_with_zero_current(channel: str) -> None:
         rig.run(0.15, [10.0])
         assert rig.drv.state(0, rig.t) is DriveState.OFFLINE
         assert rig.drv.currents_a == (0.0,)
-        assert rig.drv._integral_a == [0.0]  # integrator reset while offline
+        assert rig.drv.integrals_a == (0.0,)  # integrator reset while offline
         sent = currents_in(rig.drv.command([10.0], rig.t))
         assert sent[1] == 0  # zero current goes out while offline
         sim.clear(SimFault.SILENT)

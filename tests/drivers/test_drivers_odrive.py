@@ -20,7 +20,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from drivers.odrive import OdriveDriver, OdriveSimulator
+from drivers.odrive import OdriveDriver
+from drivers.odrive.axis import Axis
 from drivers.odrive.codec import OdriveCodec
 from drivers.odrive.enums import (
     AXIS_ERROR_05_FAULTS,
@@ -48,9 +49,11 @@ from drivers.odrive.messages import (
     SetControllerMode,
     SetInputVel,
 )
+from drivers.odrive.sim import OdriveSimulator, simulator_for
 from gateway.bus.can_bus import drain, send_frames
 from gateway.core.errors import ConfigError, DecodeError, EncodeError, IllegalTransitionError
 from gateway.core.types import DriveFault, DriveState, Frame, MotorConfig
+from gateway.drive.claims import FrameClaim
 from gateway.drive.registry import get_driver_class
 from gateway.sim.bus import SimulatedControllers
 from gateway.sim.device import SimFault
@@ -372,13 +375,14 @@ def test_error_flags_map_onto_drive_faults() -> None:
 
 def test_registry_and_config() -> None:
     assert get_driver_class("odrive") is OdriveDriver
-    drv = OdriveDriver([motor(3), motor(4, "right", liveness_s=0.5)])
+    drv = OdriveDriver([motor(3), motor(4, "right")])
     assert (drv.codec.firmware, drv.codec.extended_id, drv.liveness_s) == (V06, False, 0.25)
+    assert OdriveDriver([motor(3, liveness_s=0.5)]).liveness_s == 0.5
     assert OdriveDriver([motor(0xFEDCBA, extended_id=True)]).codec.max_node_id == 0xFFFFFF
     OdriveDriver.validate_node_id(0xFFFFFF, "x", {"extended_id": True})
     with pytest.raises(ConfigError, match=r"^x: expected int 0..16777215, got 16777216$"):
         OdriveDriver.validate_node_id(0x1000000, "x", {"extended_id": True})
-    sim = OdriveDriver.make_simulator(motor(3, firmware="0.5"))
+    sim = simulator_for(motor(3, firmware="0.5"))
     assert isinstance(sim, OdriveSimulator)
     assert sim.codec.firmware is V05
     with pytest.raises(ConfigError, match=r"firmware: expected one of '0.5', '0.6', got 5"):
@@ -391,7 +395,25 @@ def test_registry_and_config() -> None:
         ([motor(3, firmware="0.7")], r"motor 'left'.firmware: expected one of '0.5', '0.6'"),
         ([motor(3, speed=1)], r"motor 'left'.speed: unknown key"),
         ([motor(3, input_mode=3)], r"input_mode: expected one of 1, 2, got 3"),
-        ([motor(3), motor(4, "right", firmware="0.5")], r"'right'.firmware: expected '0.6'"),
+        (
+            [motor(3), motor(4, "right", firmware="0.5")],
+            r"^motor 'right'.firmware: expected '0.6' like motor 'left' on the same ODrive bus, "
+            r"got '0.5'$",
+        ),
+        (
+            [motor(3), motor(4, "right", extended_id=True)],
+            r"'right'.extended_id: expected False like motor 'left' .* got True$",
+        ),
+        (  # one liveness per bus: the second motor's would be ignored
+            [motor(3), motor(4, "right", liveness_s=0.5)],
+            r"'right'.liveness_s: expected 0.25 like motor 'left' .* got 0.5$",
+        ),
+        (
+            [motor(3, firmware="0.5", watchdog_endpoints={"fw_version": "0.5.6",
+                                                          "enable_watchdog": 1,
+                                                          "watchdog_timeout": 2})],
+            r"flat_endpoints/watchdog_endpoints: expected firmware 0.6 .* got firmware 0.5$",
+        ),
         ([motor(0x3F)], r"node_id: expected int 0..62, got 63"),
         ([motor(0xFEDCBA)], r"node_id: expected int 0..62, got 16702650"),
         (
@@ -414,11 +436,16 @@ def test_command_conversion_and_limits() -> None:
     ]
     with pytest.raises(EncodeError) as err:
         drv.command([0.0, 400.0], 0.0)
-    expected = 'Expected velocity for node 4 ("right") between -314 and 314 rad/s, but got 400.0.'
+    expected = (
+        'Expected a wheel speed for ODrive node 4 ("right") between -314.159 and 314.159 rad/s '
+        "(max_rpm 3000), but got 400.0."
+    )
     assert str(err.value) == expected
     with pytest.raises(EncodeError, match="but got nan"):
         drv.command([math.nan, 0.0], 0.0)
-    with pytest.raises(EncodeError, match="Expected 2 wheel speeds"):
+    with pytest.raises(
+        EncodeError, match=r"^Expected 2 setpoints for the ODrive motors \(left, right\), but got 1"
+    ):
         drv.command([0.0], 0.0)
 
 
@@ -448,6 +475,26 @@ def test_on_frame_ownership_and_rejects() -> None:
     assert not rtr.rejected
 
 
+def test_claims_and_message_names() -> None:
+    """Every CANSimple identifier of our nodes (the command bits open), by motor; the names
+    the monitor shows (the command's name, or its number)."""
+    drv = OdriveDriver([motor(3), motor(4, "right")])
+    assert drv.claims() == (
+        FrameClaim(0x060, 0x7E0, False, 0),
+        FrameClaim(0x080, 0x7E0, False, 1),
+    )
+    assert [str(f) for f in drv.receive_filters()] == ["060/7E0", "080/7E0"]
+    assert drv.message_name(0x069, False) == "Get_Encoder_Estimates"
+    assert drv.message_name(0x081, False) == "Heartbeat"
+    assert drv.message_name(0x064, False) == "cmd 0x04"  # RxSdo: no CmdId of its own
+    assert drv.message_name(0x0A9, False) is None  # node 5 is not ours
+    assert drv.message_name(0x069, True) is None  # nor the other ID type
+    ext = OdriveDriver([motor(0xFEDCBA, extended_id=True)])
+    assert ext.claims() == (FrameClaim(0xFEDCBA << 5, 0x1FFFFFE0, True, 0),)
+    assert ext.claims()[0].matches(0x1FDB974D, True)  # its Set_Input_Vel (golden "ext")
+    assert ext.message_name(0x1FDB974D, True) == "Set_Input_Vel"
+
+
 def test_state_liveness_and_enable_handshake() -> None:
     drv = OdriveDriver([motor(3)])
     drv.on_frame(_hb(C6, AxisState.IDLE, t=1.0))
@@ -463,6 +510,11 @@ def test_state_liveness_and_enable_handshake() -> None:
     drv.on_frame(_hb(C6, AxisState.CLOSED_LOOP_CONTROL, t=1.1))
     assert drv.state(0, 1.1) is DriveState.ENABLED
     assert drv.state(0, 1.27) is DriveState.OFFLINE  # estimates 0.26 s old
+    assert drv.live.silent(0, 1.27) == ["encoder estimates"]
+    drv.on_frame(_est(C6, 7.75, 1.3))
+    assert drv.state(0, 1.3) is DriveState.ENABLED
+    assert drv.state(0, 1.36) is DriveState.OFFLINE  # the heartbeat is 0.26 s old
+    assert drv.live.silent(0, 1.36) == ["heartbeat"]
     assert drv.disable(1.3) == list(C6.make_transition(3, AxisState.IDLE, AxisState.IDLE))
 
 
@@ -519,7 +571,7 @@ def test_enable_retries_then_gives_up() -> None:
         frames = drv.poll(t)
         assert frames in ([], arm)
         sent += bool(frames)
-    assert sent == OdriveDriver.ENABLE_ATTEMPTS
+    assert sent == Axis.ENABLE_ATTEMPTS
     assert drv.state(0, t) is DriveState.DISABLED
 
 
@@ -647,7 +699,7 @@ def test_bus_watchdog(channel: str, firmware: str, bit: int) -> None:
         m = motor(3, firmware=firmware, controller_timeout_s=0.5)
     else:  # the gateway sets it over CAN on an axis at factory settings
         m = motor(3, firmware=firmware, controller_timeout_s=0.5, watchdog_endpoints=ENDPOINTS)
-    with rig(channel, [cast("OdriveSimulator", OdriveDriver.make_simulator(m))]) as r:
+    with rig(channel, [cast("OdriveSimulator", simulator_for(m))]) as r:
         r.send(r.drv.enable(r.t))
         r.speeds = [1.0]
         r.run(1.0)  # velocity commands at 100 Hz keep feeding the watchdog

@@ -5,13 +5,14 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import math
+import re
 from typing import TYPE_CHECKING
 
 import can
 import pytest
 from hypothesis import strategies as st
 
-from drivers.vesc import SimMode, VescDriver, VescSimulator
+from drivers.vesc import VescDriver
 from drivers.vesc.codec import (
     VescStatus,
     VescStatus5,
@@ -23,6 +24,7 @@ from drivers.vesc.codec import (
     wrap_int32,
 )
 from drivers.vesc.settings import STATUS_1, STATUS_5
+from drivers.vesc.sim import SimMode, VescSimulator, simulator_for
 from gateway.bus.can_bus import drain, send_frames
 from gateway.core.errors import ConfigError
 from gateway.core.types import DriveState, Frame, MotorConfig
@@ -57,7 +59,10 @@ def sim_for(**kwargs: object) -> VescSimulator:
 def test_sim_needs_pole_pairs() -> None:
     with pytest.raises(ConfigError, match="pole_pairs"):
         VescSimulator(MotorConfig(wheel="left", driver="vesc", node_id=23))
-    assert isinstance(VescDriver.make_simulator(motor(23)), VescSimulator)
+    assert isinstance(simulator_for(motor(23)), VescSimulator)
+    refused = re.escape("motor 'left'.command_period_s: expected less")
+    with pytest.raises(ConfigError, match=refused):  # a block the driver refuses
+        simulator_for(motor(23, command_period_s=0.5))
 
 
 def test_sim_answers_ping() -> None:
@@ -95,9 +100,7 @@ def test_sim_releases_motor_after_its_timeout() -> None:
 
 def test_sim_timeout_is_the_factory_one_or_the_stated_one() -> None:
     assert VescSimulator(motor(23, controller_timeout_s=0.3)).timeout_s == 1.0  # not read here
-    sim = VescDriver.make_simulator(motor(23, controller_timeout_s=0.3))
-    assert isinstance(sim, VescSimulator)
-    assert sim.timeout_s == 0.3
+    assert simulator_for(motor(23, controller_timeout_s=0.3)).timeout_s == 0.3
 
 
 @pytest.mark.parametrize(
@@ -348,8 +351,7 @@ def test_keepalive_and_device_timeout(channel: str) -> None:
     # Built as the motor block states the VESC was set up: a 0.5 s timeout, status at 50 Hz,
     # and (kinder than the factory) s_pid_min_erpm 0 for the slow 5 rad/s.
     left = motor(23, controller_timeout_s=0.5, status_rate_hz=50.0, min_erpm=0.0)
-    sim = VescDriver.make_simulator(left)
-    assert isinstance(sim, VescSimulator)
+    sim = simulator_for(left)
     with rig(channel, [left], [sim]) as r:
         r.send(r.drv.enable(r.t))
         r.send(r.drv.command([5.0], r.t))

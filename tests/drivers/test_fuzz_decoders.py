@@ -25,7 +25,7 @@ import functools
 import math
 import random
 import struct
-from typing import TYPE_CHECKING, NamedTuple, TypeAlias, TypeVar
+from typing import TYPE_CHECKING, Any, NamedTuple, TypeAlias, TypeVar
 
 import pytest
 import yaml
@@ -36,8 +36,9 @@ from drivers.cia402 import Cia402Codec, Cia402Driver, PdoLayout
 from drivers.cia402.enums import CobBase, tpdo_cob_id
 from drivers.cia402.sdo import parse_sdo_request, parse_sdo_response
 from drivers.dbc import DbcDriver
-from drivers.dji import DjiCodec, DjiDriver
+from drivers.dji import DjiDriver
 from drivers.dji.codec import decode_command as dji_decode_command
+from drivers.dji.codec import decode_feedback as dji_decode_feedback
 from drivers.odrive import Firmware, OdriveCodec, OdriveDriver
 from drivers.odrive.enums import AxisState, CmdId
 from drivers.vesc import VescDriver
@@ -47,6 +48,7 @@ from gateway.config import parse_config
 from gateway.core.errors import DecodeError
 from gateway.core.types import Frame, MotorConfig
 from gateway.drive.driveset import DriveSet
+from gateway.sim.registry import simulator_for
 from gateway.wire.can import CanIds, WgCodec
 from gateway.wire.candump import CandumpError, parse_line
 from tests.conftest import CONFIG_DIR, DATA_DIR, SIM_ODRIVE_ENDPOINTS
@@ -116,7 +118,7 @@ def odrive_dbc_motor() -> MotorConfig:
 
 
 @functools.cache
-def _prototype(case: str) -> MotorDriver:
+def _prototype(case: str) -> MotorDriver[Any]:
     if case == DBC_FLOAT:
         return DbcDriver([odrive_dbc_motor()])
     ((driver, _),) = DriveSet(shipped_config(case)).groups
@@ -130,7 +132,7 @@ def _fresh(obj: T, motors: tuple[MotorConfig, ...]) -> T:
     return copy.deepcopy(obj, memo)
 
 
-def make_driver(case: str) -> MotorDriver:
+def make_driver(case: str) -> MotorDriver[Any]:
     """A fresh driver of ``case`` (every motor of the config uses the same protocol).  DBC
     drivers are copies of one built once, since loading the DBC file takes 30 ms."""
     proto = _prototype(case)
@@ -144,13 +146,13 @@ def make_simulators(case: str) -> list[DeviceSimulator]:
     proto = _prototype(case)
     if isinstance(proto, DbcDriver):
         return _fresh(_prototype_sims(case), proto.motors)
-    return [proto.make_simulator(m) for m in proto.motors]
+    return [simulator_for(m) for m in proto.motors]
 
 
 @functools.cache
 def _prototype_sims(case: str) -> list[DeviceSimulator]:
     drv = _prototype(case)
-    return [drv.make_simulator(m) for m in drv.motors]
+    return [simulator_for(m) for m in drv.motors]
 
 
 class Own(NamedTuple):
@@ -165,7 +167,7 @@ class Own(NamedTuple):
     exempt: frozenset[int] = frozenset()
 
 
-def own_feedback(drv: MotorDriver) -> list[Own]:
+def own_feedback(drv: MotorDriver[Any]) -> list[Own]:
     """Every identifier ``drv`` decodes feedback from, derived from its public state."""
     nodes = [m.node_id for m in drv.motors]
     eight = frozenset({8})
@@ -199,7 +201,7 @@ def own_feedback(drv: MotorDriver) -> list[Own]:
     return out
 
 
-def claimable_ids(drv: MotorDriver) -> frozenset[int]:
+def claimable_ids(drv: MotorDriver[Any]) -> frozenset[int]:
     """Every arbitration ID (either ID type) the driver may claim; others are foreign."""
     nodes = [m.node_id for m in drv.motors]
     if isinstance(drv, OdriveDriver):
@@ -261,15 +263,15 @@ def malformed_own(draw: st.DrawFn, own: list[Own]) -> Frame:
 # ------------------------------------------------------------------------------- helpers
 
 
-def rejected(drv: MotorDriver) -> int:
+def rejected(drv: MotorDriver[Any]) -> int:
     return sum(drv.rejected.values())
 
 
-def feedbacks(drv: MotorDriver) -> list[object]:
+def feedbacks(drv: MotorDriver[Any]) -> list[object]:
     return [drv.feedback(i) for i in range(len(drv.motors))]
 
 
-def assert_feedback_finite(drv: MotorDriver) -> None:
+def assert_feedback_finite(drv: MotorDriver[Any]) -> None:
     for i, m in enumerate(drv.motors):
         fb = drv.feedback(i)
         if fb is not None:
@@ -277,7 +279,7 @@ def assert_feedback_finite(drv: MotorDriver) -> None:
             assert all(math.isfinite(v) for v in values), f"{m.wheel}: {fb}"
 
 
-def assert_still_works(drv: MotorDriver, now_s: float, enabled: bool) -> None:
+def assert_still_works(drv: MotorDriver[Any], now_s: float, enabled: bool) -> None:
     """Housekeeping and commands after the fuzzing raise nothing."""
     assert len(drv.status(now_s)) == len(drv.motors)
     drv.poll(now_s)
@@ -315,7 +317,7 @@ def test_random_frames_never_raise_and_are_counted_at_most_once(
     assert_still_works(drv, t, enabled)
 
 
-def foreign_sweep(drv: MotorDriver) -> list[Frame]:
+def foreign_sweep(drv: MotorDriver[Any]) -> list[Frame]:
     """Frames on every identifier the driver must not claim: all 11-bit numbers (both ID
     types), the VESC / ODrive 29-bit layouts around its nodes, and 2000 random 29-bit IDs."""
     rng = random.Random(type(drv).__name__)
@@ -360,14 +362,14 @@ def test_malformed_frames_of_own_ids_are_claimed_counted_and_ignored(
         t += 0.002
 
 
-def odrive_estimates(case: str) -> tuple[MotorDriver, Callable[[bytes], Frame]]:
+def odrive_estimates(case: str) -> tuple[MotorDriver[Any], Callable[[bytes], Frame]]:
     drv = make_driver(case)
     assert isinstance(drv, OdriveDriver)
     ident = drv.motors[0].node_id << 5 | CmdId.GET_ENCODER_ESTIMATES
     return drv, lambda data: Frame(ident, data, drv.codec.extended_id)
 
 
-def dbc_estimates(case: str) -> tuple[MotorDriver, Callable[[bytes], Frame]]:
+def dbc_estimates(case: str) -> tuple[MotorDriver[Any], Callable[[bytes], Frame]]:
     drv = make_driver(case)
     return drv, lambda data: Frame(0x069, data)  # Axis3_Get_Encoder_Estimates
 
@@ -385,7 +387,7 @@ any_f32 = st.floats(width=32).map(lambda v: struct.pack("<f", v)) | non_finite
 @given(pair=st.tuples(non_finite, any_f32) | st.tuples(any_f32, non_finite), swap=st.booleans())
 def test_non_finite_float_feedback_is_counted_and_ignored(
     case: str,
-    build: Callable[[str], tuple[MotorDriver, Callable[[bytes], Frame]]],
+    build: Callable[[str], tuple[MotorDriver[Any], Callable[[bytes], Frame]]],
     pair: tuple[bytes, bytes],
     swap: bool,
 ) -> None:
@@ -415,7 +417,7 @@ def test_huge_finite_float_feedback_stays_finite(case: str, pos: float, vel: flo
 # Unbounded rejected-frame counters: a key per distinct garbage value.
 
 
-def _same_shape_garbage(case: str, drv: MotorDriver) -> list[Frame]:
+def _same_shape_garbage(case: str, drv: MotorDriver[Any]) -> list[Frame]:
     """200 malformed frames on one ID with one length, differing only in their values."""
     node = drv.motors[0].node_id
     if case.startswith("odrive"):
@@ -523,7 +525,7 @@ CODECS: dict[str, tuple[Callable[[], Decoders], list[Own]]] = {
         lambda: [CIA402.decode],
         _aims([b + n for b in range(0x80, 0x800, 0x80) for n in (1, 5, 9)]),
     ),
-    "dji": (lambda: [DjiCodec().decode, dji_decode_command], _aims(list(range(0x1FE, 0x20A)))),
+    "dji": (lambda: [dji_decode_feedback, dji_decode_command], _aims(list(range(0x1FE, 0x20A)))),
     "dbc": (functools.partial(_dbc_decoders, "dbc"), _aims(list(range(0x180, 0x290)))),
     DBC_FLOAT: (functools.partial(_dbc_decoders, DBC_FLOAT), _aims(list(range(0x60, 0x80)))),
     "wgproto": (

@@ -17,7 +17,8 @@ import pytest
 
 from drivers.odrive.driver import OdriveDriver
 from drivers.odrive.enums import AxisState
-from drivers.odrive.sim import OdriveSimulator
+from drivers.odrive.options import OdriveOptions
+from drivers.odrive.sim import OdriveSimulator, simulator_for
 from drivers.odrive.watchdog import WatchdogEndpoints, endpoints_from_options
 from gateway.cli import main
 from gateway.config import load_config
@@ -41,7 +42,7 @@ def hx(text: str) -> bytes:
 
 
 def sim_for(m: MotorConfig) -> OdriveSimulator:
-    return cast("OdriveSimulator", OdriveDriver.make_simulator(m))
+    return cast("OdriveSimulator", simulator_for(m))
 
 
 # ----------------------------------------------------------------------------- golden frames
@@ -241,21 +242,27 @@ def test_flat_endpoints_file(tmp_path: Path) -> None:
         },
     }
     (tmp_path / "flat_endpoints.json").write_text(json.dumps(doc))
-    ep = endpoints_from_options({"flat_endpoints": "flat_endpoints.json"}, "m", str(tmp_path))
+    here = str(tmp_path)
+    ep = endpoints_from_options(
+        OdriveOptions(flat_endpoints="flat_endpoints.json", config_dir=here), "m"
+    )
     assert ep == WatchdogEndpoints("0.6.10", 154, 153, "4.4.58")
     doc["endpoints"]["axis0.config.watchdog_timeout"]["type"] = "uint32"  # type: ignore[index]
     (tmp_path / "flat_endpoints.json").write_text(json.dumps(doc))
     with pytest.raises(ConfigError, match=r"expected 'axis0\.config\.watchdog_timeout' of type"):
-        endpoints_from_options({"flat_endpoints": "flat_endpoints.json"}, "m", str(tmp_path))
+        endpoints_from_options(
+            OdriveOptions(flat_endpoints="flat_endpoints.json", config_dir=here), "m"
+        )
     with pytest.raises(ConfigError, match="cannot read"):
-        endpoints_from_options({"flat_endpoints": "missing.json"}, "m", str(tmp_path))
+        endpoints_from_options(OdriveOptions(flat_endpoints="missing.json", config_dir=here), "m")
     with pytest.raises(ConfigError, match="got both"):
         endpoints_from_options(
-            {"flat_endpoints": "x.json", "watchdog_endpoints": ENDPOINTS}, "m", str(tmp_path)
+            OdriveOptions(flat_endpoints="x.json", watchdog_endpoints=ENDPOINTS, config_dir=here),
+            "m",
         )
     with pytest.raises(ConfigError, match="expected two different endpoint IDs"):
         endpoints_from_options(
-            {"watchdog_endpoints": {**ENDPOINTS, "watchdog_timeout": 201}}, "m"
+            OdriveOptions(watchdog_endpoints={**ENDPOINTS, "watchdog_timeout": 201}), "m"
         )
 
 

@@ -14,19 +14,22 @@ last command frame, and with nothing stated holds the last command for ever.
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import pytest
 import yaml
 
-from drivers.dbc import DbcDriver, DbcSimulator
-from drivers.dji import M3508_GEAR_RATIO, DjiDriver, DjiSimulator
+from drivers.dbc import DbcDriver
+from drivers.dbc.sim import DbcSimulator
+from drivers.dji import M3508_GEAR_RATIO, DjiDriver
+from drivers.dji.sim import DjiSimulator
 from gateway.cli import main
 from gateway.config import load_config, parse_config
 from gateway.core.errors import ConfigError
 from gateway.core.protection import Guard
 from gateway.core.types import MotorConfig
 from gateway.drive.driveset import DriveSet
+from gateway.sim.registry import simulators_for
 from tests.conftest import CONFIG_DIR
 
 if TYPE_CHECKING:
@@ -62,7 +65,7 @@ def doc_of(path: object) -> dict[str, object]:
 
 
 def run(
-    drv: MotorDriver,
+    drv: MotorDriver[Any],
     sims: Sequence[DeviceSimulator],
     t: float,
     until: float,
@@ -201,7 +204,7 @@ def test_dji_simulator_keeps_the_wheel_turning_when_the_commands_stop() -> None:
     drives = DriveSet(cfg)
     ((drv, _),) = drives.groups
     assert isinstance(drv, DjiDriver)
-    sims = drives.simulators()
+    sims = simulators_for(drives.all_motors())
     assert all(isinstance(s, DjiSimulator) and s.command_timeout_s is None for s in sims)
     target = 5.0  # wheel rad/s
     drv.enable(0.0)
@@ -276,7 +279,7 @@ def dbc_session(timeout: float | None) -> tuple[DbcDriver, list[DeviceSimulator]
     drives = DriveSet(parse_config(dbc_doc(timeout), "robot.yaml"))
     ((drv, _),) = drives.groups
     assert isinstance(drv, DbcDriver)
-    sims = drives.simulators()
+    sims = simulators_for(drives.all_motors())
     assert all(isinstance(s, DbcSimulator) for s in sims)
     for frame in drv.enable(0.0):
         for s in sims:

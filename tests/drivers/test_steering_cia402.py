@@ -21,10 +21,9 @@ from canopen.profiles.p402 import OperationMode as P402Mode
 from hypothesis import given
 from hypothesis import strategies as st
 
-from drivers.cia402 import Cia402Codec, Cia402Driver, PdoLayout
+from drivers.cia402 import Cia402Codec, Cia402Driver, Cia402Options, PdoLayout
 from drivers.cia402.codec import make_rpdo, make_sync, make_tpdo, position_to_raw
 from drivers.cia402.enums import DataType, OperationMode, State, supported_mode_bit
-from drivers.cia402.options import NodeOptions
 from drivers.cia402.sdo import make_sdo_download
 from drivers.cia402.sequence import NodeSequencer, Phase
 from drivers.cia402.steps import SdoExpectStep, SdoWriteStep, configuration_steps
@@ -32,12 +31,10 @@ from gateway.bus.can_bus import send_frames
 from gateway.core.errors import ConfigError, EncodeError
 from gateway.core.types import DriveFault, DriveState, Frame, MotorConfig, MotorRole
 from gateway.sim.device import SimFault
-from tests.drivers.test_drivers_cia402_bus import benches
+from tests.drivers.cia402_bench import Bench, benches
 
 if TYPE_CHECKING:
     from collections.abc import Callable, Iterator
-
-    from tests.drivers.test_drivers_cia402_bus import Bench
 
 DT = 0.001
 TWO_PI = 2.0 * math.pi
@@ -106,7 +103,7 @@ def test_position_to_raw_rounds_and_wraps() -> None:
 
 
 def test_configuration_steps_of_a_steering_actuator() -> None:
-    steps = configuration_steps(5, NodeOptions.from_motor(STEER))
+    steps = configuration_steps(5, Cia402Options.from_block(STEER.options, "s"), position=True)
     writes = {(s.index, s.subindex): s for s in steps if isinstance(s, SdoWriteStep)}
     assert writes[(0x1603, 1)].value == 0x60400010
     assert writes[(0x1603, 2)].value == 0x607A0020
@@ -115,7 +112,7 @@ def test_configuration_steps_of_a_steering_actuator() -> None:
     assert (mode.value, mode.what) == (8, "modes of operation = cyclic synchronous position")
     expect = [s for s in steps if isinstance(s, SdoExpectStep)]
     assert [(s.index, s.expected) for s in expect] == [(0x6061, 8)]
-    drive = configuration_steps(3, NodeOptions.from_motor(DRIVE))
+    drive = configuration_steps(3, Cia402Options.from_block(DRIVE.options, "d"))
     assert SdoWriteStep(0x1603, 2, 0x60FF0020, DataType.UNSIGNED32,
                         "RPDO4 mapping entry 2 (0x60FF)") in drive
 
@@ -124,7 +121,7 @@ def test_steering_refuses_event_driven_pdos() -> None:
     with pytest.raises(ConfigError) as err:
         Cia402Driver([steer_motor(sync=False)])
     assert str(err.value) == (
-        "wheel 'fl steering' (node 5).sync: expected true for a steering actuator (cyclic "
+        "motor 'fl steering'.sync: expected true for a steering actuator (cyclic "
         "synchronous position mode takes its target at every SYNC), got false")
 
 
@@ -132,7 +129,7 @@ def test_steering_refuses_zero_outside_int32_positions() -> None:
     with pytest.raises(ConfigError) as err:
         Cia402Driver([steer_motor(zero_rad=4e6)])
     assert str(err.value) == (
-        "wheel 'fl steering' (node 5).zero_rad: expected a motor position within the drive's "
+        "motor 'fl steering'.zero_rad: expected a motor position within the drive's "
         "int32 position range (-3.2942e+06 to 3.2942e+06 rad at 4096 counts per revolution), "
         "got 4000000.0")
 
@@ -142,7 +139,10 @@ def test_non_finite_angle_is_refused() -> None:
     with pytest.raises(EncodeError) as err:
         drv.command([0.0, math.inf], 0.0)
     assert str(err.value) == (
-        'Expected a finite steering angle in rad for node 5 ("fl steering"), but got inf.')
+        'Expected a finite steering angle for CiA 402 node 5 ("fl steering") in rad, but got '
+        "inf.")
+    with pytest.raises(EncodeError, match="finite steering angle"):
+        drv.preview_command([0.0, math.nan])
 
 
 def test_preview_of_a_mixed_driver() -> None:

@@ -27,7 +27,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from drivers.dbc import DbcDriver, DbcReading, DbcSimulator, Role
+from drivers.dbc import DbcDriver, DbcReading, Role
+from drivers.dbc.sim import DbcSimulator
 from gateway.core.errors import ConfigError, EncodeError
 from gateway.core.types import DriveState, Frame, MotorConfig, MotorRole
 from gateway.sim.device import SimFault
@@ -201,7 +202,7 @@ def test_non_finite_steering_angle_is_refused(steer_dbc: str, angle: float) -> N
     with pytest.raises(EncodeError) as info:
         drv.command([1.0, angle], 0.0)
     assert str(info.value) == (
-        'Expected a finite steering angle in rad for node 2 ("front_left steering"), '
+        'Expected a finite steering angle for DBC node 2 ("front_left steering") in rad, '
         f"but got {angle!r}."
     )
 

@@ -26,11 +26,12 @@ from drivers.dji import (
     STEERING_OPTIONS,
     DjiDriver,
     DjiFeedback,
-    DjiSimulator,
+    DjiOptions,
     PositionLoop,
     power_up_position_rad,
 )
 from drivers.dji.codec import COUNTS_PER_REV, RAD_S_PER_RPM, decode_command, encode_feedback
+from drivers.dji.sim import DjiSimulator
 from gateway.bus.can_bus import send_frames
 from gateway.config import parse_config
 from gateway.core.errors import ConfigError, EncodeError
@@ -108,13 +109,14 @@ def test_position_loop_law() -> None:
 
 
 def test_position_loop_defaults() -> None:
-    loop = PositionLoop.from_options({}, 50.0)
-    assert loop == PositionLoop(35.0, 0.7, 50.0)
     assert {k: s.default for k, s in STEERING_OPTIONS.items()} == {
         "steer_kp": 35.0,
         "steer_kd": 0.7,
     }
-    assert PositionLoop.from_options({"steer_kp": 10, "steer_kd": 0.0}, 1.0).kp_1_s == 10.0
+    specs = DjiOptions.specs()
+    assert {k: specs[k] for k in STEERING_OPTIONS} == dict(STEERING_OPTIONS)
+    opts = DjiOptions.from_block({"steer_kp": 10, **ACK}, "w")
+    assert (opts.steer_kp, opts.steer_kd) == (10.0, 0.7)
 
 
 @pytest.mark.parametrize(
@@ -144,8 +146,9 @@ def test_steering_keys_only_where_given() -> None:
     opts = DjiDriver.validate_options({"steer_kp": 20, "steer_kd": 1, **ACK}, "w")
     assert (opts["steer_kp"], opts["steer_kd"]) == (20.0, 1.0)
     drv = DjiDriver([steer(steer_kp=20.0), steer(node_id=6)])
-    assert drv._position[0] == PositionLoop(20.0, 0.7, 3000.0 * TWO_PI / 60.0)
-    assert drv._position[1] == PositionLoop(35.0, 0.7, 3000.0 * TWO_PI / 60.0)
+    assert drv._axes[0].loop == PositionLoop(20.0, 0.7, 3000.0 * TWO_PI / 60.0)
+    assert drv._axes[1].loop == PositionLoop(35.0, 0.7, 3000.0 * TWO_PI / 60.0)
+    assert DjiDriver([drive(1)])._axes[0].loop is None
 
 
 @pytest.mark.parametrize(
@@ -173,10 +176,14 @@ def test_non_finite_angle_is_refused() -> None:
         with pytest.raises(EncodeError) as info:
             drv.command([0.0, bad], 0.0)
         assert str(info.value) == (
-            f'Expected a finite steering angle in rad for node 5 ("fl steering"), but got {bad}.'
+            f'Expected a finite steering angle for DJI node 5 ("fl steering") in rad, but got '
+            f"{bad}."
         )
-    with pytest.raises(EncodeError, match=r"Expected 2 setpoints for the DJI motors, but got 1"):
+    with pytest.raises(EncodeError) as info:
         drv.preview_command([0.0])
+    assert str(info.value) == (
+        "Expected 2 setpoints for the DJI motors (w1, fl steering), but got 1."
+    )
 
 
 # ===================================================================== golden frames
@@ -433,8 +440,8 @@ def test_swerve_config_with_dji_steering() -> None:
     (dji,) = [drv for drv, _ in drives.groups if isinstance(drv, DjiDriver)]
     assert [m.wheel for m in dji.motors][:1] == ["front_left steering"]
     lim = 15000.0 * RAD_S_PER_RPM
-    assert dji._position[0] == PositionLoop(30.0, 0.7, lim)
-    assert dji._position[3] == PositionLoop(35.0, 0.7, lim)
+    assert dji._axes[0].loop == PositionLoop(30.0, 0.7, lim)
+    assert dji._axes[3].loop == PositionLoop(35.0, 0.7, lim)
     frames = drives.preview([0.0] * 4, [0.0, 0.01, 0.0, 0.01])
     (current,) = [f for f in frames if f.arbitration_id == 0x200]
     cur = decode_command(current)

@@ -18,10 +18,11 @@ from typing import TYPE_CHECKING
 import pytest
 import yaml
 
-from drivers.vesc import SimMode, VescDriver, VescSimulator
+from drivers.vesc import VescDriver
 from drivers.vesc.codec import VescStatus, decode, make_set_current, make_set_rpm
 from drivers.vesc.min_erpm import describe_band, in_band
 from drivers.vesc.settings import STATUS_1, STATUS_5, TIMEOUT_FIX
+from drivers.vesc.sim import SimMode, VescSimulator, simulator_for
 from gateway.config import parse_config
 from gateway.core.protection import Guard
 from gateway.core.types import DriveState
@@ -62,13 +63,12 @@ def test_a_factory_vesc_sends_no_status() -> None:
     assert run(sim, 0.0, 2.0, erpm=3000) == []
     assert wheel_erpm(sim) == pytest.approx(3000, abs=1)  # it drives all the same
     # Built from a block that does not state a status rate: the factory device.
-    assert run(VescDriver.make_simulator(motor(23)), 0.0, 1.0) == []  # type: ignore[arg-type]
+    assert run(simulator_for(motor(23)), 0.0, 1.0) == []
 
 
 @pytest.mark.parametrize(("rate", "msgs"), [(50.0, STATUS_1 | STATUS_5), (20.0, STATUS_1)])
 def test_a_stated_status_rate_is_what_the_simulator_sends(rate: float, msgs: int) -> None:
-    sim = VescDriver.make_simulator(motor(23, status_rate_hz=rate))
-    assert isinstance(sim, VescSimulator)
+    sim = simulator_for(motor(23, status_rate_hz=rate))
     frames = [decode(f) for f in run(sim, 0.0, 1.0)]
     assert sum(isinstance(f, VescStatus) for f in frames) == rate
     assert len(frames) == 2 * rate  # STATUS and STATUS_5
@@ -113,8 +113,7 @@ def test_a_silent_vesc_is_offline_and_its_detail_says_how_to_enable_status() -> 
 def test_the_wheel_coasts_only_after_the_vesc_timeout(stated: float, timeout_s: float) -> None:
     # Not stated (0): the simulator has the factory 1 s; stated: what was set in VESC Tool.
     m = motor(23, status_rate_hz=50.0, controller_timeout_s=stated)
-    drv, sim = VescDriver([m]), VescDriver.make_simulator(m)
-    assert isinstance(sim, VescSimulator)
+    drv, sim = VescDriver([m]), simulator_for(m)
     speed = 3000 / ERPM_PER_RAD_S  # wheel rad/s
     t, dt = 0.0, 0.002
     for f in drv.enable(t):

@@ -68,13 +68,13 @@ import json
 import os
 import socket
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import can
 import pytest
 from can.interfaces.virtual import VirtualBus
 
-from drivers.dji import DjiSimulator
+from drivers.dji.sim import DjiSimulator
 from drivers.odrive.enums import AxisState, CmdId
 from gateway.bus.can_bus import send_frames
 from gateway.bus.edge import UNSENT_FAULT_CYCLES
@@ -148,7 +148,7 @@ class Run:
         return self.rig.sims[VICTIM]
 
     @property
-    def driver(self) -> MotorDriver:
+    def driver(self) -> MotorDriver[Any]:
         name = self.victim.motor.wheel
         return next(d for d, _ in self.rig.gw.drives.groups if any(
             m.wheel == name for m in d.motors))

@@ -20,6 +20,7 @@ from drivers.odrive.enums import CmdId
 from gateway.bus.can_bus import drain
 from gateway.bus.edge import UNSENT_FAULT_CYCLES
 from gateway.core.control import AUTO_RETRIES
+from gateway.core.settings import FeedbackRecovery
 from gateway.core.types import ConstraintCode, ErrorCode, GatewayState, Twist
 from gateway.sim.device import SimFault
 from gateway.wire.can import TwistFlags
@@ -156,7 +157,7 @@ def test_feedback_timeout_faults_names_motor_and_recovers(rig: Rig, pilot: Socke
     assert refused["ok"] is False
     right.clear(SimFault.SILENT)
     rig.advance(1.0)
-    if rig.config.loop.feedback_recovery == "auto":
+    if rig.config.loop.feedback_recovery is FeedbackRecovery.AUTO:
         assert state(rig) is GatewayState.RUNNING
     else:
         assert state(rig) is GatewayState.FAULT

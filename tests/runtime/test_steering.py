@@ -37,7 +37,7 @@ from tests.e2e_helpers import Rig, errors_on_can, virtual_config
 if TYPE_CHECKING:
     from click.testing import CliRunner
 
-    from drivers.odrive import OdriveSimulator
+    from drivers.odrive.sim import OdriveSimulator
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -199,7 +199,9 @@ def test_driver_arms_steering_in_position_control() -> None:
     second = codec.decode_command(drv.command([2.0, 0.6], 0.01)[1])
     assert isinstance(second, SetInputPos)
     assert second.vel_ff_turns_s == pytest.approx(10 * 12.8 / (2 * math.pi), abs=0.001)
-    with pytest.raises(EncodeError, match=r'finite steering angle for node 5 \("front_left'):
+    with pytest.raises(
+        EncodeError, match=r'^Expected a finite steering angle for ODrive node 5 \("front_left'
+    ):
         drv.command([0.0, math.inf], 0.02)
 
 

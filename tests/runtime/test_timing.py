@@ -509,3 +509,35 @@ def test_the_longest_gap_between_bursts_tells_a_stall_as_it_was(channel: str) ->
         assert gw.burst_gap_max_s >= 0.3
     finally:
         gw.close()
+
+
+def test_the_timing_modules_import_one_way() -> None:
+    """No import cycle among the timing modules, imports under ``TYPE_CHECKING`` included."""
+    import ast
+    from pathlib import Path
+
+    from gateway.runtime import timing
+
+    folder = Path(timing.__file__).parent
+    prefix = "gateway.runtime.timing."
+    graph: dict[str, set[str]] = {}
+    for path in folder.glob("*.py"):
+        if path.stem == "__init__":
+            continue
+        deps = graph.setdefault(path.stem, set())
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom) and (node.module or "").startswith(prefix):
+                deps.add((node.module or "").removeprefix(prefix).split(".")[0])
+            elif isinstance(node, ast.Import):
+                deps.update(a.name.removeprefix(prefix).split(".")[0] for a in node.names
+                            if a.name.startswith(prefix))
+    assert {"cause", "misses", "scheduler", "stats"} <= graph.keys()
+
+    def reaches(start: str, goal: str, seen: set[str]) -> bool:
+        for dep in graph.get(start, ()):
+            if dep == goal or (dep not in seen and reaches(dep, goal, seen | {dep})):
+                return True
+        return False
+
+    cycles = sorted(m for m in graph if reaches(m, m, {m}))
+    assert cycles == [], f"expected no import cycle among the timing modules, got one via {cycles}"

@@ -1,81 +1,37 @@
-"""The jog screen, pure: the daemon's status as the screen shows it, and :func:`render`.
-
-:func:`daemon_view` reads a ``status`` reply into a :class:`DaemonView`; :func:`render` turns a
-:class:`Screen` (the session of :mod:`gateway.apps.jog.keys` plus that view) into lines of text.
-The
+"""The jog screen, pure: :func:`render` turns a :class:`Screen` -- the session of
+:mod:`gateway.apps.jog.keys` and the daemon's last status (:class:`gateway.core.status.
+GatewayStatus`, which :func:`read_status` takes from a reply) -- into lines of text.  The
 terminal itself is handled by :mod:`gateway.cli.commands.jog`.  No I/O, no clock.
 """
 
 from __future__ import annotations
 
-import math
 import textwrap
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from gateway.apps.jog.keys import HELP, key_name
-from gateway.core.types import Twist
+from gateway.core.status import fault_names, state_name
+from gateway.wire.socket import ProtocolError
+from gateway.wire.socket.status import status_from_json
 
 if TYPE_CHECKING:
     from gateway.apps.jog.keys import JogState
+    from gateway.core.status import GatewayStatus
+    from gateway.core.types import Twist
 
 
 # --------------------------------------------------------------------- what the daemon says
 
 
-@dataclass(frozen=True, slots=True)
-class MotorView:
-    """One motor in the daemon's status."""
-
-    name: str
-    state: str
-    faults: tuple[str, ...]
-    feedback_age_s: float | None
-    velocity_rad_s: float | None
-
-
-@dataclass(frozen=True, slots=True)
-class DaemonView:
-    """The parts of the daemon's status the screen shows."""
-
-    robot: str
-    state: str
-    reason: str
-    odometry: tuple[float, float, float, float, float, float]  # x y theta vx vy wz
-    applied: Twist | None
-    speed_scale: float
-    accel_scale: float
-    motors: tuple[MotorView, ...]
-
-
-def _num(value: object, default: float = math.nan) -> float:
-    return float(value) if isinstance(value, (int, float)) else default
-
-
-def _twist(obj: object) -> Twist | None:
-    if not isinstance(obj, Mapping):
-        return None
-    return Twist(_num(obj.get("vx_m_s")), _num(obj.get("vy_m_s")), _num(obj.get("wz_rad_s")))
-
-
-def daemon_view(status: Mapping[str, Any]) -> DaemonView:
-    """The screen's view of a ``status`` reply (missing fields show as ``nan`` or ``-``)."""
-    odo = status.get("odometry") or {}
-    cmd = status.get("command") or {}
-    motors = tuple(
-        MotorView(str(m.get("name", "?")), str(m.get("state", "?")),
-                  tuple(str(f) for f in m.get("faults") or ()),
-                  None if m.get("feedback_age_s") is None else _num(m["feedback_age_s"]),
-                  None if m.get("velocity_rad_s") is None else _num(m["velocity_rad_s"]))
-        for m in status.get("motors") or () if isinstance(m, Mapping))
-    return DaemonView(
-        str(status.get("robot", "?")), str(status.get("state", "?")),
-        str(status.get("reason") or ""),
-        (_num(odo.get("x")), _num(odo.get("y")), _num(odo.get("theta")),
-         _num(odo.get("vx")), _num(odo.get("vy")), _num(odo.get("wz"))),
-        _twist(cmd.get("applied")), _num(cmd.get("speed_scale"), 1.0),
-        _num(cmd.get("accel_scale"), 1.0), motors)
+def read_status(reply: Mapping[str, Any]) -> tuple[GatewayStatus | None, str]:
+    """The status in an ``ok`` reply to ``status``, or ``None`` and why it cannot be read (a
+    daemon that speaks another status)."""
+    try:
+        return status_from_json(reply), ""
+    except ProtocolError as err:
+        return None, f"status: {err}"
 
 
 def reply_error(reply: Mapping[str, Any]) -> str:
@@ -108,7 +64,7 @@ class Screen:
     title: str
     connection: str
     jog: JogState
-    daemon: DaemonView | None = None
+    daemon: GatewayStatus | None = None
     last_error: str = ""
     log: tuple[str, ...] = ()
 
@@ -151,20 +107,21 @@ def render(screen: Screen, width: int = 100) -> list[str]:
     if d is None:
         lines.append("daemon: no status yet")
     else:
-        applied = "-" if d.applied is None else _fmt_twist(d.applied)
+        cmd, pose, vel = d.command, d.odometry.pose, d.odometry.twist
         lines += [
-            f"daemon: state {d.state}{f' ({d.reason})' if d.reason else ''}   applied "
-            f"{applied}   speed x{d.speed_scale:.2f} accel x{d.accel_scale:.2f}",
-            *([] if d.robot in ("?", screen.robot) else _wrapped(
+            f"daemon: state {state_name(d.state)}{f' ({d.reason})' if d.reason else ''}   "
+            f"applied {_fmt_twist(cmd.applied)}   speed x{cmd.speed_scale:.2f} "
+            f"accel x{cmd.accel_scale:.2f}",
+            *([] if d.robot == screen.robot else _wrapped(
                 f"warning: the daemon drives {d.robot!r}, but the key limits are those of "
                 f"{screen.robot!r} (pass its configuration with -c)", width)),
-            "odometry: x={:+.3f} m y={:+.3f} m theta={:+.3f} rad   v=({:+.3f}, {:+.3f}, "
-            "{:+.3f})".format(*d.odometry),
+            f"odometry: x={pose.x_m:+.3f} m y={pose.y_m:+.3f} m theta={pose.theta_rad:+.3f} rad"
+            f"   v=({vel.vx_m_s:+.3f}, {vel.vy_m_s:+.3f}, {vel.wz_rad_s:+.3f})",
         ]
         for m in d.motors:
-            vel = "-" if m.velocity_rad_s is None else f"{m.velocity_rad_s:+.2f} rad/s"
+            speed = "-" if m.velocity_rad_s is None else f"{m.velocity_rad_s:+.2f} rad/s"
             age = "-" if m.feedback_age_s is None else f"{m.feedback_age_s * 1e3:.1f} ms"
-            lines.append(f"  {m.name:<14} {m.state:<9} wheel {vel:>13}  feedback {age:>9}  "
-                         f"{', '.join(m.faults) or 'no faults'}")
+            lines.append(f"  {m.name:<14} {state_name(m.state):<9} wheel {speed:>13}  "
+                         f"feedback {age:>9}  {', '.join(fault_names(m.faults)) or 'no faults'}")
     lines += [f"log: {line}" for line in screen.log]
     return [line[:width] for line in lines]

@@ -7,8 +7,8 @@ replays on its own time stamps and tests run on simulated time.
   the last ``window_s`` seconds for rates and bus load, and gives the received ones to a
   :class:`~gateway.drive.driveset.DriveSet` of the configuration, whose drivers decode motor state,
   speed, position and faults.  It never produces a frame: it only listens.
-* :class:`StatusMonitor` takes the daemon's ``status`` replies: rates and bus load come from
-  the differences between replies up to ``window_s`` apart.
+* :class:`StatusMonitor` takes the daemon's statuses (:class:`gateway.core.status.GatewayStatus`):
+  rates and bus load come from the differences between statuses up to ``window_s`` apart.
 
 Rates are counts in the window ``(now - window_s, now]`` divided by ``window_s``, or by the
 time since the start while less than a window has passed.  Bus load counts the bits of every
@@ -21,19 +21,19 @@ from __future__ import annotations
 import math
 from collections import deque
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from gateway.apps.monitor.view import BusLoad, IdView, MonitorSnapshot, MotorView
 from gateway.core.errors import DecodeError, GatewayError
-from gateway.core.types import DriveFault, DriveState
+from gateway.core.status import CanErrorState, fault_names, state_name
+from gateway.core.types import DriveState
 from gateway.drive.driveset import DriveSet
 from gateway.drive.labels import FrameLabel, FrameLabeler
 from gateway.wire.busload import bus_load, frame_bits
 
 if TYPE_CHECKING:
-    from collections.abc import Mapping
-
     from gateway.core.settings import GatewayConfig
+    from gateway.core.status import GatewayStatus
     from gateway.core.types import Frame, MotorConfig, MotorStatus
 
 #: Default averaging window of rates and bus load, s.
@@ -47,15 +47,14 @@ ARMING_ON_BUS = frozenset({"odrive"})
 #: SDO response answers the gateway's SDO request, which the monitor's drivers never sent):
 #: they are no errors on the bus and are not counted.
 LISTENER_REJECTIONS = frozenset({"unexpected SDO response"})
+#: The daemon's event counters shown as errors.
+_DAEMON_ERRORS = ("send_failures", "frames_unsent", "receive_failures", "bus_reopens",
+                  "bad_can_twists", "fd_frames_ignored")
 #: Bits per frame, nominal and worst case, by [extended][data bytes].
 _BITS = tuple(
     tuple((frame_bits(n, ext), frame_bits(n, ext, worst_case=True)) for n in range(9))
     for ext in (False, True)
 )
-
-
-def _fault_names(faults: DriveFault) -> tuple[str, ...]:
-    return tuple(f.name.lower() for f in DriveFault if f.name and f.value and f in faults)
 
 
 def _rpm(motor: MotorConfig | None, wheel_rad_s: float | None) -> float | None:
@@ -187,7 +186,7 @@ class BusMonitor:
             state = "online"
         fb = st.feedback
         velocity = None if fb is None else fb.velocity_rad_s
-        return MotorView(st.name, driver, st.node_id, state, _fault_names(st.faults), st.detail,
+        return MotorView(st.name, driver, st.node_id, state, fault_names(st.faults), st.detail,
                          velocity, _rpm(motor, velocity), None if fb is None else fb.position_rad,
                          st.feedback_age_s)
 
@@ -197,19 +196,11 @@ class _Sample:
     time_s: float
     counts: dict[tuple[int, bool, str], int]
     bits: int
-    worst_bits: int | None
-
-
-def _get(obj: Mapping[str, Any], key: str, kind: type | tuple[type, ...], where: str) -> Any:
-    value = obj.get(key) if isinstance(obj, dict) else None
-    if not isinstance(value, kind) or (isinstance(value, bool) and kind is not bool):
-        raise DecodeError(f"daemon status: expected {where}.{key} of type "
-                          f"{getattr(kind, '__name__', kind)}, got {value!r}")
-    return value
 
 
 class StatusMonitor:
-    """Aggregates the daemon's ``status`` replies.
+    """Aggregates the daemon's statuses (:class:`gateway.core.status.GatewayStatus`, as
+    :func:`gateway.wire.socket.status.status_from_json` reads a ``status`` reply).
 
     :param config: the robot's configuration (names the IDs; gives gear ratios for rpm).
     :param window_s: averaging window of rates and load, s (> 0).
@@ -226,34 +217,28 @@ class StatusMonitor:
         self._motors = {m.wheel: m for m in config.motors if m is not None}
         self._classes = {type(p).__name__: m.driver for m, p in self.labeler.probes()}
         self._samples: deque[_Sample] = deque()
-        self._status: dict[str, Any] = {}
+        self._status: GatewayStatus | None = None
         self._start: float | None = None
 
-    def update(self, status: Mapping[str, Any]) -> None:
-        """Take one status reply (as ``wheelgate status --json`` prints it).
-
-        :raises DecodeError: naming the key that is missing or of the wrong type.
-        """
-        bus = _get(status, "bus", dict, "status")
-        t = float(_get(bus, "time_s", (int, float), "bus"))
-        counts: dict[tuple[int, bool, str], int] = {}
-        for k, item in enumerate(_get(bus, "frames", list, "bus")):
-            where = f"bus.frames[{k}]"
-            key = (_get(item, "id", int, where), _get(item, "extended", bool, where),
-                   _get(item, "direction", str, where))
-            counts[key] = _get(item, "count", int, where)
-        worst = bus.get("worst_bits")
+    def update(self, status: GatewayStatus) -> None:
+        """Take one status."""
+        bus = status.bus
+        t = bus.time_s
+        counts = {(f.can_id, f.extended, f.direction.value): f.count for f in bus.frames}
         if self._start is None:
             self._start = t
-        self._samples.append(_Sample(t, counts, _get(bus, "bits", int, "bus"),
-                                     worst if isinstance(worst, int) else None))
+        self._samples.append(_Sample(t, counts, bus.bits))
         while len(self._samples) > 2 and self._samples[1].time_s <= t - self.window_s:
             self._samples.popleft()
-        self._status = dict(status)
+        self._status = status
 
     def snapshot(self) -> MonitorSnapshot:
-        """The view at the last status's time (rates need two replies)."""
-        if not self._samples:
+        """The view at the last status's time (rates need two statuses).
+
+        :raises DecodeError: before the first status.
+        """
+        status = self._status
+        if status is None or not self._samples:
             raise DecodeError("daemon status: expected a status reply before a snapshot")
         first, last = self._samples[0], self._samples[-1]
         start = first.time_s if self._start is None else self._start
@@ -264,63 +249,52 @@ class StatusMonitor:
             rate = (n - first.counts.get((can_id, ext, direction), 0)) * per_s
             ids.append(IdView(can_id, ext, False, direction, n, rate,
                               self.labeler.label_id(can_id, ext)))
-        bitrate = int(self._status["bus"].get("bitrate") or self.config.bus.bitrate)
-        worst = (None if last.worst_bits is None or first.worst_bits is None
-                 else bus_load((last.worst_bits - first.worst_bits) * per_s, bitrate))
+        bitrate = status.bus.bitrate or self.config.bus.bitrate
         frames = sum(last.counts.values())
         load = BusLoad(bitrate, (frames - sum(first.counts.values())) * per_s,
-                       bus_load((last.bits - first.bits) * per_s, bitrate), worst)
+                       bus_load((last.bits - first.bits) * per_s, bitrate), None)
         return MonitorSnapshot(
             self.source, last.time_s, last.time_s - start, span, frames, load,
-            self._motor_views(), tuple(ids), self._errors(), str(self._status.get("state")),
-            self._notes())
+            self._motor_views(status), tuple(ids), self._errors(status),
+            state_name(status.state), self._notes(status))
 
-    def _motor_views(self) -> tuple[MotorView, ...]:
+    def _motor_views(self, status: GatewayStatus) -> tuple[MotorView, ...]:
         out = []
-        for k, m in enumerate(_get(self._status, "motors", list, "status")):
-            where = f"motors[{k}]"
-            name = _get(m, "name", str, where)
-            motor = self._motors.get(name)
-            velocity = m.get("velocity_rad_s")
+        for m in status.motors:
+            motor = self._motors.get(m.name)
             out.append(MotorView(
-                name, motor.driver if motor is not None else "?", _get(m, "node_id", int, where),
-                str(m.get("state")), tuple(str(f) for f in m.get("faults") or ()),
-                str(m.get("detail") or ""), velocity, _rpm(motor, velocity),
-                m.get("position_rad"), m.get("feedback_age_s")))
+                m.name, motor.driver if motor is not None else "?", m.node_id,
+                state_name(m.state), fault_names(m.faults), m.detail, m.velocity_rad_s,
+                _rpm(motor, m.velocity_rad_s), m.position_rad, m.feedback_age_s))
         return tuple(out)
 
-    def _errors(self) -> tuple[tuple[str, int], ...]:
-        counters = self._status.get("counters") or {}
-        rejected = counters.get("rejected_frames") or {}
+    def _errors(self, status: GatewayStatus) -> tuple[tuple[str, int], ...]:
+        events = status.counters.events
         drivers = sorted({m.driver for m in self._motors.values()})
         by_driver = dict.fromkeys(drivers, 0)
-        for cls, reasons in rejected.items():
+        for cls, reasons in status.counters.rejected_frames.items():
             name = self._classes.get(cls, cls)
             by_driver[name] = by_driver.get(name, 0) + sum(reasons.values())
         out = [(f"rejected by {name}", n) for name, n in by_driver.items()]
-        out += [(name.replace("_", " "), int(counters.get(name, 0)))
-                for name in ("send_failures", "frames_unsent", "receive_failures",
-                             "bus_reopens", "bad_can_twists", "fd_frames_ignored")]
-        bus_errors = (self._status.get("bus") or {}).get("error_frames") or {}
+        out += [(name.replace("_", " "), events.get(name, 0)) for name in _DAEMON_ERRORS]
+        health = status.bus.health
+        bus_errors = {} if health is None else health.error_frames
         out += [(f"error frames: {name.replace('_', ' ')}" if name != "error_frames"
-                 else "error frames", int(n))
+                 else "error frames", n)
                 for name, n in bus_errors.items() if n or name in ("error_frames", "bus_off")]
         return tuple(out)
 
-    def _notes(self) -> tuple[str, ...]:
+    def _notes(self, status: GatewayStatus) -> tuple[str, ...]:
         notes = []
-        robot = self._status.get("robot")
-        if robot is not None and robot != self.config.name:
-            notes.append(f"the daemon runs robot {robot!r} but names come from "
+        if status.robot != self.config.name:
+            notes.append(f"the daemon runs robot {status.robot!r} but names come from "
                          f"{self.config.name!r}: pass the daemon's config with -c")
-        bus = self._status.get("bus") or {}
-        if bus.get("healthy") is False:
+        health = status.bus.health
+        if health is not None and not health.healthy:
             notes.append("the daemon reports its CAN bus as unhealthy")
-        if bus.get("error_state", "active") != "active":
-            notes.append(f"CAN controller {str(bus['error_state']).replace('_', '-')}: "
-                         f"{bus.get('last_error_frame') or 'no detail'}")
-        if self._status.get("reason"):
-            notes.append(f"gateway: {self._status['reason']}")
+        if health is not None and health.error_state is not CanErrorState.ACTIVE:
+            notes.append(f"CAN controller {health.error_state.value.replace('_', '-')}: "
+                         f"{health.last_error_frame or 'no detail'}")
+        if status.reason:
+            notes.append(f"gateway: {status.reason}")
         return tuple(notes)
-
-

@@ -3,9 +3,10 @@
 :class:`Replay` is the core of ``wheelgate odom``: every :class:`~gateway.wire.candump.LogEntry`
 goes, stamped with its recorded time, to a :class:`~gateway.drive.driveset.DriveSet` built from the
 configuration (drivers ignore frames that are not theirs, so a gateway ``--record`` log with
-both directions is fed whole), and the odometry integrates every wheel's latest position the
-way :meth:`gateway.runtime.loop.Gateway._integrate` does: at the newest feedback time stamp, with
-``None`` for wheels without feedback.  It reads no clock and touches no file or bus.
+both directions is fed whole), and the odometry integrates every wheel's latest position by the
+gateway's own rule (:class:`gateway.core.odom_feed.OdomFeed`): at the newest feedback time
+stamp, with ``None`` for wheels without feedback.  It reads no clock and touches no file or
+bus.
 
 When the odometry is updated
     At the end of a group of entries that share one time stamp (the gateway stamps all frames
@@ -35,6 +36,7 @@ from typing import TYPE_CHECKING
 
 from gateway.core.errors import DecodeError, KinematicsError
 from gateway.core.kinematics import Odometry
+from gateway.core.odom_feed import OdomFeed
 from gateway.core.steer_log import SteeringSource, fixed_subset, reconstruct_steer
 from gateway.drive.driveset import DriveSet
 from gateway.wire.can import WgCodec
@@ -187,6 +189,7 @@ class Replay:
         # would leave an interval with too few wheels to solve).
         self._needed = tuple(i for i, m in enumerate(config.motors) if m is not None)
         self._n_needed = len(self._needed)
+        self._feed = OdomFeed(self._needed)
         self._last_feedback: list[WheelFeedback | None] = [None] * self.model.n
         # Frames the drivers took since the last update: every driven wheel having a new
         # sample needs at least one each, so fewer spares the look at every wheel.
@@ -196,7 +199,6 @@ class Replay:
         self._pending = False
         self._group_s: float | None = None
         self._last_update_s = float("-inf")
-        self._odom_stamp = float("-inf")
         self._start_s: float | None = None
         self._entries = 0
         self._received = 0
@@ -276,11 +278,10 @@ class Replay:
         self._taken = 0
         self._last_update_s = group
         self._last_feedback = feedback
-        stamp = max(fb.timestamp_s for fb in feedback if fb is not None)
-        if stamp <= self._odom_stamp:
-            return None
-        self._odom_stamp = stamp
-        positions = [None if fb is None else fb.position_rad for fb in feedback]
+        got = self._feed.sample(feedback)
+        if got is None:
+            return None  # no feedback newer than the last update's
+        stamp, positions = got
         try:
             state = self._integrate(positions, stamp)
         except KinematicsError as err:

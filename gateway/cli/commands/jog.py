@@ -33,7 +33,7 @@ from typing import IO, TYPE_CHECKING, Any
 import click
 
 from gateway.apps.jog.keys import DEFAULT_DEADMAN_S, STOP, JogState, Request, jog_limits, split_keys
-from gateway.apps.jog.screen import Screen, daemon_view, render, reply_error
+from gateway.apps.jog.screen import Screen, read_status, render, reply_error
 from gateway.cli import config_option
 from gateway.cli.commands._common import check_finite, load, socket_for
 from gateway.runtime.client import ClientError, ControlClient
@@ -43,8 +43,8 @@ from gateway.runtime.sdnotify import SystemdNotifier
 if TYPE_CHECKING:
     from collections.abc import Iterator
 
-    from gateway.apps.jog.screen import DaemonView
     from gateway.core.settings import GatewayConfig
+    from gateway.core.status import GatewayStatus
 
 #: How often the daemon's status is polled (s).
 STATUS_PERIOD_S = 0.2
@@ -236,7 +236,7 @@ def _session(fd_in: int, wake_fd: int, caught: list[str], term: _Terminal, link:
              state: JogState, robot: str, title: str, logs: _LogCapture) -> JogState:
     """The select loop; returns the final state (stop has been sent)."""
     last_error = ""
-    view: DaemonView | None = None
+    view: GatewayStatus | None = None
     next_status = 0.0
 
     def send(requests: tuple[Request, ...]) -> None:
@@ -259,7 +259,8 @@ def _session(fd_in: int, wake_fd: int, caught: list[str], term: _Terminal, link:
                 link.retry()
                 status = link.request({"op": "status"})
                 if status is not None and status.get("ok"):
-                    view = daemon_view(status)
+                    view, problem = read_status(status)
+                    last_error = problem or last_error
                 next_status = now + STATUS_PERIOD_S
             connection = (f"connected: {link.path}" if link.client is not None else
                           f"DISCONNECTED: {link.error} (retrying)")

@@ -3,7 +3,8 @@
 One of three sources:
 
 * the daemon (the default, when one answers; ``--socket PATH``): its ``status`` is polled at
-  the refresh rate, and rates come from the differences between replies;
+  the refresh rate and read into :class:`gateway.core.status.GatewayStatus`, and rates come
+  from the differences between statuses;
 * ``--bus``: the configured bus (or the root ``--interface``/``--channel``), opened with
   python-can.  **Read-only**: the monitor never sends a frame, not even a request; it decodes
   what the controllers and the gateway put on the bus.  (On SocketCAN the adapter still
@@ -27,7 +28,7 @@ import math
 import shutil
 import sys
 import time
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import can
 import click
@@ -40,12 +41,14 @@ from gateway.cli import config_option, json_option
 from gateway.cli.commands._common import load, socket_for
 from gateway.runtime.client import ClientError, ControlClient
 from gateway.wire.candump import CandumpError, parse_line
+from gateway.wire.socket.status import status_from_json
 
 if TYPE_CHECKING:
     from collections.abc import Callable
 
     from gateway.apps.monitor import MonitorSnapshot
     from gateway.core.settings import GatewayConfig
+    from gateway.core.status import GatewayStatus
 
 #: Largest accepted --refresh (Hz) and --window (s).
 MAX_REFRESH_HZ = 100.0
@@ -255,13 +258,18 @@ def watch_bus(cfg: GatewayConfig, screen: Screen, period: float, window: float,
         bus.shutdown()
 
 
-def _status(client: ControlClient) -> dict[str, Any]:
+def _status(client: ControlClient) -> GatewayStatus:
+    """The daemon's status.
+
+    :raises click.ClickException: if the daemon refuses the request.
+    :raises ProtocolError: naming the key of a malformed reply.
+    """
     reply = client.request({"op": "status"})
     if not reply.get("ok"):
         error = reply.get("error") or {}
         raise click.ClickException(f"the daemon at {client.path} refused the status request: "
                                    f"{error.get('message', reply)}")
-    return reply
+    return status_from_json(reply)
 
 
 def watch_daemon(cfg: GatewayConfig, client: ControlClient, screen: Screen, period: float,

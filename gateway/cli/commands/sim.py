@@ -44,6 +44,7 @@ from gateway.cli.commands._common import VIRTUAL_HINT, load
 from gateway.core.errors import BusError, GatewayError
 from gateway.drive.driveset import DriveSet
 from gateway.sim.bus import SimulatedControllers
+from gateway.sim.registry import simulators_for
 from gateway.sim.truth import SimTruth, state_line
 
 if TYPE_CHECKING:
@@ -126,7 +127,7 @@ def command(ctx: click.Context, config_path: str | None, rate_hz: float, every_s
     """Run the configuration's simulated controllers on its bus, as separate devices."""
     cfg = load(ctx, config_path)
     drives = DriveSet(cfg)
-    sims = drives.simulators()
+    sims = simulators_for(drives.all_motors())
     truth = SimTruth(cfg, drives, sims)
     ctl = open_controllers(cfg, sims, rate_hz)
     ctl.on_step = truth.update

@@ -3,15 +3,20 @@
 from __future__ import annotations
 
 import json
+import math
+from typing import TYPE_CHECKING
 
 import click
 
 from gateway.cli import config_option, json_option
 from gateway.cli.commands._common import socket_for
+from gateway.core.protection import ProtectionState
+from gateway.core.status import fault_names, state_name
 from gateway.runtime.client import ControlClient
+from gateway.wire.socket.status import status_from_json, status_to_json
 
-#: Late-start causes in the status's timing (``late_<key>``), as printed.
-_LATE_CAUSES = (("on_cpu", "on CPU"), ("runnable", "runnable"), ("asleep", "asleep"))
+if TYPE_CHECKING:
+    from gateway.core.status import GatewayStatus
 
 
 @click.command()
@@ -28,59 +33,78 @@ def command(
         reply = client.request({"op": "status"})
     if not reply.get("ok"):
         raise click.ClickException(str((reply.get("error") or {}).get("message", reply)))
-    reply.pop("ok", None)
-    reply.pop("id", None)
+    status = status_from_json(reply)
     if as_json:
-        click.echo(json.dumps(reply))
+        click.echo(json.dumps(status_to_json(status)))
         return
-    click.echo(f"robot: {reply['robot']}  state: {reply['state']}"
-               + (f" ({reply['reason']})" if reply.get("reason") else ""))
-    odo = reply["odometry"]
-    click.echo(f"odometry: x={odo['x']:.4f} m y={odo['y']:.4f} m theta={odo['theta']:.4f} rad "
-               f"v=({odo['vx']:.3f}, {odo['vy']:.3f}, {odo['wz']:.3f}) slip={odo['slip']:.4f} m/s "
-               f"distance={odo['distance']:.3f} m")
-    width = max([12, *(len(str(m["name"])) for m in reply["motors"])])
-    for m in reply["motors"]:
-        age = m["feedback_age_s"]
-        stop = m.get("controller_stop")  # daemons before issue 14 do not send it
+    for line in status_lines(status):
+        click.echo(line)
+
+
+def _finite_nonzero(value: float) -> bool:
+    return math.isfinite(value) and value != 0.0
+
+
+def status_lines(status: GatewayStatus) -> list[str]:
+    """What ``wheelgate status`` prints, a line each."""
+    s = status
+    lines = [f"robot: {s.robot}  state: {state_name(s.state)}"
+             + (f" ({s.reason})" if s.reason else "")]
+    odo = s.odometry
+    pose, vel = odo.pose, odo.twist
+    lines.append(
+        f"odometry: x={pose.x_m:.4f} m y={pose.y_m:.4f} m theta={pose.theta_rad:.4f} rad "
+        f"v=({vel.vx_m_s:.3f}, {vel.vy_m_s:.3f}, {vel.wz_rad_s:.3f}) slip={odo.slip_m_s:.4f} m/s "
+        f"distance={odo.distance_m:.3f} m")
+    width = max([12, *(len(m.name) for m in s.motors)])
+    for m in s.motors:
+        age = m.feedback_age_s
+        stop = m.controller_stop  # daemons before issue 14 do not send it
         guard = ""
-        if stop:
-            timeout = stop["timeout_s"]
-            guard = f"stop {stop['guard']}" + (f" {timeout:g} s" if timeout else "") + (
-                f" ({stop['state']})" if stop["state"] != "not applicable" else "")
-        click.echo(f"  {m['name']:<{width}} node {m['node_id']:<4} {m['state']:<9} "
-                   f"age {'-' if age is None else f'{age * 1000:.1f} ms':>9}  {guard:<30} "
-                   f"{', '.join(m['faults']) or 'no faults'} {m['detail']}")
-    tr = reply.get("tracking")
-    if tr:  # daemons before the tracking check do not send it
-        click.echo(f"tracking: worst error {tr['worst_ratio']:.2f} of the window "
-                   f"({tr['tolerance_rad_s']:g} rad/s + {100 * tr['tolerance_ratio']:g} % of the "
-                   f"command, {tr['time_s']:g} s)"
-                   + (f"; steering {tr['steer_worst_ratio']:.2f} of "
-                      f"{tr['steer_tolerance_rad']:g} rad" if tr.get("steer_worst_ratio") else ""))
-    t = reply["timing"]
-    causes = [(t.get(f"late_{key}", 0), text) for key, text in _LATE_CAUSES]
+        if stop is not None:
+            timeout = stop.timeout_s
+            guard = f"stop {stop.guard.value}" + (f" {timeout:g} s" if timeout else "") + (
+                f" ({stop.state.value})" if stop.state is not ProtectionState.NOT_APPLICABLE
+                else "")
+        lines.append(
+            f"  {m.name:<{width}} node {m.node_id:<4} {state_name(m.state):<9} "
+            f"age {'-' if age is None else f'{age * 1000:.1f} ms':>9}  {guard:<30} "
+            f"{', '.join(fault_names(m.faults)) or 'no faults'} {m.detail}")
+    tr = s.tracking
+    if tr is not None:  # daemons before the tracking check do not send it
+        lim = tr.limits
+        lines.append(
+            f"tracking: worst error {tr.worst_ratio:.2f} of the window "
+            f"({lim.tolerance_rad_s:g} rad/s + {100 * lim.tolerance_ratio:g} % of the "
+            f"command, {lim.time_s:g} s)"
+            + (f"; steering {tr.steer_worst_ratio:.2f} of {lim.steer_tolerance_rad:g} rad"
+               if _finite_nonzero(tr.steer_worst_ratio) else ""))
+    t = s.timing
+    causes = [(t.late_on_cpu, "on CPU"), (t.late_runnable, "runnable"),
+              (t.late_asleep, "asleep")]
     why = (" (late starts: " + ", ".join(f"{text} {n}" for n, text in causes) + ")"
            if any(n for n, _ in causes) else "")
-    click.echo(f"timing: {t['cycles']} cycles, {t['missed']} missed{why}; lateness p50/p99/max "
-               f"{t['lateness_p50_us']:.0f}/{t['lateness_p99_us']:.0f}/{t['lateness_max_us']:.0f} "
-               f"us; cost p50/p99/max {t['cost_p50_us']:.0f}/{t['cost_p99_us']:.0f}/"
-               f"{t['cost_max_us']:.0f} us"
-               + (f"; longest gap between bursts {t['burst_gap_max_ms']:.1f} ms"
-                  if "burst_gap_max_ms" in t else ""))
-    counters = {k: v for k, v in reply["counters"].items()
-                if v and k not in ("rejected_frames", "commands_not_followed")}
-    for driver, counts in (reply["counters"].get("commands_not_followed") or {}).items():
+    lines.append(
+        f"timing: {t.cycles} cycles, {t.missed} missed{why}; lateness p50/p99/max "
+        f"{t.lateness_p50_us:.0f}/{t.lateness_p99_us:.0f}/{t.lateness_max_us:.0f} "
+        f"us; cost p50/p99/max {t.cost_p50_us:.0f}/{t.cost_p99_us:.0f}/{t.cost_max_us:.0f} us"
+        + (f"; longest gap between bursts {t.burst_gap_max_ms:.1f} ms"
+           if t.burst_gap_max_ms is not None else ""))
+    counters = {k: v for k, v in s.counters.events.items() if v}
+    for driver, counts in s.counters.commands_not_followed.items():
         counters.update({f"{driver}.{k}": v for k, v in counts.items()})
-    click.echo("counters: " + ", ".join(f"{k}={v}" for k, v in sorted(counters.items())))
-    bus = reply.get("bus") or {}
-    if "error_state" in bus:  # daemons before the bus's health was reported do not send it
-        errors = {k: v for k, v in bus["error_frames"].items() if v and k != "error_frames"}
-        click.echo(f"bus: {bus['interface']}:{bus['channel']} controller {bus['error_state']}"
-                   f"{'' if bus['healthy'] else ' (unhealthy: frames do not go out)'}; "
-                   f"{bus['error_frames'].get('error_frames', 0)} error frames"
-                   + (" (" + ", ".join(f"{k}={v}" for k, v in sorted(errors.items())) + ")"
-                      if errors else "")
-                   + (f", last: {bus['last_error_frame']}" if bus.get("last_error_frame") else ""))
-    if reply.get("last_error"):
-        click.echo(f"last error: {reply['last_error']['message']}")
+    lines.append("counters: " + ", ".join(f"{k}={v}" for k, v in sorted(counters.items())))
+    bus, health = s.bus, s.bus.health
+    if health is not None:  # daemons before the bus's health was reported do not send it
+        frames = health.error_frames
+        errors = {k: v for k, v in frames.items() if v and k != "error_frames"}
+        lines.append(
+            f"bus: {bus.interface}:{bus.channel} controller {health.error_state.value}"
+            f"{'' if health.healthy else ' (unhealthy: frames do not go out)'}; "
+            f"{frames.get('error_frames', 0)} error frames"
+            + (" (" + ", ".join(f"{k}={v}" for k, v in sorted(errors.items())) + ")"
+               if errors else "")
+            + (f", last: {health.last_error_frame}" if health.last_error_frame else ""))
+    if s.last_error is not None:
+        lines.append(f"last error: {s.last_error.message}")
+    return lines

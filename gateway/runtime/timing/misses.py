@@ -24,30 +24,26 @@ Linux), nothing is classified.
 from __future__ import annotations
 
 import collections
-import enum
 import math
 import os
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
+
+from gateway.runtime.timing.cause import MissCause
 
 if TYPE_CHECKING:
     from collections.abc import Callable
 
     from gateway.runtime.timing.scheduler import Scheduler
 
+__all__ = ["RECENT", "REPORT_INTERVAL_S", "Miss", "MissCause", "MissProbe", "SchedStat",
+           "classify"]
+
 #: Late starts kept in :attr:`MissProbe.recent`.
 RECENT = 64
 
 #: Least time between two :meth:`MissProbe.report` lines (s).
 REPORT_INTERVAL_S = 10.0
-
-
-class MissCause(enum.Enum):
-    """What kept the loop from its deadline (see the module documentation)."""
-
-    ON_CPU = "on_cpu"
-    RUNNABLE = "runnable"
-    ASLEEP = "asleep"
 
 
 def classify(late_s: float, on_cpu_s: float, runnable_s: float, period_s: float,

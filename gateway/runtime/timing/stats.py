@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from gateway.core.errors import ConfigError
-from gateway.runtime.timing.misses import MissCause
+from gateway.runtime.timing.cause import MissCause
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -44,7 +44,7 @@ class TimingStats:
     :param latency_max_us: largest latency in the window.
     :param late_on_cpu: late starts (each skipping one or more deadlines) since start-up for
         which the loop thread was on a CPU for more than a period
-        (:class:`~gateway.runtime.timing.misses.MissCause`; all three stay 0 where the kernel's
+        (:class:`~gateway.runtime.timing.cause.MissCause`; all three stay 0 where the kernel's
         per-thread statistics cannot be read).
     :param late_runnable: late starts for which it was runnable but not running.
     :param late_asleep: late starts for which it was woken late.
@@ -145,7 +145,7 @@ class LoopTimer:
         self.cycles = 0
         #: Deadlines skipped after overruns since start-up (cheap to read every cycle).
         self.missed = 0
-        #: Late starts since start-up by cause (:class:`~gateway.runtime.timing.misses.MissCause`
+        #: Late starts since start-up by cause (:class:`~gateway.runtime.timing.cause.MissCause`
         #: value), as classified by a :class:`~gateway.runtime.timing.misses.MissProbe`.
         self.late_by_cause = {cause.value: 0 for cause in MissCause}
 

@@ -33,6 +33,7 @@ error ``count`` wraps modulo 65536 (a sequence number), the status counts satura
 
 from __future__ import annotations
 
+from gateway.core.can_ids import ID_KEYS, CanIds
 from gateway.wire.can.codec import WgCodec, unwrap_position_m
 from gateway.wire.can.counter import CounterKind, CounterTracker, classify_counter
 from gateway.wire.can.messages import (
@@ -41,7 +42,6 @@ from gateway.wire.can.messages import (
     ERROR,
     I16_MAX,
     I16_MIN,
-    ID_KEYS,
     NO_TWIST_COUNTER,
     NO_WHEEL,
     ODOM_POSE,
@@ -53,7 +53,6 @@ from gateway.wire.can.messages import (
     TWIST_CMD,
     U8_MAX,
     U16_MAX,
-    CanIds,
     ErrorReport,
     OdomVelocity,
     StatusFlags,

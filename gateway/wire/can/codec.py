@@ -12,6 +12,7 @@ import math
 import struct
 from typing import TYPE_CHECKING, TypeVar
 
+from gateway.core.can_ids import CanIds
 from gateway.core.errors import DecodeError, EncodeError
 from gateway.core.kinematics.odometry import Pose
 from gateway.core.types import ConstraintCode, ErrorCode, Frame, GatewayState, Twist
@@ -32,7 +33,6 @@ from gateway.wire.can.messages import (
     TWIST_CMD,
     U8_MAX,
     U16_MAX,
-    CanIds,
     ErrorReport,
     OdomVelocity,
     StatusFlags,

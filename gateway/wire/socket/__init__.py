@@ -28,6 +28,8 @@ dataclasses an object of their fields, tuples lists.
 * :mod:`gateway.wire.socket.parsing`: :class:`LineFramer` and :func:`parse_request` (inbound).
 * :mod:`gateway.wire.socket.replies`: :func:`to_json`, the reply and event lines, and
   :func:`parse_message` for clients (outbound).
+* :mod:`gateway.wire.socket.status`: the ``status`` reply's payload, the JSON form of
+  :class:`gateway.core.status.GatewayStatus` (:func:`status_to_json`, :func:`status_from_json`).
 """
 
 from __future__ import annotations
@@ -49,14 +51,17 @@ from gateway.wire.socket.messages import (
 )
 from gateway.wire.socket.parsing import LineFramer, parse_request
 from gateway.wire.socket.replies import (
+    encode_data_line,
     encode_line,
     event,
     parse_message,
     reply_error,
     reply_ok,
+    reply_ok_data,
     reply_protocol_error,
     to_json,
 )
+from gateway.wire.socket.status import odometry_to_json, status_from_json, status_to_json
 
 __all__ = [
     "MAX_ID_CHARS",
@@ -73,12 +78,17 @@ __all__ = [
     "SubscribeRequest",
     "Topic",
     "TwistRequest",
+    "encode_data_line",
     "encode_line",
     "event",
+    "odometry_to_json",
     "parse_message",
     "parse_request",
     "reply_error",
     "reply_ok",
+    "reply_ok_data",
     "reply_protocol_error",
+    "status_from_json",
+    "status_to_json",
     "to_json",
 ]

@@ -1,0 +1,177 @@
+"""One ODrive axis as the driver keeps it: one record per axis, and its enable sequence.
+
+The sequence, per axis (as the official ``can_simple.py`` example of the `ODrive CAN protocol
+<https://docs.odriverobotics.com/v/latest/manual/can-protocol.html>`_ arms an axis):
+
+* arm: Clear_Errors, Set_Controller_Mode (velocity control with the configured input mode;
+  position control for a steering actuator) and Set_Axis_State CLOSED_LOOP_CONTROL; ENABLING
+  until a heartbeat shows CLOSED_LOOP_CONTROL;
+* on 0.6 with the watchdog's endpoint IDs, the watchdog setup
+  (:class:`~drivers.odrive.watchdog.WatchdogSetup`) runs first, and the axis is armed once it
+  ends, if the driver's ``may_arm`` allows (confirmed, or failed under
+  ``gateway.controller_watchdog: warn``);
+* an enable that does not take is repeated every :attr:`Axis.ENABLE_RETRY_S` while the axis is
+  alive, idle and error-free, :attr:`Axis.ENABLE_ATTEMPTS` times at most; a reported error is
+  never cleared automatically (the axis refused: it stays in FAULT);
+* disarm: Set_Input_Vel 0 then Set_Axis_State IDLE, from any state.
+
+The record is plain data the driver reads and writes on every frame; the methods here only
+change the enable state and return frames, so they are tested through the driver.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, ClassVar
+
+from drivers.odrive.enums import AxisState, ControlMode, InputMode
+from gateway.core.errors import IllegalTransitionError
+
+if TYPE_CHECKING:
+    from collections.abc import Sequence
+
+    from drivers.odrive.codec import OdriveCodec
+    from drivers.odrive.watchdog import WatchdogSetup
+    from gateway.core.types import Frame, MotorConfig
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(slots=True)
+class Axis:
+    """One axis: its configuration and what the driver last learnt of it.
+
+    :param index: the motor's position in the driver's ``motors``.
+    :param motor: the motor block.
+    :param node_id: its node ID.
+    :param steer: whether it is a steering actuator (position control).
+    :param scale: wheel to motor side, ``gear_ratio * sign`` (the driver's ``motor_scale``).
+    :param rtr: encoder estimates are requested (``encoder_request: rtr``), not cyclic.
+    :param input_mode: the input mode selected when arming.
+    :param watchdog: the 0.6 watchdog setup (``None``: 0.5, or no endpoint IDs given).
+    """
+
+    #: Seconds between enable attempts that have not reached CLOSED_LOOP_CONTROL.
+    ENABLE_RETRY_S: ClassVar[float] = 0.5
+    #: Enable attempts (while the axis answers) before giving up.
+    ENABLE_ATTEMPTS: ClassVar[int] = 3
+    #: Heartbeats this soon after an enable may still carry the errors it just cleared.
+    ENABLE_GRACE_S: ClassVar[float] = 0.3
+
+    index: int
+    motor: MotorConfig
+    node_id: int
+    steer: bool
+    scale: float
+    rtr: bool
+    input_mode: InputMode
+    watchdog: WatchdogSetup | None
+    #: The axis state in the last heartbeat (``UNDEFINED`` before one).
+    axis_state: AxisState | int = AxisState.UNDEFINED
+    #: The first position estimate (turns): a drive wheel's angle is counted from it.
+    pos0_turns: float | None = None
+    #: The previous cycle's steering command, ``(time, angle)``, for the speed feed-forward.
+    last_angle: tuple[float, float] | None = None
+    #: Enabling: armed or about to be, until CLOSED_LOOP_CONTROL, a refusal or giving up.
+    enabling: bool = False
+    #: Arming waits for the watchdog setup.
+    arm_waits: bool = False
+    enable_sent_s: float = 0.0
+    attempts: int = 0
+    #: The fault text from the heartbeat, and from the error reply it asked for.
+    axis_detail: str = ""
+    error_detail: str = ""
+    #: A Get_Error (0.6) / Get_Motor_Error (0.5) request is due at the next poll.
+    error_request_due: bool = False
+
+    # ----------------------------------------------------------------- the sequence
+
+    def arm(self, codec: OdriveCodec, alive: bool) -> tuple[Frame, ...]:
+        """The frames that request CLOSED_LOOP_CONTROL from the state last heard (unknown
+        when the axis is not ``alive``).
+
+        :raises IllegalTransitionError: naming the wheel, while the axis runs a calibration or
+            homing procedure (a new state request would abort it).
+        """
+        current = self.axis_state if alive else AxisState.UNDEFINED
+        mode = ControlMode.POSITION_CONTROL if self.steer else ControlMode.VELOCITY_CONTROL
+        self.last_angle = None
+        try:
+            return codec.make_transition(
+                self.node_id, current, AxisState.CLOSED_LOOP_CONTROL, self.input_mode, mode
+            )
+        except IllegalTransitionError as err:
+            raise IllegalTransitionError(
+                f'Cannot enable wheel "{self.motor.wheel}": {err}'
+            ) from err
+
+    def start(self, arm: Sequence[Frame], now_s: float) -> Sequence[Frame]:
+        """Begin enabling with the frames of :meth:`arm`: sent now, or once the watchdog
+        setup (which starts here) ends."""
+        self.enabling = True
+        self.enable_sent_s = now_s
+        self.attempts = 1
+        self.error_detail = ""
+        wd = self.watchdog
+        self.arm_waits = wd is not None
+        return arm if wd is None else wd.start(now_s)
+
+    def settled(
+        self, codec: OdriveCodec, now_s: float, alive: bool, may_arm: bool
+    ) -> tuple[Frame, ...]:
+        """The watchdog setup ended: arm now if ``may_arm``, else stop enabling."""
+        self.arm_waits = False
+        if not may_arm:
+            self.enabling = False
+            return ()
+        self.enable_sent_s = now_s
+        self.attempts = 1
+        return self.arm(codec, alive)
+
+    def retry_due(self, now_s: float) -> bool:
+        """Whether an enable under way has waited :attr:`ENABLE_RETRY_S` for its answer."""
+        return (
+            self.enabling
+            and not self.arm_waits
+            and now_s - self.enable_sent_s >= self.ENABLE_RETRY_S
+        )
+
+    def retry(
+        self, codec: OdriveCodec, now_s: float, alive: bool, faulted: bool
+    ) -> tuple[Frame, ...]:
+        """Arm again if the axis is alive, idle and error-free, at most
+        :attr:`ENABLE_ATTEMPTS` times; a fault ends enabling once past the grace."""
+        if faulted:
+            if now_s - self.enable_sent_s > self.ENABLE_GRACE_S:
+                self.enabling = False  # the axis refused: stay in FAULT, never auto-clear
+            return ()
+        if not alive or self.axis_state != AxisState.IDLE:
+            return ()  # not answering yet, or busy: wait without using up an attempt
+        m = self.motor
+        if self.attempts >= self.ENABLE_ATTEMPTS:
+            log.warning(
+                'ODrive node %d ("%s") stayed in IDLE after %d enable attempts; giving up',
+                m.node_id, m.wheel, self.attempts,
+            )
+            self.enabling = False
+            return ()
+        self.attempts += 1
+        self.enable_sent_s = now_s
+        log.info('ODrive node %d ("%s"): enable attempt %d', m.node_id, m.wheel, self.attempts)
+        return self.arm(codec, alive)
+
+    def disarm(self, codec: OdriveCodec) -> tuple[Frame, ...]:
+        """Set_Input_Vel 0 and Set_Axis_State IDLE (allowed from any state)."""
+        self.enabling = False
+        self.arm_waits = False
+        return codec.make_transition(self.node_id, self.axis_state, AxisState.IDLE)
+
+    def armed_by(self, axis_state: AxisState | int) -> bool:
+        """Take a heartbeat's axis state: whether it is CLOSED_LOOP_CONTROL (which ends
+        enabling)."""
+        self.axis_state = axis_state
+        armed = axis_state == AxisState.CLOSED_LOOP_CONTROL
+        if armed:
+            self.enabling = False
+        return armed

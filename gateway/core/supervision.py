@@ -1,0 +1,135 @@
+"""What the supervisor (:mod:`gateway.core.control`) answers, and what it reads of the motors.
+
+Its answers are frozen values: :class:`Accepted` or :class:`Rejection` for a twist,
+:class:`Fault` when a fault starts, :class:`Decision` for every cycle.  It reads the motors
+through a :class:`MotorBoard`, which gives their states and feedback every cycle without
+building a :class:`~gateway.core.types.MotorStatus` for each motor; the full statuses are read
+only for a fault's message.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Protocol
+
+if TYPE_CHECKING:
+    from collections.abc import Sequence
+
+    from gateway.core.errors import InfeasibleTwistError
+    from gateway.core.kinematics import IkResult
+    from gateway.core.types import (
+        DriveState,
+        ErrorCode,
+        MotorStatus,
+        Twist,
+        WheelFeedback,
+    )
+
+__all__ = ["Accepted", "Decision", "Fault", "MotorBoard", "Rejection", "Source", "StatusBoard"]
+
+
+class Source(enum.Enum):
+    """Where a command came from."""
+
+    SOCKET = "socket"
+    CAN = "can"
+    INTERNAL = "internal"
+
+
+@dataclass(frozen=True, slots=True)
+class Rejection:
+    """Why a command was refused.
+
+    :param code: the error class.
+    :param message: a sentence for people.
+    :param error: the kinematic error, for infeasible twists.
+    """
+
+    code: ErrorCode
+    message: str
+    error: InfeasibleTwistError | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class Accepted:
+    """A twist that will be followed.
+
+    :param twist: the twist the gateway follows (the nearest feasible one when projected).
+    :param projected: whether it was projected from an infeasible request.
+    :param error: the kinematic error of the request, when projected.
+    :param ik: the inverse kinematics of ``twist`` from the steering angles the check was given
+        (``None`` when projected: the nearest twist is not solved here), so that the loop
+        solves no twist twice.
+    """
+
+    twist: Twist
+    projected: bool = False
+    error: InfeasibleTwistError | None = None
+    ik: IkResult | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class Fault:
+    """Why the gateway went to FAULT just now.
+
+    :param code: the error class (``MOTOR_FAULT``, ``FEEDBACK_TIMEOUT``, ``TRACKING_ERROR``).
+    :param message: a sentence naming every motor involved.
+    """
+
+    code: ErrorCode
+    message: str
+
+
+@dataclass(frozen=True, slots=True)
+class Decision:
+    """What to command this cycle.
+
+    :param twist: the target twist.
+    :param ramp: reach it through the acceleration limits (False: jump, for e-stop).
+    :param armed: whether the drives should be enabled.
+    :param cmd_timeout: whether the command timeout forced the zero target.
+    """
+
+    twist: Twist
+    ramp: bool
+    armed: bool
+    cmd_timeout: bool
+
+
+class MotorBoard(Protocol):
+    """What the supervisor reads of the motors each cycle, in one order: the drive motors in
+    model order of their wheels, then the steering actuators (the drive layer's drive set is
+    one).  Only :meth:`states` and :meth:`motor_feedback` are read every cycle; :meth:`status`
+    only for a fault's message."""
+
+    def states(self, now_s: float) -> Sequence[DriveState]:
+        """Every motor's state at ``now_s``."""
+
+    def motor_feedback(self) -> Sequence[WheelFeedback | None]:
+        """Every motor's latest feedback (``None``: none yet)."""
+
+    def status(self, now_s: float) -> Sequence[MotorStatus]:
+        """Every motor's full status at ``now_s``."""
+
+
+@dataclass(frozen=True, slots=True)
+class StatusBoard:
+    """A :class:`MotorBoard` over statuses already taken (the same for every ``now_s``).
+
+    :param statuses: every motor's status, drive motors first.
+    """
+
+    statuses: Sequence[MotorStatus]
+
+    def states(self, now_s: float) -> list[DriveState]:
+        """Every motor's state."""
+        return [s.state for s in self.statuses]
+
+    def motor_feedback(self) -> list[WheelFeedback | None]:
+        """Every motor's feedback."""
+        return [s.feedback for s in self.statuses]
+
+    def status(self, now_s: float) -> Sequence[MotorStatus]:
+        """The statuses."""
+        return self.statuses

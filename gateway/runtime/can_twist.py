@@ -1,0 +1,99 @@
+"""Twist commands from the bus: ``WG_Twist_Cmd`` frames checked and handed to the supervisor.
+
+:class:`CanTwists` decodes each frame (:mod:`gateway.wire.can`), checks its rolling counter
+(a repeated frame is a duplicate, a gap counts lost frames; a sender silent for longer than
+the command timeout starts a new sequence) and acts on its flags: ESTOP (even from a
+duplicate: an e-stop only ever stops), ENABLE (refused while an e-stop is latched that only
+the control socket may release), STOP, or else the twist.  Errors go back as ``WG_Error``.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from gateway.core.control import Rejection, Source
+from gateway.core.errors import DecodeError
+from gateway.core.types import ErrorCode, GatewayState
+from gateway.wire.can import NO_TWIST_COUNTER, CounterKind, CounterTracker, TwistFlags
+
+if TYPE_CHECKING:
+    from collections.abc import Callable
+
+    from gateway.core.control import Accepted, Supervisor
+    from gateway.core.settings import LoopConfig
+    from gateway.core.types import Frame, Twist
+    from gateway.wire.can import WgCodec
+
+    #: ``Gateway.twist``: a twist from a source, checked and followed.
+    TwistSink = Callable[[Twist, float, Source], Accepted | Rejection]
+    #: ``Gateway.report_error``: (code, message, out, rejection, twist counter).
+    ErrorSink = Callable[[ErrorCode, str, list[Frame], Rejection | None, int], None]
+
+
+class CanTwists:
+    """The gateway's CAN command input.
+
+    :param wg: the codec of the gateway's own frames.
+    :param loop: the ``gateway:`` settings (command timeout, who releases an e-stop).
+    :param supervisor: the state machine the commands go to.
+    :param counts: the gateway's event counters (``can_twists``, ``can_duplicates``,
+        ``can_lost``, ``bad_can_twists``).
+    :param twist: where a twist goes (checked, logged and remembered by the gateway).
+    :param report: how an error is answered (``WG_Error`` and the outbox).
+    """
+
+    def __init__(self, wg: WgCodec, loop: LoopConfig, supervisor: Supervisor,
+                 counts: dict[str, int], twist: TwistSink, report: ErrorSink) -> None:
+        self.wg = wg
+        self.loop = loop
+        self.supervisor = supervisor
+        self.counts = counts
+        self._twist = twist
+        self._report = report
+        #: The rolling counter of the sender's frames.
+        self.counter = CounterTracker()
+        self._last_s: float | None = None
+
+    def handle(self, frame: Frame, now_s: float, out: list[Frame]) -> None:
+        """A WG_Twist_Cmd from the bus (counter checked; errors answered with WG_Error, which
+        is appended to ``out``)."""
+        try:
+            cmd = self.wg.decode_twist(frame)
+        except DecodeError as err:
+            self.counts["bad_can_twists"] += 1
+            self._report(ErrorCode.BAD_COMMAND, str(err), out, None, NO_TWIST_COUNTER)
+            return
+        if cmd is None:
+            return
+        # A sender silent for longer than the command timeout is gone: its next frame starts
+        # a new sequence, even if it repeats the counter it stopped at (a restarted sender).
+        last, self._last_s = self._last_s, now_s
+        timeout = self.loop.cmd_timeout_s
+        if last is not None and timeout > 0.0 and now_s - last > timeout:
+            self.counter.reset()
+        kind, lost = self.counter.feed(cmd.counter)
+        self.counts["can_lost"] += lost
+        duplicate = kind is CounterKind.DUPLICATE
+        self.counts["can_duplicates" if duplicate else "can_twists"] += 1
+        sup = self.supervisor
+        if cmd.flags & TwistFlags.ESTOP:
+            # Taken even from a repeated frame: an e-stop only ever stops.
+            sup.estop("e-stop requested on CAN")
+            return
+        if duplicate:
+            return
+        if cmd.flags & TwistFlags.ENABLE:
+            if sup.state is GatewayState.ESTOP and self.loop.estop_release == "socket":
+                self._report(
+                    ErrorCode.ESTOP, "an e-stop is released only by an enable on the control "
+                    "socket (gateway.estop_release: socket); the CAN ENABLE flag was ignored",
+                    out, None, cmd.counter)
+                return
+            sup.enable(now_s)
+            return
+        if cmd.flags & TwistFlags.STOP:
+            sup.stop(now_s)
+            return
+        result = self._twist(cmd.twist, now_s, Source.CAN)
+        if isinstance(result, Rejection):
+            self._report(result.code, result.message, out, result, cmd.counter)

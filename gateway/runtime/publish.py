@@ -1,0 +1,142 @@
+"""What the gateway tells the world: odometry and status at their rates, errors as they come.
+
+:class:`Publisher` encodes ``WG_Odom_Pose``, ``WG_Odom_Velocity``, ``WG_Status`` and
+``WG_Error`` frames (:mod:`gateway.wire.can`) and puts the same news in the outbox that the
+daemon hands to socket subscribers.  :class:`gateway.runtime.loop.Gateway` owns one and sends
+the frames it returns.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from gateway.core.types import ConstraintCode, ErrorCode
+from gateway.wire.can import NO_TWIST_COUNTER, NO_WHEEL, ErrorReport, StatusFlags, StatusReport
+
+if TYPE_CHECKING:
+    from collections.abc import Mapping
+
+    from gateway.core.control import Rejection, Supervisor
+    from gateway.core.kinematics import LimitReport, Odometry
+    from gateway.core.settings import LoopConfig
+    from gateway.core.types import Frame
+    from gateway.runtime.timing import LoopTimer
+    from gateway.wire.can import WgCodec
+
+
+class Publisher:
+    """The gateway's reports, on CAN and in the outbox.
+
+    :param loop: the ``gateway:`` settings (the odometry and status rates).
+    :param wg: the codec of the gateway's own CAN frames.
+    :param supervisor: the state machine whose state and counters the status reports.
+    :param odometry: the odometry whose state is published.
+    :param timer: the loop's timing (missed cycles, in the status).
+    :param wheel_of: each motor's name -> the model index of its wheel (a steering
+        actuator's: its first wheel), for the wheel field of WG_Error and the status's mask.
+    """
+
+    def __init__(self, loop: LoopConfig, wg: WgCodec, supervisor: Supervisor,
+                 odometry: Odometry, timer: LoopTimer, wheel_of: Mapping[str, int]) -> None:
+        self._odom_period_s = 1.0 / loop.odom_rate_hz
+        self._status_period_s = 1.0 / loop.status_rate_hz
+        self.wg = wg
+        self.supervisor = supervisor
+        self.odometry = odometry
+        self.timer = timer
+        self.wheel_of = wheel_of
+        self._next_odom_s = 0.0
+        self._next_status_s = 0.0
+        #: The earliest time a report is due (s): nothing to do before it.
+        self.next_due_s = 0.0
+        self._status_counter = 0
+        self._error_count = 0
+        #: (topic, payload) news for socket subscribers; the daemon empties it every cycle.
+        self.outbox: list[tuple[str, dict[str, object]]] = []
+        #: The last error reported, as ``{"code": ..., "message": ...}``.
+        self.last_error: dict[str, object] | None = None
+
+    def error(
+        self,
+        code: ErrorCode,
+        message: str,
+        rejection: Rejection | None = None,
+        twist_counter: int = NO_TWIST_COUNTER,
+        wheel: str | None = None,
+    ) -> Frame:
+        """The WG_Error frame of an error (the outbox gets it too).
+
+        :param wheel: the wheel the error is about, when it is not the rejection's.
+        """
+        self._error_count += 1
+        err = rejection.error if rejection is not None else None
+        if err is not None:
+            wheel = err.wheel
+        frame = self.wg.encode_error(ErrorReport(
+            code=code,
+            wheel=NO_WHEEL if wheel is None else self.wheel_of[wheel],
+            constraint=ConstraintCode.from_name(err.constraint) if err else ConstraintCode.NONE,
+            twist_counter=twist_counter,
+            residual_m_s=err.residual_m_s if err else 0.0,
+            count=self._error_count,
+        ))
+        self.last_error = {"code": code.name.lower(), "message": message}
+        self.outbox.append(("error", dict(self.last_error)))
+        return frame
+
+    def publish(self, now_s: float, limit_report: LimitReport | None,
+                bus_trouble: bool) -> list[Frame]:
+        """The odometry and status frames due at ``now_s`` (the outbox gets their news).
+
+        :param limit_report: the last limits' report (the status's SPEED_LIMITED flag).
+        :param bus_trouble: failed bursts or a controller not error-active lately.
+        """
+        frames: list[Frame] = []
+        if now_s >= self._next_odom_s:
+            self._next_odom_s = now_s + self._odom_period_s
+            st = self.odometry.state
+            frames.append(self.wg.encode_pose(st.pose))
+            frames.append(self.wg.encode_velocity(st.twist, st.slip_m_s))
+            self.outbox.append(("odometry", self.odometry_dict()))
+        if now_s >= self._next_status_s:
+            self._next_status_s = now_s + self._status_period_s
+            frames.append(self.wg.encode_status(self.status_report(limit_report, bus_trouble)))
+            self.outbox.append(("status", {"state": self.supervisor.state,
+                                           "reason": self.supervisor.reason}))
+        self.next_due_s = min(self._next_odom_s, self._next_status_s)
+        return frames
+
+    def status_report(self, limit_report: LimitReport | None,
+                      bus_trouble: bool) -> StatusReport:
+        """The WG_Status content (each call advances its counter)."""
+        sup = self.supervisor
+        mask = 0
+        for name in sup.faulted:
+            mask |= 1 << min(self.wheel_of[name], 7)  # wheels 8 and up share bit 7
+        flags = StatusFlags(0)
+        if sup.cmd_timeout_active:
+            flags |= StatusFlags.CMD_TIMEOUT_ACTIVE
+        if limit_report is not None and limit_report.speed_scale < 1.0:
+            flags |= StatusFlags.SPEED_LIMITED
+        if sup.counts["projected"]:
+            flags |= StatusFlags.PROJECTED
+        if bus_trouble:
+            flags |= StatusFlags.BUS_ERRORS_RECENT
+        self._status_counter = (self._status_counter + 1) & 0xFF
+        return StatusReport(
+            state=sup.state,
+            faulted_motors=mask,
+            counter=self._status_counter,
+            flags=flags,
+            missed_cycles=self.timer.missed,
+            infeasible_count=sup.counts["infeasible"],
+        )
+
+    def odometry_dict(self) -> dict[str, object]:
+        """The odometry as a JSON-able mapping."""
+        st = self.odometry.state
+        return {
+            "x": st.pose.x_m, "y": st.pose.y_m, "theta": st.pose.theta_rad,
+            "vx": st.twist.vx_m_s, "vy": st.twist.vy_m_s, "wz": st.twist.wz_rad_s,
+            "slip": st.slip_m_s, "distance": st.distance_m, "t": st.timestamp_s,
+        }

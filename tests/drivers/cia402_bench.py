@@ -1,0 +1,105 @@
+"""The CiA 402 driver and its simulated drives on a python-can virtual bus, for the tests of
+``test_*cia402*.py``: a :class:`Bench` steps simulated time, passes what the drives send to the
+driver and sends what the driver returns."""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import math
+from typing import TYPE_CHECKING
+
+import can
+
+from drivers.cia402 import Cia402Driver
+from drivers.cia402.sim import Cia402Simulator
+from gateway.bus.can_bus import drain, send_frames
+from gateway.core.types import DriveState, Frame, MotorConfig
+from gateway.sim.bus import SimulatedControllers
+
+if TYPE_CHECKING:
+    from collections.abc import Callable, Iterator, Sequence
+
+#: The loop period of a bench (s).
+DT = 0.001
+TWO_PI = 2.0 * math.pi
+LEFT = MotorConfig("left", "cia402", 3, gear_ratio=10.0)
+RIGHT = MotorConfig("right", "cia402", 5, gear_ratio=10.0, invert=True)
+#: One position count at the wheel of LEFT or RIGHT (rad).
+COUNT_RAD = TWO_PI / 4096 / 10.0
+
+
+def hexb(text: str) -> bytes:
+    return bytes.fromhex(text)
+
+
+def left(**options: object) -> MotorConfig:
+    """LEFT with these protocol keys."""
+    return dataclasses.replace(LEFT, options=options)
+
+
+@dataclasses.dataclass
+class Bench:
+    drv: Cia402Driver
+    sims: Sequence[Cia402Simulator]
+    gw: can.BusABC
+    ctl: SimulatedControllers
+    t: float = 0.0
+    seen: list[Frame] = dataclasses.field(default_factory=list)
+    sent: list[Frame] = dataclasses.field(default_factory=list)
+
+    def send(self, frames: Sequence[Frame]) -> None:
+        send_frames(self.gw, frames)
+        self.sent += frames
+
+    def run(self, seconds: float, speeds: Sequence[float] | None = None,
+            until: Callable[[], bool] | None = None) -> bool:
+        """Step simulated time; ``speeds`` None means the loop does not call command()."""
+        for _ in range(round(seconds / DT)):
+            self.t += DT
+            self.ctl.step(self.t)
+            for raw in drain(self.gw):
+                f = raw.stamped(self.t)
+                self.seen.append(f)
+                self.drv.on_frame(f)
+            out = self.drv.poll(self.t)
+            if speeds is not None:
+                out += self.drv.command(speeds, self.t)
+            self.send(out)
+            if until is not None and until():
+                return True
+        return until is None
+
+    def state(self, i: int = 0) -> DriveState:
+        return self.drv.state(i, self.t)
+
+    def enable(self, speeds: Sequence[float] | None = None, seconds: float = 0.5) -> bool:
+        self.send(self.drv.enable(self.t))
+        return self.run(seconds, speeds, until=lambda: all(
+            self.state(i) is DriveState.ENABLED for i in range(len(self.sims))))
+
+
+@contextlib.contextmanager
+def benches(channel: str) -> Iterator[Callable[..., Bench]]:
+    """A maker of benches on ``channel``, shutting every bench down at the end."""
+    made: list[Bench] = []
+
+    def make(motors: Sequence[MotorConfig], sim_class: type[Cia402Simulator] = Cia402Simulator,
+             **sim_kwargs: object) -> Bench:
+        drv = Cia402Driver(motors)
+        sims = [sim_class(m, **sim_kwargs) for m in motors]  # type: ignore[arg-type]
+        ctl = SimulatedControllers(sims, channel)
+        try:
+            gw = can.Bus(interface="virtual", channel=channel)
+        except Exception:
+            ctl.shutdown()
+            raise
+        made.append(Bench(drv, sims, gw, ctl))
+        return made[-1]
+
+    try:
+        yield make
+    finally:
+        for b in made:
+            b.gw.shutdown()
+            b.ctl.shutdown()
