@@ -13,7 +13,7 @@ cycles.  The simulators stand for controllers at the other end of the bus: their
 has the drivers' filters (for ODrive they cover the commands too), so the flood loads only the
 gateway.  Measured per cycle: the loop thread's CPU time in ``Gateway.cycle``
 (``time.thread_time``, which time the thread spends descheduled does not inflate) and the
-frames it drained (``counts["frames_received"]``: every classical frame the socket delivered,
+frames it drained (``edge.counts.frames_received``: every classical frame the socket delivered,
 consumed or not).
 
 Four runs of ``--cycles`` cycles (default 400) each, after 2 s of simulated time to enable:
@@ -175,7 +175,7 @@ def run(cfg: GatewayConfig, filters: Sequence[CanFilter], sim_filters: Sequence[
         gw.receive(t)  # what piled up during the set-up is not this run's
         costs = []
         late = 0
-        received0 = gw.counts["frames_received"]
+        received0 = gw.edge.counts.frames_received
         next_s = time.monotonic()
         for k in range(cycles):
             if k % 20 == 0:
@@ -194,7 +194,7 @@ def run(cfg: GatewayConfig, filters: Sequence[CanFilter], sim_filters: Sequence[
             t += period
         if gw.state is not GatewayState.RUNNING:
             raise SystemExit(f"bench_busy_bus: the gateway left RUNNING: {gw.supervisor.reason}")
-        return Run(filtered, busy, costs, (gw.counts["frames_received"] - received0) / cycles,
+        return Run(filtered, busy, costs, (gw.edge.counts.frames_received - received0) / cycles,
                    late)
     finally:
         ctl.shutdown()

@@ -199,11 +199,11 @@ class BenchDaemon(Daemon):
         thread_time = time.thread_time_ns
 
         def timed_cycle(now_s: float) -> None:
-            can_before = gw.counts["can_twists"]
+            can_before = gw.counts.can_twists
             c0 = thread_time()
             cycle(now_s)
             cpu.append(thread_time() - c0)
-            can_new = gw.counts["can_twists"] - can_before
+            can_new = gw.counts.can_twists - can_before
             if self._ids or can_new:  # the daemon's own "sent": the wheel burst went out
                 t = round(gw.burst_sent_s * 1e9)  # perf_counter, as perf_counter_ns
                 for i in self._ids:

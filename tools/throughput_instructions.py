@@ -193,8 +193,8 @@ def _child(bench: Bench, outdir: Path, position: int, mix: str, side: str, work:
     """One forked child: the loop, the gateway's checks and counts, then ``os._exit``."""
     status = 0
     try:
-        counts = bench.gw.counts
-        sent0, recv0 = counts["frames_sent"], counts["frames_received"]
+        counts = bench.gw.edge.counts
+        sent0, recv0 = counts.frames_sent, counts.frames_received
         peer0 = _queue(anchor.peer).qsize() if anchor is not None else 0
         if work is not None:
             run_loop(bench, side, work, n, anchor)
@@ -202,7 +202,7 @@ def _child(bench: Bench, outdir: Path, position: int, mix: str, side: str, work:
         if anchor is not None:
             ok = ok and anchor.healthy()
         meta = {"position": position, "mix": mix, "side": side, "n": n, "ok": ok,
-                "gw_frames": [counts["frames_sent"] - sent0, counts["frames_received"] - recv0],
+                "gw_frames": [counts.frames_sent - sent0, counts.frames_received - recv0],
                 "anchor_sent": _queue(anchor.peer).qsize() - peer0 if anchor else 0}
         (outdir / f"meta.{os.getpid()}.json").write_text(json.dumps(meta))
     except BaseException:  # a forked child must never return into the parent's loop

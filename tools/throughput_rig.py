@@ -184,9 +184,9 @@ class Bench:
                 raise SystemExit(f"{self.protocol}: did not enable: {gw.supervisor.reason}")
             gw.twist(TWIST, self.t, Source.SOCKET)
             run(twist_cycles, False)
-            sent0 = gw.counts["frames_sent"]
+            sent0 = gw.edge.counts.frames_sent
             run(round(seconds / PERIOD_S), True)
-            self.sent_estimate = (gw.counts["frames_sent"] - sent0) / len(self.pool)
+            self.sent_estimate = (gw.edge.counts.frames_sent - sent0) / len(self.pool)
         finally:
             sims.bus.shutdown()
         self.gw.cycle(self.t)  # takes what the simulators sent after the last cycle
@@ -217,7 +217,7 @@ class Bench:
                     ) -> tuple[float, int, int, list[list[can.Message]]]:
         """Time ``Gateway.cycle`` over the schedule; return (ns, sent, received, sent msgs)."""
         gw, inj = self.gw, self.injector
-        sent0, recv0 = gw.counts["frames_sent"], gw.counts["frames_received"]
+        sent0, recv0 = gw.edge.counts.frames_sent, gw.edge.counts.frames_received
         total = 0.0
         sent_msgs: list[list[can.Message]] = []
         clock = self.clock
@@ -236,8 +236,8 @@ class Bench:
             while (m := inj.recv(0.0)) is not None:
                 out.append(m)
             sent_msgs.append(out)
-        return (total, gw.counts["frames_sent"] - sent0,
-                gw.counts["frames_received"] - recv0, sent_msgs)
+        return (total, gw.edge.counts.frames_sent - sent0,
+                gw.edge.counts.frames_received - recv0, sent_msgs)
 
     def run_bare(self, schedule: list[list[can.Message]],
                  sent_msgs: list[list[can.Message]]) -> tuple[float, int, int]:

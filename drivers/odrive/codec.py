@@ -32,7 +32,6 @@ from drivers.odrive.messages import (
     DEFAULT_FIRMWARE,
     ENCODER_ESTIMATES,
     ESTOP,
-    FLOAT32_MAX,
     GET_ERROR_06,
     GET_MOTOR_ERROR_05,
     HEARTBEAT,
@@ -65,16 +64,15 @@ from drivers.odrive.messages import (
     ff_counts,
 )
 from gateway.core.errors import ConfigError, DecodeError, EncodeError, IllegalTransitionError
-from gateway.core.types import Frame
+from gateway.core.types import Frame, frame_of
 
 if TYPE_CHECKING:
-    from collections.abc import Mapping
+    from collections.abc import Iterable, Mapping, Sequence
 
 #: Bound methods of the two messages on the hot path (a command per wheel per cycle, an
-#: estimate per wheel per feedback period): one attribute lookup fewer each; and the command's
-#: ID as a plain int.
+#: estimate per wheel per feedback period): one attribute lookup fewer each.
 _SET_INPUT_VEL_PACK = SET_INPUT_VEL.packer.pack
-_SET_INPUT_VEL_CMD = int(CmdId.SET_INPUT_VEL)
+_TAU = 2.0 * math.pi
 _ESTIMATES_UNPACK = ENCODER_ESTIMATES.packer.unpack
 
 
@@ -158,22 +156,26 @@ class OdriveCodec:
         :param torque_ff_nm: torque feed-forward in N*m (finite float32).
         :raises EncodeError: for a non-finite or out-of-float32-range value, or a bad node ID.
         """
-        # The hot path of every cycle: one chained comparison rejects NaN and +-inf too.
+        check_float32("Input_Vel", node_id, vel_turns_s, "turns/s")
+        check_float32("Input_Torque_FF", node_id, torque_ff_nm, "Nm")
+        return self._frame(node_id, SET_INPUT_VEL, vel_turns_s, torque_ff_nm)
+
+    def set_input_vels(
+        self, axes: Sequence[tuple[int, float]], setpoints: Iterable[float]
+    ) -> list[Frame]:
+        """Set_Input_Vel without torque feed-forward for many axes at once, the frames of every
+        cycle: ``(arbitration ID, scale)`` per axis (the ID from :meth:`arbitration_id`), the
+        velocity in turns/s is ``setpoint * scale / (2 pi)`` (rad/s to turns/s).
+
+        The caller guarantees finite velocities and valid identifiers (the driver's checked
+        setpoints and configured nodes); a velocity beyond float32 is an :class:`EncodeError`.
+        """
+        pack, ext = _SET_INPUT_VEL_PACK, self.extended_id
         try:
-            ok = -FLOAT32_MAX <= vel_turns_s <= FLOAT32_MAX
-            ok = ok and -FLOAT32_MAX <= torque_ff_nm <= FLOAT32_MAX
-        except TypeError:
-            ok = False
-        if not ok:
-            check_float32("Input_Vel", node_id, vel_turns_s, "turns/s")
-            check_float32("Input_Torque_FF", node_id, torque_ff_nm, "Nm")
-        if not 0 <= node_id <= self.max_node_id:
-            self.arbitration_id(node_id, _SET_INPUT_VEL_CMD)  # raises, naming the ID mode
-        return Frame(
-            node_id << CMD_BITS | _SET_INPUT_VEL_CMD,
-            _SET_INPUT_VEL_PACK(vel_turns_s, torque_ff_nm),
-            self.extended_id,
-        )
+            return [frame_of((arb, pack(w * k / _TAU, 0.0), ext, False, 8, 0.0))
+                    for (arb, k), w in zip(axes, setpoints)]  # noqa: B905 - count checked
+        except OverflowError as err:  # a max_rpm beyond float32 turns/s
+            raise EncodeError(f"Expected Input_Vel within float32 in turns/s: {err}.") from err
 
     def make_set_input_pos(
         self,

@@ -136,8 +136,10 @@ class OdriveDriver(MotorDriver[OdriveOptions]):
         self._axes: tuple[Axis, ...] = tuple(axes)
         self._by_node = {ax.node_id: ax for ax in axes}
         self._any_steer = any(ax.steer for ax in axes)
-        #: (node ID, gear_ratio * sign) per motor, for :meth:`_command`.
-        self._vel = tuple((ax.node_id, ax.scale) for ax in axes)
+        #: (Set_Input_Vel identifier, gear_ratio * sign) per motor, for :meth:`_command`.
+        self._vel = tuple(
+            (self.codec.arbitration_id(ax.node_id, CmdId.SET_INPUT_VEL), ax.scale) for ax in axes
+        )
         #: Frames to send at the next poll (the watchdog setups' answers to replies).
         self._queued: list[Frame] = []
 
@@ -206,11 +208,7 @@ class OdriveDriver(MotorDriver[OdriveOptions]):
         steering actuator gets Set_Input_Pos instead (see the module docstring)."""
         if self._any_steer:
             return self._command_mixed(setpoints, now_s)
-        make = self.codec.make_set_input_vel
-        return [
-            make(node, w * scale / TAU)
-            for (node, scale), w in zip(self._vel, setpoints, strict=True)
-        ]
+        return self.codec.set_input_vels(self._vel, setpoints)  # checked by command()
 
     def _command_mixed(self, setpoints: Sequence[float], now_s: float) -> list[Frame]:
         """:meth:`_command` for a bus with steering actuators."""

@@ -43,6 +43,43 @@ def to_message(frame: Frame) -> can.Message:
     )
 
 
+class MessagePool:
+    """One ``can.Message`` per identifier, refilled for every send instead of built anew.
+
+    A command goes out every cycle on the same few identifiers, and building a
+    ``can.Message`` costs more than filling one: the pool keeps one message per identifier
+    and copies the frame's payload into it.  This relies on python-can's interfaces taking
+    the message's content during ``send()`` (``virtual`` deep-copies it, ``socketcan`` packs it
+    into a ``struct can_frame``: ``can/interfaces/virtual.py`` and ``socketcan/socketcan.py``,
+    ``send``), so a message handed to ``send()`` may be refilled once it returns.  Whoever
+    keeps a message beyond the call (a recorder) gets its own (:func:`to_message`).
+    """
+
+    __slots__ = ("_pool",)
+
+    def __init__(self) -> None:
+        self._pool: dict[int, can.Message] = {}
+
+    def messages(self, frames: Iterable[Frame]) -> list[can.Message]:
+        """The pool's messages filled with ``frames``, in order.
+
+        Two frames of one burst on the same identifier get two messages (the second one a
+        new object), so a burst never sends one message twice.
+        """
+        pool = self._pool
+        out = []
+        for f in frames:
+            msg = pool.get(f.arbitration_id)
+            if (msg is None or msg.is_extended_id is not f.is_extended_id
+                    or msg.is_remote_frame is not f.is_remote_frame or msg in out):
+                msg = pool[f.arbitration_id] = to_message(f)
+            else:
+                msg.data[:] = f.data
+                msg.dlc = f.dlc
+            out.append(msg)
+        return out
+
+
 #: Received frames are built with ``tuple.__new__(Frame, fields)``, past ``Frame.__new__`` (a
 #: Python function, more than half the cost of converting a message): every field is given,
 #: in ``Frame._fields`` order, so its only work, defaulting ``dlc``, has nothing to do

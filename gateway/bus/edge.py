@@ -30,11 +30,12 @@ import collections
 import logging
 import operator
 import time
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import can
 
-from gateway.bus.can_bus import drain, open_bus, to_message
+from gateway.bus.can_bus import MessagePool, drain, open_bus, to_message
 from gateway.bus.health import (
     GONE,
     NO_ROOM,
@@ -107,14 +108,36 @@ def _gone(err: BaseException) -> bool:
     return _errno(err) in GONE or "closed bus" in str(err)
 
 
+@dataclass(slots=True)
+class EdgeCounts:
+    """What the bus edge counted since start (in the status's ``counters``)."""
+
+    #: Frames that went out.
+    frames_sent: int = 0
+    #: Classical frames received (error frames and CAN FD frames not included).
+    frames_received: int = 0
+    #: Bursts cut short: a frame refused after the wait for room.
+    send_failures: int = 0
+    #: Times the bus was closed and opened again.
+    bus_reopens: int = 0
+    #: Drains of the bus that failed.
+    receive_failures: int = 0
+    #: Frames left out of their burst.
+    frames_unsent: int = 0
+    #: Bursts that went out in part.
+    partial_bursts: int = 0
+    #: Waits for room in a full transmit queue.
+    send_waits: int = 0
+    #: CAN FD frames received (and ignored).
+    fd_frames_ignored: int = 0
+
+
 class BusEdge:
     """Sending, receiving, tallying and reopening, for the gateway's loop.
 
     :param config: the configuration (the bus section, for reopening and messages).
     :param bus: an open python-can bus; opened from the config (with ``bus_kwargs``) when
         ``None``, and then closed by :meth:`close` and reopened after failures.
-    :param counts: the gateway's event counters: this edge counts frames, failures and
-        reopens in them (and adds its own keys).
     :param period_s: the loop period (the time a burst may wait for room is a share of it).
     :param bus_kwargs: keyword arguments of every (re)open (:func:`bus_options`).
     :param record: a python-can writer that gets every frame sent and received.
@@ -126,14 +149,14 @@ class BusEdge:
         self,
         config: GatewayConfig,
         bus: can.BusABC | None,
-        counts: dict[str, int],
         period_s: float,
         bus_kwargs: dict[str, Any],
         record: can.Listener | None = None,
         stamp_with_cycle_time: bool = False,
     ) -> None:
         self.config = config
-        self.counts = counts
+        #: Frames, failures and reopens since start.
+        self.counts = EdgeCounts()
         self.period_s = period_s
         #: Keyword arguments of every (re)open: kernel receive filters, FD frames.
         self.bus_kwargs = bus_kwargs
@@ -141,9 +164,6 @@ class BusEdge:
         self.record = record
         #: Stamp received frames with the cycle's time instead of their receive time.
         self.stamp_with_cycle_time = stamp_with_cycle_time
-        for name in ("receive_failures", "frames_unsent", "partial_bursts", "send_waits",
-                     "fd_frames_ignored"):
-            counts[name] = 0
         #: Error frames by class and the controller's error state.
         self.bus_errors = BusErrors()
         #: The error state the last error frames moved to, until the loop takes it.
@@ -158,6 +178,7 @@ class BusEdge:
         self._reopen_log = LogThrottle(LOG_EVERY_S)
         self._error_log = LogThrottle(LOG_EVERY_S)
         self._odd: list[can.Message] = []
+        self._messages = MessagePool()
         self._last_send_error = ""
         self._bus_failures = 0
         self._since_reopen = 0
@@ -175,7 +196,7 @@ class BusEdge:
     def _reopen(self, now_s: float) -> None:
         if not self._own_bus or not self._backoff.due(now_s):
             return
-        self.counts["bus_reopens"] += 1
+        self.counts.bus_reopens += 1
         delay = self._backoff.failed(now_s)  # reset once a burst goes out again
         note = self._reopen_log.note(now_s)
         if note is not None:
@@ -208,7 +229,7 @@ class BusEdge:
         bursts = self.bursts
         if tracked and bursts.missed:
             frames = bursts.order(frames)
-        msgs = [to_message(f) for f in frames]
+        msgs = self._messages.messages(frames)
         send = self.bus.send
         sent = 0
         try:
@@ -219,9 +240,9 @@ class BusEdge:
             sent = self._send_rest(msgs, sent, err, time.monotonic() if now_s is None else now_s)
         n = len(msgs)
         if sent < n:
-            self.counts["frames_unsent"] += n - sent
+            self.counts.frames_unsent += n - sent
             if sent:
-                self.counts["partial_bursts"] += 1
+                self.counts.partial_bursts += 1
         if tracked and (sent < n or bursts.missed):
             worst = bursts.after_send(frames, sent)
             if worst is not None:
@@ -233,13 +254,14 @@ class BusEdge:
             self._backoff.reset()
         if not sent:
             return False
-        self.counts["frames_sent"] += sent
+        self.counts.frames_sent += sent
         if sent < n:
-            frames, msgs = frames[:sent], msgs[:sent]
+            frames = frames[:sent]
         self._tally(frames, True)
         if self.record is not None:
             stamp = time.time()
-            for msg in msgs:
+            for f in frames:  # the writer may keep them: not the pool's
+                msg = to_message(f)
                 msg.timestamp, msg.is_rx, msg.channel = stamp, False, self.config.bus.channel
                 self.record.on_message_received(msg)
         return sent == n
@@ -252,7 +274,7 @@ class BusEdge:
         """
         end = time.perf_counter() + SEND_BUDGET * self.period_s
         while _no_room(err) and time.perf_counter() < end:
-            self.counts["send_waits"] += 1
+            self.counts.send_waits += 1
             time.sleep(ROOM_POLL_S)
             try:
                 for msg in msgs[sent:]:
@@ -261,7 +283,7 @@ class BusEdge:
                 return sent
             except (can.CanError, OSError) as again:
                 err = again
-        self.counts["send_failures"] += 1
+        self.counts.send_failures += 1
         if not sent:  # a slow bus that takes part of each burst is not mended by a reopen
             self._bus_failures += 1
             self._since_reopen += 1
@@ -270,7 +292,7 @@ class BusEdge:
         if note is not None:
             log.warning("CAN send failed: %d bursts cut short since the last report (%d in a "
                         "row with nothing sent, %d frames left out in all): %s", note,
-                        self._bus_failures, self.counts["frames_unsent"] + len(msgs) - sent, err)
+                        self._bus_failures, self.counts.frames_unsent + len(msgs) - sent, err)
         if _gone(err) or self._since_reopen >= REOPEN_AFTER:
             self._reopen(now_s)
         return sent
@@ -282,7 +304,7 @@ class BusEdge:
             frames = drain(self.bus, timestamp_s=now_s if self.stamp_with_cycle_time else None,
                            odd=odd)
         except BusError as err:
-            self.counts["receive_failures"] += 1
+            self.counts.receive_failures += 1
             note = self._recv_log.note(now_s)
             if note is not None:
                 log.warning("CAN receive failed %d times since the last report: %s", note, err)
@@ -291,7 +313,7 @@ class BusEdge:
             self._take_odd(odd, now_s)
         if not frames:
             return frames
-        self.counts["frames_received"] += len(frames)
+        self.counts.frames_received += len(frames)
         self._tally(frames, False)
         if self.record is not None:
             stamp = time.time()
@@ -306,8 +328,8 @@ class BusEdge:
         errors = self.bus_errors
         for msg in odd:
             if not msg.is_error_frame:
-                self.counts["fd_frames_ignored"] += 1
-                if self.counts["fd_frames_ignored"] == 1:
+                self.counts.fd_frames_ignored += 1
+                if self.counts.fd_frames_ignored == 1:
                     log.warning("a CAN FD frame (ID 0x%X) on %s: ignored and counted (the "
                                 "drivers speak classic CAN)", msg.arbitration_id,
                                 self.config.bus.channel)

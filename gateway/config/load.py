@@ -31,7 +31,6 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
-import tempfile
 from importlib import resources
 from pathlib import Path
 from types import MappingProxyType
@@ -100,6 +99,8 @@ def default_socket_path() -> str:
     xdg = os.environ.get("XDG_RUNTIME_DIR")
     if xdg and Path(xdg).is_dir():
         return str(Path(xdg) / "wheelgate.sock")
+    import tempfile  # noqa: PLC0415 - the last resort; importing it costs start-up time
+
     return str(Path(tempfile.gettempdir()) / f"wheelgate-{os.getuid()}.sock")
 
 

@@ -34,6 +34,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+from gateway.core.counts import SupervisorCounts
 from gateway.core.errors import InfeasibleTwistError
 from gateway.core.supervision import (
     Accepted,
@@ -103,8 +104,7 @@ class Supervisor:
         #: The error class of the current fault (twists refused in FAULT carry it).
         self.fault_code = ErrorCode.MOTOR_FAULT
         #: Counters of what happened, by kind.
-        self.counts = {"infeasible": 0, "projected": 0, "rejected": 0, "faults": 0,
-                       "cmd_timeouts": 0, "estops": 0}
+        self.counts = SupervisorCounts()
         #: Whether the bus can carry frames (``False`` from bus-off until the controller
         #: reports that it is back): automatic recovery waits for it.
         self.bus_ok = True
@@ -143,15 +143,15 @@ class Supervisor:
             :attr:`Accepted.ik` carries).
         """
         if self.state is not GatewayState.RUNNING:
-            self.counts["rejected"] += 1
+            self.counts.rejected += 1
             return Rejection(*self._not_running())
         try:
             ik = self.model.ik(twist, steer)
         except InfeasibleTwistError as err:
-            self.counts["infeasible"] += 1
+            self.counts.infeasible += 1
             self._last_twist_s = now_s
             if self.cfg.infeasible_policy == "project":
-                self.counts["projected"] += 1
+                self.counts.projected += 1
                 self.target = err.nearest
                 return Accepted(err.nearest, projected=True, error=err)
             self.target = ZERO
@@ -169,7 +169,7 @@ class Supervisor:
     def estop(self, reason: str = "e-stop requested") -> None:
         """Zero at once and disarm until an explicit enable."""
         if self.state is not GatewayState.ESTOP:
-            self.counts["estops"] += 1
+            self.counts.estops += 1
         self._go(Event.ESTOP)
         self.reason = reason
         self.target = ZERO
@@ -200,7 +200,7 @@ class Supervisor:
 
     def enable_failed(self, why: str) -> str:
         """The drives refused the enable sequence: FAULT with ``why`` as the reason."""
-        self.counts["faults"] += 1
+        self.counts.faults += 1
         self._go(Event.ENABLE_REFUSED)
         self.target = ZERO
         self._fault_s = self._now_hint
@@ -309,7 +309,7 @@ class Supervisor:
         """FAULT, naming the motors at positions ``which`` of ``board``."""
         statuses = board.status(now_s)
         motors = [statuses[i] for i in which]
-        self.counts["faults"] += 1
+        self.counts.faults += 1
         self._fault_s = self._now_hint
         self._go(Event.FAULT)
         self.target = ZERO
@@ -338,7 +338,7 @@ class Supervisor:
         """
         if not self._go(Event.BUS_FAULT):
             return None
-        self.counts["faults"] += 1
+        self.counts.faults += 1
         self._fault_s = self._now_hint
         self.target = ZERO
         self.faulted = tuple(names)
@@ -371,7 +371,7 @@ class Supervisor:
         ):
             self.target = ZERO
             if not self._timed_out:
-                self.counts["cmd_timeouts"] += 1
+                self.counts.cmd_timeouts += 1
             self._timed_out = True
         last = self._running
         if last.twist is not self.target or last.cmd_timeout is not self._timed_out:

@@ -158,8 +158,9 @@ class TrackingReport:
 class Counters:
     """What happened since start.
 
-    :param events: the gateway's and the supervisor's event counters by name (``cycles``,
-        ``frames_sent``, ``infeasible``, ``faults``, ...).
+    :param events: the event counters of the control cycle, the bus edge and the supervisor
+        by name (``cycles``, ``frames_sent``, ``infeasible``, ``faults``, ...: the fields of
+        their records, in the order of :func:`gateway.runtime.report.event_counts`).
     :param rejected_frames: per driver class, frames its driver rejected, by reason.
     :param commands_not_followed: per driver class, commands its controllers did not follow,
         by kind.

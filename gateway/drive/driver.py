@@ -6,23 +6,13 @@ back; it never touches the bus itself, so it stays testable without threads or a
 caller passes ``now_s``, monotonic seconds).
 
 The contract is a template, as python-can's ``BusABC.recv`` wraps ``_recv_internal``: the public
-methods do what every protocol needs, once, and call small hooks that a protocol implements:
-
-* :meth:`command` checks the count, finiteness and range of every setpoint (an
-  :class:`EncodeError` naming the wheel, node and bounds), then calls :meth:`_command`;
-* :meth:`on_frame` calls :meth:`_on_frame` and counts a malformed frame (the hook raises
-  :class:`DecodeError`) instead of raising;
-* :meth:`enable` calls :meth:`_enable`, then forgets the last enable's protection faults;
-* :meth:`poll` calls :meth:`_poll`, then reports a controller-side protection that failed,
-  once per enable;
-* :meth:`state` gives OFFLINE from liveness (:mod:`gateway.drive.liveness`) and FAULT from the
-  fault flags, else asks :meth:`_ready_state`;
-* :meth:`claims` declares the frames of the protocol: dispatch, receive filters and labels
-  come from it (:mod:`gateway.drive.claims`).
-
-Protocol keys are a :class:`~gateway.drive.options.DriverOptions` dataclass (:attr:`Options`);
-the base validates every motor's block into :attr:`opts` and checks the keys that hold for the
-whole bus (:attr:`BUS_WIDE`).  Simulators are not part of a driver: they are registered apart
+methods do once what every protocol needs (the count, finiteness and range of the setpoints,
+malformed-frame counting, liveness, fault flags, the controller-side protection step) and call
+small hooks a protocol implements (:meth:`~MotorDriver._command`, :meth:`~MotorDriver._on_frame`,
+:meth:`~MotorDriver._enable`, :meth:`~MotorDriver._poll`, :meth:`~MotorDriver._ready_state`).
+:meth:`~MotorDriver.claims` declares the protocol's frames: dispatch, receive filters and labels
+come from it (:mod:`gateway.drive.claims`).  Protocol keys are a
+:class:`~gateway.drive.options.DriverOptions` dataclass.  Simulators are registered apart
 (:mod:`gateway.sim.registry`), so a driver may ship none.
 """
 
@@ -30,17 +20,16 @@ from __future__ import annotations
 
 import abc
 import collections
-import logging
 from typing import TYPE_CHECKING, ClassVar, Generic, TypeVar, cast
 
-from gateway.core.errors import ConfigError, DecodeError, EncodeError
+from gateway.core.errors import DecodeError
 from gateway.core.options import OptionSpec
 from gateway.core.protection import ProtectionState, WatchdogPolicy
 from gateway.core.types import DriveFault, DriveState, MotorConfig, MotorStatus, WheelFeedback
-from gateway.drive.guard import fault_text, stated_protection
+from gateway.drive.guard import FailedProtections, fault_text, may_arm, stated_protection
 from gateway.drive.liveness import Liveness
-from gateway.drive.options import CONTROLLER_TIMEOUT_OPTION, DriverOptions
-from gateway.drive.setpoints import bounds, check_motors, setpoint_error
+from gateway.drive.options import CONTROLLER_TIMEOUT_OPTION, DriverOptions, check_bus_wide
+from gateway.drive.setpoints import bounds, check_motors, check_node_id, count_error, setpoint_error
 
 __all__ = ["CONTROLLER_TIMEOUT_OPTION", "MotorDriver", "OptionSpec"]
 
@@ -51,8 +40,6 @@ if TYPE_CHECKING:
     from gateway.core.types import Frame
     from gateway.drive.claims import FrameClaim
     from gateway.drive.filters import CanFilter
-
-log = logging.getLogger(__name__)
 
 OptT = TypeVar("OptT", bound=DriverOptions)
 
@@ -88,6 +75,9 @@ class MotorDriver(abc.ABC, Generic[OptT]):
     #: :attr:`~gateway.core.types.MotorRole.STEER`): armed in position control, commanded with
     #: a steering angle, reporting that angle (absolute, from ``zero_rad``) as feedback.
     STEERING: ClassVar[bool] = False
+    #: Whether this driver writes its controllers' protection itself (:attr:`Guard.CONFIGURED`
+    #: motors report :meth:`protection_state` and :meth:`protection_failure`).
+    CONFIGURES_PROTECTION: ClassVar[bool] = False
     #: The protocol's name in messages (protection, labels, errors).
     PROTOCOL: ClassVar[str] = "CAN"
     #: What the controller does when its stated timeout expires (:meth:`protection`).
@@ -111,17 +101,15 @@ class MotorDriver(abc.ABC, Generic[OptT]):
             cast("OptT", self.Options.from_block(m.options, f"motor {m.wheel!r}"))
             for m in self.motors
         )
-        self._check_bus_wide()
+        check_bus_wide(self.motors, self.opts, self.BUS_WIDE, self.PROTOCOL)
         self._index = {m.node_id: i for i, m in enumerate(self.motors)}
         n = len(self.motors)
         self._feedback: list[WheelFeedback | None] = [None] * n
         self._faults: list[DriveFault] = [DriveFault.NONE] * n
         self._detail: list[str] = [""] * n
         self._armed: list[bool] = [False] * n
-        #: Per motor, why its controller-side protection failed under REQUIRED ("" if not).
-        self._protection_failed: list[str] = [""] * n
-        #: Per motor, whether this enable's protection failure has been reported.
-        self._protection_reported: list[bool] = [False] * n
+        #: The controller-side protections that failed, per motor.
+        self._failed = FailedProtections(n)
         #: What to do when a protection this driver configures is not confirmed; the drive
         #: set passes the configuration's ``gateway.controller_watchdog``.
         self.watchdog_policy = WatchdogPolicy.REQUIRED
@@ -145,17 +133,6 @@ class MotorDriver(abc.ABC, Generic[OptT]):
         #: Per motor, wheel to motor side: ``gear_ratio * sign`` (motor = wheel * scale).
         self.motor_scale: tuple[float, ...] = tuple(m.gear_ratio * m.sign for m in self.motors)
 
-    def _check_bus_wide(self) -> None:
-        first = self.opts[0] if self.opts else None
-        for m, o in zip(self.motors, self.opts, strict=True):
-            for key in self.BUS_WIDE:
-                want, got = getattr(first, key), getattr(o, key)
-                if got != want:
-                    raise ConfigError(
-                        f"motor {m.wheel!r}.{key}: expected {want!r} like motor "
-                        f"{self.motors[0].wheel!r} on the same {self.PROTOCOL} bus, got {got!r}"
-                    )
-
     # ----------------------------------------------------------------- configuration
 
     @classmethod
@@ -177,15 +154,12 @@ class MotorDriver(abc.ABC, Generic[OptT]):
     def validate_node_id(
         cls, node_id: int, where: str, options: Mapping[str, object] | None = None
     ) -> None:
-        """Check a node ID against :meth:`node_id_range`.
+        """Check a node ID against :meth:`node_id_range` of the motor block's validated
+        protocol keys ``options`` (ODrive widens it with 29-bit identifiers).
 
-        :param options: the motor block's validated protocol keys (some protocols widen the
-            range, e.g. ODrive with 29-bit identifiers).
         :raises ConfigError: if it is out of range.
         """
-        lo, hi = cls.node_id_range(options)
-        if not lo <= node_id <= hi:
-            raise ConfigError(f"{where}: expected int {lo}..{hi}, got {node_id!r}")
+        check_node_id(node_id, where, cls.node_id_range(options))
 
     # ----------------------------------------------------------------- the template
 
@@ -201,10 +175,7 @@ class MotorDriver(abc.ABC, Generic[OptT]):
         """
         bounds = self.bounds
         if len(setpoints) != len(bounds):
-            raise EncodeError(
-                f"Expected {len(bounds)} setpoints for the {self.PROTOCOL} motors "
-                f"({', '.join(m.wheel for m in self.motors)}), but got {len(setpoints)}."
-            )
+            raise count_error(self.motors, len(setpoints), self.PROTOCOL)
         for value, bound in zip(setpoints, bounds):  # noqa: B905 - lengths checked above
             if not -bound <= value <= bound:  # also false for NaN
                 raise setpoint_error(self.motors, setpoints, self.PROTOCOL)
@@ -234,16 +205,15 @@ class MotorDriver(abc.ABC, Generic[OptT]):
 
     def enable(self, now_s: float) -> list[Frame]:
         """Start the enable sequence (clear errors, select velocity mode, or position mode for
-        a steering actuator, arm); the last enable's protection faults are forgotten first.
-
-        Sequences that wait for answers go on through :meth:`poll` and :meth:`on_frame`.
+        a steering actuator, arm; sequences that wait for answers go on through :meth:`poll`
+        and :meth:`on_frame`); the last enable's protection faults are forgotten first.
 
         :raises IllegalTransitionError: if a controller cannot be enabled now (no frame is sent).
         """
         frames = self._enable(now_s)  # may raise before anything is forgotten
         for i in range(len(self.motors)):
             self.clear_protection_fault(i)
-            self._protection_reported[i] = False
+            self._failed.reported[i] = False
         return frames
 
     @abc.abstractmethod
@@ -256,21 +226,16 @@ class MotorDriver(abc.ABC, Generic[OptT]):
         actuator is released where it stands)."""
 
     def poll(self, now_s: float) -> list[Frame]:
-        """Housekeeping frames due at ``now_s`` (requests, sequence steps, SYNC); a
-        controller-side protection that failed since the last call is reported
-        (:meth:`protection_fault`), once per enable."""
+        """Housekeeping frames due at ``now_s`` (requests, sequence steps, SYNC); a protection
+        that failed since the last call is reported (:meth:`protection_fault`), once per enable."""
         frames = self._poll(now_s)
         if self.CONFIGURES_PROTECTION:
+            reported = self._failed.reported
             for i in range(len(self.motors)):
-                if (not self._protection_reported[i]
-                        and self.protection_state(i) is ProtectionState.FAILED):
-                    self._protection_reported[i] = True
+                if not reported[i] and self.protection_state(i) is ProtectionState.FAILED:
+                    reported[i] = True
                     self.protection_fault(i, self.protection_failure(i))
         return frames
-
-    #: Whether this driver writes its controllers' protection itself (:attr:`Guard.CONFIGURED`
-    #: motors report :meth:`protection_state` and :meth:`protection_failure`).
-    CONFIGURES_PROTECTION: ClassVar[bool] = False
 
     def _poll(self, now_s: float) -> list[Frame]:
         """Hook of :meth:`poll` (default: nothing to send)."""
@@ -294,11 +259,9 @@ class MotorDriver(abc.ABC, Generic[OptT]):
 
     def preview_command(self, setpoints: Sequence[float]) -> list[Frame]:
         """The frames :meth:`command` would send for these setpoints from a freshly
-        enabled driver with no feedback (pure; for ``wheelgate frames`` and tests).
-
-        The default runs a fresh instance; drivers whose frames depend on feedback override it
-        and document what they assume.
-        """
+        enabled driver with no feedback (pure; for ``wheelgate frames`` and tests): a fresh
+        instance's; drivers whose frames depend on feedback override it and say what they
+        assume."""
         fresh = type(self)(self.motors)
         fresh.enable(0.0)
         return fresh.command(setpoints, 0.0)
@@ -337,12 +300,7 @@ class MotorDriver(abc.ABC, Generic[OptT]):
     def may_arm(self, index: int) -> bool:
         """Whether motor ``index`` may be armed as far as its protection goes: confirmed, not
         configured by this driver, or failed under :attr:`WatchdogPolicy.WARN`."""
-        state = self.protection_state(index)
-        if state is ProtectionState.PENDING:
-            return False
-        if state is ProtectionState.FAILED:
-            return self.watchdog_policy is WatchdogPolicy.WARN
-        return True
+        return may_arm(self.protection_state(index), self.watchdog_policy)
 
     def protection_fault(self, index: int, why: str) -> None:
         """Record that motor ``index``'s protection could not be confirmed: a FAULT
@@ -354,17 +312,13 @@ class MotorDriver(abc.ABC, Generic[OptT]):
         """
         m = self.motors[index]
         text = fault_text(m.wheel, self.PROTOCOL, m.node_id, why, self.protection(index).fix)
-        if self.watchdog_policy is WatchdogPolicy.REQUIRED:
-            log.error("%s; not arming it (gateway.controller_watchdog: required)", text)
-            self._protection_failed[index] = text
+        if self._failed.fail(index, text, self.watchdog_policy):
             self.set_fault(index, self._faults[index], self._detail[index])
-        else:
-            log.warning("%s; arming it anyway (gateway.controller_watchdog: warn)", text)
 
     def clear_protection_fault(self, index: int) -> None:
         """Forget motor ``index``'s protection fault (a new enable tries again)."""
-        if self._protection_failed[index]:
-            self._protection_failed[index] = ""
+        if self._failed.why[index]:
+            self._failed.why[index] = ""
             self.set_fault(index, self._faults[index] & ~DriveFault.WATCHDOG, "")
 
     # ----------------------------------------------------------------- shared state
@@ -380,42 +334,22 @@ class MotorDriver(abc.ABC, Generic[OptT]):
         return self._index.get(node_id)
 
     def store_feedback(self, index: int, feedback: WheelFeedback, stream: int | None = 0) -> None:
-        """Record new feedback for motor ``index``, and liveness stream ``stream`` heard at its
-        time (``None``: the caller reports the streams itself, with :meth:`heard`, e.g. when
-        the feedback is stamped with the older of two frames)."""
+        """Record new feedback for motor ``index``, and stream ``stream`` heard at its time
+        (``None``: the caller reports the streams with :meth:`heard`)."""
         self._feedback[index] = feedback
         if stream is not None:
             self.live.heard(index, stream, feedback.timestamp_s)
 
     def heard(self, index: int, stream: int, t: float) -> None:
-        """Motor ``index``'s liveness stream ``stream`` (an index into
-        :attr:`LIVENESS_STREAMS`) was heard at ``t``."""
+        """Motor ``index``'s liveness stream ``stream`` (:attr:`LIVENESS_STREAMS`) heard at t."""
         self.live.heard(index, stream, t)
-
-    def alive(self, index: int, now_s: float) -> bool:
-        """Whether every liveness stream of motor ``index`` is younger than ``liveness_s``."""
-        return self.live.alive(index, now_s)
-
-    def silent_streams(self, index: int, now_s: float) -> list[str]:
-        """The names of motor ``index``'s liveness streams that are missing or too old."""
-        return self.live.silent(index, now_s)
-
-    @property
-    def liveness_s(self) -> float:
-        """Feedback older than this (s) marks a motor OFFLINE (``liveness_s``, one per bus)."""
-        return self.live.liveness_s
-
-    @liveness_s.setter
-    def liveness_s(self, value: float) -> None:
-        self.live.liveness_s = value
 
     def set_fault(self, index: int, faults: DriveFault, detail: str = "") -> None:
         """Record the fault flags (``DriveFault.NONE`` clears) of motor ``index``; a
         protection fault (:meth:`protection_fault`) stays in them."""
-        failed = self._protection_failed[index]
-        if failed:
+        if self._failed.why[index]:
             faults |= DriveFault.WATCHDOG
-            detail = failed if not detail or detail == failed else f"{failed}; {detail}"
+            detail = self._failed.merged(index, detail)
         self._faults[index] = faults
         self._detail[index] = detail
 
@@ -442,12 +376,14 @@ class MotorDriver(abc.ABC, Generic[OptT]):
     def state(self, index: int, now_s: float) -> DriveState:
         """What the driver believes of motor ``index`` at ``now_s``: OFFLINE while a liveness
         stream is silent, FAULT while fault flags are set, else :meth:`_ready_state`."""
-        heard = self._heard_s[index]
-        if heard is None or now_s - heard > self.live.liveness_s:
-            return DriveState.OFFLINE
-        if self._faults[index]:
-            return DriveState.FAULT
-        return self._ready_state(index)
+        return self.states(now_s)[index]
+
+    def states(self, now_s: float) -> list[DriveState]:
+        """:meth:`state` of every motor, in one call (what the supervisor reads every cycle)."""
+        limit, faults, ready = self.live.liveness_s, self._faults, self._ready_state
+        return [DriveState.OFFLINE if t is None or now_s - t > limit
+                else DriveState.FAULT if faults[i] else ready(i)
+                for i, t in enumerate(self._heard_s)]
 
     def _ready_state(self, index: int) -> DriveState:
         """Hook of :meth:`state` for a live motor without faults: ENABLED when armed, else
@@ -456,18 +392,9 @@ class MotorDriver(abc.ABC, Generic[OptT]):
 
     def status(self, now_s: float) -> tuple[MotorStatus, ...]:
         """A snapshot of every motor, for reports."""
-        out = []
-        for i, m in enumerate(self.motors):
-            fb = self._feedback[i]
-            out.append(
-                MotorStatus(
-                    m.wheel,
-                    m.node_id,
-                    self.state(i, now_s),
-                    self._faults[i],
-                    self._detail[i],
-                    None if fb is None else now_s - fb.timestamp_s,
-                    fb,
-                )
-            )
-        return tuple(out)
+        return tuple(
+            MotorStatus(m.wheel, m.node_id, st, self._faults[i], self._detail[i],
+                        None if fb is None else now_s - fb.timestamp_s, fb)
+            for i, (m, fb, st) in enumerate(
+                zip(self.motors, self._feedback, self.states(now_s), strict=True))
+        )

@@ -16,7 +16,6 @@ which the odometry uses in place of the commanded one (:meth:`DriveSet.measured_
 
 from __future__ import annotations
 
-from itertools import repeat
 from typing import TYPE_CHECKING, Any
 
 from gateway.core.linkage import virtual_angle, wheel_angle
@@ -219,9 +218,8 @@ class DriveSet:
         """Every motor's state (:meth:`MotorDriver.state`), in the order of :meth:`status`:
         what the supervisor reads every cycle, without building a status per motor."""
         out: list[DriveState] = []
-        for drv, idx in self.groups:
-            n = len(idx)
-            out += map(drv.state, range(n), repeat(now_s, n))
+        for drv, _ in self.groups:
+            out += drv.states(now_s)
         order = self._status_order
         return out if order is None else [out[k] for k in order]
 

@@ -1,9 +1,14 @@
 """The driver contract's part of controller-side protection (:mod:`gateway.core.protection`):
-the default for protocols whose timeout is stated, and the text of a protection fault."""
+the default for protocols whose timeout is stated, the text of a protection fault, and the
+per-motor record of protections that failed."""
 
 from __future__ import annotations
 
-from gateway.core.protection import Guard, Protection
+import logging
+
+from gateway.core.protection import Guard, Protection, ProtectionState, WatchdogPolicy
+
+log = logging.getLogger("gateway.drive.driver")
 
 
 def stated_protection(protocol: str, action: str, fix: str, stated_s: float) -> Protection:
@@ -38,3 +43,45 @@ def fault_text(wheel: str, protocol: str, node_id: int, why: str, fix: str) -> s
         f"motor {wheel!r} ({protocol} node {node_id}): controller watchdog not confirmed: "
         f"{why}" + (f"; fix: {fix}" if fix else "")
     )
+
+
+class FailedProtections:
+    """Per motor, why its controller-side protection failed under
+    :attr:`~gateway.core.protection.WatchdogPolicy.REQUIRED` (``""``: it did not), and
+    whether this enable's failure has been reported (once per enable).
+
+    :param n: the number of motors.
+    """
+
+    __slots__ = ("reported", "why")
+
+    def __init__(self, n: int) -> None:
+        self.why: list[str] = [""] * n
+        self.reported: list[bool] = [False] * n
+
+    def merged(self, index: int, detail: str) -> str:
+        """Motor ``index``'s fault text with its protection failure first."""
+        failed = self.why[index]
+        return failed if not detail or detail == failed else f"{failed}; {detail}"
+
+    def fail(self, index: int, text: str, policy: WatchdogPolicy) -> bool:
+        """Record that motor ``index``'s protection was not confirmed (``text``: the fault
+        text): kept under :attr:`WatchdogPolicy.REQUIRED` (the motor is not armed), a warning
+        under :attr:`WatchdogPolicy.WARN`.
+
+        :return: whether it is kept as a fault.
+        """
+        if policy is WatchdogPolicy.REQUIRED:
+            log.error("%s; not arming it (gateway.controller_watchdog: required)", text)
+            self.why[index] = text
+            return True
+        log.warning("%s; arming it anyway (gateway.controller_watchdog: warn)", text)
+        return False
+
+
+def may_arm(state: ProtectionState, policy: WatchdogPolicy) -> bool:
+    """Whether a motor may be armed as far as its protection goes: confirmed, not configured
+    by its driver, or failed under :attr:`WatchdogPolicy.WARN`."""
+    if state is ProtectionState.PENDING:
+        return False
+    return state is not ProtectionState.FAILED or policy is WatchdogPolicy.WARN

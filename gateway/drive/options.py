@@ -21,16 +21,20 @@ import dataclasses
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, TypeVar, cast
 
+from gateway.core.errors import ConfigError
 from gateway.core.options import OptionSpec, validate_block
 
 if TYPE_CHECKING:
-    from collections.abc import Mapping
+    from collections.abc import Mapping, Sequence
+
+    from gateway.core.types import MotorConfig
 
 __all__ = [
     "CONTROLLER_TIMEOUT_OPTION",
     "DEFAULT_LIVENESS_S",
     "DriverOptions",
     "StatedTimeout",
+    "check_bus_wide",
     "option",
 ]
 
@@ -124,3 +128,21 @@ class StatedTimeout(DriverOptions):
     """
 
     controller_timeout_s: float = spec_field(CONTROLLER_TIMEOUT_OPTION)
+
+
+def check_bus_wide(
+    motors: Sequence[MotorConfig], opts: Sequence[DriverOptions], keys: Sequence[str],
+    protocol: str,
+) -> None:
+    """Check that every motor of one bus agrees on ``keys`` (a driver's ``BUS_WIDE``).
+
+    :raises ConfigError: naming the first motor that differs from the first one, and the key.
+    """
+    for m, o in zip(motors, opts, strict=True):
+        for key in keys:
+            want, got = getattr(opts[0], key), getattr(o, key)
+            if got != want:
+                raise ConfigError(
+                    f"motor {m.wheel!r}.{key}: expected {want!r} like motor "
+                    f"{motors[0].wheel!r} on the same {protocol} bus, got {got!r}"
+                )

@@ -1,14 +1,15 @@
 """Driver lookup: the built-in table plus the ``gateway.drivers`` entry-point group.
 
-Built-ins are imported lazily.  A plugin that fails to load becomes a warning naming the plugin
-and the exception; it never empties the registry.
+Built-ins are imported lazily, and the installed packages' entry points are read only when a
+name is not built in (reading them scans every installed distribution's metadata, a good part
+of the CLI's start-up).  A plugin that fails to load becomes a warning naming the plugin and
+the exception; it never empties the registry.
 """
 
 from __future__ import annotations
 
 import importlib
 import logging
-from importlib.metadata import entry_points
 from typing import TYPE_CHECKING, Any
 
 from drivers import BUILTIN_DRIVERS
@@ -24,6 +25,8 @@ ENTRY_POINT_GROUP = "gateway.drivers"
 
 
 def _plugins() -> dict[str, EntryPoint]:
+    from importlib.metadata import entry_points  # noqa: PLC0415 - see the module's doc
+
     return {ep.name: ep for ep in entry_points(group=ENTRY_POINT_GROUP)}
 
 
@@ -41,7 +44,6 @@ def get_driver_class(name: str) -> type[MotorDriver[Any]]:
 
     :raises DriverNotFoundError: if no driver has that name, or it cannot be loaded.
     """
-    known = ", ".join(sorted(valid_drivers()))
     if name in BUILTIN_DRIVERS:
         module_name, class_name = BUILTIN_DRIVERS[name]
         try:
@@ -51,8 +53,10 @@ def get_driver_class(name: str) -> type[MotorDriver[Any]]:
                 f"Driver {name!r} ({module_name}.{class_name}) failed to load: {err}"
             ) from err
     else:
-        plugin = _plugins().get(name)
+        plugins = _plugins()
+        plugin = plugins.get(name)
         if plugin is None:
+            known = ", ".join(sorted(BUILTIN_DRIVERS.keys() | plugins.keys()))
             raise DriverNotFoundError(f"Unknown driver {name!r}; expected one of: {known}")
         try:
             cls = plugin.load()

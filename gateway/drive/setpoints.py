@@ -1,4 +1,5 @@
-"""The setpoints a driver takes: their bounds per motor, and the error for one out of bounds."""
+"""The setpoints a driver takes: their bounds per motor, and the errors for setpoints out of
+bounds or of the wrong count, and for a node ID out of range."""
 
 from __future__ import annotations
 
@@ -69,3 +70,21 @@ def check_motors(
                 f"{where}: node {m.node_id} is already used by wheel {owners[m.node_id]!r}"
             )
         owners[m.node_id] = m.wheel
+
+
+def count_error(motors: Sequence[MotorConfig], got: int, protocol: str) -> EncodeError:
+    """The error for ``got`` setpoints given to a driver of ``motors``."""
+    return EncodeError(
+        f"Expected {len(motors)} setpoints for the {protocol} motors "
+        f"({', '.join(m.wheel for m in motors)}), but got {got}."
+    )
+
+
+def check_node_id(node_id: int, where: str, valid: tuple[int, int]) -> None:
+    """Check a node ID against the inclusive range ``valid``.
+
+    :raises ConfigError: if it is out of range.
+    """
+    lo, hi = valid
+    if not lo <= node_id <= hi:
+        raise ConfigError(f"{where}: expected int {lo}..{hi}, got {node_id!r}")

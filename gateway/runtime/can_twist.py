@@ -22,6 +22,7 @@ if TYPE_CHECKING:
     from gateway.core.control import Accepted, Supervisor
     from gateway.core.settings import LoopConfig
     from gateway.core.types import Frame, Twist
+    from gateway.runtime.counts import LoopCounts
     from gateway.wire.can import WgCodec
 
     #: ``Gateway.twist``: a twist from a source, checked and followed.
@@ -36,14 +37,14 @@ class CanTwists:
     :param wg: the codec of the gateway's own frames.
     :param loop: the ``gateway:`` settings (command timeout, who releases an e-stop).
     :param supervisor: the state machine the commands go to.
-    :param counts: the gateway's event counters (``can_twists``, ``can_duplicates``,
-        ``can_lost``, ``bad_can_twists``).
+    :param counts: the gateway's event counters (this input counts ``can_twists``,
+        ``can_duplicates``, ``can_lost`` and ``bad_can_twists``).
     :param twist: where a twist goes (checked, logged and remembered by the gateway).
     :param report: how an error is answered (``WG_Error`` and the outbox).
     """
 
     def __init__(self, wg: WgCodec, loop: LoopConfig, supervisor: Supervisor,
-                 counts: dict[str, int], twist: TwistSink, report: ErrorSink) -> None:
+                 counts: LoopCounts, twist: TwistSink, report: ErrorSink) -> None:
         self.wg = wg
         self.loop = loop
         self.supervisor = supervisor
@@ -60,7 +61,7 @@ class CanTwists:
         try:
             cmd = self.wg.decode_twist(frame)
         except DecodeError as err:
-            self.counts["bad_can_twists"] += 1
+            self.counts.bad_can_twists += 1
             self._report(ErrorCode.BAD_COMMAND, str(err), out, None, NO_TWIST_COUNTER)
             return
         if cmd is None:
@@ -72,9 +73,13 @@ class CanTwists:
         if last is not None and timeout > 0.0 and now_s - last > timeout:
             self.counter.reset()
         kind, lost = self.counter.feed(cmd.counter)
-        self.counts["can_lost"] += lost
+        counts = self.counts
+        counts.can_lost += lost
         duplicate = kind is CounterKind.DUPLICATE
-        self.counts["can_duplicates" if duplicate else "can_twists"] += 1
+        if duplicate:
+            counts.can_duplicates += 1
+        else:
+            counts.can_twists += 1
         sup = self.supervisor
         if cmd.flags & TwistFlags.ESTOP:
             # Taken even from a repeated frame: an e-stop only ever stops.

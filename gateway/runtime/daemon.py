@@ -5,7 +5,8 @@ the control socket while it sleeps so a twist is applied at the next cycle, spea
 (READY=1 once the drives are enabled, WATCHDOG=1 from the loop while it is healthy, STATUS=
 on every state change, STOPPING=1), and on SIGTERM or SIGINT sends zero and disarm frames
 before it exits 0.  With ``--sim`` every motor gets its device simulator on the same virtual
-bus in the same process.
+bus in the same process.  The requests are answered by :mod:`gateway.runtime.requests`, the
+events go to the subscribers in their JSON form (:mod:`gateway.wire.socket.events`).
 """
 
 from __future__ import annotations
@@ -23,40 +24,27 @@ from typing import TYPE_CHECKING, Any
 import can
 
 from gateway.config import default_socket_path
-from gateway.core.control import Accepted, Source
 from gateway.core.errors import GatewayError
 from gateway.core.settings import FeedbackRecovery
-from gateway.core.types import DriveState, ErrorCode, Frame, GatewayState
+from gateway.core.types import DriveState, ErrorCode, GatewayState
 from gateway.runtime.latch import EstopLatch, latch_path
 from gateway.runtime.loop import Gateway
 from gateway.runtime.report import build_status
+from gateway.runtime.requests import RequestHandler
 from gateway.runtime.sdnotify import SystemdNotifier
 from gateway.runtime.server import ControlServer
 from gateway.runtime.timing import MissProbe, Scheduler, realtime_setup
 from gateway.sim.bus import SimulatedControllers
 from gateway.sim.registry import simulators_for
-from gateway.wire.socket import (
-    CommandRequest,
-    Op,
-    ProtocolError,
-    ResetOdometryRequest,
-    SubscribeRequest,
-    Topic,
-    TwistRequest,
-    event,
-    reply_error,
-    reply_ok,
-    reply_ok_data,
-    reply_protocol_error,
-)
-from gateway.wire.socket.status import odometry_to_json, status_to_json
+from gateway.wire.socket import reply_error
+from gateway.wire.socket.events import event_line, event_topic
 
 if TYPE_CHECKING:
     from types import FrameType
 
     from gateway.core.settings import GatewayConfig
     from gateway.core.status import GatewayStatus
-    from gateway.wire.socket import Request
+    from gateway.wire.socket import ProtocolError, Request
 
 log = logging.getLogger(__name__)
 
@@ -136,7 +124,10 @@ class Daemon:
         self.latch = EstopLatch(latch_path(config.loop.state_file, config.name))
         self._ready = False
         self._state = GatewayState.DISABLED
-        self._pending_twists: list[float] = []
+        #: Answers the socket's requests (:mod:`gateway.runtime.requests`).
+        self.requests = RequestHandler(self.gateway, self.server, self.latch, self.status)
+        # When each twist accepted since the last cycle arrived (the latency's start).
+        self._pending_twists = self.requests.pending_twists
         self._watchdog_s = self.notifier.watchdog_period_s
         self._next_watchdog = 0.0
         self.rt_notes: list[str] = []
@@ -150,41 +141,9 @@ class Daemon:
     # ----------------------------------------------------------------- requests
 
     def handle(self, client: int, request: Request | ProtocolError, now_s: float) -> None:
-        """Answer one socket request."""
-        gw, server = self.gateway, self.server
-        if isinstance(request, ProtocolError):
-            server.reply(client, reply_protocol_error(request))
-            return
-        rid = request.id
-        if isinstance(request, TwistRequest):
-            result = gw.twist(request.twist, now_s, Source.SOCKET)
-            if isinstance(result, Accepted):
-                self._pending_twists.append(time.perf_counter())
-                server.reply(client, reply_ok(rid, {
-                    "twist": result.twist, "projected": result.projected,
-                    **({"warning": str(result.error)} if result.error else {}),
-                }))
-                return
-            details: dict[str, object] = {}
-            if result.error is not None:
-                err = result.error
-                details = {"wheel": err.wheel, "constraint": err.constraint,
-                           "residual_m_s": err.residual_m_s, "nearest": err.nearest}
-            out: list[Frame] = []
-            gw.report_error(result.code, result.message, out, result)
-            gw.send(out)
-            server.reply(client, reply_error(rid, result.code, result.message, **details))
-            return
-        if isinstance(request, ResetOdometryRequest):
-            gw.odometry.reset(request.pose)
-            odometry = odometry_to_json(gw.odometry.state)
-            server.reply(client, reply_ok(rid, {"odometry": odometry}))
-            return
-        if isinstance(request, SubscribeRequest):
-            server.subscribe(client, request.topics)
-            server.reply(client, reply_ok(rid, {"topics": sorted(t.value for t in request.topics)}))
-            return
-        self._command(client, request, now_s)
+        """Answer one socket request (:meth:`RequestHandler.handle
+        <gateway.runtime.requests.RequestHandler.handle>`)."""
+        self.requests.handle(client, request, now_s)
 
     def handle_safely(self, client: int, request: Request | ProtocolError, now_s: float) -> None:
         """:meth:`handle`, but a reply that cannot be built becomes an error reply: no client
@@ -198,24 +157,6 @@ class Daemon:
                     None, ErrorCode.BAD_COMMAND, f"request failed: {err}"))
             except (GatewayError, ValueError, UnicodeError):
                 log.warning("client %d: no error reply possible", client)
-
-    def _command(self, client: int, request: CommandRequest, now_s: float) -> None:
-        sup, rid = self.gateway.supervisor, request.id
-        if request.op is Op.STATUS:
-            self.server.reply(client, reply_ok_data(rid, status_to_json(self.status())))
-            return
-        if request.op is Op.STOP:
-            sup.stop(now_s)
-        elif request.op is Op.ESTOP:
-            sup.estop("e-stop requested on the control socket")
-            self.latch.set(sup.reason)
-        elif request.op is Op.ENABLE:
-            sup.enable(now_s)
-        elif request.op is Op.DISABLE:
-            sup.disable()
-        elif request.op is Op.UNSUBSCRIBE:
-            self.server.unsubscribe(client)
-        self.server.reply(client, reply_ok(rid, {"state": sup.state}))
 
     def status(self) -> GatewayStatus:
         """Everything a ``status`` request returns, now."""
@@ -292,9 +233,11 @@ class Daemon:
         for arrived in self._pending_twists:
             self.scheduler.timer.record_latency(sent - arrived)
         self._pending_twists.clear()
-        for topic, payload in gw.outbox:
-            if self.server.has_subscribers(Topic(topic)):
-                self.server.publish(Topic(topic), event(topic, payload))
+        server = self.server
+        for news in gw.outbox:
+            topic = event_topic(news)
+            if server.has_subscribers(topic):
+                server.publish(topic, event_line(news))
         gw.outbox.clear()
         if gw.state is not self._state:
             if gw.state is GatewayState.ESTOP:

@@ -37,6 +37,7 @@ from gateway.core.types import ErrorCode, Frame, GatewayState, Twist
 from gateway.drive.driveset import DriveSet
 from gateway.drive.ownership import gateway_filters
 from gateway.runtime.can_twist import CanTwists
+from gateway.runtime.counts import LoopCounts
 from gateway.runtime.publish import Publisher
 from gateway.runtime.timing import LoopTimer
 from gateway.wire.can import NO_TWIST_COUNTER, StatusReport, WgCodec
@@ -49,6 +50,7 @@ if TYPE_CHECKING:
     from gateway.bus.health import BurstTracker, BusErrors
     from gateway.core.kinematics import IkResult, LimitReport
     from gateway.core.settings import GatewayConfig
+    from gateway.core.status import LastError
     from gateway.drive.labels import FrameLabeler
 
 log = logging.getLogger(__name__)
@@ -87,17 +89,13 @@ class Gateway:
         self.wg = WgCodec(config.loop.can_ids)
         self.timer = timer if timer is not None else LoopTimer(config.loop.rate_hz)
         self.period_s = 1.0 / config.loop.rate_hz
-        #: Event counters for status reports.
-        self.counts = {
-            "cycles": 0, "frames_sent": 0, "frames_received": 0, "send_failures": 0,
-            "bus_reopens": 0, "can_twists": 0, "can_duplicates": 0, "can_lost": 0,
-            "bad_can_twists": 0, "errors_reported": 0, "odometry_errors": 0,
-        }
+        #: Event counters for status reports (the bus's: ``edge.counts``).
+        self.counts = LoopCounts()
         #: The identifiers the gateway consumes (its drivers' claims and its twist input).
         self.receive_filters = gateway_filters(config, self.drives)
         #: The bus: sending, receiving, tallying, reopening.
         self.edge = BusEdge(
-            config, bus, self.counts, self.period_s,
+            config, bus, self.period_s,
             bus_options(config.bus.interface, [f.as_python_can() for f in self.receive_filters]),
             record, stamp_with_cycle_time,
         )
@@ -128,7 +126,8 @@ class Gateway:
         #: Odometry, status and errors, on CAN and in the outbox.
         self.publisher = Publisher(config.loop, self.wg, self.supervisor, self.odometry,
                                    self.timer, self._wheel_of)
-        #: (topic, payload) news for socket subscribers: emptied by the daemon every cycle.
+        #: News for socket subscribers (:mod:`gateway.core.events`): emptied by the daemon
+        #: every cycle.
         self.outbox = self.publisher.outbox
         #: WG_Twist_Cmd frames from the bus.
         self.can_twists = CanTwists(self.wg, config.loop, self.supervisor, self.counts,
@@ -166,14 +165,14 @@ class Gateway:
 
         :param wheel: the wheel the error is about, when it is not the rejection's.
         """
-        self.counts["errors_reported"] += 1
+        self.counts.errors_reported += 1
         out.append(self.publisher.error(code, message, rejection, twist_counter, wheel))
 
     # ----------------------------------------------------------------- the cycle
 
     def cycle(self, now_s: float) -> None:
         """One control cycle at time ``now_s`` (monotonic seconds)."""
-        self.counts["cycles"] += 1
+        self.counts.cycles += 1
         out: list[Frame] = []
         edge = self.edge
         frames = edge.receive(now_s)
@@ -273,7 +272,7 @@ class Gateway:
         try:
             self.odometry.update(got[1], got[0], self.drives.measured_steer(self.prev.steer_rad))
         except KinematicsError as err:
-            self.counts["odometry_errors"] += 1
+            self.counts.odometry_errors += 1
             log.warning("odometry update skipped: %s", err)
 
     def _bus_trouble(self, out: list[Frame], change: BusErrorState | None = None) -> None:
@@ -320,13 +319,9 @@ class Gateway:
         """The WG_Status content (each call advances its counter)."""
         return self.publisher.status_report(self.limit_report, self.edge.errors_recent)
 
-    def odometry_dict(self) -> dict[str, object]:
-        """The odometry as a JSON-able mapping."""
-        return self.publisher.odometry_dict()
-
     @property
-    def last_error(self) -> dict[str, object] | None:
-        """The last error reported, as ``{"code": ..., "message": ...}``."""
+    def last_error(self) -> LastError | None:
+        """The last error reported."""
         return self.publisher.last_error
 
     @property

@@ -1,15 +1,18 @@
 """What the gateway tells the world: odometry and status at their rates, errors as they come.
 
 :class:`Publisher` encodes ``WG_Odom_Pose``, ``WG_Odom_Velocity``, ``WG_Status`` and
-``WG_Error`` frames (:mod:`gateway.wire.can`) and puts the same news in the outbox that the
-daemon hands to socket subscribers.  :class:`gateway.runtime.loop.Gateway` owns one and sends
-the frames it returns.
+``WG_Error`` frames (:mod:`gateway.wire.can`) and puts the same news in the outbox, as typed
+events (:mod:`gateway.core.events`), that the daemon hands to socket subscribers (in their JSON
+form, :mod:`gateway.wire.socket.events`).  :class:`gateway.runtime.loop.Gateway` owns one and
+sends the frames it returns.
 """
 
 from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+from gateway.core.events import ErrorEvent, OdometryEvent, StatusEvent
+from gateway.core.status import LastError
 from gateway.core.types import ConstraintCode, ErrorCode
 from gateway.wire.can import NO_TWIST_COUNTER, NO_WHEEL, ErrorReport, StatusFlags, StatusReport
 
@@ -17,6 +20,7 @@ if TYPE_CHECKING:
     from collections.abc import Mapping
 
     from gateway.core.control import Rejection, Supervisor
+    from gateway.core.events import OutboxEvent
     from gateway.core.kinematics import LimitReport, Odometry
     from gateway.core.settings import LoopConfig
     from gateway.core.types import Frame
@@ -51,10 +55,10 @@ class Publisher:
         self.next_due_s = 0.0
         self._status_counter = 0
         self._error_count = 0
-        #: (topic, payload) news for socket subscribers; the daemon empties it every cycle.
-        self.outbox: list[tuple[str, dict[str, object]]] = []
-        #: The last error reported, as ``{"code": ..., "message": ...}``.
-        self.last_error: dict[str, object] | None = None
+        #: News for socket subscribers, oldest first; the daemon empties it every cycle.
+        self.outbox: list[OutboxEvent] = []
+        #: The last error reported.
+        self.last_error: LastError | None = None
 
     def error(
         self,
@@ -80,8 +84,8 @@ class Publisher:
             residual_m_s=err.residual_m_s if err else 0.0,
             count=self._error_count,
         ))
-        self.last_error = {"code": code.name.lower(), "message": message}
-        self.outbox.append(("error", dict(self.last_error)))
+        self.last_error = LastError(code, message)
+        self.outbox.append(ErrorEvent(code, message))
         return frame
 
     def publish(self, now_s: float, limit_report: LimitReport | None,
@@ -97,12 +101,11 @@ class Publisher:
             st = self.odometry.state
             frames.append(self.wg.encode_pose(st.pose))
             frames.append(self.wg.encode_velocity(st.twist, st.slip_m_s))
-            self.outbox.append(("odometry", self.odometry_dict()))
+            self.outbox.append(OdometryEvent(st))
         if now_s >= self._next_status_s:
             self._next_status_s = now_s + self._status_period_s
             frames.append(self.wg.encode_status(self.status_report(limit_report, bus_trouble)))
-            self.outbox.append(("status", {"state": self.supervisor.state,
-                                           "reason": self.supervisor.reason}))
+            self.outbox.append(StatusEvent(self.supervisor.state, self.supervisor.reason))
         self.next_due_s = min(self._next_odom_s, self._next_status_s)
         return frames
 
@@ -118,7 +121,7 @@ class Publisher:
             flags |= StatusFlags.CMD_TIMEOUT_ACTIVE
         if limit_report is not None and limit_report.speed_scale < 1.0:
             flags |= StatusFlags.SPEED_LIMITED
-        if sup.counts["projected"]:
+        if sup.counts.projected:
             flags |= StatusFlags.PROJECTED
         if bus_trouble:
             flags |= StatusFlags.BUS_ERRORS_RECENT
@@ -129,14 +132,5 @@ class Publisher:
             counter=self._status_counter,
             flags=flags,
             missed_cycles=self.timer.missed,
-            infeasible_count=sup.counts["infeasible"],
+            infeasible_count=sup.counts.infeasible,
         )
-
-    def odometry_dict(self) -> dict[str, object]:
-        """The odometry as a JSON-able mapping."""
-        st = self.odometry.state
-        return {
-            "x": st.pose.x_m, "y": st.pose.y_m, "theta": st.pose.theta_rad,
-            "vx": st.twist.vx_m_s, "vy": st.twist.vy_m_s, "wz": st.twist.wz_rad_s,
-            "slip": st.slip_m_s, "distance": st.distance_m, "t": st.timestamp_s,
-        }

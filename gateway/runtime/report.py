@@ -23,23 +23,24 @@ from gateway.core.status import (
     Direction,
     FrameCount,
     GatewayStatus,
-    LastError,
     MotorReport,
     SocketReport,
     TimingReport,
     TrackingReport,
 )
-from gateway.core.types import ErrorCode
 
 if TYPE_CHECKING:
     from collections.abc import Mapping, Sequence
 
+    from gateway.bus.edge import EdgeCounts
+    from gateway.core.counts import SupervisorCounts
     from gateway.core.status import ServerCounters
     from gateway.core.types import MotorStatus
+    from gateway.runtime.counts import LoopCounts
     from gateway.runtime.loop import Gateway
     from gateway.runtime.timing import TimingStats
 
-__all__ = ["build_status", "timing_report"]
+__all__ = ["build_status", "event_counts", "timing_report"]
 
 
 def _finite(value: float | None) -> float | None:
@@ -75,11 +76,34 @@ def _by_driver(counts: Sequence[tuple[str, Mapping[str, int]]]) -> Mapping[str, 
     return MappingProxyType({name: MappingProxyType(dict(n)) for name, n in counts if n})
 
 
-def _last_error(error: Mapping[str, object] | None) -> LastError | None:
-    """The loop's last error (``{"code": <lower-case ErrorCode name>, "message": ...}``)."""
-    if error is None:
-        return None
-    return LastError(ErrorCode[str(error["code"]).upper()], str(error["message"]))
+def event_counts(loop: LoopCounts, edge: EdgeCounts, sup: SupervisorCounts
+                 ) -> Mapping[str, int]:
+    """The event counters by name, in the status's order (public: the socket protocol's
+    ``counters``; every field of the three records, under its own name)."""
+    return MappingProxyType({
+        "cycles": loop.cycles,
+        "frames_sent": edge.frames_sent,
+        "frames_received": edge.frames_received,
+        "send_failures": edge.send_failures,
+        "bus_reopens": edge.bus_reopens,
+        "can_twists": loop.can_twists,
+        "can_duplicates": loop.can_duplicates,
+        "can_lost": loop.can_lost,
+        "bad_can_twists": loop.bad_can_twists,
+        "errors_reported": loop.errors_reported,
+        "odometry_errors": loop.odometry_errors,
+        "receive_failures": edge.receive_failures,
+        "frames_unsent": edge.frames_unsent,
+        "partial_bursts": edge.partial_bursts,
+        "send_waits": edge.send_waits,
+        "fd_frames_ignored": edge.fd_frames_ignored,
+        "infeasible": sup.infeasible,
+        "projected": sup.projected,
+        "rejected": sup.rejected,
+        "faults": sup.faults,
+        "cmd_timeouts": sup.cmd_timeouts,
+        "estops": sup.estops,
+    })
 
 
 def build_status(
@@ -125,7 +149,7 @@ def build_status(
                                 sup.steer_tracking.worst_ratio),
         odometry=gw.odometry.state,
         counters=Counters(
-            events=MappingProxyType({**gw.counts, **sup.counts}),
+            events=event_counts(gw.counts, gw.edge.counts, sup.counts),
             rejected_frames=_by_driver(
                 [(type(drv).__name__, drv.rejected) for drv, _ in gw.drives.groups]),
             commands_not_followed=_by_driver(
@@ -133,7 +157,7 @@ def build_status(
         ),
         socket=SocketReport(socket_path, server),
         timing=timing_report(timing, gw.burst_gap_max_s),
-        last_error=_last_error(gw.last_error),
+        last_error=gw.last_error,
         realtime=tuple(realtime),
         bus=BusReport(
             interface=cfg.bus.interface,

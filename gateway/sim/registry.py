@@ -14,7 +14,6 @@ A plugin that fails to load is an error naming the plugin and the exception.
 from __future__ import annotations
 
 import importlib
-from importlib.metadata import entry_points
 from typing import TYPE_CHECKING
 
 from drivers import BUILTIN_SIMULATORS
@@ -41,6 +40,8 @@ def _factory(driver: str) -> Callable[[MotorConfig], DeviceSimulator]:
                 f"Simulator of driver {driver!r} ({what}) failed to load: {err}"
             ) from err
     else:
+        from importlib.metadata import entry_points  # noqa: PLC0415 - only for a plugin
+
         plugins = {ep.name: ep for ep in entry_points(group=ENTRY_POINT_GROUP)}
         plugin = plugins.get(driver)
         if plugin is None:

@@ -161,14 +161,14 @@ def test_bus_off_is_a_fault_that_names_it_and_the_restart_lets_it_recover(
     # Still bus-off: no automatic recovery, however long the motors answer, and no retry
     # is spent on it (the recovery after the restart below still has all of them).
     rig.advance(sum(AUTO_RETRY_DELAY_S * (k + 1) for k in range(AUTO_RETRIES + 1)) + 1.0)
-    assert sup.counts["faults"] == 1
+    assert sup.counts.faults == 1
     assert state(rig) is GatewayState.FAULT
     rig.pilot.send(error_frame(0x100))  # the controller restarted (restart-ms)
     rig.advance(3 * AUTO_RETRY_DELAY_S + 1.0)
     assert state(rig) is GatewayState.RUNNING
     counts = rig.gw.bus_errors.counts
     assert (counts["error_frames"], counts["bus_off"], counts["restarted"]) == (3, 1, 1)
-    assert rig.gw.counts["frames_received"] > 0  # error frames are not the drivers' frames
+    assert rig.gw.edge.counts.frames_received > 0  # error frames are not the drivers' frames
     assert any("bus-off" in r.getMessage() for r in caplog.records)
 
 
@@ -185,12 +185,12 @@ def test_enabling_while_bus_off_is_refused_with_the_reason(rig: Rig) -> None:
 
 def test_can_fd_frames_are_ignored_and_counted(rig: Rig) -> None:
     rig.gw.twist(Twist(0.1), rig.t, _SOCKET)
-    before = rig.gw.counts["frames_received"]
+    before = rig.gw.edge.counts.frames_received
     for can_id in (0x2D, 0x100, 0x7FF):  # even on the IDs of a motor and of the twist input
         rig.pilot.send(can.Message(arbitration_id=can_id, is_fd=True, data=bytes(range(64)),
                                    is_extended_id=False))
     rig.advance(0.2)
-    assert rig.gw.counts["fd_frames_ignored"] == 3
-    assert rig.gw.counts["can_twists"] == 0
-    assert rig.gw.counts["frames_received"] > before
+    assert rig.gw.edge.counts.fd_frames_ignored == 3
+    assert rig.gw.counts.can_twists == 0
+    assert rig.gw.edge.counts.frames_received > before
     assert state(rig) is GatewayState.RUNNING

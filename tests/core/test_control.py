@@ -71,7 +71,7 @@ def test_twist_is_followed_until_the_command_timeout() -> None:
     assert (d.twist, d.ramp, d.armed, d.cmd_timeout) == (Twist(0.3, 0.0, 0.1), True, True, False)
     d = sup.decide(1.51)
     assert d.twist == Twist() and d.ramp and d.cmd_timeout
-    assert sup.counts["cmd_timeouts"] == 1
+    assert sup.counts.cmd_timeouts == 1
     assert isinstance(sup.twist(Twist(0.1, 0.0, 0.0), 2.0), Accepted)
     assert sup.decide(2.1).twist == Twist(0.1, 0.0, 0.0)
 
@@ -90,7 +90,7 @@ def test_infeasible_reject_ramps_to_zero() -> None:
     assert result.code is ErrorCode.INFEASIBLE_TWIST
     assert result.error is not None and result.error.constraint == "sliding"
     assert sup.decide(1.1).twist == Twist() and sup.decide(1.1).ramp
-    assert sup.counts["infeasible"] == 1
+    assert sup.counts.infeasible == 1
 
 
 def test_infeasible_project_follows_nearest() -> None:
@@ -99,7 +99,7 @@ def test_infeasible_project_follows_nearest() -> None:
     assert isinstance(result, Accepted) and result.projected
     assert result.twist.vx_m_s == pytest.approx(0.3)
     assert abs(result.twist.vy_m_s) < 1e-12
-    assert sup.counts["projected"] == 1
+    assert sup.counts.projected == 1
 
 
 def test_motor_fault_zeroes_names_motor_and_recovers_automatically() -> None:

@@ -26,6 +26,7 @@ from gateway.drive.driver import MotorDriver
 from gateway.drive.filters import EXT_MASK, STD_MASK
 from gateway.drive.options import StatedTimeout, option
 from gateway.sim.registry import simulator_for
+from tests import factories
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -94,8 +95,8 @@ class Toy(MotorDriver[ToyOptions]):
 
 
 def toy_motor(node: int, wheel: str = "left", **options: object) -> MotorConfig:
-    return MotorConfig(wheel, "toy", node, gear_ratio=2.0, max_rpm=600.0,
-                       options=Toy.validate_options(options, f"motor {wheel!r}"))
+    return factories.motor("toy", node, wheel, gear_ratio=2.0, max_rpm=600.0, driver_class=Toy,
+                           options=options)
 
 
 def toy(*nodes: int) -> Toy:
@@ -109,7 +110,7 @@ def test_options_are_a_typed_dataclass_with_the_common_keys_declared_once() -> N
     drv = Toy([toy_motor(1, controller_timeout_s=0.5, liveness_s=0.1)])
     assert drv.opts[0] == ToyOptions(liveness_s=0.1, controller_timeout_s=0.5, bitrate=500_000)
     assert list(Toy.OPTIONS) == ["liveness_s", "controller_timeout_s", "bitrate"]
-    assert drv.liveness_s == 0.1
+    assert drv.live.liveness_s == 0.1
 
 
 @pytest.mark.parametrize(("block", "message"), [
@@ -192,14 +193,14 @@ def test_a_motor_is_offline_until_every_liveness_stream_is_young() -> None:
     assert drv.state(0, 0.0) is DriveState.OFFLINE
     drv.on_frame(Frame(0x181, struct.pack("<ih", 1000, 50), timestamp_s=1.0))
     assert drv.state(0, 1.0) is DriveState.OFFLINE  # no status yet
-    assert drv.silent_streams(0, 1.0) == ["status"]
+    assert drv.live.silent(0, 1.0) == ["status"]
     drv.on_frame(Frame(0x201, bytes([1]), timestamp_s=1.1))
     assert drv.state(0, 1.1) is DriveState.ENABLED
     assert drv.feedback(0) == WheelFeedback(1.0, 0.5, 1.0)
     # The feedback stream goes silent: OFFLINE after liveness_s (0.25 s) of it.
     assert drv.state(0, 1.25) is DriveState.ENABLED
     assert drv.state(0, 1.26) is DriveState.OFFLINE
-    assert drv.silent_streams(0, 1.26) == ["feedback"]
+    assert drv.live.silent(0, 1.26) == ["feedback"]
 
 
 def test_faults_come_before_the_ready_state() -> None:

@@ -22,10 +22,19 @@ from typing import TYPE_CHECKING, Any
 
 import can
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 import gateway.runtime.loop
 from drivers.cia402.enums import STATUSWORD_MASK, state_from_statusword
-from drivers.odrive.enums import AXIS_ERROR_05_FAULTS, AXIS_ERROR_FAULTS, Firmware, error_faults
+from drivers.odrive.codec import OdriveCodec
+from drivers.odrive.enums import (
+    AXIS_ERROR_05_FAULTS,
+    AXIS_ERROR_FAULTS,
+    CmdId,
+    Firmware,
+    error_faults,
+)
 from gateway.bus.can_bus import drain, to_frame, to_message
 from gateway.config import load_config, parse_config
 from gateway.core.control import Accepted, Source, StatusBoard, Supervisor
@@ -42,6 +51,7 @@ from gateway.core.types import (
     MotorStatus,
     Twist,
     WheelFeedback,
+    frame_of,
 )
 from gateway.drive.driveset import DriveSet
 from gateway.runtime.daemon import Daemon
@@ -523,3 +533,23 @@ _MIXED: dict[str, object] = {
     },
     "bus": {"interface": "virtual", "channel": "unused"},
 }
+
+
+@given(
+    st.lists(st.tuples(st.integers(0, 0x3E), st.floats(-50.0, 50.0)), min_size=1, max_size=6,
+             unique_by=lambda t: t[0]),
+    st.floats(-300.0, 300.0), st.booleans(),
+)
+def test_odrive_velocity_frames_match_the_checked_builder(
+    axes: list[tuple[int, float]], speed: float, extended: bool
+) -> None:
+    # OdriveCodec.set_input_vels builds the cycle's frames with frame_of, past Frame.__new__
+    # and the per-frame checks: the same frames, field for field, as make_set_input_vel.
+    codec = OdriveCodec(Firmware.V0_6, extended)
+    ids = [(codec.arbitration_id(node, CmdId.SET_INPUT_VEL), scale) for node, scale in axes]
+    fast = codec.set_input_vels(ids, [speed] * len(axes))
+    slow = [codec.make_set_input_vel(node, speed * scale / (2.0 * math.pi))
+            for node, scale in axes]
+    assert [tuple(f) for f in fast] == [tuple(f) for f in slow]
+    assert frame_of((0x123, b"\x01", True, False, 1, 2.5)) == Frame(0x123, b"\x01", True,
+                                                                    timestamp_s=2.5)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib.metadata
 import logging
 from importlib.metadata import EntryPoint
 from typing import TYPE_CHECKING
@@ -44,7 +45,7 @@ def plugins(monkeypatch: pytest.MonkeyPatch) -> Iterator[None]:
     def fake(group: str) -> list[EntryPoint]:
         return eps if group == registry.ENTRY_POINT_GROUP else []
 
-    monkeypatch.setattr(registry, "entry_points", fake)
+    monkeypatch.setattr(importlib.metadata, "entry_points", fake)  # imported when needed
     yield
 
 

@@ -16,6 +16,7 @@ from drivers.cia402.sim import Cia402Simulator
 from gateway.bus.can_bus import drain, send_frames
 from gateway.core.types import DriveState, Frame, MotorConfig
 from gateway.sim.bus import SimulatedControllers
+from tests import factories
 
 if TYPE_CHECKING:
     from collections.abc import Callable, Iterator, Sequence
@@ -23,8 +24,8 @@ if TYPE_CHECKING:
 #: The loop period of a bench (s).
 DT = 0.001
 TWO_PI = 2.0 * math.pi
-LEFT = MotorConfig("left", "cia402", 3, gear_ratio=10.0)
-RIGHT = MotorConfig("right", "cia402", 5, gear_ratio=10.0, invert=True)
+LEFT = factories.motor("cia402", 3, "left", gear_ratio=10.0)
+RIGHT = factories.motor("cia402", 5, "right", gear_ratio=10.0, invert=True)
 #: One position count at the wheel of LEFT or RIGHT (rad).
 COUNT_RAD = TWO_PI / 4096 / 10.0
 
@@ -33,9 +34,10 @@ def hexb(text: str) -> bytes:
     return bytes.fromhex(text)
 
 
-def left(**options: object) -> MotorConfig:
-    """LEFT with these protocol keys."""
-    return dataclasses.replace(LEFT, options=options)
+def left(*, validate: bool = True, **options: object) -> MotorConfig:
+    """LEFT with these protocol keys (:func:`tests.factories.motor`)."""
+    return factories.motor("cia402", 3, "left", gear_ratio=10.0, validate=validate,
+                           options=options)
 
 
 @dataclasses.dataclass

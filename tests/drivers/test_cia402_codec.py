@@ -51,7 +51,8 @@ from drivers.cia402.sdo import (
     parse_sdo_response,
 )
 from drivers.cia402.targets import wrap_delta
-from gateway.core.types import DriveFault, Frame, MotorConfig
+from gateway.core.types import DriveFault, Frame
+from tests import factories
 from tests.drivers.cia402_bench import TWO_PI, hexb
 
 U16, I32 = DataType.UNSIGNED16, DataType.INTEGER32
@@ -100,7 +101,7 @@ def test_golden_rpdo4_from_codec_and_driver() -> None:
                                                                      hexb("0F 00 E8 03 00 00"))
     assert codec.rpdo(5, Controlword.SHUTDOWN, -1) == Frame(0x205, hexb("06 00 FF FF FF FF"))
     # 999.6 RPM at the motor (gear 1): round(), never truncation
-    drv = Cia402Driver([MotorConfig("left", "cia402", 3)])
+    drv = Cia402Driver([factories.motor("cia402", 3, "left")])
     assert drv.preview_command([999.6 * TWO_PI / 60]) == [
         Frame(0x503, hexb("0F 00 E8 03 00 00")), Frame(0x080)]
 
@@ -150,7 +151,7 @@ def test_tpdo_decode_round_trip(node: int, word: int, value: int, kind: Feedback
 @given(st.floats(-1.0, 1.0), st.floats(0.01, 1000.0), st.booleans())
 def test_velocity_command_round_trip(fraction: float, factor: float, invert: bool) -> None:
     """A wheel speed up to max_rpm -> the RPDO's target velocity, rounded to device units."""
-    motor = MotorConfig("left", "cia402", 7, gear_ratio=12.5, max_rpm=6000.0, invert=invert,
+    motor = factories.motor("cia402", 7, "left", gear_ratio=12.5, max_rpm=6000.0, invert=invert,
                         options={"velocity_factor": factor})
     speed = fraction * motor.max_wheel_rad_s
     frame = Cia402Driver([motor]).preview_command([speed])[0]

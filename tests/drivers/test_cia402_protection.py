@@ -31,6 +31,7 @@ from gateway.core.errors import ConfigError
 from gateway.core.protection import Guard, ProtectionState, WatchdogPolicy
 from gateway.core.types import DriveFault, DriveState, Frame, MotorConfig
 from gateway.drive.driveset import DriveSet
+from tests import factories
 from tests.conftest import CONFIG_DIR
 from tests.drivers.cia402_bench import DT, LEFT, TWO_PI, Bench, benches, hexb, left
 
@@ -250,7 +251,7 @@ def test_warn_arms_anyway_with_a_warning(
 
 
 def test_protection_as_the_driver_states_it() -> None:
-    drv = Cia402Driver([LEFT, MotorConfig("right", "cia402", 5, options={
+    drv = Cia402Driver([LEFT, factories.motor("cia402", 5, "right", options={
         "abort_connection_option": 2, "controller_timeout_s": 0.5})])
     assert drv.PROTOCOL == "CiA 402"
     quick, coast = drv.protection(0), drv.protection(1)
@@ -271,24 +272,24 @@ def test_protection_as_the_driver_states_it() -> None:
         ([left(host_node_id=3)],
          "motor 'left'.host_node_id: expected a node ID that no drive on the bus uses (the "
          "gateway's heartbeat goes out on 0x703), got 3, the node ID of wheel 'left'"),
-        ([LEFT, MotorConfig("right", "cia402", 127)],
+        ([LEFT, factories.motor("cia402", 127, "right")],
          "motor 'right'.host_node_id: expected a node ID that no drive on the bus uses (the "
          "gateway's heartbeat goes out on 0x77F), got 127, the node ID of wheel 'right'"),
-        ([LEFT, MotorConfig("right", "cia402", 5, options={"host_node_id": 100})],
+        ([LEFT, factories.motor("cia402", 5, "right", options={"host_node_id": 100})],
          "motor 'right'.host_node_id: expected 127 like motor 'left' on the same CiA 402 bus, "
          "got 100"),
-        ([LEFT, MotorConfig("right", "cia402", 5, options={"host_heartbeat_s": 0.02})],
+        ([LEFT, factories.motor("cia402", 5, "right", options={"host_heartbeat_s": 0.02})],
          "motor 'right'.host_heartbeat_s: expected 0.05 like motor 'left' on the same CiA 402 "
          "bus, got 0.02"),
-        ([LEFT, MotorConfig("right", "cia402", 5, options={"liveness_s": 0.5})],
+        ([LEFT, factories.motor("cia402", 5, "right", options={"liveness_s": 0.5})],
          "motor 'right'.liveness_s: expected 0.25 like motor 'left' on the same CiA 402 bus, "
          "got 0.5"),
-        ([left(controller_timeout_s=0.09)],
+        ([left(validate=False, controller_timeout_s=0.09)],
          "motor 'left'.controller_timeout_s: expected at least 2 x host_heartbeat_s (0.1 s), "
          "or one late heartbeat of the gateway stops the drive; got 0.09"),
-        ([left(controller_timeout_s=0.2005)],
+        ([left(validate=False, controller_timeout_s=0.2005)],
          "motor 'left'.controller_timeout_s: expected a whole number of milliseconds"),
-        ([left(abort_connection_option=1)],
+        ([left(validate=False, abort_connection_option=1)],
          "motor 'left'.abort_connection_option: expected one of 2, 3, got 1"),
     ],
     ids=["host-is-the-drive", "host-is-another-drive", "two-hosts", "two-periods",

@@ -8,6 +8,8 @@ The tables are checked against an independent transcription of CiA 402 and again
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import pytest
 from canopen.profiles.p402 import State402
 
@@ -25,8 +27,11 @@ from drivers.cia402.steps import (
     configuration_steps,
 )
 from gateway.core.errors import IllegalTransitionError
-from gateway.core.types import Frame, MotorConfig
+from tests import factories
 from tests.drivers.cia402_bench import DT
+
+if TYPE_CHECKING:
+    from gateway.core.types import Frame
 
 U16 = enums.DataType.UNSIGNED16
 
@@ -92,7 +97,7 @@ def test_path_toward_enabled(start: State) -> None:
 def test_simulator_obeys_table(current: State, target: State) -> None:
     """Each transition's controlword takes the simulated drive there once the transition's
     delay has passed, as a device confirms a transition when it is done."""
-    sim = Cia402Simulator(MotorConfig("x", "cia402", 3))
+    sim = Cia402Simulator(factories.motor("cia402", 3, "x"))
     if current is State.QUICK_STOP_ACTIVE:
         sim.od.set(0x605A, 6)  # transition 16 only with quick stop option codes 5 to 8
     sim.state = current

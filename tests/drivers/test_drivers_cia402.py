@@ -20,9 +20,10 @@ from drivers.cia402.enums import DataType, NmtState
 from drivers.cia402.sdo import make_sdo_download, make_sdo_download_ack
 from drivers.cia402.sim import Cia402Simulator
 from gateway.core.errors import ConfigError, DecodeError, EncodeError
-from gateway.core.types import Frame, MotorConfig
+from gateway.core.types import Frame
 from gateway.drive.registry import get_driver_class
 from gateway.sim.registry import simulator_for
+from tests import factories
 from tests.drivers.cia402_bench import TWO_PI, hexb
 
 # ===================================================================== malformed frames, bad values
@@ -43,7 +44,7 @@ from tests.drivers.cia402_bench import TWO_PI, hexb
     ],
 )
 def test_malformed_frames_are_counted(frame: Frame, reason: str) -> None:
-    drv = Cia402Driver([MotorConfig("left", "cia402", 3)])
+    drv = Cia402Driver([factories.motor("cia402", 3, "left")])
     assert drv.on_frame(frame) is True
     assert sum(drv.rejected.values()) == 1
     assert reason in next(iter(drv.last_rejection.values()))
@@ -52,7 +53,7 @@ def test_malformed_frames_are_counted(frame: Frame, reason: str) -> None:
 
 
 def test_foreign_frames_are_not_ours() -> None:
-    drv = Cia402Driver([MotorConfig("left", "cia402", 3)])
+    drv = Cia402Driver([factories.motor("cia402", 3, "left")])
     for frame in (Frame(0x384, bytes(6)), Frame(0x080), Frame(0x603, bytes(8)),
                   Frame(0x183, bytes(2)), Frame(0x503, bytes(6)),
                   # a 29-bit frame with the number of our TPDO3 is another device's
@@ -62,14 +63,14 @@ def test_foreign_frames_are_not_ours() -> None:
 
 
 def test_unexpected_sdo_response_is_counted() -> None:
-    drv = Cia402Driver([MotorConfig("left", "cia402", 3)])
+    drv = Cia402Driver([factories.motor("cia402", 3, "left")])
     assert drv.on_frame(make_sdo_download_ack(3, 0x6040, 0))
     assert drv.rejected == {"unexpected SDO response": 1}
 
 
 @pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf, 1e3])
 def test_command_rejects_bad_speeds(bad: float) -> None:
-    drv = Cia402Driver([MotorConfig("left", "cia402", 3, gear_ratio=10.0, max_rpm=5000.0)])
+    drv = Cia402Driver([factories.motor("cia402", 3, "left", gear_ratio=10.0, max_rpm=5000.0)])
     with pytest.raises(EncodeError, match=r'Expected a wheel speed for CiA 402 node 3 \("left"\) '
                                           r"between -52\.3599 and 52\.3599 rad/s \(max_rpm "
                                           r"5000\), but got"):
@@ -79,11 +80,11 @@ def test_command_rejects_bad_speeds(bad: float) -> None:
 
 
 def test_encode_range_errors() -> None:
-    drv = Cia402Driver([MotorConfig("left", "cia402", 3)])
+    drv = Cia402Driver([factories.motor("cia402", 3, "left")])
     with pytest.raises(EncodeError, match=r"Expected 1 setpoints for the CiA 402 motors \(left\), "
                                           r"but got 2\."):
         drv.command([0.0, 0.0], 0.0)
-    huge = Cia402Driver([MotorConfig("left", "cia402", 3, max_rpm=1e5,
+    huge = Cia402Driver([factories.motor("cia402", 3, "left", max_rpm=1e5,
                                      options={"velocity_factor": 1e5})])
     with pytest.raises(EncodeError, match="target velocity for node 3 between -2147483648 and "):
         huge.preview_command([1e5 * TWO_PI / 60])  # 1e10 units: beyond the int32 of 0x60FF
@@ -99,13 +100,14 @@ def test_encode_range_errors() -> None:
 
 def test_config_errors() -> None:
     with pytest.raises(ConfigError, match="unknown key"):
-        Cia402Driver([MotorConfig("left", "cia402", 3, options={"bogus": 1})])
+        Cia402Driver([factories.motor("cia402", 3, "left", validate=False, options={"bogus": 1})])
     with pytest.raises(ConfigError, match="tpdo_velocity"):
-        Cia402Driver([MotorConfig("l", "cia402", 3, options={"tpdo_velocity": 3})])
+        Cia402Driver([factories.motor("cia402", 3, "l", validate=False,
+                                      options={"tpdo_velocity": 3})])
     with pytest.raises(ConfigError, match=r"1\.\.127, got 0"):
-        Cia402Driver([MotorConfig("left", "cia402", 0)])
+        Cia402Driver([factories.motor("cia402", 0, "left")])
     with pytest.raises(ConfigError, match=r"node 3 is already used by wheel .a."):
-        Cia402Driver([MotorConfig("a", "cia402", 3), MotorConfig("b", "cia402", 3)])
+        Cia402Driver([factories.motor("cia402", 3, "a"), factories.motor("cia402", 3, "b")])
     with pytest.raises(ConfigError, match=r"^x\.velocity_factor: expected at least 1e-09, "
                                           r"got 0\.0$"):
         Cia402Options.from_block({"velocity_factor": 0}, "x")
@@ -117,14 +119,14 @@ def test_config_errors() -> None:
 
 # ===================================================================== claims, names, simulator
 
-NODE_5 = MotorConfig("b", "cia402", 5, options={"rpdo": 1, "tpdo_position": 1,
+NODE_5 = factories.motor("cia402", 5, "b", options={"rpdo": 1, "tpdo_position": 1,
                                                 "tpdo_velocity": 2})
 
 
 def test_claims_golden() -> None:
     """What the driver takes (each node's EMCY, TPDOs, SDO responses and heartbeat) and what it
     only sends (NMT, the gateway's heartbeat, SYNC; each node's RPDO and SDO requests)."""
-    drv = Cia402Driver([MotorConfig("a", "cia402", 3), NODE_5])
+    drv = Cia402Driver([factories.motor("cia402", 3, "a"), NODE_5])
     got = [(c.can_id, c.mask, c.extended, c.motor, c.receive) for c in drv.claims()]
     taken = [(cob, 0x7FF, False, 0 if cob & 0x7F == 3 else 1, True) for cob in
              (0x083, 0x085, 0x185, 0x285, 0x383, 0x483, 0x583, 0x585, 0x703, 0x705)]
@@ -134,14 +136,14 @@ def test_claims_golden() -> None:
             (0x605, 0x7FF, False, 1, False)]
     assert got == taken + sent
     assert [str(f) for f in drv.receive_filters()] == [f"{c[0]:03X}/7FF" for c in taken]
-    quiet = Cia402Driver([MotorConfig("a", "cia402", 3, options={"sync": False})])
+    quiet = Cia402Driver([factories.motor("cia402", 3, "a", options={"sync": False})])
     assert not [c for c in quiet.claims() if c.can_id == 0x080]  # no SYNC without sync
 
 
 def test_every_frame_taken_is_claimed_by_its_node() -> None:
     """Every 11-bit ID: on_frame takes it exactly when a claim with receive does, and every
     claim of one motor is that motor's node (CiA 301: function code << 7 | node ID)."""
-    drv = Cia402Driver([MotorConfig("a", "cia402", 3), NODE_5])
+    drv = Cia402Driver([factories.motor("cia402", 3, "a"), NODE_5])
     claims = drv.claims()
     for cob in range(0x800):
         mine = [c for c in claims if c.matches(cob, False)]
@@ -159,7 +161,7 @@ def test_every_frame_taken_is_claimed_by_its_node() -> None:
     (0x703, "HEARTBEAT"), (0x77F, "HEARTBEAT"), (0x780, None),
 ])
 def test_message_names(cob: int, name: str | None) -> None:
-    drv = Cia402Driver([MotorConfig("a", "cia402", 3)])
+    drv = Cia402Driver([factories.motor("cia402", 3, "a")])
     assert drv.message_name(cob, False) == name
     assert drv.message_name(cob, True) is None
 
@@ -167,7 +169,7 @@ def test_message_names(cob: int, name: str | None) -> None:
 def test_any_frame_of_a_node_keeps_it_alive() -> None:
     """A node is alive while any of its frames is younger than liveness_s: pre-operational
     during the enable sequence it sends no TPDO, only its heartbeat and SDO answers."""
-    drv = Cia402Driver([MotorConfig("a", "cia402", 3)])
+    drv = Cia402Driver([factories.motor("cia402", 3, "a")])
     drv.enable(0.0)
     assert drv.state(0, 0.0).name == "OFFLINE"
     drv.on_frame(Frame(0x703, hexb("7F"), timestamp_s=0.1))  # heartbeat, PRE-OPERATIONAL
@@ -177,7 +179,7 @@ def test_any_frame_of_a_node_keeps_it_alive() -> None:
 
 
 def test_the_simulator_is_registered_apart_and_never_imported_by_the_driver() -> None:
-    motor = MotorConfig("a", "cia402", 3)
+    motor = factories.motor("cia402", 3, "a")
     assert isinstance(simulator_for(motor), Cia402Simulator)
     production = sorted(
         f"drivers.cia402.{p.stem}" for p in Path(drivers.cia402.__file__).parent.glob("*.py")

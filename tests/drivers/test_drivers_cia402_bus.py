@@ -4,7 +4,6 @@ recovery, silence, stopping, and drives that take their time."""
 
 from __future__ import annotations
 
-import dataclasses
 from typing import TYPE_CHECKING
 
 import pytest
@@ -12,9 +11,20 @@ import pytest
 from drivers.cia402.codec import make_nmt, make_sync, make_tpdo
 from drivers.cia402.enums import NmtCommand, NmtState, State
 from drivers.cia402.sequence import Phase
-from gateway.core.types import DriveFault, DriveState, Frame, MotorConfig
+from gateway.core.types import DriveFault, DriveState, Frame
 from gateway.sim.device import SimFault
-from tests.drivers.cia402_bench import COUNT_RAD, DT, LEFT, RIGHT, TWO_PI, Bench, benches, hexb
+from tests import factories
+from tests.drivers.cia402_bench import (
+    COUNT_RAD,
+    DT,
+    LEFT,
+    RIGHT,
+    TWO_PI,
+    Bench,
+    benches,
+    hexb,
+    left,
+)
 
 if TYPE_CHECKING:
     from collections.abc import Callable, Iterator
@@ -58,7 +68,7 @@ def test_enable_drive_and_read_position(bench: Callable[..., Bench]) -> None:
 
 
 def test_position_wraps_int32_end_to_end(bench: Callable[..., Bench]) -> None:
-    motor = MotorConfig("left", "cia402", 3, gear_ratio=1.0, options={"counts_per_rev": 4096})
+    motor = factories.motor("cia402", 3, "left", gear_ratio=1.0, options={"counts_per_rev": 4096})
     b = bench([motor], initial_position=(1 << 31) - 3000)
     assert b.enable([0.0])
     b.run(1.5, [6.0])
@@ -70,7 +80,7 @@ def test_position_wraps_int32_end_to_end(bench: Callable[..., Bench]) -> None:
 
 
 def test_event_driven_pdos_without_sync(bench: Callable[..., Bench]) -> None:
-    motor = MotorConfig("left", "cia402", 3, options={"sync": False, "event_timer_ms": 10})
+    motor = factories.motor("cia402", 3, "left", options={"sync": False, "event_timer_ms": 10})
     b = bench([motor])
     assert b.enable([0.0])
     sim = b.sims[0]
@@ -138,7 +148,7 @@ def test_statusword_fault_without_emcy(bench: Callable[..., Bench]) -> None:
 def test_silence_goes_offline_and_back(bench: Callable[..., Bench]) -> None:
     # A SILENT simulator hears nothing either, the gateway's heartbeat included: a consumer
     # time (1 s) longer than the 0.3 s of silence keeps the drive from stopping by itself.
-    b = bench([dataclasses.replace(LEFT, options={"controller_timeout_s": 1.0})])
+    b = bench([left(controller_timeout_s=1.0)])
     assert b.enable([0.0])
     b.sims[0].inject(SimFault.SILENT)
     b.run(0.2, [0.0])

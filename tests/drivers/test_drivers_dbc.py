@@ -38,6 +38,7 @@ from gateway.core.errors import ConfigError, EncodeError
 from gateway.core.types import DriveFault, DriveState, Frame, MotorConfig
 from gateway.drive.claims import FrameClaim
 from gateway.drive.registry import get_driver_class
+from tests import factories
 from tests.conftest import CONFIG_DIR, DATA_DIR, REPO
 
 if TYPE_CHECKING:
@@ -109,15 +110,19 @@ def motor(
     gear: float = GEAR,
     invert: bool = False,
     extra: Mapping[str, object] | None = None,
+    *,
+    validate: bool = True,
     **over: object,
 ) -> MotorConfig:
-    """An example-controller motor block with ``extra`` and ``over`` replacing protocol keys."""
-    opts = {**EXAMPLE, **(extra or {}), **over}
-    return MotorConfig(wheel, "dbc", node, gear_ratio=gear, invert=invert, options=opts)
+    """An example-controller motor block of the factory (:func:`tests.factories.motor`), with
+    ``extra`` and ``over`` replacing protocol keys."""
+    return factories.motor("dbc", node, wheel, gear_ratio=gear, invert=invert, validate=validate,
+                           options={**EXAMPLE, **(extra or {}), **over})
 
 
 def odrive_motor(node: int = 3, **over: object) -> MotorConfig:
-    return MotorConfig("left", "dbc", node, gear_ratio=1.0, options=odrive_options(node, **over))
+    """A motor block of the factory that drives ODrive axis ``node`` (:func:`odrive_options`)."""
+    return factories.motor("dbc", node, options=odrive_options(node, **over))
 
 
 @functools.cache
@@ -236,7 +241,7 @@ def test_odrive_golden_frames_through_the_generic_driver() -> None:
 
 def test_odrive_axis0_messages_with_shifted_node_id_match_the_golden_frame() -> None:
     opts = odrive_options(0, node_id_in_frame="add", node_id_shift=5)
-    motors = [MotorConfig(w, "dbc", n, options=opts) for w, n in (("a", 1), ("b", 3))]
+    motors = [factories.motor("dbc", n, w, options=opts) for w, n in (("a", 1), ("b", 3))]
     drv = DbcDriver(motors)
     drv.enable(0.0)
     frames = drv.command([10.0 * TWO_PI, 10.0 * TWO_PI], 0.0)
@@ -579,7 +584,7 @@ KNOWN_MESSAGES = "WD_Angle, WD_Enable, WD_Feedback, WD_Velocity_Command"
 )
 def test_config_errors_name_the_key(over: dict[str, object], message: str) -> None:
     with pytest.raises(ConfigError) as info:
-        DbcDriver([motor(3, extra=over)])
+        DbcDriver([motor(3, extra=over, validate=False)])
     assert message in str(info.value)
     assert str(info.value).startswith("wheels['left'].motor.")
 
@@ -587,7 +592,7 @@ def test_config_errors_name_the_key(over: dict[str, object], message: str) -> No
 def test_missing_required_key() -> None:
     opts = {k: v for k, v in EXAMPLE.items() if k != "position_signal"}
     with pytest.raises(ConfigError, match=r"motor\.position_signal: required key is missing"):
-        DbcDriver([MotorConfig("left", "dbc", 3, options=opts)])
+        DbcDriver([factories.motor("dbc", 3, validate=False, options=opts)])
 
 
 def test_invalid_dbc_file(tmp_path: Path) -> None:
@@ -678,7 +683,7 @@ def dual_motors() -> list[MotorConfig]:
             "enable_message": "Dual_Command",
             "enable_signal": "Drive_Enable",
         }
-        motors.append(MotorConfig(side.lower(), "dbc", node, options=opts))
+        motors.append(factories.motor("dbc", node, side.lower(), options=opts))
     return motors
 
 
@@ -813,4 +818,4 @@ def test_the_motors_of_one_bus_share_one_liveness() -> None:
         "motor 'right'.liveness_s: expected 0.25 like motor 'left' on the same DBC bus, got 1.0"
     )
     drv = DbcDriver([motor(1, liveness_s=0.5), motor(2, "right", liveness_s=0.5)])
-    assert drv.liveness_s == 0.5
+    assert drv.live.liveness_s == 0.5

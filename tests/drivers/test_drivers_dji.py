@@ -51,6 +51,7 @@ from gateway.drive.registry import get_driver_class
 from gateway.sim.bus import SimulatedControllers
 from gateway.sim.device import SimFault
 from gateway.sim.registry import simulator_for
+from tests import factories
 from tests.conftest import REPO
 
 if TYPE_CHECKING:
@@ -64,17 +65,16 @@ def motor(
     esc: str = "c620",
     gear: float | None = None,
     invert: bool = False,
+    *,
+    validate: bool = True,
     **options: object,
 ) -> MotorConfig:
+    """A DJI motor block of the factory (:func:`tests.factories.motor`): wheel ``w<node>``, the
+    gearbox of the ESC's motor unless ``gear`` is given, no controller stop acknowledged."""
     ratio = gear if gear is not None else (M3508_GEAR_RATIO if esc == "c620" else M2006_GEAR_RATIO)
-    return MotorConfig(
-        wheel=f"w{node_id}",
-        driver="dji",
-        node_id=node_id,
-        gear_ratio=ratio,
-        invert=invert,
-        max_rpm=20000.0,
-        options={"esc": esc, "no_controller_stop": "acknowledged", **options},
+    return factories.motor(
+        "dji", node_id, f"w{node_id}", gear_ratio=ratio, invert=invert, max_rpm=20000.0,
+        validate=validate, options={"esc": esc, "no_controller_stop": "acknowledged", **options},
     )
 
 
@@ -339,7 +339,7 @@ def test_registry_and_options() -> None:
         "max_temp_c": 80.0,
         "no_controller_stop": "acknowledged",
     }
-    assert DjiDriver([motor(1)]).liveness_s == 0.1
+    assert DjiDriver([motor(1)]).live.liveness_s == 0.1
     assert DjiDriver.Options is DjiOptions
     assert ACK_KEY in DjiOptions.specs()  # the acknowledgement is a key of its own name
     assert DjiDriver.OPTIONS["liveness_s"].default == 0.1
@@ -349,9 +349,12 @@ def test_registry_and_options() -> None:
 @pytest.mark.parametrize(
     ("motors", "message"),
     [
-        ([motor(1, esc="c630")], "esc: expected one of 'c620', 'c610', got 'c630'"),
-        ([motor(1, esc="c610", max_current_a=15.0)], "at most 10 A for a C610, got 15"),
-        ([motor(1, max_current_a=25.0)], "expected at most 20, got 25.0"),
+        ([motor(1, esc="c630", validate=False)], "esc: expected one of 'c620', 'c610', got 'c630'"),
+        (
+            [motor(1, esc="c610", validate=False, max_current_a=15.0)],
+            "at most 10 A for a C610, got 15",
+        ),
+        ([motor(1, validate=False, max_current_a=25.0)], "expected at most 20, got 25.0"),
         ([motor(1), motor(1)], "node 1 is already used by wheel 'w1'"),
         ([motor(0)], "expected int 1..8, got 0"),
         ([motor(9)], "expected int 1..8, got 9"),
@@ -359,8 +362,8 @@ def test_registry_and_options() -> None:
             [motor(1), motor(2, liveness_s=0.2)],
             "motor 'w2'.liveness_s: expected 0.1 like motor 'w1' on the same DJI bus, got 0.2",
         ),
-        ([motor(1, speed_kp=1.0)], "speed_kp: unknown key"),
-        ([motor(1, kp="fast")], "expected float, got 'fast'"),
+        ([motor(1, validate=False, speed_kp=1.0)], "speed_kp: unknown key"),
+        ([motor(1, validate=False, kp="fast")], "expected float, got 'fast'"),
     ],
 )
 def test_config_errors(motors: list[MotorConfig], message: str) -> None:

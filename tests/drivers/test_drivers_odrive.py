@@ -11,6 +11,7 @@ import contextlib
 import itertools
 import logging
 import math
+import struct
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, cast
 
@@ -57,6 +58,7 @@ from gateway.drive.claims import FrameClaim
 from gateway.drive.registry import get_driver_class
 from gateway.sim.bus import SimulatedControllers
 from gateway.sim.device import SimFault
+from tests import factories
 
 if TYPE_CHECKING:
     from collections.abc import Iterator, Sequence
@@ -74,9 +76,19 @@ def hx(text: str) -> bytes:
     return bytes.fromhex(text.replace(" ", ""))
 
 
-def motor(node: int = 3, wheel: str = "left", **kw: Any) -> MotorConfig:
-    fields = {k: kw.pop(k) for k in ("gear_ratio", "invert", "max_rpm") if k in kw}
-    return MotorConfig(wheel, "odrive", node, options=kw, **fields)
+def motor(
+    node: int = 3,
+    wheel: str = "left",
+    *,
+    gear_ratio: float = 1.0,
+    invert: bool = False,
+    max_rpm: float = 3000.0,
+    validate: bool = True,
+    **options: object,
+) -> MotorConfig:
+    """An ODrive motor block of the factory (:func:`tests.factories.motor`)."""
+    return factories.motor("odrive", node, wheel, gear_ratio=gear_ratio, invert=invert,
+                           max_rpm=max_rpm, validate=validate, options=options)
 
 
 @pytest.fixture(scope="module")
@@ -376,8 +388,8 @@ def test_error_flags_map_onto_drive_faults() -> None:
 def test_registry_and_config() -> None:
     assert get_driver_class("odrive") is OdriveDriver
     drv = OdriveDriver([motor(3), motor(4, "right")])
-    assert (drv.codec.firmware, drv.codec.extended_id, drv.liveness_s) == (V06, False, 0.25)
-    assert OdriveDriver([motor(3, liveness_s=0.5)]).liveness_s == 0.5
+    assert (drv.codec.firmware, drv.codec.extended_id, drv.live.liveness_s) == (V06, False, 0.25)
+    assert OdriveDriver([motor(3, liveness_s=0.5)]).live.liveness_s == 0.5
     assert OdriveDriver([motor(0xFEDCBA, extended_id=True)]).codec.max_node_id == 0xFFFFFF
     OdriveDriver.validate_node_id(0xFFFFFF, "x", {"extended_id": True})
     with pytest.raises(ConfigError, match=r"^x: expected int 0..16777215, got 16777216$"):
@@ -386,15 +398,18 @@ def test_registry_and_config() -> None:
     assert isinstance(sim, OdriveSimulator)
     assert sim.codec.firmware is V05
     with pytest.raises(ConfigError, match=r"firmware: expected one of '0.5', '0.6', got 5"):
-        OdriveSimulator(motor(3, firmware=5))
+        OdriveSimulator(motor(3, validate=False, firmware=5))
 
 
 @pytest.mark.parametrize(
     ("motors", "message"),
     [
-        ([motor(3, firmware="0.7")], r"motor 'left'.firmware: expected one of '0.5', '0.6'"),
-        ([motor(3, speed=1)], r"motor 'left'.speed: unknown key"),
-        ([motor(3, input_mode=3)], r"input_mode: expected one of 1, 2, got 3"),
+        (
+            [motor(3, validate=False, firmware="0.7")],
+            r"motor 'left'.firmware: expected one of '0.5', '0.6'",
+        ),
+        ([motor(3, validate=False, speed=1)], r"motor 'left'.speed: unknown key"),
+        ([motor(3, validate=False, input_mode=3)], r"input_mode: expected one of 1, 2, got 3"),
         (
             [motor(3), motor(4, "right", firmware="0.5")],
             r"^motor 'right'.firmware: expected '0.6' like motor 'left' on the same ODrive bus, "
@@ -425,6 +440,13 @@ def test_registry_and_config() -> None:
 def test_config_errors(motors: list[MotorConfig], message: str) -> None:
     with pytest.raises(ConfigError, match=message):
         OdriveDriver(motors)
+
+
+def test_a_speed_beyond_float32_is_an_encode_error_not_an_overflow() -> None:
+    drv = OdriveDriver([factories.motor("odrive", 3, max_rpm=1e300)])
+    with pytest.raises(EncodeError, match=r"^Expected Input_Vel within float32 in turns/s"):
+        drv.command([1e40], 0.0)
+    assert drv.command([1.0], 0.0)[0].data[:4] == struct.pack("<f", 1.0 / TAU)
 
 
 def test_command_conversion_and_limits() -> None:

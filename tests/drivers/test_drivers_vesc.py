@@ -10,7 +10,6 @@ from __future__ import annotations
 import logging
 import math
 import re
-from types import MappingProxyType
 from typing import TYPE_CHECKING
 
 import pytest
@@ -27,6 +26,7 @@ from drivers.vesc.codec import (
 from gateway.core.errors import ConfigError, EncodeError
 from gateway.core.types import DriveState, Frame, MotorConfig
 from gateway.drive.registry import get_driver_class
+from tests import factories
 from tests.drivers.test_vesc_codec import I32, ext
 
 if TYPE_CHECKING:
@@ -44,17 +44,13 @@ def motor(
     gear_ratio: float = 1.0,
     invert: bool = False,
     max_rpm: float = 3000.0,
+    validate: bool = True,
     **options: object,
 ) -> MotorConfig:
-    opts: dict[str, object] = {"pole_pairs": PP, **options}
-    return MotorConfig(
-        wheel=wheel,
-        driver="vesc",
-        node_id=node_id,
-        gear_ratio=gear_ratio,
-        invert=invert,
-        max_rpm=max_rpm,
-        options=MappingProxyType(opts),
+    """A VESC motor block of the factory (:func:`tests.factories.motor`), ``PP`` pole pairs."""
+    return factories.motor(
+        "vesc", node_id, wheel, gear_ratio=gear_ratio, invert=invert, max_rpm=max_rpm,
+        validate=validate, options={"pole_pairs": PP, **options},
     )
 
 
@@ -125,9 +121,9 @@ def test_validate_options_rejects(raw: dict[str, object], message: str) -> None:
         [motor(255)],  # broadcast
         [motor(-1)],
         [motor(23), motor(23, wheel="right")],
-        [motor(23, command_period_s=0.5)],
-        [motor(23, controller_timeout_s=0.2, command_period_s=0.1)],
-        [MotorConfig(wheel="left", driver="vesc", node_id=23)],  # no pole_pairs
+        [motor(23, validate=False, command_period_s=0.5)],
+        [motor(23, validate=False, controller_timeout_s=0.2, command_period_s=0.1)],
+        [factories.motor("vesc", 23, validate=False)],  # no pole_pairs
         [motor(23, liveness_s=0.25), motor(24, wheel="right", liveness_s=0.5)],  # one per bus
     ],
 )

@@ -30,6 +30,7 @@ from gateway.core.errors import ConfigError
 from gateway.core.types import DriveState, Frame, MotorConfig
 from gateway.sim.bus import SimulatedControllers
 from gateway.sim.device import SimFault
+from tests import factories
 from tests.drivers.test_drivers_vesc import PP, ext, motor
 
 if TYPE_CHECKING:
@@ -58,11 +59,11 @@ def sim_for(**kwargs: object) -> VescSimulator:
 
 def test_sim_needs_pole_pairs() -> None:
     with pytest.raises(ConfigError, match="pole_pairs"):
-        VescSimulator(MotorConfig(wheel="left", driver="vesc", node_id=23))
+        VescSimulator(factories.motor("vesc", 23, validate=False))
     assert isinstance(simulator_for(motor(23)), VescSimulator)
     refused = re.escape("motor 'left'.command_period_s: expected less")
     with pytest.raises(ConfigError, match=refused):  # a block the driver refuses
-        simulator_for(motor(23, command_period_s=0.5))
+        simulator_for(motor(23, validate=False, command_period_s=0.5))
 
 
 def test_sim_answers_ping() -> None:

@@ -51,6 +51,7 @@ from gateway.drive.driveset import DriveSet
 from gateway.sim.registry import simulator_for
 from gateway.wire.can import CanIds, WgCodec
 from gateway.wire.candump import CandumpError, parse_line
+from tests import factories
 from tests.conftest import CONFIG_DIR, DATA_DIR, SIM_ODRIVE_ENDPOINTS
 
 if TYPE_CHECKING:
@@ -114,7 +115,7 @@ def odrive_dbc_motor() -> MotorConfig:
         "fault_message": f"Axis{axis}_Heartbeat",
         "fault_signal": "Axis_Error",
     }
-    return MotorConfig("left", "dbc", axis, options=opts)
+    return factories.motor("dbc", axis, options=opts)
 
 
 @functools.cache

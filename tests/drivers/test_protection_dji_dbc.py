@@ -27,9 +27,9 @@ from gateway.cli import main
 from gateway.config import load_config, parse_config
 from gateway.core.errors import ConfigError
 from gateway.core.protection import Guard
-from gateway.core.types import MotorConfig
 from gateway.drive.driveset import DriveSet
 from gateway.sim.registry import simulators_for
+from tests import factories
 from tests.conftest import CONFIG_DIR
 
 if TYPE_CHECKING:
@@ -37,6 +37,7 @@ if TYPE_CHECKING:
 
     from click.testing import CliRunner
 
+    from gateway.core.types import MotorConfig
     from gateway.drive.driver import MotorDriver
     from gateway.sim.device import DeviceSimulator
 
@@ -47,15 +48,10 @@ ACK = {"no_controller_stop": "acknowledged"}
 STEP_S = 0.001
 
 
-def dji_motor(**options: object) -> MotorConfig:
-    return MotorConfig(
-        wheel="front_left",
-        driver="dji",
-        node_id=1,
-        gear_ratio=M3508_GEAR_RATIO,
-        max_rpm=9000.0,
-        options={"esc": "c620", **options},
-    )
+def dji_motor(*, validate: bool = True, **options: object) -> MotorConfig:
+    """A DJI C620 motor block of the factory (:func:`tests.factories.motor`), ESC 1."""
+    return factories.motor("dji", 1, "front_left", gear_ratio=M3508_GEAR_RATIO, max_rpm=9000.0,
+                           validate=validate, options={"esc": "c620", **options})
 
 
 def doc_of(path: object) -> dict[str, object]:
@@ -96,7 +92,7 @@ def test_dji_motor_without_the_acknowledgement_is_refused_naming_motor_consequen
     None
 ):
     with pytest.raises(ConfigError) as info:
-        DjiDriver([dji_motor()])
+        DjiDriver([dji_motor(validate=False)])
     text = str(info.value)
     assert text.startswith("motor 'front_left'.no_controller_stop: expected 'acknowledged', got ")
     assert "got nothing" in text
@@ -114,7 +110,7 @@ def test_dji_motor_without_the_acknowledgement_is_refused_naming_motor_consequen
 @pytest.mark.parametrize("value", ["yes", "Acknowledged", True, 1])
 def test_dji_acknowledgement_must_be_exactly_the_word(value: object) -> None:
     with pytest.raises(ConfigError) as info:
-        DjiDriver([dji_motor(no_controller_stop=value)])
+        DjiDriver([dji_motor(validate=False, no_controller_stop=value)])
     text = str(info.value)
     assert text.startswith("motor 'front_left'.no_controller_stop: expected ")
     assert repr(value) in text
@@ -152,7 +148,7 @@ def test_dji_steering_actuator_needs_the_acknowledgement_too() -> None:
 
 
 def test_acknowledged_dji_motor_has_no_controller_stop_and_the_config_warns() -> None:
-    drv = DjiDriver([dji_motor(**ACK)])
+    drv = DjiDriver([dji_motor(no_controller_stop="acknowledged")])
     assert drv.PROTOCOL == "DJI"
     prot = drv.protection(0)
     assert prot.guard is Guard.NONE

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import itertools
 import math
-from types import MappingProxyType
 from typing import TYPE_CHECKING
 
 import pytest
@@ -29,8 +28,9 @@ from drivers.cia402.sequence import NodeSequencer, Phase
 from drivers.cia402.steps import SdoExpectStep, SdoWriteStep, configuration_steps
 from gateway.bus.can_bus import send_frames
 from gateway.core.errors import ConfigError, EncodeError
-from gateway.core.types import DriveFault, DriveState, Frame, MotorConfig, MotorRole
+from gateway.core.types import DriveFault, DriveState, Frame, MotorConfig
 from gateway.sim.device import SimFault
+from tests import factories
 from tests.drivers.cia402_bench import Bench, benches
 
 if TYPE_CHECKING:
@@ -46,16 +46,15 @@ COUNT_STEER = TWO_PI / CPR / GEAR
 
 def steer_motor(node_id: int = 5, zero_rad: float = 0.3, *, invert: bool = False,
                 gear: float = GEAR, **options: object) -> MotorConfig:
-    opts = {"counts_per_rev": CPR, **options}
-    return MotorConfig(
-        wheel="fl steering", driver="cia402", node_id=node_id, gear_ratio=gear,
-        max_rpm=3000, invert=invert,
-        options=MappingProxyType(Cia402Driver.validate_options(opts, "steering.fl")),
-        role=MotorRole.STEER, zero_rad=zero_rad, steers=("front_left",),
+    """A CiA 402 steering actuator ``"fl steering"`` of the factory
+    (:func:`tests.factories.steer_motor`), ``CPR`` counts per revolution."""
+    return factories.steer_motor(
+        "cia402", node_id, ("front_left",), wheel="fl steering", zero_rad=zero_rad,
+        gear_ratio=gear, invert=invert, options={"counts_per_rev": CPR, **options},
     )
 
 
-DRIVE = MotorConfig("front_left", "cia402", 3, gear_ratio=10.0)
+DRIVE = factories.motor("cia402", 3, "front_left", gear_ratio=10.0)
 STEER = steer_motor()
 
 

@@ -19,7 +19,6 @@ from __future__ import annotations
 import functools
 import math
 import struct
-from types import MappingProxyType
 from typing import TYPE_CHECKING, Any
 
 import cantools
@@ -30,8 +29,9 @@ from hypothesis import strategies as st
 from drivers.dbc import DbcDriver, DbcReading, Role
 from drivers.dbc.sim import DbcSimulator
 from gateway.core.errors import ConfigError, EncodeError
-from gateway.core.types import DriveState, Frame, MotorConfig, MotorRole
+from gateway.core.types import DriveState, Frame, MotorConfig
 from gateway.sim.device import SimFault
+from tests import factories
 from tests.conftest import CONFIG_DIR
 from tests.drivers.test_drivers_dbc import EXAMPLE, ODRIVE_DBC, SETTINGS, TWO_PI, odrive_options
 from tests.drivers.test_drivers_dbc_sim import rig
@@ -81,20 +81,21 @@ def steer_motor(
     travel: float = math.pi,
     **over: object,
 ) -> MotorConfig:
-    opts = {**STEER_EXAMPLE, "dbc": dbc, **over}
-    return MotorConfig(
-        "front_left steering", "dbc", node, gear_ratio=gear, invert=invert, max_rpm=3000.0,
-        options=MappingProxyType(DbcDriver.validate_options(opts, "steering.front_left")),
-        role=MotorRole.STEER, zero_rad=zero_rad, steers=("front_left",),
-        steer_range_rad=(-travel, travel),
+    """A steering actuator of the factory (:func:`tests.factories.steer_motor`) on the example
+    controller's position command in ``dbc``, travelling ``travel`` either way."""
+    return factories.steer_motor(
+        "dbc", node, zero_rad=zero_rad, gear_ratio=gear, invert=invert,
+        steer_range_rad=(-travel, travel), options={**STEER_EXAMPLE, "dbc": dbc, **over},
     )
 
 
 def drive_motor(dbc: str, node: int = 1) -> MotorConfig:
-    return MotorConfig("rear", "dbc", node, gear_ratio=10.0, options={**EXAMPLE, "dbc": dbc})
+    """A drive motor of the factory on the example controller's velocity command in ``dbc``."""
+    return factories.motor("dbc", node, "rear", gear_ratio=10.0, options={**EXAMPLE, "dbc": dbc})
 
 
 def odrive_steer(node: int = 3, zero_rad: float = 0.0, gear: float = GEAR) -> MotorConfig:
+    """A steering actuator of the factory on ODrive axis ``node``'s position command."""
     opts = odrive_options(node)
     del opts["command_message"], opts["command_signal"], opts["command_unit"]
     opts.update(
@@ -104,11 +105,7 @@ def odrive_steer(node: int = 3, zero_rad: float = 0.0, gear: float = GEAR) -> Mo
         position_mode_message=f"Axis{node}_Set_Controller_Mode",
         position_mode_values={"Control_Mode": 3, "Input_Mode": 1},
     )
-    return MotorConfig(
-        "front_left steering", "dbc", node, gear_ratio=gear, max_rpm=3000.0,
-        options=MappingProxyType(DbcDriver.validate_options(opts, "steering.front_left")),
-        role=MotorRole.STEER, zero_rad=zero_rad, steers=("front_left",),
-    )
+    return factories.steer_motor("dbc", node, zero_rad=zero_rad, gear_ratio=gear, options=opts)
 
 
 def counts(motor_rad: float) -> int:
@@ -308,7 +305,7 @@ def _error(make: Callable[[], object]) -> str:
 
 def test_a_steering_block_needs_a_position_command(steer_dbc: str) -> None:
     opts = {**EXAMPLE, "dbc": steer_dbc}
-    m = MotorConfig("fl steering", "dbc", 5, options=opts, role=MotorRole.STEER)
+    m = factories.steer_motor("dbc", 5, wheel="fl steering", options=opts)
     assert _error(lambda: DbcDriver([m])) == (
         "wheels['fl steering'].motor.position_command_message: expected a non-empty name for a "
         "steering actuator's position command (it is commanded in position, not in velocity), "
@@ -316,7 +313,7 @@ def test_a_steering_block_needs_a_position_command(steer_dbc: str) -> None:
     )
     both = {**opts, **{k: STEER_EXAMPLE[k] for k in ("position_command_message",
                                                         "position_command_signal")}}
-    m = MotorConfig("fl steering", "dbc", 5, options=both, role=MotorRole.STEER)
+    m = factories.steer_motor("dbc", 5, wheel="fl steering", options=both)
     assert "motor.command_message: a steering actuator is commanded in position" in _error(
         lambda: DbcDriver([m])
     )
@@ -324,14 +321,14 @@ def test_a_steering_block_needs_a_position_command(steer_dbc: str) -> None:
 
 def test_a_drive_block_needs_a_velocity_command(steer_dbc: str) -> None:
     opts = {**STEER_EXAMPLE, "dbc": steer_dbc}
-    m = MotorConfig("rear", "dbc", 1, options=opts)
+    m = factories.motor("dbc", 1, "rear", options=opts)
     assert _error(lambda: DbcDriver([m])) == (
         "wheels['rear'].motor.command_message: expected a non-empty name for a drive motor's "
         "velocity command, got ''"
     )
-    m = MotorConfig("rear", "dbc", 1, options={**EXAMPLE, "dbc": steer_dbc,
-                                               "position_command_message": "WD_Position_Command",
-                                               "position_command_signal": "Target_Position"})
+    m = factories.motor("dbc", 1, "rear", options={
+        **EXAMPLE, "dbc": steer_dbc, "position_command_message": "WD_Position_Command",
+        "position_command_signal": "Target_Position"})
     assert "only a steering actuator takes a position command; expected '' for a drive motor" in (
         _error(lambda: DbcDriver([m]))
     )

@@ -12,7 +12,6 @@ worked examples (``0x200`` ``0F A0 ...`` = 4000 raw in ESC 1's slot, ``0x1FF`` `
 from __future__ import annotations
 
 import math
-from types import MappingProxyType
 from typing import TYPE_CHECKING
 
 import pytest
@@ -35,9 +34,10 @@ from drivers.dji.sim import DjiSimulator
 from gateway.bus.can_bus import send_frames
 from gateway.config import parse_config
 from gateway.core.errors import ConfigError, EncodeError
-from gateway.core.types import DriveFault, DriveState, Frame, MotorConfig, MotorRole
+from gateway.core.types import DriveFault, DriveState, Frame, MotorConfig
 from gateway.drive.driveset import DriveSet
 from gateway.sim.device import SimFault
+from tests import factories
 from tests.conftest import CONFIG_DIR
 from tests.drivers.test_drivers_dji import Rig, _rig, currents_in
 
@@ -48,6 +48,8 @@ TWO_PI = 2.0 * math.pi
 COUNT_RAD = TWO_PI / COUNTS_PER_REV
 #: Every DJI motor block acknowledges that the ESC has no stop of its own.
 ACK = {"no_controller_stop": "acknowledged"}
+#: How messages name the block of :func:`steer`.
+STEER = "motor 'fl steering'"
 
 
 def steer(
@@ -59,34 +61,19 @@ def steer(
     max_rpm: float = 3000.0,
     **options: object,
 ) -> MotorConfig:
+    """A DJI steering actuator ``"fl steering"`` of the factory
+    (:func:`tests.factories.steer_motor`), the gearbox of the ESC's motor unless ``gear``."""
     ratio = gear if gear is not None else (M3508_GEAR_RATIO if esc == "c620" else M2006_GEAR_RATIO)
-    return MotorConfig(
-        wheel="fl steering",
-        driver="dji",
-        node_id=node_id,
-        gear_ratio=ratio,
-        invert=invert,
-        max_rpm=max_rpm,
-        options=MappingProxyType(
-            DjiDriver.validate_options({"esc": esc, **ACK, **options}, "t")
-        ),
-        role=MotorRole.STEER,
-        zero_rad=zero_rad,
-        steers=("front_left",),
+    return factories.steer_motor(
+        "dji", node_id, ("front_left",), wheel="fl steering", zero_rad=zero_rad,
+        gear_ratio=ratio, invert=invert, max_rpm=max_rpm, options={"esc": esc, **ACK, **options},
     )
 
 
 def drive(node_id: int = 1, **options: object) -> MotorConfig:
-    return MotorConfig(
-        wheel=f"w{node_id}",
-        driver="dji",
-        node_id=node_id,
-        gear_ratio=M3508_GEAR_RATIO,
-        max_rpm=9000.0,
-        options=MappingProxyType(
-            DjiDriver.validate_options({"esc": "c620", **ACK, **options}, "t")
-        ),
-    )
+    """A DJI drive motor ``w<node>`` of the factory (:func:`tests.factories.motor`)."""
+    return factories.motor("dji", node_id, f"w{node_id}", gear_ratio=M3508_GEAR_RATIO,
+                           max_rpm=9000.0, options={"esc": "c620", **ACK, **options})
 
 
 def fb_frame(esc_id: int, angle: int, rpm: int = 0, temp: int = 35, t: float = 0.0) -> Frame:
@@ -159,9 +146,9 @@ def test_steering_keys_only_where_given() -> None:
             "motor 'w1'.steer_kp: expected only in a steering actuator's block (steering:), "
             "got it in a drive motor's block",
         ),
-        (lambda: steer(steer_kd=-1.0), "t.steer_kd: expected at least 0, got -1.0"),
-        (lambda: steer(steer_kp="stiff"), "t.steer_kp: expected float, got 'stiff'"),
-        (lambda: steer(steer_ki=1.0), "t.steer_ki: unknown key"),
+        (lambda: steer(steer_kd=-1.0), f"{STEER}.steer_kd: expected at least 0, got -1.0"),
+        (lambda: steer(steer_kp="stiff"), f"{STEER}.steer_kp: expected float, got 'stiff'"),
+        (lambda: steer(steer_ki=1.0), f"{STEER}.steer_ki: unknown key"),
     ],
 )
 def test_steering_option_errors(build: Callable[[], object], message: str) -> None:

@@ -68,6 +68,6 @@ def test_odometry_matches_ground_truth(
                       - math.pi)
         assert heading <= 0.01 * want.distance_m
         if source == "can":
-            assert rig.gw.counts["can_twists"] > 100
-        assert rig.gw.counts["send_failures"] == 0
-        assert rig.gw.supervisor.counts["infeasible"] == 0
+            assert rig.gw.counts.can_twists > 100
+        assert rig.gw.edge.counts.send_failures == 0
+        assert rig.gw.supervisor.counts.infeasible == 0

@@ -75,7 +75,7 @@ def test_socket_estop_survives_a_restart_and_enable_on_start(channel: str, sock_
     with Rig(cfg, f"{sock_path}2") as rig:
         assert rig.daemon is not None
         rig.daemon.run(max_cycles=3)  # ends with the shutdown (STOPPING)
-        assert rig.gw.supervisor.counts["estops"] == 1
+        assert rig.gw.supervisor.counts.estops == 1
         assert rig.daemon.latch.path.exists()
         assert "e-stop requested on the control socket (latched since" in rig.gw.supervisor.reason
         assert all(not s.model.armed for s in rig.sims)

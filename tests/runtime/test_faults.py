@@ -228,7 +228,7 @@ def run(request: pytest.FixtureRequest, channel: str, sock_path: str) -> Iterato
 
 def reaction_bound(r: Run) -> float:
     """The longest a silent motor may go unnoticed: liveness + 2 cycles."""
-    return r.driver.liveness_s + 2 * r.rig.period + 1e-9
+    return r.driver.live.liveness_s + 2 * r.rig.period + 1e-9
 
 
 def assert_safe_from(samples: list[Sample], start: Sample) -> None:
@@ -380,7 +380,7 @@ def test_controller_fault_zeroes_every_wheel_and_recovers(run: Run) -> None:
     run.until(GatewayState.RUNNING, within_s=1.5)
     run.drive(1.0)
     assert run.following()
-    assert run.rig.gw.supervisor.counts["faults"] == 1
+    assert run.rig.gw.supervisor.counts.faults == 1
 
 
 # -- a controller answers late ----------------------------------------------------------------
@@ -402,7 +402,7 @@ def test_late_answers_below_liveness_are_harmless(run: Run) -> None:
 
 @pytest.mark.parametrize("run", DRIVERS, indirect=True)
 def test_late_answers_above_liveness_fault_then_recover(run: Run) -> None:
-    run.victim.latency_s = run.driver.liveness_s + 0.15
+    run.victim.latency_s = run.driver.live.liveness_s + 0.15
     t0 = run.inject(SimFault.LATE)
     samples = run.drive(0.5)
     fault = next(s for s in samples if s.state is GatewayState.FAULT)
@@ -451,7 +451,7 @@ def test_wheel_that_stops_following_faults_and_recovers(run: Run) -> None:
     run.until(GatewayState.RUNNING, within_s=1.5)
     run.drive(1.0)
     assert run.following()
-    assert run.rig.gw.supervisor.counts["faults"] == 1
+    assert run.rig.gw.supervisor.counts.faults == 1
 
 
 @pytest.mark.parametrize("run", [pytest.param(("vesc", {"tracking_time_s": 0.0}), id="vesc")],
@@ -546,7 +546,7 @@ def test_garbage_with_automatic_recovery_never_raises_nor_moves_when_not_running
 ) -> None:
     run.inject(SimFault.GARBAGE)
     samples = run.drive(4.0)
-    faults = run.rig.gw.supervisor.counts["faults"]
+    faults = run.rig.gw.supervisor.counts.faults
     assert faults >= 1
     assert any(s.state is GatewayState.FAULT for s in samples)
     for s in samples:
@@ -620,13 +620,13 @@ def test_bus_refusing_sends_loop_goes_on_drives_fall_back(
     run: Run, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     gw = run.rig.gw
-    cycles = gw.counts["cycles"]
+    cycles = gw.counts.cycles
     with refusing_bus(run.rig, monkeypatch) as calls:
         samples = run.drive(1.5)
-    assert gw.counts["cycles"] == cycles + len(samples)  # the loop never stopped
+    assert gw.counts.cycles == cycles + len(samples)  # the loop never stopped
     assert calls["refused"] >= len(samples)
-    assert gw.counts["send_failures"] >= len(samples)
-    assert gw.counts["bus_reopens"] >= 1
+    assert gw.edge.counts.send_failures >= len(samples)
+    assert gw.edge.counts.bus_reopens >= 1
     truth = [abs(s.wheel_velocity_rad_s) for s in run.rig.drive_sims]
     # The commands stopped going out: a bus fault that names the first frame left out.
     fault = next(s for s in samples if s.state is GatewayState.FAULT)
@@ -657,7 +657,7 @@ def test_bus_that_keeps_refusing_reads_unhealthy(run: Run, monkeypatch: pytest.M
         for _ in range(100):
             run.drive(1.0 / RATE_HZ)
             healthy.append(run.rig.gw.bus_healthy)
-    assert run.rig.gw.counts["bus_reopens"] >= 2
+    assert run.rig.gw.edge.counts.bus_reopens >= 2
     assert not any(healthy[-50:])
 
 
@@ -678,14 +678,14 @@ def test_client_disconnecting_mid_message_is_dropped_and_the_loop_goes_on(
     run.pilot.send(op="stop")
     run.drive(1.0)
     assert all(v == 0.0 for v in run.rig.gw.prev.wheel_rad_s)
-    cycles = run.rig.gw.counts["cycles"]
+    cycles = run.rig.gw.counts.cycles
     with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as half:
         half.connect(sock_path)
         half.sendall(b'{"op": "twist", "vx": 0.2, "wz": 0.')
         run.drive(0.05)
     samples = run.drive(0.5)
     assert server.counters.dropped_partial == 1
-    assert run.rig.gw.counts["cycles"] == cycles + 5 + len(samples)
+    assert run.rig.gw.counts.cycles == cycles + 5 + len(samples)
     # The half twist was never acted on.
     assert all(s.state is GatewayState.RUNNING for s in samples)
     assert all(v == 0.0 for s in samples for v in s.speeds)
@@ -708,7 +708,7 @@ def test_a_thousand_clients_at_once_while_running(run: Run, sock_path: str) -> N
     assert server is not None
     server.max_clients = 500  # the daemon's pilot holds one of them
     before = open_fds()
-    cycles = run.rig.gw.counts["cycles"]
+    cycles = run.rig.gw.counts.cycles
     storm: list[socket.socket] = []
     samples: list[Sample] = []
     try:
@@ -746,7 +746,7 @@ def test_a_thousand_clients_at_once_while_running(run: Run, sock_path: str) -> N
     assert (served, refused) == (499, 501)
     assert server.counters.refused == 501
     # The loop cycled all along and kept following the twist.
-    assert run.rig.gw.counts["cycles"] == cycles + len(samples)
+    assert run.rig.gw.counts.cycles == cycles + len(samples)
     assert all(s.state is GatewayState.RUNNING for s in samples)
     assert not run.rig.gw.supervisor.cmd_timeout_active
     assert run.following()

@@ -10,9 +10,12 @@ from typing import TYPE_CHECKING
 
 import pytest
 
+from gateway.bus.edge import EdgeCounts
+from gateway.core.counts import SupervisorCounts
 from gateway.core.status import TimingReport
 from gateway.core.types import DriveState, ErrorCode, GatewayState, Twist
-from gateway.runtime.report import build_status
+from gateway.runtime.counts import LoopCounts
+from gateway.runtime.report import build_status, event_counts
 from gateway.runtime.timing import TimingStats
 from gateway.sim.device import SimFault
 from gateway.wire.socket import TwistRequest, reply_ok, reply_ok_data
@@ -31,11 +34,33 @@ def _finite(value: float | None) -> float | None:
     return None if value is None or not math.isfinite(value) else value
 
 
+#: The event counters in the order of the daemon's counter dictionaries before they were typed
+#: (issue 15): the gateway's, the keys its bus edge added, the supervisor's.
+LEGACY_EVENTS = (
+    "cycles", "frames_sent", "frames_received", "send_failures", "bus_reopens", "can_twists",
+    "can_duplicates", "can_lost", "bad_can_twists", "errors_reported", "odometry_errors",
+    "receive_failures", "frames_unsent", "partial_bursts", "send_waits", "fd_frames_ignored",
+    "infeasible", "projected", "rejected", "faults", "cmd_timeouts", "estops",
+)
+
+
+def legacy_counts(daemon: Daemon) -> dict[str, int]:
+    """The event counters as the daemon's dictionaries held them, in their order."""
+    gw = daemon.gateway
+    owners = (gw.counts, gw.edge.counts, gw.supervisor.counts)
+    return {name: next(getattr(o, name) for o in owners if hasattr(o, name))
+            for name in LEGACY_EVENTS}
+
+
 def legacy_status(daemon: Daemon, now_s: float) -> dict[str, object]:
     """The status reply's payload exactly as the daemon built it before the typed model
-    (``gateway/runtime/report.py`` of the commit before issue 15): the oracle of the wire form."""
+    (``gateway/runtime/report.py`` of the commit before issue 15): the oracle of the wire form.
+    Since the counters, the odometry and the last error were typed (issue 15 too), their
+    dictionaries are rebuilt here as they were."""
     gw = daemon.gateway
     sup = gw.supervisor
+    odom = gw.odometry.state
+    error = gw.last_error
     protection: dict[str, object] = {}
     for drv, _ in gw.drives.groups:
         for i, m in enumerate(drv.motors):
@@ -84,13 +109,18 @@ def legacy_status(daemon: Daemon, now_s: float) -> dict[str, object]:
             "worst_ratio": sup.tracking.worst_ratio,
             "steer_worst_ratio": sup.steer_tracking.worst_ratio,
         },
-        "odometry": gw.odometry_dict(),
-        "counters": {**gw.counts, **sup.counts, "rejected_frames": rejected,
+        "odometry": {
+            "x": odom.pose.x_m, "y": odom.pose.y_m, "theta": odom.pose.theta_rad,
+            "vx": odom.twist.vx_m_s, "vy": odom.twist.vy_m_s, "wz": odom.twist.wz_rad_s,
+            "slip": odom.slip_m_s, "distance": odom.distance_m, "t": odom.timestamp_s,
+        },
+        "counters": {**legacy_counts(daemon), "rejected_frames": rejected,
                      "commands_not_followed": not_followed},
         "socket": {"path": daemon.socket_path,
                    **dataclasses.asdict(daemon.server.counters)},
         "timing": timing,
-        "last_error": gw.last_error,
+        "last_error": None if error is None else {"code": error.code.name.lower(),
+                                                  "message": error.message},
         "realtime": daemon.rt_notes,
         "bus": {
             "interface": gw.config.bus.interface,
@@ -158,3 +188,15 @@ def test_the_reply_is_the_one_the_daemon_sent_before(name: str, channel: str,
 def test_the_timing_report_carries_every_timing_statistic() -> None:
     reported = {f.name for f in dataclasses.fields(TimingReport)}
     assert reported == {f.name for f in dataclasses.fields(TimingStats)} | {"burst_gap_max_ms"}
+
+
+def test_every_event_counter_is_reported_under_its_name_in_the_legacy_order() -> None:
+    loop, edge, sup = LoopCounts(), EdgeCounts(), SupervisorCounts()
+    expected: dict[str, int] = {}
+    for n, (record, field) in enumerate(
+            (r, f.name) for r in (loop, edge, sup) for f in dataclasses.fields(r)):
+        setattr(record, field, 1000 + n)  # every counter a value of its own
+        expected[field] = 1000 + n
+    events = event_counts(loop, edge, sup)
+    assert dict(events) == expected
+    assert tuple(events) == LEGACY_EVENTS

@@ -83,7 +83,7 @@ def test_command_timeout_ramps_to_zero_within_deceleration(rig: Rig, pilot: Sock
             before, after, step)
     assert sum(1 for before, after in itertools.pairwise(history) if after != before) >= 5
     assert max(abs(s.wheel_velocity_rad_s) for s in rig.drive_sims) < 0.1
-    assert rig.gw.supervisor.counts["cmd_timeouts"] == 1
+    assert rig.gw.supervisor.counts.cmd_timeouts == 1
 
 
 @pytest.mark.parametrize("rig", [{"cmd_timeout_s": 0.0}], indirect=True)
@@ -123,7 +123,7 @@ def test_infeasible_twist_rejected_on_socket_and_can(rig: Rig, pilot: SocketPilo
     reports = errors_on_can(rig)
     assert reports[-1].code is ErrorCode.INFEASIBLE_TWIST
     assert reports[-1].twist_counter == counter
-    assert rig.gw.supervisor.counts["infeasible"] == 2
+    assert rig.gw.supervisor.counts.infeasible == 2
 
 
 @pytest.mark.parametrize("rig", [{"infeasible_policy": "project"}], indirect=True)
@@ -134,7 +134,7 @@ def test_infeasible_twist_projected(rig: Rig, pilot: SocketPilot) -> None:
     assert reply["ok"] is True and reply["projected"] is True
     assert "sliding" in str(reply["warning"])
     assert rig.gw.prev.twist.vx_m_s == pytest.approx(0.15)
-    assert rig.gw.supervisor.counts["projected"] == 1
+    assert rig.gw.supervisor.counts.projected == 1
 
 
 @pytest.mark.parametrize("rig", [{}, {"feedback_recovery": "manual"}], indirect=True)
@@ -181,7 +181,7 @@ def test_motor_fault_zeroes_retries_then_waits_for_enable(rig: Rig, pilot: Socke
     # up to enable_timeout_s, 5 s).
     rig.advance(25.0)
     assert state(rig) is GatewayState.FAULT
-    assert rig.gw.supervisor.counts["faults"] == 1 + AUTO_RETRIES
+    assert rig.gw.supervisor.counts.faults == 1 + AUTO_RETRIES
     left.clear(SimFault.FAULT)
     rig.advance(2.0)
     assert state(rig) is GatewayState.FAULT
@@ -228,7 +228,7 @@ def test_estop_from_socket_and_can_zeroes_at_once_and_latches(rig: Rig, pilot: S
         pilot.send(op="enable")
         rig.advance(1.0)
         assert state(rig) is GatewayState.RUNNING
-    assert rig.gw.supervisor.counts["estops"] == 2
+    assert rig.gw.supervisor.counts.estops == 2
 
 
 def test_repeated_can_frame_is_ignored_but_never_an_estop(rig: Rig) -> None:
@@ -238,13 +238,13 @@ def test_repeated_can_frame_is_ignored_but_never_an_estop(rig: Rig) -> None:
     rig.counter -= 1  # the same counter again: a repeated frame
     rig.send_can_twist(Twist(-0.2))
     rig.advance(0.1)
-    assert rig.gw.counts["can_duplicates"] == 1
+    assert rig.gw.counts.can_duplicates == 1
     assert min(speeds(rig)) > 5.0  # the repeat did not command anything
     rig.counter -= 1
     rig.send_can_twist(Twist(), TwistFlags.ESTOP)
     rig.advance(rig.period)
     assert state(rig) is GatewayState.ESTOP
-    assert rig.gw.counts["can_duplicates"] == 2
+    assert rig.gw.counts.can_duplicates == 2
 
 
 def test_can_sender_restarting_after_the_command_timeout_is_followed(rig: Rig) -> None:
@@ -256,7 +256,7 @@ def test_can_sender_restarting_after_the_command_timeout_is_followed(rig: Rig) -
     rig.counter = 0  # restarted: its sequence begins where the old one stopped
     rig.send_can_twist(Twist(0.2))
     rig.advance(0.3)
-    assert rig.gw.counts["can_duplicates"] == 0
+    assert rig.gw.counts.can_duplicates == 0
     assert min(speeds(rig)) > 5.0
 
 
@@ -326,8 +326,8 @@ def test_a_full_transmit_queue_cuts_bursts_without_starving_a_wheel(
     for can_id in commands:
         assert sum(can_id in ids for ids in went) >= 0.45 * len(went)
     assert max(rig.gw.bursts.missed.values(), default=0) < UNSENT_FAULT_CYCLES
-    assert rig.gw.counts["partial_bursts"] >= 150
-    assert rig.gw.counts["frames_unsent"] >= 150
+    assert rig.gw.edge.counts.partial_bursts >= 150
+    assert rig.gw.edge.counts.frames_unsent >= 150
     assert state(rig) is GatewayState.RUNNING
     assert min(abs(s.wheel_velocity_rad_s) for s in rig.sims) > 1.0
     # Two seconds of cut bursts at 100 Hz: one log line per five seconds, not one per burst.
@@ -344,14 +344,14 @@ def test_a_full_transmit_queue_cuts_bursts_without_starving_a_wheel(
         real_send(bus, msg, timeout)
 
     monkeypatch.setattr(VirtualBus, "send", slow)
-    unsent, waits = rig.gw.counts["frames_unsent"], rig.gw.counts["send_waits"]
+    unsent, waits = rig.gw.edge.counts.frames_unsent, rig.gw.edge.counts.send_waits
 
     def busy(r: Rig) -> None:
         free_at[0] = time.perf_counter() + 0.1 * r.period  # drains within a tenth of a period
 
     rig.advance(0.2, busy)
-    assert rig.gw.counts["send_waits"] > waits
-    assert rig.gw.counts["frames_unsent"] == unsent
+    assert rig.gw.edge.counts.send_waits > waits
+    assert rig.gw.edge.counts.frames_unsent == unsent
     assert state(rig) is GatewayState.RUNNING
 
 
@@ -393,9 +393,9 @@ def test_a_bus_that_stays_down_is_reopened_with_backoff_and_recovers(
     assert not any(plan.sent)  # nothing went out, whichever bus object the gateway held
     assert rig.gw.bus is not first  # reopened ...
     # ... with backoff: at 0, 0.1, 0.3, 0.7, 1.5 and 3.1 s, not once per failed burst.
-    assert 4 <= rig.gw.counts["bus_reopens"] <= 6
-    assert rig.gw.counts["send_failures"] >= 250
-    assert rig.gw.counts["receive_failures"] >= 250
+    assert 4 <= rig.gw.edge.counts.bus_reopens <= 6
+    assert rig.gw.edge.counts.send_failures >= 250
+    assert rig.gw.edge.counts.receive_failures >= 250
     assert not rig.gw.bus_healthy
     assert state(rig) is GatewayState.FAULT
     # One line per kind of trouble per five seconds (send, receive, reopen, the fault).
@@ -418,7 +418,7 @@ def test_first_feedback_of_one_wheel_arriving_late_does_not_break_the_loop(
         right.inject(SimFault.SILENT)
         rig.gw.supervisor.enable(rig.t)
         rig.advance(0.3)  # left reports, right does not: odometry waits, nothing raises
-        assert rig.gw.counts["odometry_errors"] == 0
+        assert rig.gw.counts.odometry_errors == 0
         right.clear(SimFault.SILENT)
         rig.advance(1.0)
         rig.gw.supervisor.enable(rig.t)

@@ -327,7 +327,7 @@ def soak(robot: str, channel: str, sock_path: str, duration_s: float, warmup_s: 
         rig.sim_steps = 1  # 1 ms steps: enough for DJI's 13-bit angle (DJI_STEP_S)
         rig.pilot.shutdown()  # twists go over the socket; nobody reads the CAN side
         rig.enable()
-        liveness = max(drv.liveness_s for drv, _ in rig.gw.drives.groups)
+        liveness = max(drv.live.liveness_s for drv, _ in rig.gw.drives.groups)
         pilot = SocketPilot(sock_path)
         logging.disable(logging.CRITICAL)  # pytest would keep every record in memory
         try:

@@ -111,8 +111,8 @@ class Watch:
         self._last = self._now()
 
     def _now(self) -> tuple[int, int]:
-        counts = self.daemon.gateway.counts
-        return counts["cycles"], counts["frames_sent"]
+        gw = self.daemon.gateway
+        return gw.counts.cycles, gw.edge.counts.frames_sent
 
     def tick(self, final: bool = False) -> None:
         """Close the window if it is due (call often), or ``final``ly whatever it holds."""

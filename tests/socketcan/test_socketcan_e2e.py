@@ -207,5 +207,5 @@ def test_dji_square_over_a_kernel_bus_on_simulated_time(vcan: str) -> None:
         assert err <= 0.01 * want.distance_m, (got.pose, want.pose)
         assert abs(math.remainder(got.pose.theta_rad - want.pose.theta_rad, math.tau)) \
             <= 0.01 * want.distance_m
-        assert rig.gw.counts["can_twists"] > 100
+        assert rig.gw.counts.can_twists > 100
         assert rig.gw.receive_filters is not None  # opened with the kernel filters

@@ -84,8 +84,8 @@ def test_a_full_transmit_queue_cuts_bursts_but_starves_no_wheel(
     finally:
         tc("qdisc", "del", "dev", vcan, "root")
         watcher.shutdown()
-    counts = rig.gw.counts
-    assert counts["send_waits"] + counts["frames_unsent"] > 0, counts  # ENOBUFS happened
+    counts = rig.gw.edge.counts
+    assert counts.send_waits + counts.frames_unsent > 0, counts  # ENOBUFS happened
     # What reached the bus: every wheel's command, none starved behind the others.
     assert min(seen.values()) >= 0.3 * max(seen.values()) > 0, seen
     lines = [r for r in caplog.records if "send failed" in r.getMessage()]
@@ -109,10 +109,10 @@ def test_interface_down_and_up_reopens_with_backoff_and_recovers(
             drive(rig, 3.0)
     finally:
         ip("link", "set", vcan, "up")
-    counts = rig.gw.counts
-    assert counts["send_failures"] >= 250, counts  # every burst of 3 s at 100 Hz failed
-    assert counts["receive_failures"] >= 1, counts  # counted apart from send failures
-    assert 3 <= counts["bus_reopens"] <= 7, counts  # backoff: 0, 0.1, 0.3, 0.7, 1.5, ... s
+    counts = rig.gw.edge.counts
+    assert counts.send_failures >= 250, counts  # every burst of 3 s at 100 Hz failed
+    assert counts.receive_failures >= 1, counts  # counted apart from send failures
+    assert 3 <= counts.bus_reopens <= 7, counts  # backoff: 0, 0.1, 0.3, 0.7, 1.5, ... s
     assert not rig.gw.bus_healthy
     assert state(rig) is GatewayState.FAULT
     assert len(caplog.records) <= 8, [r.getMessage() for r in caplog.records]
@@ -154,8 +154,8 @@ def test_can_fd_frames_are_ignored_and_counted(rig: Rig, vcan: str) -> None:
     for frame in ("02D##1" + "11" * 12, "100##0" + "00" * 64, "7A0##1" + "22" * 8):
         subprocess.run(["cansend", vcan, frame], check=True, timeout=30)
     drive(rig, 0.4)
-    assert rig.gw.counts["fd_frames_ignored"] >= 2  # 0x7A0 may be kept out by the filters
-    assert rig.gw.counts["bad_can_twists"] == 0
+    assert rig.gw.edge.counts.fd_frames_ignored >= 2  # 0x7A0 may be kept out by the filters
+    assert rig.gw.counts.bad_can_twists == 0
     assert state(rig) is GatewayState.RUNNING
 
 
@@ -163,7 +163,7 @@ def test_kernel_filters_keep_foreign_traffic_out_of_the_process(rig: Rig, vcan: 
     """The gateway's socket is opened with filters for exactly what it consumes: a flood of
     foreign frames never reaches it (the drain sees only its drives' feedback)."""
     assert rig.gw.receive_filters is not None
-    before = rig.gw.counts["frames_received"]
+    before = rig.gw.edge.counts.frames_received
     flood = subprocess.Popen(["cangen", vcan, "-g", "0.2", "-I", "7A0", "-L", "8", "-n", "5000"])
     try:
         drive(rig, 1.0)
@@ -173,5 +173,5 @@ def test_kernel_filters_keep_foreign_traffic_out_of_the_process(rig: Rig, vcan: 
     assert (0x7A0, False) not in received
     assert all(rig.gw.receive_filters and any(f.matches(i, e) for f in rig.gw.receive_filters)
                for i, e in received), received
-    assert rig.gw.counts["frames_received"] > before  # the drives' feedback still comes
+    assert rig.gw.edge.counts.frames_received > before  # the drives' feedback still comes
     assert state(rig) is GatewayState.RUNNING

@@ -150,15 +150,15 @@ def test_malformed_can_twists_are_counted_answered_and_never_move(
     payloads: list[tuple[bytes, bool, int]],
 ) -> None:
     with running(CONFIG_DIR / "turtlebot3_burger.yaml") as rig:
-        counts = dict(rig.gw.counts)
+        counts = dataclasses.replace(rig.gw.counts)
         bad_command_errors(rig)
         speeds: list[tuple[float, ...]] = []
         for payload in payloads:
             send_frames(rig.pilot, [twist_frame(rig, payload)])
             rig.advance(rig.period, lambda r: speeds.append(r.gw.prev.wheel_rad_s))
         rig.advance(0.05, lambda r: speeds.append(r.gw.prev.wheel_rad_s))
-        assert rig.gw.counts["bad_can_twists"] == counts["bad_can_twists"] + len(payloads)
-        assert rig.gw.counts["can_twists"] == counts["can_twists"]
+        assert rig.gw.counts.bad_can_twists == counts.bad_can_twists + len(payloads)
+        assert rig.gw.counts.can_twists == counts.can_twists
         assert bad_command_errors(rig) == len(payloads)
         assert rig.gw.state is GatewayState.RUNNING
         assert all(w == 0.0 for s in speeds for w in s)
@@ -171,7 +171,7 @@ def test_the_robot_moves_only_on_a_valid_feasible_twist(
     robot: str, payloads: list[tuple[bytes, bool, int]]
 ) -> None:
     with running(CONFIG_DIR / robot) as rig:
-        counts = dict(rig.gw.counts)
+        counts = dataclasses.replace(rig.gw.counts)
         bad_command_errors(rig)
         model, wg = rig.config.model, rig.gw.wg
         bad = valid = 0
@@ -195,9 +195,10 @@ def test_the_robot_moves_only_on_a_valid_feasible_twist(
             rig.advance(rig.period, lambda r: speeds.append(r.gw.prev.wheel_rad_s))
             assert_wheels_within_limits(rig)
         rig.advance(0.05, lambda r: speeds.append(r.gw.prev.wheel_rad_s))
-        got = {k: rig.gw.counts[k] - counts[k] for k in counts}
-        assert got["bad_can_twists"] == bad
-        assert got["can_twists"] + got["can_duplicates"] == valid
+        now = rig.gw.counts
+        assert now.bad_can_twists - counts.bad_can_twists == bad
+        assert (now.can_twists - counts.can_twists
+                + now.can_duplicates - counts.can_duplicates) == valid
         assert bad_command_errors(rig) == bad
         if not may_move:
             assert all(w == 0.0 for s in speeds for w in s), "moved without a feasible twist"
@@ -519,17 +520,18 @@ def _snapshot(rig: Rig) -> dict[str, object]:
     gw = rig.gw
     assert rig.daemon is not None
     server = rig.daemon.server.counters
-    odom = gw.odometry_dict()
+    odom = gw.odometry.state
     return {
         "state": gw.state,
-        "gateway": {k: v for k, v in gw.counts.items()
+        "gateway": {k: v for k, v in {**dataclasses.asdict(gw.counts),
+                                      **dataclasses.asdict(gw.edge.counts)}.items()
                     if k not in ("cycles", "frames_sent", "frames_received")},
-        "supervisor": dict(gw.supervisor.counts),
+        "supervisor": dataclasses.asdict(gw.supervisor.counts),
         "rejected": [dict(drv.rejected) for drv, _ in gw.drives.groups],
         "server": {k: v for k, v in dataclasses.asdict(server).items()
                    if k not in ("malformed", "too_long")},
         "parse_errors": server.malformed + server.too_long,
-        "pose": (odom["x"], odom["y"], odom["theta"], odom["distance"]),
+        "pose": (odom.pose.x_m, odom.pose.y_m, odom.pose.theta_rad, odom.distance_m),
         "target": gw.supervisor.target,
     }
 

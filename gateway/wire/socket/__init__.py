@@ -29,11 +29,16 @@ dataclasses an object of their fields, tuples lists.
 * :mod:`gateway.wire.socket.replies`: :func:`to_json`, the reply and event lines, and
   :func:`parse_message` for clients (outbound).
 * :mod:`gateway.wire.socket.status`: the ``status`` reply's payload, the JSON form of
-  :class:`gateway.core.status.GatewayStatus` (:func:`status_to_json`, :func:`status_from_json`).
+  :class:`gateway.core.status.GatewayStatus` (:func:`status_to_json` in
+  :mod:`~gateway.wire.socket.status_write`, :func:`status_from_json` in
+  :mod:`~gateway.wire.socket.status_read`).
+* :mod:`gateway.wire.socket.events`: the events' lines, the JSON form of
+  :mod:`gateway.core.events` (:func:`event_line`).
 """
 
 from __future__ import annotations
 
+from gateway.wire.socket.events import event_line, event_to_json, event_topic
 from gateway.wire.socket.messages import (
     MAX_ID_CHARS,
     MAX_MESSAGE_BYTES,
@@ -81,6 +86,9 @@ __all__ = [
     "encode_data_line",
     "encode_line",
     "event",
+    "event_line",
+    "event_to_json",
+    "event_topic",
     "odometry_to_json",
     "parse_message",
     "parse_request",
