@@ -58,7 +58,7 @@ class Rig:
         if socket_path is not None:
             self.daemon = Daemon(config, socket_path=socket_path, notifier=SystemdNotifier(None))
             self.gw = self.daemon.gateway
-            self.gw.stamp_with_cycle_time = True
+            self.gw.edge.stamp_with_cycle_time = True
         else:
             self.gw = Gateway(config, stamp_with_cycle_time=True)
         self.sims = simulators_for(self.gw.drives.all_motors())

@@ -33,8 +33,12 @@ import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from gateway.runtime.timing import LoopTimer, MissProbe, Scheduler, TimingStats
+from gateway.runtime.timing import LoopTimer, MissProbe, Scheduler
+
+if TYPE_CHECKING:
+    from gateway.core.status import TimingReport
 
 #: Width of cyclictest's latency histogram (us); later wake-ups count as overflows.
 HISTOGRAM_US = 2000
@@ -50,7 +54,7 @@ class WorkLoop:
         starts.
     """
 
-    stats: TimingStats
+    stats: TimingReport
     work_us: tuple[float, float, float]
     late_starts: str
 

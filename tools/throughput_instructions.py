@@ -29,7 +29,7 @@ import callgrind
 import can
 from anchor_loop import AXIS_CLOSED_LOOP_CONTROL, AnchorLoop, Robot
 from can.interfaces.virtual import VirtualBus
-from throughput_rig import PERIOD_S, PROTOCOLS, TWIST, Bench, gateway_edge, robot_raw
+from throughput_rig import PERIOD_S, PROTOCOLS, TWIST, Bench, robot_raw
 
 from gateway.core.types import GatewayState
 
@@ -114,7 +114,7 @@ def run_loop(bench: Bench, side: str, work: Work, n: int, anchor: Anchor | None 
             raise SystemExit("the anchor side needs the anchor loop (--anchor)")
         run_anchor(anchor, slots, n)
     elif side == "gateway":
-        put, cycle, t = _queue(gateway_edge(bench.gw).bus).put, bench.gw.cycle, bench.t
+        put, cycle, t = _queue(bench.gw.edge.bus).put, bench.gw.cycle, bench.t
         for k in range(n):
             for msg in slots[k]:
                 put(msg)

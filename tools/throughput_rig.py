@@ -83,12 +83,6 @@ def robot_config(protocol: str, channel: str) -> GatewayConfig:
     return parse_config(robot_raw(protocol, channel), f"<bench {protocol}>")
 
 
-def gateway_edge(gw: Gateway) -> Any:
-    """The part of the gateway that owns its python-can bus (``bus``, ``close``): the
-    gateway's bus edge, or the gateway itself where the edge is not a part of its own."""
-    return getattr(gw, "edge", gw)
-
-
 def clock_overhead_ns(clock: Callable[[], int], samples: int = 20_000) -> float:
     """The cost of an empty timed region (two clock reads), subtracted from every cycle."""
     runs = []
@@ -159,7 +153,7 @@ class Bench:
     def close(self) -> None:
         for bus in (self.bare, self.bare_injector, self.injector):
             bus.shutdown()
-        gateway_edge(self.gw).close()
+        self.gw.edge.close()
 
     def record_pool(self, seconds: float = 2.0, enable_cycles: int = 2000,
                     twist_cycles: int = 1000) -> None:

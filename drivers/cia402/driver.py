@@ -91,13 +91,13 @@ class Cia402Driver(MotorDriver[Cia402Options]):
 
     :param motors: the motors, each with ``driver: cia402`` and a node ID 1..127.
     :raises ConfigError: for a bad option, a node ID out of range or used twice, motors that
-        disagree on the gateway's heartbeat or on ``liveness_s``, a drive with the gateway's
+        disagree on the gateway's heartbeat, a drive with the gateway's
         node ID, or a steering actuator without SYNC or with a ``zero_rad`` out of range.
     """
 
     Options = Cia402Options
-    #: One liveness, and one gateway heartbeat (node and period), per bus.
-    BUS_WIDE: ClassVar[tuple[str, ...]] = ("liveness_s", "host_node_id", "host_heartbeat_s")
+    #: One gateway heartbeat (node and period) per bus.
+    BUS_WIDE: ClassVar[tuple[str, ...]] = ("host_node_id", "host_heartbeat_s")
     NODE_ID_RANGE: ClassVar[tuple[int, int]] = (1, 127)
     LIVENESS_STREAMS: ClassVar[tuple[str, ...]] = ("heartbeat, PDO, EMCY or SDO response",)
     #: SYNC period of :meth:`poll` while :meth:`command` is not called (s).
@@ -108,6 +108,7 @@ class Cia402Driver(MotorDriver[Cia402Options]):
     #: Longest time one cycle's steering target may advance over (s): a late or resumed cycle
     #: does not turn into a jump the drive cannot follow.
     SLEW_MAX_DT_S: ClassVar[float] = 0.05
+    MALFORMED: ClassVar[str] = "malformed CiA 402 frame"
     PROTOCOL: ClassVar[str] = "CiA 402"
     TIMEOUT_FIX: ClassVar[str] = FIX
     CONFIGURES_PROTECTION: ClassVar[bool] = True

@@ -24,13 +24,14 @@ heartbeat stops: ``abort_connection_option`` 3 (quick stop) or 2 (disable voltag
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, TypeVar
 
 from drivers.cia402.codec import PdoLayout
 from gateway.core.errors import ConfigError
-from gateway.drive.options import DriverOptions, option
+from gateway.drive.options import DriverOptions, option, spec_field
 
 if TYPE_CHECKING:
     from collections.abc import Mapping
@@ -41,9 +42,6 @@ OptT = TypeVar("OptT", bound="Cia402Options")
 
 #: 2^31: the position objects (0x6064, 0x607A) are int32.
 _INT32_LIMIT = float(1 << 31)
-
-#: Default liveness timeout (s): feedback TPDOs run at the loop rate, heartbeats every 100 ms.
-DEFAULT_LIVENESS_S = 0.25
 
 #: The gateway's own NMT node ID by default: the highest, which drives rarely take.
 DEFAULT_HOST_NODE_ID = 127
@@ -83,9 +81,11 @@ class Cia402Options(DriverOptions):
         int, 10, minimum=1, maximum=0xFFFF,
         help="TPDO event timer when sync is false (0x18xx:05)",
     )
-    liveness_s: float = option(
-        float, DEFAULT_LIVENESS_S, minimum=1e-3,
-        help="silence (no heartbeat, PDO, EMCY or SDO) after which a node is OFFLINE",
+    liveness_s: float = spec_field(
+        dataclasses.replace(
+            DriverOptions.specs()["liveness_s"],
+            help="silence (no heartbeat, PDO, EMCY or SDO) after which a node is OFFLINE",
+        )
     )
     rpdo: int = option(int, 4, minimum=1, maximum=4, help="RPDO number for the command")
     tpdo_position: int = option(

@@ -31,8 +31,8 @@ integrator, and a consumer time of 1.5 to 3 producer periods is the usual choice
 The heartbeat's COB-ID is declared the way every frame the gateway sends is: it is one of the
 driver's claims (:meth:`~drivers.cia402.driver.Cia402Driver.claims`, sent, of no motor), and a
 fresh driver's :meth:`~drivers.cia402.driver.Cia402Driver.poll` returns it, so
-:func:`gateway.drive.filters.own_id_collisions` checks it against ``gateway.can_ids``; a drive with
-the same node ID (whose own heartbeat has that COB-ID) is refused here.
+:func:`gateway.drive.ownership.own_id_collisions` checks it against ``gateway.can_ids``; a drive
+with the same node ID (whose own heartbeat has that COB-ID) is refused here.
 """
 
 from __future__ import annotations

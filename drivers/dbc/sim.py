@@ -103,11 +103,6 @@ class DbcSimulator(DeviceSimulator):
         #: Malformed frames of the configured command messages.
         self.rejected = 0
 
-    @property
-    def latched_fault(self) -> int:
-        """The fault code the device reports (0 when healthy)."""
-        return self._latched
-
     def position_raw(self) -> int | float:
         """The raw position signal value for the model's current angle."""
         value = self.units.motor_to_position(self.model.position_rad)

@@ -105,9 +105,12 @@ class DjiDriver(MotorDriver[DjiOptions]):
     """
 
     Options = DjiOptions
+    #: One feedback age for the bus: the speed loop steps every motor on the same clock.
+    BUS_WIDE: ClassVar[tuple[str, ...]] = ("liveness_s",)
     NODE_ID_RANGE: ClassVar[tuple[int, int]] = (1, 8)
     HOST_SPEED_LOOP: ClassVar[bool] = True
     STEERING: ClassVar[bool] = True
+    MALFORMED: ClassVar[str] = "malformed feedback"
     PROTOCOL: ClassVar[str] = "DJI"
     TIMEOUT_ACTION: ClassVar[str] = ACTION
 

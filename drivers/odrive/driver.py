@@ -100,7 +100,7 @@ class OdriveDriver(MotorDriver[OdriveOptions]):
     """
 
     Options = OdriveOptions
-    BUS_WIDE: ClassVar[tuple[str, ...]] = (*MotorDriver.BUS_WIDE, "firmware", "extended_id")
+    BUS_WIDE: ClassVar[tuple[str, ...]] = ("liveness_s", "firmware", "extended_id")
     #: Node IDs with 11-bit identifiers (0x3F is the 0.6 broadcast address).
     NODE_ID_RANGE: ClassVar[tuple[int, int]] = (0, 0x3E)
     #: Node IDs with 29-bit identifiers (``extended_id: true``).
@@ -333,20 +333,23 @@ class OdriveDriver(MotorDriver[OdriveOptions]):
         return True
 
     def _on_setup_reply(self, ax: Axis, cmd: int, frame: Frame) -> None:
-        """A Get_Version or TxSdo data frame of one axis (0.6): to its watchdog setup."""
+        """A Get_Version or TxSdo data frame of one axis (0.6): to its watchdog setup while one
+        runs (a late reply after a disable changes nothing)."""
         wd = ax.watchdog
         if wd is None or frame.dlc == 0:
             return  # no setup, or a Get_Version request (another host's)
         if cmd == CmdId.GET_VERSION:
             version = parse_version(frame.data)
             if version is not None:
-                self._queued.extend(wd.on_version(*version, frame.timestamp_s))
+                if ax.arm_waits:
+                    self._queued.extend(wd.on_version(*version, frame.timestamp_s))
                 return
             expected = "8 bytes in Get_Version"
         else:
             reply = parse_sdo(frame.data)
             if reply is not None:
-                wd.on_tx_sdo(reply[1], reply[2])
+                if ax.arm_waits:
+                    wd.on_tx_sdo(reply[1], reply[2])
                 return
             expected = "at least 4 bytes in TxSdo"
         raise DecodeError(

@@ -103,8 +103,7 @@ class VescDriver(MotorDriver[VescOptions]):
     """Every VESC on one bus, commanded in electrical RPM.
 
     :param motors: the motor blocks, each with ``driver: vesc`` and its protocol keys.
-    :raises ConfigError: for a node ID outside 0..254, a node ID used twice, bad options, or
-        motors that disagree on ``liveness_s``.
+    :raises ConfigError: for a node ID outside 0..254, a node ID used twice, or bad options.
     """
 
     Options = VescOptions
@@ -180,10 +179,6 @@ class VescDriver(MotorDriver[VescOptions]):
         """The SET_RPM value for a wheel speed of motor ``index`` (within its ``max_rpm``,
         which :meth:`command` checks)."""
         return round(wheel_rad_s * self._axes[index].erpm_per_rad_s)
-
-    def wheel_rad_s_for(self, index: int, erpm: float) -> float:
-        """The wheel speed in rad/s for an eRPM reading of motor ``index``."""
-        return erpm * self._axes[index].rad_s_per_erpm
 
     def wheel_rad_for(self, index: int, steps: int) -> float:
         """The wheel angle in rad for ``steps`` tachometer steps of motor ``index``."""

@@ -36,7 +36,6 @@ from drivers.vesc.min_erpm import FACTORY_MIN_ERPM
 from gateway.core.errors import ConfigError
 from gateway.drive.options import (
     CONTROLLER_TIMEOUT_OPTION,
-    DEFAULT_LIVENESS_S,
     StatedTimeout,
     option,
     spec_field,
@@ -87,8 +86,9 @@ class VescOptions(StatedTimeout):
     :param liveness_s: a status stream older than this makes the motor OFFLINE.
     """
 
-    liveness_s: float = option(
-        float, DEFAULT_LIVENESS_S, minimum=0.001, help="status frames older than this: OFFLINE (s)"
+    liveness_s: float = spec_field(
+        dataclasses.replace(StatedTimeout.specs()["liveness_s"],
+                            help="status frames older than this: OFFLINE (s)")
     )
     controller_timeout_s: float = spec_field(
         dataclasses.replace(

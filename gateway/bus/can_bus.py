@@ -64,14 +64,16 @@ class MessagePool:
         """The pool's messages filled with ``frames``, in order.
 
         Two frames of one burst on the same identifier get two messages (the second one a
-        new object), so a burst never sends one message twice.
+        new object), so a burst never sends one message twice; a remote frame gets a message
+        of its own.
         """
         pool = self._pool
         out = []
         for f in frames:
             msg = pool.get(f.arbitration_id)
-            if (msg is None or msg.is_extended_id is not f.is_extended_id
-                    or msg.is_remote_frame is not f.is_remote_frame or msg in out):
+            if f.is_remote_frame:  # (rare: a request) built as it is, not pooled
+                msg = to_message(f)
+            elif msg is None or msg.is_extended_id is not f.is_extended_id or msg in out:
                 msg = pool[f.arbitration_id] = to_message(f)
             else:
                 msg.data[:] = f.data

@@ -8,14 +8,13 @@ whether the drives should be armed.  The loop (:mod:`gateway.runtime.loop`) does
 States (:class:`~gateway.core.types.GatewayState`)::
 
     DISABLED --enable--> ENABLING --all motors ENABLED--> RUNNING
-    RUNNING  --motor FAULT/OFFLINE, or a wheel off its command--> FAULT
+    RUNNING  --motor FAULT/OFFLINE, a wheel off its command, a command not encodable--> FAULT
     FAULT    --all answer again, recovery "auto" (3 tries)--> ENABLING
     FAULT    --enable (recovery "manual")--> ENABLING
     any      --e-stop--> ESTOP --enable--> ENABLING
     any      --disable--> DISABLED            ENABLING --timeout--> FAULT
 
-Every change of state goes through one method, checked against the table of
-:mod:`gateway.core.transitions`.
+Every change of state goes through one method, checked against :mod:`gateway.core.transitions`.
 
 Safety rules:
 
@@ -36,6 +35,7 @@ from typing import TYPE_CHECKING
 
 from gateway.core.counts import SupervisorCounts
 from gateway.core.errors import InfeasibleTwistError
+from gateway.core.settings import FaultAction, FeedbackRecovery, InfeasiblePolicy
 from gateway.core.supervision import (
     Accepted,
     Decision,
@@ -150,7 +150,7 @@ class Supervisor:
         except InfeasibleTwistError as err:
             self.counts.infeasible += 1
             self._last_twist_s = now_s
-            if self.cfg.infeasible_policy == "project":
+            if self.cfg.infeasible_policy is InfeasiblePolicy.PROJECT:
                 self.counts.projected += 1
                 self.target = err.nearest
                 return Accepted(err.nearest, projected=True, error=err)
@@ -200,13 +200,21 @@ class Supervisor:
 
     def enable_failed(self, why: str) -> str:
         """The drives refused the enable sequence: FAULT with ``why`` as the reason."""
+        return self._refused(Event.ENABLE_REFUSED, f"enable refused: {why}")
+
+    def command_failed(self, why: str) -> str:
+        """A drive could not encode the cycle's command (a speed its controller's field cannot
+        hold): FAULT with ``why``; none of the cycle's commands went out."""
+        return self._refused(Event.COMMAND_FAILED, f"command not sent: {why}")
+
+    def _refused(self, event: Event, reason: str) -> str:
         self.counts.faults += 1
-        self._go(Event.ENABLE_REFUSED)
+        self._go(event)
         self.target = ZERO
         self._fault_s = self._now_hint
         self.fault_code = ErrorCode.MOTOR_FAULT
-        self.reason = f"enable refused: {why}"
-        return self.reason
+        self.reason = reason
+        return reason
 
     @property
     def cmd_timeout_active(self) -> bool:
@@ -256,7 +264,7 @@ class Supervisor:
             return None
         if (
             state is GatewayState.FAULT
-            and self.cfg.feedback_recovery == "auto"
+            and self.cfg.feedback_recovery is FeedbackRecovery.AUTO
             and (states := board.states(now_s))
             and DriveState.OFFLINE not in states
             and self.bus_ok
@@ -357,7 +365,7 @@ class Supervisor:
             # Zero at once: with a motor gone, no wheel should keep driving on its own.  A speed
             # loop closed on the host cannot hold zero on feedback that is missing, late or not
             # followed (late DJI feedback makes it run away): release those motors.
-            release = self.cfg.fault_action == "disarm" or (
+            release = self.cfg.fault_action is FaultAction.DISARM or (
                 self.host_speed_loop and self.fault_code in _FEEDBACK_FAULTS)
             return _FAULT_RELEASED if release else _FAULT_ARMED
         if state is GatewayState.ENABLING:

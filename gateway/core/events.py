@@ -12,23 +12,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, TypeAlias
 
+from gateway.core.status import LastError
+
 if TYPE_CHECKING:
     from gateway.core.kinematics.odometry import OdometryState
-    from gateway.core.types import ErrorCode, GatewayState
+    from gateway.core.types import GatewayState
 
-__all__ = ["ErrorEvent", "OdometryEvent", "OutboxEvent", "StatusEvent"]
-
-
-@dataclass(frozen=True, slots=True)
-class ErrorEvent:
-    """An error the gateway reported (on CAN as ``WG_Error`` too): a fault, a refused command.
-
-    :param code: its class.
-    :param message: a sentence for people.
-    """
-
-    code: ErrorCode
-    message: str
+__all__ = ["OdometryEvent", "OutboxEvent", "StatusEvent"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -53,5 +43,7 @@ class StatusEvent:
     reason: str
 
 
-#: Anything the outbox holds.
-OutboxEvent: TypeAlias = ErrorEvent | OdometryEvent | StatusEvent
+#: Anything the outbox holds: an error the gateway reported (on CAN as ``WG_Error`` too; the
+#: status model's :class:`~gateway.core.status.LastError`, the same news ``status`` keeps),
+#: the odometry or the state.
+OutboxEvent: TypeAlias = LastError | OdometryEvent | StatusEvent

@@ -219,12 +219,34 @@ class SocketReport:
 
 @dataclass(frozen=True, slots=True)
 class TimingReport:
-    """The control loop's timing: the fields of
-    :class:`gateway.runtime.timing.TimingStats` (see there; times in microseconds), and the
-    longest gap between two cycles' bursts.
+    """The control loop's timing over the last ring-buffer window
+    (:class:`gateway.runtime.timing.LoopTimer` summarises it).
 
+    Percentiles are nearest-rank over the window; all times are in microseconds.  Every
+    figure is 0.0 when there are no samples.
+
+    :param cycles: cycles started since start-up (not limited to the window).
+    :param missed: deadlines skipped after overruns since start-up.
+    :param rate_hz: the configured loop rate (0.0 if the timer was not told).
+    :param achieved_hz: the cycle rate achieved over the window (0.0 with fewer than 2 cycles).
+    :param lateness_p50_us: median of cycle start minus deadline.
+    :param lateness_p99_us: 99th percentile of the lateness.
+    :param lateness_max_us: largest lateness in the window.
+    :param cost_p50_us: median of the work duration of a cycle.
+    :param cost_p99_us: 99th percentile of the cost.
+    :param cost_max_us: largest cost in the window.
+    :param latency_samples: twist-to-frame latency samples in the window.
+    :param latency_p50_us: median twist-to-frame latency.
+    :param latency_p99_us: 99th percentile of the latency.
+    :param latency_max_us: largest latency in the window.
+    :param late_on_cpu: late starts (each skipping one or more deadlines) since start-up for
+        which the loop thread was on a CPU for more than a period
+        (:class:`~gateway.runtime.timing.cause.MissCause`; all three stay 0 where the kernel's
+        per-thread statistics cannot be read).
+    :param late_runnable: late starts for which it was runnable but not running.
+    :param late_asleep: late starts for which it was woken late.
     :param burst_gap_max_ms: the longest time between two cycles' bursts of wheel frames, ms
-        (``None``: not reported).
+        (``None``: not reported; the daemon adds it).
     """
 
     cycles: int
@@ -245,6 +267,15 @@ class TimingReport:
     late_runnable: int = 0
     late_asleep: int = 0
     burst_gap_max_ms: float | None = None
+
+    def summary(self) -> str:
+        """One line for ``STATUS=`` and logs."""
+        return (
+            f"{self.achieved_hz:.1f}/{self.rate_hz:g} Hz, {self.cycles} cycles, "
+            f"{self.missed} missed; "
+            f"late p99 {self.lateness_p99_us:.0f} us max {self.lateness_max_us:.0f} us; "
+            f"cost p99 {self.cost_p99_us:.0f} us max {self.cost_max_us:.0f} us"
+        )
 
 
 @dataclass(frozen=True, slots=True)

@@ -16,6 +16,7 @@ The table, by event (``*``: from every state)::
     FAULT           ENABLING, RUNNING -> FAULT           (a motor faulted, fell silent, left its
                                                           command, or did not enable in time)
     ENABLE_REFUSED  * -> FAULT                           (see below)
+    COMMAND_FAILED  * -> FAULT                           (a command could not be encoded)
     BUS_FAULT       ENABLING, RUNNING -> FAULT           (ignored elsewhere)
     ESTOP           * -> ESTOP
     DISABLE         DISABLED, ENABLING, RUNNING, FAULT -> DISABLED   (ignored in ESTOP, STOPPING)
@@ -55,6 +56,8 @@ class Event(enum.Enum):
     FAULT = "fault"
     #: The drives refused the enable sequence.
     ENABLE_REFUSED = "enable refused"
+    #: A drive could not encode the cycle's command.
+    COMMAND_FAILED = "command failed"
     #: The bus cannot carry the commands (bus-off, a command that does not go out).
     BUS_FAULT = "bus fault"
     #: An e-stop (socket, CAN, the latch at start-up).
@@ -79,6 +82,7 @@ def _rows() -> list[_Row]:
         (Event.ENABLED, (en,), run, ()),
         (Event.FAULT, (en, run), fault, ()),
         (Event.ENABLE_REFUSED, every, fault, ()),
+        (Event.COMMAND_FAILED, every, fault, ()),
         (Event.BUS_FAULT, (en, run), fault, (d, fault, estop, stop)),
         (Event.ESTOP, every, estop, ()),
         (Event.DISABLE, (d, en, run, fault), d, (estop, stop)),

@@ -59,8 +59,8 @@ class MotorDriver(abc.ABC, Generic[OptT]):
     Options: ClassVar[type[DriverOptions]] = DriverOptions
     #: Protocol keys accepted in a motor block, with their specs (derived from :attr:`Options`).
     OPTIONS: ClassVar[Mapping[str, OptionSpec]] = DriverOptions.specs()
-    #: Keys every motor of one bus must agree on (``liveness_s``: one liveness per driver).
-    BUS_WIDE: ClassVar[tuple[str, ...]] = ("liveness_s",)
+    #: Keys every motor of one bus must agree on (e.g. a firmware family).
+    BUS_WIDE: ClassVar[tuple[str, ...]] = ()
     #: Valid node IDs for this protocol (inclusive).
     NODE_ID_RANGE: ClassVar[tuple[int, int]] = (0, 0x3F)
     #: The streams whose silence makes a motor OFFLINE (each younger than ``liveness_s``
@@ -78,6 +78,8 @@ class MotorDriver(abc.ABC, Generic[OptT]):
     #: Whether this driver writes its controllers' protection itself (:attr:`Guard.CONFIGURED`
     #: motors report :meth:`protection_state` and :meth:`protection_failure`).
     CONFIGURES_PROTECTION: ClassVar[bool] = False
+    #: The reason a malformed frame is counted under (:attr:`rejected`; ``status`` shows it).
+    MALFORMED: ClassVar[str] = "malformed"
     #: The protocol's name in messages (protection, labels, errors).
     PROTOCOL: ClassVar[str] = "CAN"
     #: What the controller does when its stated timeout expires (:meth:`protection`).
@@ -122,10 +124,7 @@ class MotorDriver(abc.ABC, Generic[OptT]):
         #: set, so garbage traffic cannot grow it).
         self.last_rejection: dict[str, str] = {}
         #: When each motor's liveness streams were last heard (:attr:`LIVENESS_STREAMS`).
-        self.live = Liveness(
-            n, self.LIVENESS_STREAMS,
-            self.opts[0].liveness_s if self.opts else self.Options().liveness_s,
-        )
+        self.live = Liveness(n, self.LIVENESS_STREAMS, [o.liveness_s for o in self.opts])
         self._heard_s = self.live.oldest
         #: Per motor, the largest setpoint magnitude :meth:`command` passes
         #: (:func:`gateway.drive.setpoints.bounds`).
@@ -190,12 +189,12 @@ class MotorDriver(abc.ABC, Generic[OptT]):
 
         :return: whether the frame belonged to this driver.  A malformed frame of this
             protocol (the hook raises :class:`DecodeError`) is counted in :attr:`rejected`
-            under ``malformed``, never raised.
+            under :attr:`MALFORMED`, never raised.
         """
         try:
             return self._on_frame(frame)
         except DecodeError as err:
-            self.reject("malformed", err)
+            self.reject(self.MALFORMED, err)
             return True
 
     @abc.abstractmethod
@@ -380,8 +379,8 @@ class MotorDriver(abc.ABC, Generic[OptT]):
 
     def states(self, now_s: float) -> list[DriveState]:
         """:meth:`state` of every motor, in one call (what the supervisor reads every cycle)."""
-        limit, faults, ready = self.live.liveness_s, self._faults, self._ready_state
-        return [DriveState.OFFLINE if t is None or now_s - t > limit
+        limits, faults, ready = self.live.limits, self._faults, self._ready_state
+        return [DriveState.OFFLINE if t is None or now_s - t > limits[i]
                 else DriveState.FAULT if faults[i] else ready(i)
                 for i, t in enumerate(self._heard_s)]
 

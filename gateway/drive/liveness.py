@@ -3,7 +3,7 @@
 A protocol names its streams (:attr:`~gateway.drive.driver.MotorDriver.LIVENESS_STREAMS`): the
 feedback alone for most, the heartbeat and the encoder estimates for an ODrive (the heartbeat
 gives the state, the estimates the odometry).  A motor is alive while the oldest of its
-streams is younger than ``liveness_s``.  Pure: the caller passes the times.
+streams is younger than its ``liveness_s``.  Pure: the caller passes the times.
 """
 
 from __future__ import annotations
@@ -19,14 +19,18 @@ class Liveness:
 
     :param motors: the number of motors.
     :param streams: the names of the streams every motor must keep up.
-    :param liveness_s: the age (s) beyond which a silent stream makes its motor OFFLINE.
+    :param limits: per motor, the age (s) beyond which a silent stream makes it OFFLINE (its
+        ``liveness_s``).
     """
 
-    __slots__ = ("liveness_s", "oldest", "streams", "times")
+    __slots__ = ("limits", "oldest", "streams", "times")
 
-    def __init__(self, motors: int, streams: Sequence[str], liveness_s: float) -> None:
+    def __init__(self, motors: int, streams: Sequence[str], limits: Sequence[float]) -> None:
         self.streams = tuple(streams)
-        self.liveness_s = liveness_s
+        #: Per motor, its ``liveness_s``.
+        self.limits: list[float] = list(limits)
+        if len(self.limits) != motors:
+            raise ValueError(f"expected {motors} liveness limits, got {len(self.limits)}")
         #: Per motor, the last time each stream was heard (``None``: never).
         self.times: list[list[float | None]] = [[None] * len(self.streams) for _ in range(motors)]
         #: Per motor, the oldest of its streams' times (``None`` until every one was heard):
@@ -50,13 +54,20 @@ class Liveness:
         self.oldest[index] = oldest
 
     def alive(self, index: int, now_s: float) -> bool:
-        """Whether every stream of motor ``index`` is younger than ``liveness_s``."""
+        """Whether every stream of motor ``index`` is younger than its ``liveness_s``."""
         oldest = self.oldest[index]
-        return oldest is not None and now_s - oldest <= self.liveness_s
+        return oldest is not None and now_s - oldest <= self.limits[index]
 
     def silent(self, index: int, now_s: float) -> list[str]:
         """The names of motor ``index``'s streams that are missing or too old."""
+        limit = self.limits[index]
         return [
             name for name, t in zip(self.streams, self.times[index], strict=True)
-            if t is None or now_s - t > self.liveness_s
+            if t is None or now_s - t > limit
         ]
+
+    @property
+    def liveness_s(self) -> float:
+        """The longest ``liveness_s`` of the motors (their one value on a protocol whose motors
+        share it, :attr:`~gateway.drive.driver.MotorDriver.BUS_WIDE`); 0.0 without motors."""
+        return max(self.limits, default=0.0)

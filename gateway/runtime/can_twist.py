@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING
 
 from gateway.core.control import Rejection, Source
 from gateway.core.errors import DecodeError
+from gateway.core.settings import EstopRelease
 from gateway.core.types import ErrorCode, GatewayState
 from gateway.wire.can import NO_TWIST_COUNTER, CounterKind, CounterTracker, TwistFlags
 
@@ -88,7 +89,7 @@ class CanTwists:
         if duplicate:
             return
         if cmd.flags & TwistFlags.ENABLE:
-            if sup.state is GatewayState.ESTOP and self.loop.estop_release == "socket":
+            if sup.state is GatewayState.ESTOP and self.loop.estop_release is EstopRelease.SOCKET:
                 self._report(
                     ErrorCode.ESTOP, "an e-stop is released only by an enable on the control "
                     "socket (gateway.estop_release: socket); the CAN ENABLE flag was ignored",

@@ -274,7 +274,7 @@ class Daemon:
     def _healthy(self) -> bool:
         """Whether to feed the systemd watchdog: the loop runs (we are in it) and the bus
         takes frames; a wedged bus ends in a restart instead of a zombie daemon."""
-        return self.gateway.bus_healthy
+        return self.gateway.edge.bus_healthy
 
     def _mark_ready(self) -> None:
         self._ready = True
@@ -346,14 +346,14 @@ class Daemon:
         self.notifier.stopping("sending zero and disarm")
         gw.supervisor.shutdown()
         now = time.monotonic()
-        gw.send(gw.drives.disable(now))
+        gw.edge.send(gw.drives.disable(now))
         end = now + SHUTDOWN_GRACE_S
         while time.monotonic() < end:
             time.sleep(0.01)
             t = time.monotonic()
-            for frame in gw.receive(t):
+            for frame in gw.edge.receive(t):
                 gw.drives.on_frame(frame)
-            gw.send(gw.drives.poll(t))
+            gw.edge.send(gw.drives.poll(t))
         self.close()
 
     def close(self) -> None:

@@ -30,7 +30,7 @@ from typing import TYPE_CHECKING
 from gateway.bus.edge import BusEdge, bus_options
 from gateway.bus.health import BusErrorState
 from gateway.core.control import Accepted, Rejection, Source, Supervisor
-from gateway.core.errors import GatewayError, KinematicsError
+from gateway.core.errors import EncodeError, GatewayError, KinematicsError
 from gateway.core.kinematics import Odometry, apply_limits
 from gateway.core.odom_feed import OdomFeed
 from gateway.core.types import ErrorCode, Frame, GatewayState, Twist
@@ -43,11 +43,9 @@ from gateway.runtime.timing import LoopTimer
 from gateway.wire.can import NO_TWIST_COUNTER, StatusReport, WgCodec
 
 if TYPE_CHECKING:
-    import collections
 
     import can
 
-    from gateway.bus.health import BurstTracker, BusErrors
     from gateway.core.kinematics import IkResult, LimitReport
     from gateway.core.settings import GatewayConfig
     from gateway.core.status import LastError
@@ -227,7 +225,12 @@ class Gateway:
             self._prev_limited = True
         if decision.armed:
             self._armed = True
-            out.extend(self.drives.command(result.wheel_rad_s, now_s, result.steer_rad))
+            try:
+                out.extend(self.drives.command(result.wheel_rad_s, now_s, result.steer_rad))
+            except EncodeError as err:  # e.g. a max_rpm beyond the controller's speed field
+                message = sup.command_failed(str(err))
+                log.error("fault: %s", message)
+                self.report_error(ErrorCode.MOTOR_FAULT, message, out)
         elif self._armed:
             self._armed = False
             out.extend(self.drives.disable(now_s))
@@ -328,64 +331,6 @@ class Gateway:
     def state(self) -> GatewayState:
         """The supervisor's state."""
         return self.supervisor.state
-
-    # ----------------------------------------------------------------- the bus (self.edge)
-
-    @property
-    def bus(self) -> can.BusABC:
-        """The python-can bus (a new object after a reopen)."""
-        return self.edge.bus
-
-    @property
-    def record(self) -> can.Listener | None:
-        """A python-can writer that gets every frame sent and received."""
-        return self.edge.record
-
-    @record.setter
-    def record(self, writer: can.Listener | None) -> None:
-        self.edge.record = writer
-
-    @property
-    def stamp_with_cycle_time(self) -> bool:
-        """Whether received frames are stamped with the cycle's time."""
-        return self.edge.stamp_with_cycle_time
-
-    @stamp_with_cycle_time.setter
-    def stamp_with_cycle_time(self, value: bool) -> None:
-        self.edge.stamp_with_cycle_time = value
-
-    @property
-    def bus_errors(self) -> BusErrors:
-        """Error frames by class and the controller's error state."""
-        return self.edge.bus_errors
-
-    @property
-    def bursts(self) -> BurstTracker:
-        """The frames left out of recent bursts."""
-        return self.edge.bursts
-
-    @property
-    def bus_healthy(self) -> bool:
-        """Whether frames go out and the controller is not bus-off."""
-        return self.edge.bus_healthy
-
-    @property
-    def id_counts(self) -> collections.Counter[tuple[int, bool, bool]]:
-        """Frames seen per (arbitration ID, extended, transmitted), for monitors."""
-        return self.edge.id_counts
-
-    @property
-    def bits(self) -> int:
-        """Nominal bits of every frame sent and received (bus load = rate / bitrate)."""
-        return self.edge.bits
-
-    def send(self, frames: list[Frame], now_s: float | None = None, tracked: bool = True) -> bool:
-        """Send one burst (:meth:`BusEdge.send`)."""
-        return self.edge.send(frames, now_s, tracked)
-
-    def receive(self, now_s: float) -> list[Frame]:
-        """Everything waiting on the bus (:meth:`BusEdge.receive`)."""
-        return self.edge.receive(now_s)
 
     def close(self) -> None:
         """Close the bus if this gateway opened it (safe to call twice)."""

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from gateway.core.events import ErrorEvent, OdometryEvent, StatusEvent
+from gateway.core.events import OdometryEvent, StatusEvent
 from gateway.core.status import LastError
 from gateway.core.types import ConstraintCode, ErrorCode
 from gateway.wire.can import NO_TWIST_COUNTER, NO_WHEEL, ErrorReport, StatusFlags, StatusReport
@@ -85,7 +85,7 @@ class Publisher:
             count=self._error_count,
         ))
         self.last_error = LastError(code, message)
-        self.outbox.append(ErrorEvent(code, message))
+        self.outbox.append(self.last_error)
         return frame
 
     def publish(self, now_s: float, limit_report: LimitReport | None,

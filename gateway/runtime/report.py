@@ -9,6 +9,7 @@ time); the daemon answers a ``status`` request with its JSON form
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from types import MappingProxyType
 from typing import TYPE_CHECKING
@@ -38,7 +39,6 @@ if TYPE_CHECKING:
     from gateway.core.types import MotorStatus
     from gateway.runtime.counts import LoopCounts
     from gateway.runtime.loop import Gateway
-    from gateway.runtime.timing import TimingStats
 
 __all__ = ["build_status", "event_counts", "timing_report"]
 
@@ -47,19 +47,9 @@ def _finite(value: float | None) -> float | None:
     return None if value is None or not math.isfinite(value) else value
 
 
-def timing_report(stats: TimingStats, burst_gap_max_s: float) -> TimingReport:
+def timing_report(stats: TimingReport, burst_gap_max_s: float) -> TimingReport:
     """The loop's timing statistics and the longest gap between two bursts, as reported."""
-    return TimingReport(
-        cycles=stats.cycles, missed=stats.missed, rate_hz=stats.rate_hz,
-        achieved_hz=stats.achieved_hz, lateness_p50_us=stats.lateness_p50_us,
-        lateness_p99_us=stats.lateness_p99_us, lateness_max_us=stats.lateness_max_us,
-        cost_p50_us=stats.cost_p50_us, cost_p99_us=stats.cost_p99_us,
-        cost_max_us=stats.cost_max_us, latency_samples=stats.latency_samples,
-        latency_p50_us=stats.latency_p50_us, latency_p99_us=stats.latency_p99_us,
-        latency_max_us=stats.latency_max_us, late_on_cpu=stats.late_on_cpu,
-        late_runnable=stats.late_runnable, late_asleep=stats.late_asleep,
-        burst_gap_max_ms=burst_gap_max_s * 1000.0,
-    )
+    return dataclasses.replace(stats, burst_gap_max_ms=burst_gap_max_s * 1000.0)
 
 
 def _motor(st: MotorStatus, stops: Mapping[str, ControllerStop]) -> MotorReport:
@@ -108,7 +98,7 @@ def event_counts(loop: LoopCounts, edge: EdgeCounts, sup: SupervisorCounts
 
 def build_status(
     gw: Gateway,
-    timing: TimingStats,
+    timing: TimingReport,
     socket_path: str,
     server: ServerCounters,
     realtime: Sequence[str],
@@ -131,7 +121,7 @@ def build_status(
             prot = drv.protection(i)
             stops[m.wheel] = ControllerStop(prot.guard, prot.timeout_s, drv.protection_state(i))
     limit = gw.limit_report
-    errors = gw.bus_errors
+    errors = gw.edge.bus_errors
     cfg = gw.config
     return GatewayStatus(
         robot=cfg.name,
@@ -163,14 +153,14 @@ def build_status(
             interface=cfg.bus.interface,
             channel=cfg.bus.channel,
             bitrate=cfg.bus.bitrate,
-            health=BusHealth(gw.bus_healthy, CanErrorState(errors.state.value),
+            health=BusHealth(gw.edge.bus_healthy, CanErrorState(errors.state.value),
                              MappingProxyType(dict(errors.counts)), errors.last),
-            bits=gw.bits,
+            bits=gw.edge.bits,
             time_s=now_s,
             frames=tuple(
                 # int(): a driver's ID may be an IntEnum member (CiA 402's NMT, SYNC)
                 FrameCount(int(can_id), ext, Direction.TX if sent else Direction.RX, n)
-                for (can_id, ext, sent), n in sorted(gw.id_counts.items())
+                for (can_id, ext, sent), n in sorted(gw.edge.id_counts.items())
             ),
         ),
     )

@@ -81,7 +81,7 @@ class RequestHandler:
                            "residual_m_s": err.residual_m_s, "nearest": err.nearest}
             out: list[Frame] = []
             gw.report_error(result.code, result.message, out, result)
-            gw.send(out)
+            gw.edge.send(out)
             server.reply(client, reply_error(rid, result.code, result.message, **details))
             return
         if isinstance(request, ResetOdometryRequest):

@@ -96,7 +96,7 @@ def record(name: str, folder: Path) -> Session:
     path = folder / f"{name}.log"
     with Rig(cfg) as rig:
         log = SimClockLog(path, lambda: rig.t)
-        rig.gw.record = log
+        rig.gw.edge.record = log
         try:
             rig.enable()
             for twist, seconds in legs:

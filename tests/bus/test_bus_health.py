@@ -148,14 +148,14 @@ def test_bus_off_is_a_fault_that_names_it_and_the_restart_lets_it_recover(
         rig.pilot.send(error_frame(0x004, bytes([0, 0x20, 0, 0, 0, 0, 0, 0])))  # passive
         rig.advance(0.05)
         assert state(rig) is GatewayState.RUNNING  # error passive: counted, not a fault
-        assert rig.gw.bus_errors.state is BusErrorState.PASSIVE
+        assert rig.gw.edge.bus_errors.state is BusErrorState.PASSIVE
         rig.pilot.send(error_frame(0x040))
         rig.advance(0.05)
     sup = rig.gw.supervisor
     assert state(rig) is GatewayState.FAULT
     assert sup.fault_code is ErrorCode.BUS_ERROR
     assert "CAN bus-off on virtual:" in sup.reason
-    assert not rig.gw.bus_healthy
+    assert not rig.gw.edge.bus_healthy
     assert [s.model.target_rad_s for s in rig.drive_sims] == [0.0, 0.0]
     assert rig.gw.status_report().flags
     # Still bus-off: no automatic recovery, however long the motors answer, and no retry
@@ -166,7 +166,7 @@ def test_bus_off_is_a_fault_that_names_it_and_the_restart_lets_it_recover(
     rig.pilot.send(error_frame(0x100))  # the controller restarted (restart-ms)
     rig.advance(3 * AUTO_RETRY_DELAY_S + 1.0)
     assert state(rig) is GatewayState.RUNNING
-    counts = rig.gw.bus_errors.counts
+    counts = rig.gw.edge.bus_errors.counts
     assert (counts["error_frames"], counts["bus_off"], counts["restarted"]) == (3, 1, 1)
     assert rig.gw.edge.counts.frames_received > 0  # error frames are not the drivers' frames
     assert any("bus-off" in r.getMessage() for r in caplog.records)

@@ -203,6 +203,20 @@ def test_a_motor_is_offline_until_every_liveness_stream_is_young() -> None:
     assert drv.live.silent(0, 1.26) == ["feedback"]
 
 
+def test_each_motor_goes_offline_after_its_own_liveness() -> None:
+    class Loose(Toy):  # liveness_s per motor, as VESC, CiA 402 and DBC take it
+        BUS_WIDE: ClassVar[tuple[str, ...]] = ("bitrate",)
+
+    drv = Loose([toy_motor(1, "w1"), toy_motor(2, "w2", liveness_s=1.0)])
+    for node in (1, 2):
+        drv.on_frame(Frame(0x180 + node, bytes(6), timestamp_s=0.0))
+        drv.on_frame(Frame(0x200 + node, bytes([1]), timestamp_s=0.0))
+    assert drv.states(0.5) == [DriveState.OFFLINE, DriveState.ENABLED]
+    assert [drv.state(i, 0.5) for i in (0, 1)] == drv.states(0.5)
+    assert drv.live.liveness_s == 1.0  # the longest
+    assert drv.states(1.01) == [DriveState.OFFLINE, DriveState.OFFLINE]
+
+
 def test_faults_come_before_the_ready_state() -> None:
     drv = toy(1)
     drv.on_frame(Frame(0x181, bytes(6), timestamp_s=0.0))
@@ -292,7 +306,6 @@ def test_a_driver_must_declare_its_frames() -> None:
     class Silent(Toy):
         claims = MotorDriver.claims
 
-    Silent.__abstractmethods__ = frozenset({"claims"})
     with pytest.raises(TypeError, match="claims"):
         Silent([toy_motor(1)])
 

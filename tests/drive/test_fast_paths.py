@@ -338,19 +338,19 @@ def test_tally_counts_ids_and_bits_as_frame_bits_does(channel: str) -> None:
         gw.edge._tally(frames, True)
         gw.edge._tally(frames[:2], False)
         gw.edge._tally([], False)
-        assert gw.id_counts == {(0x123, False, True): 2, (0x1ABCDEF, True, True): 1,
+        assert gw.edge.id_counts == {(0x123, False, True): 2, (0x1ABCDEF, True, True): 1,
                                 (0x7FF, False, True): 1, (0x10, False, True): 1,
                                 (0x124, False, True): 1,
                                 (0x123, False, False): 1, (0x1ABCDEF, True, False): 1}
         expected = sum(frame_bits(0 if f.is_remote_frame else f.dlc, f.is_extended_id)
                        for f in frames + frames[:2])
-        assert gw.bits == expected
+        assert gw.edge.bits == expected
         # The same, frame by frame, as the tally was written before it counted in C.
         rng = random.Random(9)
         pool = [Frame(rng.choice((0x10, 0x123, 0x7FF, 0x1ABCDEF)), bytes(rng.randrange(9)),
                       rng.random() < 0.3, rng.random() < 0.2) for _ in range(40)]
-        ids: dict[tuple[int, bool, bool], int] = dict(gw.id_counts)
-        bits = gw.bits
+        ids: dict[tuple[int, bool, bool], int] = dict(gw.edge.id_counts)
+        bits = gw.edge.bits
         for _ in range(50):
             burst = rng.sample(pool, rng.randrange(6))
             sent = rng.random() < 0.5
@@ -359,8 +359,8 @@ def test_tally_counts_ids_and_bits_as_frame_bits_does(channel: str) -> None:
                 key = (f.arbitration_id, f.is_extended_id, sent)
                 ids[key] = ids.get(key, 0) + 1
                 bits += frame_bits(0 if f.is_remote_frame else f.dlc, f.is_extended_id)
-        assert gw.id_counts == ids
-        assert gw.bits == bits
+        assert gw.edge.id_counts == ids
+        assert gw.edge.bits == bits
     finally:
         gw.close()
 

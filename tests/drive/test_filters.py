@@ -330,7 +330,7 @@ def test_what_the_simulated_controllers_send_on_a_bus_passes_the_gateways_filter
         rig.advance(0.5)
         filters = rig.gw.receive_filters
         assert filters is not None
-        sent_by_gateway = {(i, e) for (i, e, tx) in rig.gw.id_counts if tx}
+        sent_by_gateway = {(i, e) for (i, e, tx) in rig.gw.edge.id_counts if tx}
         from_devices = {(f.arbitration_id, f.is_extended_id) for f in drain(rig.pilot)
                         } - sent_by_gateway
         assert from_devices  # the devices did talk

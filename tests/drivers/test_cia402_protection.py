@@ -281,9 +281,6 @@ def test_protection_as_the_driver_states_it() -> None:
         ([LEFT, factories.motor("cia402", 5, "right", options={"host_heartbeat_s": 0.02})],
          "motor 'right'.host_heartbeat_s: expected 0.05 like motor 'left' on the same CiA 402 "
          "bus, got 0.02"),
-        ([LEFT, factories.motor("cia402", 5, "right", options={"liveness_s": 0.5})],
-         "motor 'right'.liveness_s: expected 0.25 like motor 'left' on the same CiA 402 bus, "
-         "got 0.5"),
         ([left(validate=False, controller_timeout_s=0.09)],
          "motor 'left'.controller_timeout_s: expected at least 2 x host_heartbeat_s (0.1 s), "
          "or one late heartbeat of the gateway stops the drive; got 0.09"),
@@ -293,7 +290,7 @@ def test_protection_as_the_driver_states_it() -> None:
          "motor 'left'.abort_connection_option: expected one of 2, 3, got 1"),
     ],
     ids=["host-is-the-drive", "host-is-another-drive", "two-hosts", "two-periods",
-         "two-liveness", "timeout-too-short", "timeout-not-ms", "option-1"],
+         "timeout-too-short", "timeout-not-ms", "option-1"],
 )
 def test_configuration_errors(motors: list[MotorConfig], message: str) -> None:
     with pytest.raises(ConfigError) as err:

@@ -811,11 +811,7 @@ def test_a_config_file_with_dbc_motors_loads_and_builds_the_driver(tmp_path: Pat
         load_config(tmp_path / "bad.yaml")
 
 
-def test_the_motors_of_one_bus_share_one_liveness() -> None:
-    with pytest.raises(ConfigError) as info:
-        DbcDriver([motor(1), motor(2, "right", liveness_s=1.0)])
-    assert str(info.value) == (
-        "motor 'right'.liveness_s: expected 0.25 like motor 'left' on the same DBC bus, got 1.0"
-    )
-    drv = DbcDriver([motor(1, liveness_s=0.5), motor(2, "right", liveness_s=0.5)])
-    assert drv.live.liveness_s == 0.5
+def test_each_motor_keeps_its_own_liveness() -> None:
+    drv = DbcDriver([motor(1), motor(2, "right", liveness_s=1.0)])
+    assert drv.live.limits == [0.25, 1.0]
+    assert drv.live.liveness_s == 1.0

@@ -475,8 +475,8 @@ def test_on_frame_counts_malformed_and_ignores_others() -> None:
     assert not drv.on_frame(Frame(0x202, bytes(8), is_extended_id=True))  # another device's
     assert drv.on_frame(Frame(0x202, is_remote_frame=True, dlc=8))
     assert drv.on_frame(Frame(0x201, bytes.fromhex("FFFF000000000000")))
-    assert drv.rejected == {"malformed": 3}
-    assert drv.last_rejection["malformed"].startswith("Expected")
+    assert drv.rejected == {"malformed feedback": 3}
+    assert drv.last_rejection["malformed feedback"].startswith("Expected")
     assert drv.feedback(0) is None and drv.feedback(1) is None
 
 

@@ -124,12 +124,16 @@ def test_validate_options_rejects(raw: dict[str, object], message: str) -> None:
         [motor(23, validate=False, command_period_s=0.5)],
         [motor(23, validate=False, controller_timeout_s=0.2, command_period_s=0.1)],
         [factories.motor("vesc", 23, validate=False)],  # no pole_pairs
-        [motor(23, liveness_s=0.25), motor(24, wheel="right", liveness_s=0.5)],  # one per bus
     ],
 )
 def test_constructor_rejects(motors: list[MotorConfig]) -> None:
     with pytest.raises(ConfigError):
         VescDriver(motors)
+
+
+def test_each_vesc_keeps_its_own_liveness() -> None:
+    drv = VescDriver([motor(23, liveness_s=0.25), motor(24, wheel="right", liveness_s=0.5)])
+    assert drv.live.limits == [0.25, 0.5]
 
 
 # ============================================================================ driver: units

@@ -75,6 +75,24 @@ def test_setup_frames_golden() -> None:
     )
 
 
+def test_a_late_reply_after_a_disable_changes_nothing() -> None:
+    drv = OdriveDriver(
+        [motor(3, firmware="0.6", controller_timeout_s=0.25, watchdog_endpoints=ENDPOINTS)]
+    )
+    drv.enable(0.0)  # Get_Version goes out
+    drv.disable(0.01)
+    # The version arrives after the disable, and it is not the endpoints' firmware (which
+    # would fail a running setup): no setup runs any more, so nothing fails.
+    assert drv.on_frame(Frame(0x060, hx("02 04 04 3A 00 06 09 00"), timestamp_s=0.02))
+    assert drv.poll(0.02) == []
+    assert drv.protection_state(0) is ProtectionState.PENDING
+    assert not drv.faults(0) and drv.detail(0) == ""
+    assert drv.rejected == {}
+    # A malformed one is still counted.
+    drv.on_frame(Frame(0x060, hx("02 04"), timestamp_s=0.03))
+    assert drv.rejected == {"malformed": 1}
+
+
 # ----------------------------------------------------------------------------- on the bus
 
 

@@ -605,7 +605,7 @@ def refusing_bus(rig: Rig, monkeypatch: pytest.MonkeyPatch) -> Iterator[dict[str
     calls = {"refused": 0}
 
     def send(self: VirtualBus, msg: can.Message, timeout: float | None = None) -> None:
-        if self is rig.gw.bus:
+        if self is rig.gw.edge.bus:
             calls["refused"] += 1
             raise can.CanOperationError("Transmit buffer full")
         real(self, msg, timeout)
@@ -646,7 +646,7 @@ def test_bus_refusing_sends_loop_goes_on_drives_fall_back(
     run.until(GatewayState.RUNNING, within_s=2.0)
     run.drive(1.0)
     assert run.following()
-    assert gw.bus_healthy
+    assert gw.edge.bus_healthy
 
 
 @pytest.mark.parametrize("run", ["odrive"], indirect=True)
@@ -656,7 +656,7 @@ def test_bus_that_keeps_refusing_reads_unhealthy(run: Run, monkeypatch: pytest.M
     with refusing_bus(run.rig, monkeypatch):
         for _ in range(100):
             run.drive(1.0 / RATE_HZ)
-            healthy.append(run.rig.gw.bus_healthy)
+            healthy.append(run.rig.gw.edge.bus_healthy)
     assert run.rig.gw.edge.counts.bus_reopens >= 2
     assert not any(healthy[-50:])
 

@@ -12,11 +12,9 @@ import pytest
 
 from gateway.bus.edge import EdgeCounts
 from gateway.core.counts import SupervisorCounts
-from gateway.core.status import TimingReport
 from gateway.core.types import DriveState, ErrorCode, GatewayState, Twist
 from gateway.runtime.counts import LoopCounts
 from gateway.runtime.report import build_status, event_counts
-from gateway.runtime.timing import TimingStats
 from gateway.sim.device import SimFault
 from gateway.wire.socket import TwistRequest, reply_ok, reply_ok_data
 from gateway.wire.socket.status import status_from_json, status_to_json
@@ -126,18 +124,18 @@ def legacy_status(daemon: Daemon, now_s: float) -> dict[str, object]:
             "interface": gw.config.bus.interface,
             "channel": gw.config.bus.channel,
             "bitrate": gw.config.bus.bitrate,
-            "healthy": gw.bus_healthy,
-            "error_state": gw.bus_errors.state.value,
-            "error_frames": dict(gw.bus_errors.counts),
-            "last_error_frame": gw.bus_errors.last,
-            "bits": gw.bits,
+            "healthy": gw.edge.bus_healthy,
+            "error_state": gw.edge.bus_errors.state.value,
+            "error_frames": dict(gw.edge.bus_errors.counts),
+            "last_error_frame": gw.edge.bus_errors.last,
+            "bits": gw.edge.bits,
             "time_s": now_s,
             "frames": [
                 # The one change: int(can_id).  A frame ID that is an IntEnum member (CiA 402's
                 # NMT and SYNC) went out as the member's name ("nmt"), which no reader took.
                 {"id": int(can_id), "extended": ext, "direction": "tx" if sent else "rx",
                  "count": n}
-                for (can_id, ext, sent), n in sorted(gw.id_counts.items())
+                for (can_id, ext, sent), n in sorted(gw.edge.id_counts.items())
             ],
         },
     }
@@ -183,11 +181,6 @@ def test_the_reply_is_the_one_the_daemon_sent_before(name: str, channel: str,
         assert faulted.state is GatewayState.FAULT and faulted.reason
         assert faulted.last_error is not None
         assert faulted.last_error.code in (ErrorCode.FEEDBACK_TIMEOUT, ErrorCode.MOTOR_FAULT)
-
-
-def test_the_timing_report_carries_every_timing_statistic() -> None:
-    reported = {f.name for f in dataclasses.fields(TimingReport)}
-    assert reported == {f.name for f in dataclasses.fields(TimingStats)} | {"burst_gap_max_ms"}
 
 
 def test_every_event_counter_is_reported_under_its_name_in_the_legacy_order() -> None:

@@ -275,7 +275,7 @@ class BusPlan:
         real_send, real_recv = VirtualBus.send, VirtualBus._recv_internal
 
         def send(bus: VirtualBus, msg: can.Message, timeout: float | None = None) -> None:
-            if bus is not rig.gw.bus:
+            if bus is not rig.gw.edge.bus:
                 real_send(bus, msg, timeout)
                 return
             if self.down:
@@ -290,7 +290,7 @@ class BusPlan:
             self.sent[-1].append(msg.arbitration_id)
 
         def recv(bus: VirtualBus, timeout: float | None) -> tuple[can.Message | None, bool]:
-            if bus is rig.gw.bus and self.down:
+            if bus is rig.gw.edge.bus and self.down:
                 raise can.CanOperationError("Failed to receive: Network is down", errno.ENETDOWN)
             return real_recv(bus, timeout)
 
@@ -325,7 +325,7 @@ def test_a_full_transmit_queue_cuts_bursts_without_starving_a_wheel(
     assert len(went) >= 150
     for can_id in commands:
         assert sum(can_id in ids for ids in went) >= 0.45 * len(went)
-    assert max(rig.gw.bursts.missed.values(), default=0) < UNSENT_FAULT_CYCLES
+    assert max(rig.gw.edge.bursts.missed.values(), default=0) < UNSENT_FAULT_CYCLES
     assert rig.gw.edge.counts.partial_bursts >= 150
     assert rig.gw.edge.counts.frames_unsent >= 150
     assert state(rig) is GatewayState.RUNNING
@@ -338,7 +338,7 @@ def test_a_full_transmit_queue_cuts_bursts_without_starving_a_wheel(
     free_at = [0.0]
 
     def slow(bus: VirtualBus, msg: can.Message, timeout: float | None = None) -> None:
-        if bus is rig.gw.bus and time.perf_counter() < free_at[0]:
+        if bus is rig.gw.edge.bus and time.perf_counter() < free_at[0]:
             raise can.CanOperationError("Failed to transmit: No buffer space available",
                                         errno.ENOBUFS)
         real_send(bus, msg, timeout)
@@ -387,22 +387,22 @@ def test_a_bus_that_stays_down_is_reopened_with_backoff_and_recovers(
     rig.advance(0.2)
     plan = BusPlan(rig, monkeypatch)
     plan.down = True
-    first = rig.gw.bus
+    first = rig.gw.edge.bus
     with caplog.at_level(logging.WARNING, logger="gateway.runtime.loop"):
         rig.advance(3.0, plan.cycle)
     assert not any(plan.sent)  # nothing went out, whichever bus object the gateway held
-    assert rig.gw.bus is not first  # reopened ...
+    assert rig.gw.edge.bus is not first  # reopened ...
     # ... with backoff: at 0, 0.1, 0.3, 0.7, 1.5 and 3.1 s, not once per failed burst.
     assert 4 <= rig.gw.edge.counts.bus_reopens <= 6
     assert rig.gw.edge.counts.send_failures >= 250
     assert rig.gw.edge.counts.receive_failures >= 250
-    assert not rig.gw.bus_healthy
+    assert not rig.gw.edge.bus_healthy
     assert state(rig) is GatewayState.FAULT
     # One line per kind of trouble per five seconds (send, receive, reopen, the fault).
     assert len(caplog.records) <= 6, [r.getMessage() for r in caplog.records]
     plan.down = False
     rig.advance(3.0, plan.cycle)  # the next reopen or send finds the bus back
-    assert rig.gw.bus_healthy
+    assert rig.gw.edge.bus_healthy
     assert state(rig) is GatewayState.RUNNING
     pilot.send(op="twist", vx=0.1)
     rig.advance(0.5, plan.cycle)

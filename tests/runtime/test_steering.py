@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from types import MappingProxyType
 from typing import TYPE_CHECKING, Any
 
 import cantools
@@ -31,6 +30,7 @@ from gateway.core.linkage import virtual_angle
 from gateway.core.types import ErrorCode, GatewayState, MotorConfig, MotorRole, Twist
 from gateway.drive.driveset import DriveSet
 from gateway.sim.device import SimFault
+from tests import factories
 from tests.conftest import CONFIG_DIR, SIM_ODRIVE_ENDPOINTS
 from tests.e2e_helpers import Rig, errors_on_can, virtual_config
 
@@ -52,12 +52,8 @@ def _doc(path: Path = SWERVE) -> dict[str, Any]:
 
 
 def _steer_motor(node_id: int = 5, zero_rad: float = 0.0, invert: bool = False) -> MotorConfig:
-    return MotorConfig(
-        wheel="front_left steering", driver="odrive", node_id=node_id, gear_ratio=12.8,
-        invert=invert, max_rpm=3000.0,
-        options=MappingProxyType(OdriveDriver.validate_options({}, "test")),
-        role=MotorRole.STEER, zero_rad=zero_rad, steers=("front_left",),
-    )
+    return factories.steer_motor("odrive", node_id, zero_rad=zero_rad, gear_ratio=12.8,
+                                 invert=invert)
 
 
 # ----------------------------------------------------------------------------- configuration
@@ -182,8 +178,7 @@ def test_feed_forward_is_clipped_and_position_must_be_finite() -> None:
 
 
 def test_driver_arms_steering_in_position_control() -> None:
-    drive = MotorConfig("front_left", "odrive", 1, 6.75, max_rpm=6000.0,
-                        options=MappingProxyType(OdriveDriver.validate_options({}, "t")))
+    drive = factories.motor("odrive", 1, "front_left", gear_ratio=6.75, max_rpm=6000.0)
     drv = OdriveDriver([drive, _steer_motor()])
     codec = OdriveCodec()
     modes = [codec.decode_command(f) for f in drv.enable(0.0)]

@@ -18,7 +18,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from gateway.core.errors import ConfigError
-from gateway.runtime.timing import LoopTimer, Scheduler, TimingStats, realtime, realtime_setup
+from gateway.core.status import TimingReport
+from gateway.runtime.timing import LoopTimer, Scheduler, realtime, realtime_setup
 from gateway.runtime.timing import stats as timing_stats
 
 if TYPE_CHECKING:
@@ -299,7 +300,7 @@ def test_ring_keeps_only_the_last_window() -> None:
 
 def test_empty_snapshot_is_zero() -> None:
     stats = LoopTimer().snapshot()
-    assert stats == TimingStats(0, 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0, 0.0, 0.0, 0.0)
+    assert stats == TimingReport(0, 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0, 0.0, 0.0, 0.0)
     with pytest.raises(FrozenInstanceError):
         stats.cycles = 1  # type: ignore[misc]
 
@@ -335,7 +336,7 @@ def test_recording_does_not_grow_memory() -> None:
 
 
 def test_summary_line() -> None:
-    stats = TimingStats(
+    stats = TimingReport(
         1000, 2, 200.0, 199.96, 1.0, 42.4, 310.0, 80.0, 120.6, 900.0, 0, 0.0, 0.0, 0.0
     )
     assert stats.summary() == (

@@ -113,12 +113,12 @@ def test_interface_down_and_up_reopens_with_backoff_and_recovers(
     assert counts.send_failures >= 250, counts  # every burst of 3 s at 100 Hz failed
     assert counts.receive_failures >= 1, counts  # counted apart from send failures
     assert 3 <= counts.bus_reopens <= 7, counts  # backoff: 0, 0.1, 0.3, 0.7, 1.5, ... s
-    assert not rig.gw.bus_healthy
+    assert not rig.gw.edge.bus_healthy
     assert state(rig) is GatewayState.FAULT
     assert len(caplog.records) <= 8, [r.getMessage() for r in caplog.records]
     rig.advance(3.0)  # up again: the next reopen or burst goes through, the drives answer
     drive(rig, 1.0)
-    assert rig.gw.bus_healthy
+    assert rig.gw.edge.bus_healthy
     assert state(rig) is GatewayState.RUNNING, rig.gw.supervisor.reason
     assert min(abs(s.wheel_velocity_rad_s) for s in rig.drive_sims) > 1.0
 
@@ -131,7 +131,7 @@ def test_error_frames_are_counted_by_class_and_bus_off_is_a_fault(rig: Rig) -> N
     rig.pilot.send(error_frame(0x004, bytes([0, 0x08, 0, 0, 0, 0, 0, 0])))  # tx warning
     drive(rig, 0.2)
     assert state(rig) is GatewayState.RUNNING
-    assert rig.gw.bus_errors.state is BusErrorState.WARNING
+    assert rig.gw.edge.bus_errors.state is BusErrorState.WARNING
     rig.pilot.send(error_frame(0x040))
     rig.advance(0.05)
     sup = rig.gw.supervisor
@@ -144,7 +144,7 @@ def test_error_frames_are_counted_by_class_and_bus_off_is_a_fault(rig: Rig) -> N
     rig.advance(4.0)
     drive(rig, 0.6)
     assert state(rig) is GatewayState.RUNNING, sup.reason
-    counts = rig.gw.bus_errors.counts
+    counts = rig.gw.edge.bus_errors.counts
     assert (counts["error_frames"], counts["no_ack"], counts["controller"], counts["bus_off"],
             counts["restarted"]) == (4, 1, 1, 1, 1)
 
@@ -169,7 +169,7 @@ def test_kernel_filters_keep_foreign_traffic_out_of_the_process(rig: Rig, vcan: 
         drive(rig, 1.0)
     finally:
         flood.wait(timeout=60)
-    received = {(i, e) for (i, e, tx) in rig.gw.id_counts if not tx}
+    received = {(i, e) for (i, e, tx) in rig.gw.edge.id_counts if not tx}
     assert (0x7A0, False) not in received
     assert all(rig.gw.receive_filters and any(f.matches(i, e) for f in rig.gw.receive_filters)
                for i, e in received), received

@@ -12,8 +12,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from gateway.core.events import ErrorEvent, OdometryEvent, StatusEvent
+from gateway.core.events import OdometryEvent, StatusEvent
 from gateway.core.kinematics.odometry import OdometryState, Pose
+from gateway.core.status import LastError
 from gateway.core.types import ErrorCode, GatewayState, Twist
 from gateway.wire.socket import Topic, event, event_line, event_to_json, event_topic
 
@@ -26,7 +27,7 @@ NAN, INF = math.nan, math.inf
 def legacy_line(ev: OutboxEvent) -> bytes:
     """The event's line as the daemon sent it before the outbox was typed: the publisher's
     dictionaries (``gateway/runtime/publish.py`` before issue 15) through :func:`event`."""
-    if isinstance(ev, ErrorEvent):
+    if isinstance(ev, LastError):
         return event("error", {"code": ev.code.name.lower(), "message": ev.message})
     if isinstance(ev, StatusEvent):
         return event("status", {"state": ev.state, "reason": ev.reason})
@@ -44,7 +45,7 @@ def _odometry(*values: float) -> OdometryEvent:
 
 
 @pytest.mark.parametrize(("ev", "topic", "line"), [
-    (ErrorEvent(ErrorCode.FEEDBACK_TIMEOUT, "motor 'right' (node 2) stopped answering"),
+    (LastError(ErrorCode.FEEDBACK_TIMEOUT, "motor 'right' (node 2) stopped answering"),
      Topic.ERROR,
      b'{"event":"error","code":"feedback_timeout",'
      b'"message":"motor \'right\' (node 2) stopped answering"}\n'),
@@ -60,10 +61,10 @@ def _odometry(*values: float) -> OdometryEvent:
      b'{"event":"odometry","x":null,"y":null,"theta":null,"vx":0.0,"vy":0.0,"wz":0.0,'
      b'"slip":null,"distance":1.0,"t":2.0}\n'),
     # Not ASCII, and a lone surrogate (which has no UTF-8 form: the line is escaped ASCII).
-    (ErrorEvent(ErrorCode.BAD_COMMAND, "vitesse \u00e9lev\u00e9e"), Topic.ERROR,
+    (LastError(ErrorCode.BAD_COMMAND, "vitesse \u00e9lev\u00e9e"), Topic.ERROR,
      '{"event":"error","code":"bad_command","message":"vitesse \u00e9lev\u00e9e"}\n'
      .encode()),
-    (ErrorEvent(ErrorCode.BAD_COMMAND, "\ud800"), Topic.ERROR,
+    (LastError(ErrorCode.BAD_COMMAND, "\ud800"), Topic.ERROR,
      b'{"event":"error","code":"bad_command","message":"\\ud800"}\n'),
 ])
 def test_each_event_is_one_line_of_its_topic(ev: OutboxEvent, topic: Topic, line: bytes) -> None:
@@ -76,7 +77,7 @@ def test_each_event_is_one_line_of_its_topic(ev: OutboxEvent, topic: Topic, line
 _floats = st.floats(allow_nan=True, allow_infinity=True)
 _text = st.text(max_size=20)
 _events = st.one_of(
-    st.builds(ErrorEvent, st.sampled_from(list(ErrorCode)), _text),
+    st.builds(LastError, st.sampled_from(list(ErrorCode)), _text),
     st.builds(StatusEvent, st.sampled_from(list(GatewayState)), _text),
     st.builds(_odometry, *[_floats] * 9),
 )

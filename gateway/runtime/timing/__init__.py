@@ -6,7 +6,7 @@
   of bursting through them.
 * :class:`LoopTimer` (:mod:`gateway.runtime.timing.stats`) records lateness, cost, skipped
   cycles and twist-to-frame latency into fixed-size ring buffers (no allocation per cycle) and
-  summarises them on demand in a frozen :class:`TimingStats`.
+  summarises them on demand in a frozen :class:`~gateway.core.status.TimingReport`.
 * :class:`MissProbe` (:mod:`gateway.runtime.timing.misses`) tells, for every late start,
   whether the loop thread was running, waiting for a CPU or asleep (its schedstat), and counts
   each cause (:class:`MissCause`, :mod:`gateway.runtime.timing.cause`).
@@ -38,7 +38,7 @@ from gateway.runtime.timing.cause import MissCause
 from gateway.runtime.timing.misses import MissProbe
 from gateway.runtime.timing.realtime import realtime_setup
 from gateway.runtime.timing.scheduler import Scheduler
-from gateway.runtime.timing.stats import DEFAULT_CAPACITY, LoopTimer, TimingStats
+from gateway.runtime.timing.stats import DEFAULT_CAPACITY, LoopTimer
 
-__all__ = ["DEFAULT_CAPACITY", "LoopTimer", "MissCause", "MissProbe", "Scheduler", "TimingStats",
+__all__ = ["DEFAULT_CAPACITY", "LoopTimer", "MissCause", "MissProbe", "Scheduler",
            "realtime_setup"]

@@ -1,4 +1,5 @@
-"""Per-cycle timing records of the control loop: :class:`LoopTimer` and :class:`TimingStats`.
+"""Per-cycle timing records of the control loop: :class:`LoopTimer`, summarised in the status
+model's :class:`~gateway.core.status.TimingReport`.
 
 Lateness, cost, cycle starts and twist-to-frame latency go into fixed-size ring buffers (no
 allocation per cycle) and are summarised on demand.  Reads no clock: callers pass the times.
@@ -8,10 +9,10 @@ from __future__ import annotations
 
 import math
 from array import array
-from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from gateway.core.errors import ConfigError
+from gateway.core.status import TimingReport
 from gateway.runtime.timing.cause import MissCause
 
 if TYPE_CHECKING:
@@ -19,63 +20,6 @@ if TYPE_CHECKING:
 
 #: Ring-buffer length of :class:`LoopTimer` (about 4 s at 1 kHz, 20 s at 200 Hz).
 DEFAULT_CAPACITY = 4096
-
-
-@dataclass(frozen=True, slots=True)
-class TimingStats:
-    """A summary of the loop's timing over the last ring-buffer window.
-
-    Percentiles are nearest-rank over the window; all times are in microseconds.  Every
-    figure is 0.0 when there are no samples.
-
-    :param cycles: cycles started since start-up (not limited to the window).
-    :param missed: deadlines skipped after overruns since start-up.
-    :param rate_hz: the configured loop rate (0.0 if the timer was not told).
-    :param achieved_hz: the cycle rate achieved over the window (0.0 with fewer than 2 cycles).
-    :param lateness_p50_us: median of cycle start minus deadline.
-    :param lateness_p99_us: 99th percentile of the lateness.
-    :param lateness_max_us: largest lateness in the window.
-    :param cost_p50_us: median of the work duration of a cycle.
-    :param cost_p99_us: 99th percentile of the cost.
-    :param cost_max_us: largest cost in the window.
-    :param latency_samples: twist-to-frame latency samples in the window.
-    :param latency_p50_us: median twist-to-frame latency.
-    :param latency_p99_us: 99th percentile of the latency.
-    :param latency_max_us: largest latency in the window.
-    :param late_on_cpu: late starts (each skipping one or more deadlines) since start-up for
-        which the loop thread was on a CPU for more than a period
-        (:class:`~gateway.runtime.timing.cause.MissCause`; all three stay 0 where the kernel's
-        per-thread statistics cannot be read).
-    :param late_runnable: late starts for which it was runnable but not running.
-    :param late_asleep: late starts for which it was woken late.
-    """
-
-    cycles: int
-    missed: int
-    rate_hz: float
-    achieved_hz: float
-    lateness_p50_us: float
-    lateness_p99_us: float
-    lateness_max_us: float
-    cost_p50_us: float
-    cost_p99_us: float
-    cost_max_us: float
-    latency_samples: int
-    latency_p50_us: float
-    latency_p99_us: float
-    latency_max_us: float
-    late_on_cpu: int = 0
-    late_runnable: int = 0
-    late_asleep: int = 0
-
-    def summary(self) -> str:
-        """One line for ``STATUS=`` and logs."""
-        return (
-            f"{self.achieved_hz:.1f}/{self.rate_hz:g} Hz, {self.cycles} cycles, "
-            f"{self.missed} missed; "
-            f"late p99 {self.lateness_p99_us:.0f} us max {self.lateness_max_us:.0f} us; "
-            f"cost p99 {self.cost_p99_us:.0f} us max {self.cost_max_us:.0f} us"
-        )
 
 
 def _percentiles_us(window: Sequence[float]) -> tuple[float, float, float]:
@@ -180,7 +124,7 @@ class LoopTimer:
         """Record one twist-to-frame latency (twist received to its frames sent), s."""
         self._latency.push(latency_s)
 
-    def snapshot(self) -> TimingStats:
+    def snapshot(self) -> TimingReport:
         """Summarise the current window.
 
         This sorts copies of the rings (about 1 ms at the default capacity): call it at status
@@ -194,7 +138,7 @@ class LoopTimer:
         late = _percentiles_us(self._lateness.window())
         cost = _percentiles_us(self._cost.window())
         latency = _percentiles_us(self._latency.window())
-        return TimingStats(
+        return TimingReport(
             cycles=self.cycles,
             missed=self.missed,
             rate_hz=self.rate_hz,

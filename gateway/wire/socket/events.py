@@ -16,10 +16,10 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from gateway.core.events import ErrorEvent, OdometryEvent, StatusEvent
-from gateway.core.status import state_name
+from gateway.core.events import OdometryEvent, StatusEvent
+from gateway.core.status import LastError, state_name
 from gateway.wire.socket.messages import Topic
-from gateway.wire.socket.replies import encode_data_line
+from gateway.wire.socket.replies import event as topic_line
 from gateway.wire.socket.status_write import odometry_to_json
 
 if TYPE_CHECKING:
@@ -28,7 +28,7 @@ if TYPE_CHECKING:
 __all__ = ["event_line", "event_to_json", "event_topic"]
 
 _TOPICS: dict[type[OutboxEvent], Topic] = {
-    ErrorEvent: Topic.ERROR,
+    LastError: Topic.ERROR,
     OdometryEvent: Topic.ODOMETRY,
     StatusEvent: Topic.STATUS,
 }
@@ -50,10 +50,10 @@ def event_to_json(event: OutboxEvent) -> dict[str, object]:
 
 def event_line(event: OutboxEvent) -> bytes:
     """The line subscribers read: ``{"event": <topic>, ...payload}``, compact JSON, UTF-8,
-    ``\\n``-terminated (as :func:`gateway.wire.socket.event` writes it).
+    ``\\n``-terminated (:func:`gateway.wire.socket.replies.event`).
 
     >>> from gateway.core.types import GatewayState
     >>> event_line(StatusEvent(GatewayState.ESTOP, "e-stop requested"))
     b'{"event":"status","state":"estop","reason":"e-stop requested"}\\n'
     """
-    return encode_data_line({"event": event_topic(event).value, **event_to_json(event)})
+    return topic_line(event_topic(event), event_to_json(event))
