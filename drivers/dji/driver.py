@@ -123,6 +123,8 @@ class DjiDriver(MotorDriver[DjiOptions]):
                     f"motor {m.wheel!r}.{given[0]}: expected only in a steering actuator's "
                     f"block (steering:), got it in a drive motor's block"
                 )
+        #: The bus's ``liveness_s`` (one value: :attr:`BUS_WIDE`), read every cycle.
+        self._stale_s = self.live.liveness_s
         #: One record per motor, in :attr:`motors` order.
         self._axes: tuple[Axis, ...] = tuple(
             Axis.of(i, m, o, scale)
@@ -178,7 +180,7 @@ class DjiDriver(MotorDriver[DjiOptions]):
         ENABLED, i.e. armed, with fresh feedback and no fault.
         """
         live = self.live
-        stale_s = live.liveness_s
+        stale_s = self._stale_s
         last = self._last_command_s
         dt = 0.0 if last is None else now_s - last
         if dt < 0.0:
@@ -247,7 +249,7 @@ class DjiDriver(MotorDriver[DjiOptions]):
             elif d < -HALF_REV_COUNTS:
                 d += COUNTS_PER_REV
             ax.count_sum += d
-            if t - ax.last_s > self.live.liveness_s:
+            if t - ax.last_s > self._stale_s:
                 self._resumed(ax, t)
         ax.last_count = angle
         ax.last_s = t

@@ -85,7 +85,7 @@ class MessagePool:
 #: Received frames are built with ``tuple.__new__(Frame, fields)``, past ``Frame.__new__`` (a
 #: Python function, more than half the cost of converting a message): every field is given,
 #: in ``Frame._fields`` order, so its only work, defaulting ``dlc``, has nothing to do
-#: (``tests/drive/test_fast_paths.py`` checks the result against ``Frame(...)``).
+#: (``tests/drive/test_fast_paths_frames.py`` checks the result against ``Frame(...)``).
 _new_tuple = tuple.__new__
 
 

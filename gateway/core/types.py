@@ -104,7 +104,7 @@ class Frame(_FrameFields):
 #: A frame from all six fields, in :class:`Frame` order and every one given (``dlc`` too):
 #: ``frame_of((arbitration_id, data, is_extended_id, is_remote_frame, dlc, timestamp_s))``.
 #: A C call past ``Frame.__new__`` (a Python function, about half the cost of a frame), for
-#: the frames built every cycle (``tests/drive/test_fast_paths.py`` checks it against
+#: the frames built every cycle (``tests/drive/test_fast_paths_frames.py`` checks it against
 #: ``Frame(...)``).
 frame_of: Callable[[tuple[int, bytes, bool, bool, int, float]], Frame] = functools.partial(
     tuple.__new__, Frame

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
+from gateway.core.errors import GatewayError
 from gateway.core.linkage import virtual_angle, wheel_angle
 from gateway.drive.claims import FrameRouter
 from gateway.drive.registry import get_driver_class
@@ -126,8 +127,21 @@ class DriveSet:
         return [[setpoints[i] for i in idx] for _, idx in self.groups]
 
     def enable(self, now_s: float) -> list[Frame]:
-        """Enable frames of every driver."""
-        return [f for drv, _ in self.groups for f in drv.enable(now_s)]
+        """Enable frames of every driver, or none: when a driver refuses, those before it are
+        disabled again (their enable frames are never sent, so their controllers stay as they
+        were) and the refusal is raised.
+
+        :raises IllegalTransitionError: from the driver that refuses.
+        """
+        out: list[Frame] = []
+        for k, (drv, _) in enumerate(self.groups):
+            try:
+                out.extend(drv.enable(now_s))
+            except GatewayError:
+                for before, _ in self.groups[:k]:
+                    before.disable(now_s)
+                raise
+        return out
 
     def disable(self, now_s: float) -> list[Frame]:
         """Zero-speed and disarm frames of every driver."""

@@ -11,7 +11,7 @@ import pytest
 from gateway import cli
 from gateway.cli import main
 from gateway.sim.bus import SimulatedControllers
-from tests.apps.test_monitor import Session, default_config
+from tests.apps.monitor_helpers import Session, default_config
 from tests.conftest import CONFIG_DIR
 
 if TYPE_CHECKING:

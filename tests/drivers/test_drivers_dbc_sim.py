@@ -1,7 +1,7 @@
 """Tests of the generic DBC driver with its simulator on a python-can virtual bus.
 
 Everything runs in simulated time (``SimulatedControllers.step``), so no assertion depends on
-the wall clock.  Motor blocks and constants come from :mod:`tests.drivers.test_drivers_dbc`.
+the wall clock.  Motor blocks and constants come from :mod:`tests.drivers.dbc_helpers`.
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from gateway.core.errors import ConfigError
 from gateway.core.types import DriveFault, DriveState, Frame
 from gateway.sim.bus import SimulatedControllers
 from gateway.sim.device import SimFault
-from tests.drivers.test_drivers_dbc import ANGLE, COUNT_RAD, GEAR, TWO_PI, motor, odrive_motor
+from tests.drivers.dbc_helpers import ANGLE, COUNT_RAD, GEAR, TWO_PI, motor, odrive_motor
 
 if TYPE_CHECKING:
     from collections.abc import Callable, Iterator

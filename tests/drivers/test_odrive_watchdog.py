@@ -26,7 +26,7 @@ from gateway.core.errors import ConfigError
 from gateway.core.protection import Guard, ProtectionState, WatchdogPolicy
 from gateway.core.types import DriveFault, DriveState, Frame
 from tests.conftest import CONFIG_DIR
-from tests.drivers.test_drivers_odrive import ENDPOINTS, motor, rig
+from tests.drivers.odrive_helpers import ENDPOINTS, motor, rig
 
 if TYPE_CHECKING:
     from pathlib import Path

@@ -16,7 +16,7 @@ import pytest
 from gateway.cli import main
 from gateway.runtime.timing import MissCause, MissProbe, Scheduler
 from gateway.runtime.timing.misses import REPORT_INTERVAL_S, SchedStat
-from tests.runtime.test_timing import FakeClock
+from tests.runtime.timing_helpers import FakeClock
 
 if TYPE_CHECKING:
     from click.testing import CliRunner

@@ -2,7 +2,7 @@
 interface that goes down and up, error frames and bus-off, CAN FD frames.
 
 The gateway and its simulated controllers run in this process on simulated time, as in
-``test_safety.py``, but their frames cross the kernel's vcan interface, so every fault is the
+``test_safety_bus.py``, but their frames cross the kernel's vcan interface, so every fault is the
 kernel's own (``ENOBUFS`` from a rate-limited qdisc, ``ENETDOWN``, error frames delivered by
 ``CAN_RAW_ERR_FILTER``).  The checks judge what reaches the bus, not how fast: the CI runs
 this tier in an emulated VM about 14 times slower than the host.

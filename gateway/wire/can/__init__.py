@@ -1,8 +1,9 @@
 """wheelgate's own CAN messages: a pure codec, no I/O, no clock.
 
 The published description is ``config/wheelgate.dbc`` (cantools and other DBC tools read the
-traffic with it); ``tests/wire/test_wgproto.py`` proves that this hand-written ``struct`` codec and
-cantools agree on every message, both ways.  Every payload is little endian with DLC 8:
+traffic with it); ``tests/wire/test_wgproto_messages.py`` proves that this hand-written
+``struct`` codec and cantools agree on every message, both ways.  Every payload is little
+endian with DLC 8:
 
 ====================  =====  ===========================================================
 message               ID     payload (i: signed, u: unsigned, bits)

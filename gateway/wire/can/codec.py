@@ -1,8 +1,8 @@
 """The ``struct`` codec of the five wheelgate messages: :class:`WgCodec`.  Pure: no I/O, no clock.
 
 Each payload layout is one precompiled :class:`struct.Struct` below; the DBC describes the same
-layouts and ``tests/wire/test_wgproto.py`` checks that both agree.  The encoders of what the
-gateway sends saturate; the twist encoder and every decoder raise (see :mod:`gateway.wire.can`).
+layouts and ``tests/wire/test_wgproto_messages.py`` checks that both agree.  The encoders of what
+the gateway sends saturate; the twist encoder and every decoder raise (see :mod:`gateway.wire.can`).
 """
 
 from __future__ import annotations
