@@ -42,11 +42,11 @@ from gateway.bus.health import (
     Backoff,
     BurstTracker,
     BusErrors,
-    BusErrorState,
     ErrorFrame,
     LogThrottle,
 )
 from gateway.core.errors import BusError
+from gateway.core.status import BusErrorState
 from gateway.wire.busload import frame_bits
 
 if TYPE_CHECKING:

@@ -22,6 +22,8 @@ import errno
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+from gateway.core.status import BusErrorState
+
 if TYPE_CHECKING:
     from collections.abc import Sequence
 
@@ -53,16 +55,6 @@ class ControllerStatus(enum.IntFlag):
     RX_PASSIVE = 0x10
     TX_PASSIVE = 0x20
     ACTIVE = 0x40
-
-
-class BusErrorState(enum.Enum):
-    """The CAN controller's fault confinement state (ISO 11898-1, clause 12), as its error
-    frames report it."""
-
-    ACTIVE = "active"
-    WARNING = "warning"
-    PASSIVE = "passive"
-    BUS_OFF = "bus_off"
 
 
 #: Counter name of each error class (status, monitor).

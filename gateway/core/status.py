@@ -29,9 +29,9 @@ if TYPE_CHECKING:
     from gateway.core.types import DriveFault, DriveState, ErrorCode, GatewayState, Twist
 
 __all__ = [
+    "BusErrorState",
     "BusHealth",
     "BusReport",
-    "CanErrorState",
     "CommandReport",
     "ControllerStop",
     "Counters",
@@ -71,9 +71,9 @@ class Direction(str, enum.Enum):
     TX = "tx"
 
 
-class CanErrorState(str, enum.Enum):
-    """The CAN controller's fault confinement state (ISO 11898-1, clause 12), as reported;
-    the values of :class:`gateway.bus.health.BusErrorState`."""
+class BusErrorState(str, enum.Enum):
+    """The CAN controller's fault confinement state (ISO 11898-1, clause 12), as its error
+    frames report it (:mod:`gateway.bus.health`) and ``status`` shows it."""
 
     ACTIVE = "active"
     WARNING = "warning"
@@ -317,7 +317,7 @@ class BusHealth:
     """
 
     healthy: bool
-    error_state: CanErrorState
+    error_state: BusErrorState
     error_frames: Mapping[str, int]
     last_error_frame: str
 

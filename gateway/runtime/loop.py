@@ -28,11 +28,11 @@ import time
 from typing import TYPE_CHECKING
 
 from gateway.bus.edge import BusEdge, bus_options
-from gateway.bus.health import BusErrorState
 from gateway.core.control import Accepted, Rejection, Source, Supervisor
 from gateway.core.errors import EncodeError, GatewayError, KinematicsError
 from gateway.core.kinematics import Odometry, apply_limits
 from gateway.core.odom_feed import OdomFeed
+from gateway.core.status import BusErrorState
 from gateway.core.types import ErrorCode, Frame, GatewayState, Twist
 from gateway.drive.driveset import DriveSet
 from gateway.drive.ownership import gateway_filters

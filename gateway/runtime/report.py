@@ -17,7 +17,6 @@ from typing import TYPE_CHECKING
 from gateway.core.status import (
     BusHealth,
     BusReport,
-    CanErrorState,
     CommandReport,
     ControllerStop,
     Counters,
@@ -153,7 +152,7 @@ def build_status(
             interface=cfg.bus.interface,
             channel=cfg.bus.channel,
             bitrate=cfg.bus.bitrate,
-            health=BusHealth(gw.edge.bus_healthy, CanErrorState(errors.state.value),
+            health=BusHealth(gw.edge.bus_healthy, errors.state,
                              MappingProxyType(dict(errors.counts)), errors.last),
             bits=gw.edge.bits,
             time_s=now_s,

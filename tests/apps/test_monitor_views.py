@@ -14,9 +14,9 @@ import pytest
 from gateway.apps.monitor import BusMonitor, StatusMonitor, render, snapshot_json
 from gateway.core.errors import DecodeError
 from gateway.core.status import (
+    BusErrorState,
     BusHealth,
     BusReport,
-    CanErrorState,
     Counters,
     Direction,
     FrameCount,
@@ -164,7 +164,7 @@ def daemon_status(t: float, count: int, bits: int, healthy: bool = True) -> Gate
             MappingProxyType({"OdriveDriver": MappingProxyType({"malformed: short": 3})}),
             MappingProxyType({})),
         bus=BusReport("virtual", "wheelgate", 1_000_000,
-                      BusHealth(healthy, CanErrorState.ACTIVE, MappingProxyType({}), ""), bits, t,
+                      BusHealth(healthy, BusErrorState.ACTIVE, MappingProxyType({}), ""), bits, t,
                       (FrameCount(0x069, False, Direction.RX, count),)),
     )
 
@@ -211,7 +211,7 @@ def test_status_monitor_shows_the_bus_errors_and_the_faults() -> None:
     health = status.bus.health
     assert health is not None
     mon.update(dataclasses.replace(status, reason="motor 'right' faulted", bus=dataclasses.replace(
-        status.bus, health=dataclasses.replace(health, error_state=CanErrorState.BUS_OFF,
+        status.bus, health=dataclasses.replace(health, error_state=BusErrorState.BUS_OFF,
                                                last_error_frame="bus-off"))))
     snap = mon.snapshot()
     assert snap.notes == ("CAN controller bus-off: bus-off", "gateway: motor 'right' faulted")

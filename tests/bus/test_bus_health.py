@@ -14,13 +14,13 @@ from gateway.bus.health import (
     Backoff,
     BurstTracker,
     BusErrors,
-    BusErrorState,
     ControllerStatus,
     ErrorClass,
     ErrorFrame,
     LogThrottle,
 )
 from gateway.core.control import AUTO_RETRIES, AUTO_RETRY_DELAY_S, Source
+from gateway.core.status import BusErrorState
 from gateway.core.types import ErrorCode, Frame, GatewayState, Twist
 from tests.conftest import CONFIG_DIR
 from tests.e2e_helpers import Rig, error_frame, virtual_config

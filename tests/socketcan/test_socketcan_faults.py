@@ -19,9 +19,9 @@ import can
 import pytest
 
 from drivers.odrive.enums import CmdId
-from gateway.bus.health import BusErrorState
 from gateway.config import load_config
 from gateway.core.control import Source
+from gateway.core.status import BusErrorState
 from gateway.core.types import ErrorCode, GatewayState, Twist
 from tests.e2e_helpers import Rig, error_frame
 

@@ -13,9 +13,9 @@ from hypothesis import strategies as st
 from gateway.core.kinematics.odometry import OdometryState, Pose
 from gateway.core.protection import Guard, ProtectionState
 from gateway.core.status import (
+    BusErrorState,
     BusHealth,
     BusReport,
-    CanErrorState,
     CommandReport,
     ControllerStop,
     Counters,
@@ -81,7 +81,7 @@ def sample_status(**changes: object) -> GatewayStatus:
         last_error=LastError(ErrorCode.MOTOR_FAULT, "motor 'right' (odrive node 2) faulted"),
         realtime=("gc: 100 start-up objects frozen",),
         bus=BusReport("virtual", "wheelgate", 500_000,
-                      BusHealth(True, CanErrorState.ACTIVE,
+                      BusHealth(True, BusErrorState.ACTIVE,
                                 _counts(ERROR_FRAMES, error_frames=2, no_ack=2), "no ACK"),
                       123_456, 12.5,
                       (FrameCount(0x21, False, Direction.RX, 10),
@@ -127,7 +127,7 @@ _timing = st.builds(
     TimingReport, _counts_st, _counts_st, _numbers, _numbers, _numbers, _numbers, _numbers,
     _numbers, _numbers, _numbers, _counts_st, _numbers, _numbers, _numbers, _counts_st,
     _counts_st, _counts_st, st.none() | _numbers)
-_health = st.none() | st.builds(BusHealth, st.booleans(), _enum(CanErrorState),
+_health = st.none() | st.builds(BusHealth, st.booleans(), _enum(BusErrorState),
                                 _mapping(_names, _counts_st), _names)
 _frames = st.lists(st.builds(FrameCount, st.integers(0, 0x1FFFFFFF), st.booleans(),
                              _enum(Direction), _counts_st), max_size=4).map(tuple)

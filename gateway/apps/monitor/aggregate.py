@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING
 
 from gateway.apps.monitor.view import BusLoad, IdView, MonitorSnapshot, MotorView
 from gateway.core.errors import DecodeError, GatewayError
-from gateway.core.status import CanErrorState, fault_names, state_name
+from gateway.core.status import BusErrorState, fault_names, state_name
 from gateway.core.types import DriveState
 from gateway.drive.driveset import DriveSet
 from gateway.drive.labels import FrameLabel, FrameLabeler
@@ -292,7 +292,7 @@ class StatusMonitor:
         health = status.bus.health
         if health is not None and not health.healthy:
             notes.append("the daemon reports its CAN bus as unhealthy")
-        if health is not None and health.error_state is not CanErrorState.ACTIVE:
+        if health is not None and health.error_state is not BusErrorState.ACTIVE:
             notes.append(f"CAN controller {health.error_state.value.replace('_', '-')}: "
                          f"{health.last_error_frame or 'no detail'}")
         if status.reason:

@@ -16,9 +16,9 @@ from typing import TYPE_CHECKING, Final, NoReturn, TypeVar
 from gateway.core.kinematics.odometry import OdometryState, Pose
 from gateway.core.protection import Guard, ProtectionState
 from gateway.core.status import (
+    BusErrorState,
     BusHealth,
     BusReport,
-    CanErrorState,
     CommandReport,
     ControllerStop,
     Counters,
@@ -221,7 +221,7 @@ def _read_socket(obj: _Obj) -> SocketReport:
 
 
 _DIRECTIONS = {d.value: d for d in Direction}
-_ERROR_STATES = {e.value: e for e in CanErrorState}
+_ERROR_STATES = {e.value: e for e in BusErrorState}
 
 
 def _read_bus(obj: _Obj) -> BusReport:
