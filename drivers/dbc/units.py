@@ -48,23 +48,17 @@ class UnitConversion:
     @classmethod
     def build(cls, motor: MotorConfig, opts: DbcOptions) -> UnitConversion:
         """The conversion for ``motor`` with the protocol keys ``opts``."""
-        cmd = VELOCITY_UNITS[opts.command_unit] * opts.command_scale
-        if opts.command_unit == "erpm":
-            cmd *= opts.pole_pairs
-        vel = VELOCITY_UNITS[opts.velocity_unit] * opts.velocity_scale
-        if opts.velocity_unit == "erpm":
-            vel *= opts.pole_pairs
-        pos = POSITION_UNITS[opts.position_unit] * opts.position_scale
-        if opts.position_unit == "counts":
-            pos *= opts.counts_per_rev
-        target = POSITION_UNITS[opts.position_command_unit] * opts.position_command_scale
-        if opts.position_command_unit == "counts":
-            target *= opts.counts_per_rev
+        def speed(unit: str, scale: float) -> float:  # eRPM: per pole pair
+            return VELOCITY_UNITS[unit] * scale * (opts.pole_pairs if unit == "erpm" else 1)
+
+        def angle(unit: str, scale: float) -> float:  # counts: per encoder count
+            return POSITION_UNITS[unit] * scale * (opts.counts_per_rev if unit == "counts" else 1)
+
         return cls(
-            command_per_rad_s=cmd,
-            velocity_per_rad_s=vel,
-            position_per_rad=pos,
-            target_per_rad=target,
+            command_per_rad_s=speed(opts.command_unit, opts.command_scale),
+            velocity_per_rad_s=speed(opts.velocity_unit, opts.velocity_scale),
+            position_per_rad=angle(opts.position_unit, opts.position_scale),
+            target_per_rad=angle(opts.position_command_unit, opts.position_command_scale),
             command_gear=motor.gear_ratio if opts.command_side == "motor" else 1.0,
             feedback_gear=motor.gear_ratio if opts.feedback_side == "motor" else 1.0,
             sign=motor.sign,

@@ -43,12 +43,9 @@ if TYPE_CHECKING:
 
 OptT = TypeVar("OptT", bound=DriverOptions)
 
-class MotorDriver(abc.ABC, Generic[OptT]):
-    """Stateful protocol driver for a group of motors on one bus.
 
-    Subclasses declare their :attr:`Options` and :meth:`claims` and fill in the hooks; the
-    base keeps feedback, liveness, fault flags, arming and the counters of rejected frames so
-    every protocol reports them the same way.
+class MotorDriver(abc.ABC, Generic[OptT]):
+    """Stateful protocol driver for a group of motors on one bus (see the module's doc).
 
     :param motors: the motors this driver serves, in the order the loop passes setpoints.
     :raises ConfigError: if a node ID is out of range or used twice, a protocol key is bad, or
@@ -344,8 +341,7 @@ class MotorDriver(abc.ABC, Generic[OptT]):
         self.live.heard(index, stream, t)
 
     def set_fault(self, index: int, faults: DriveFault, detail: str = "") -> None:
-        """Record the fault flags (``DriveFault.NONE`` clears) of motor ``index``; a
-        protection fault (:meth:`protection_fault`) stays in them."""
+        """Record motor ``index``'s fault flags (NONE clears); a protection fault stays in them."""
         if self._failed.why[index]:
             faults |= DriveFault.WATCHDOG
             detail = self._failed.merged(index, detail)
@@ -371,6 +367,10 @@ class MotorDriver(abc.ABC, Generic[OptT]):
     def feedback(self, index: int) -> WheelFeedback | None:
         """Latest feedback of motor ``index``."""
         return self._feedback[index]
+
+    def feedbacks(self) -> list[WheelFeedback | None]:
+        """Latest feedback of every motor, in :attr:`motors` order (a new list)."""
+        return self._feedback[:]
 
     def state(self, index: int, now_s: float) -> DriveState:
         """What the driver believes of motor ``index`` at ``now_s``: OFFLINE while a liveness

@@ -241,8 +241,8 @@ class DriveSet:
         """Every motor's latest feedback (:meth:`MotorDriver.feedback`; ``None``: none yet),
         in the order of :meth:`status`."""
         out: list[WheelFeedback | None] = []
-        for drv, idx in self.groups:
-            out += map(drv.feedback, range(len(idx)))
+        for drv, _ in self.groups:
+            out += drv.feedbacks()
         order = self._status_order
         return out if order is None else [out[k] for k in order]
 
@@ -250,8 +250,7 @@ class DriveSet:
         """The latest feedback of every wheel in model order (``None``: passive or none yet)."""
         if self._whole:
             # One driver for every wheel, in model order: its motors are the wheels.
-            drv = self.groups[0][0]
-            return list(map(drv.feedback, range(len(self.config.motors))))
+            return self.groups[0][0].feedbacks()
         out = self._slot_feedback()
         return out[: len(self.config.motors)] if self.steered_by else out
 
@@ -263,8 +262,8 @@ class DriveSet:
         """The latest feedback of every setpoint slot (the wheels, then the actuators)."""
         out: list[WheelFeedback | None] = [None] * (len(self.config.motors) + len(self.steered_by))
         for drv, idx in self.groups:
-            for k, i in enumerate(idx):
-                out[i] = drv.feedback(k)
+            for i, fb in zip(idx, drv.feedbacks(), strict=True):
+                out[i] = fb
         return out
 
     def measured_steer(
