@@ -29,10 +29,12 @@ script, run by this interpreter) against ``python -c "import numpy, yaml, click"
 libraries the CLI stands on), ``python -c "import can, yaml"`` (the anchor's) and ``python -c
 pass`` (the interpreter alone): instructions of
 the whole process under callgrind (hash seed 0, after one untimed run so the bytecode caches
-exist), and the median and best wall time of ``--runs`` runs each, interleaved.
+exist; the median of ``--instr-runs`` runs, as a whole interpreter start-up varies by a few
+per cent from run to run even so), and the median and best wall time of ``--runs`` runs each,
+interleaved.
 
 Run: ``.venv/bin/python tools/bench_anchor.py [--instr-cycles N] [--verify] [--runs R]
-[--skip-cycle] [--skip-startup]``.
+[--instr-runs K] [--skip-cycle] [--skip-startup]``.
 """
 
 from __future__ import annotations
@@ -124,9 +126,9 @@ def startup_commands() -> list[tuple[str, list[str]]]:
     return out
 
 
-def _run(argv: list[str]) -> float:
+def _run(argv: list[str], env: dict[str, str] | None = None) -> float:
     t0 = time.perf_counter()
-    proc = subprocess.run(argv, capture_output=True, check=False)
+    proc = subprocess.run(argv, capture_output=True, check=False, env=env)
     elapsed = time.perf_counter() - t0
     if proc.returncode != 0:
         raise SystemExit(f"{' '.join(argv)}: expected exit status 0, got {proc.returncode}: "
@@ -134,29 +136,39 @@ def _run(argv: list[str]) -> float:
     return elapsed
 
 
-def run_startup(runs: int) -> dict[str, tuple[int, float, float]]:
+def run_startup(runs: int, instr_runs: int = 5) -> dict[str, tuple[int, float, float]]:
     """Per command: (instructions, median wall s, best wall s); prints the table."""
     print("\n" + _doc("Start-up") + "\n", flush=True)
     commands = startup_commands()
     env = {"PYTHONHASHSEED": "0"}
+    # Bytecode caches written, as an installed package has them (PYTHONDONTWRITEBYTECODE in
+    # the environment would leave wheelgate's modules compiled from source on every run).
+    writes = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
     for _, argv in commands:
-        _run(argv)  # bytecode caches written
+        _run(argv, writes)
     wall: dict[str, list[float]] = {label: [] for label, _ in commands}
     for _ in range(runs):
         for label, argv in commands:
             wall[label].append(_run(argv))
-    out: dict[str, tuple[int, float, float]] = {}
-    for label, argv in commands:
-        with tempfile.TemporaryDirectory(prefix="wg-callgrind-") as tmp:
-            counts = callgrind.run(argv, Path(tmp), env)
-        if len(counts) != 1:
-            raise SystemExit(f"{label}: expected one process under callgrind, got {len(counts)}")
-        out[label] = (next(iter(counts.values())), statistics.median(wall[label]),
-                      min(wall[label]))
-    print(f"command                         instructions   median ms   best ms   ({runs} runs, "
-          f"load average {os.getloadavg()[0]:.2f})")
+    instr: dict[str, list[int]] = {label: [] for label, _ in commands}
+    for _ in range(instr_runs):
+        for label, argv in commands:
+            with tempfile.TemporaryDirectory(prefix="wg-callgrind-") as tmp:
+                counts = callgrind.run(argv, Path(tmp), env)
+            if len(counts) != 1:
+                raise SystemExit(f"{label}: expected one process under callgrind, "
+                                 f"got {len(counts)}")
+            instr[label].append(next(iter(counts.values())))
+    out: dict[str, tuple[int, float, float]] = {
+        label: (int(statistics.median(instr[label])), statistics.median(wall[label]),
+                min(wall[label]))
+        for label, _ in commands
+    }
+    print(f"command                         instructions (median; range)       median ms   "
+          f"best ms   ({instr_runs} / {runs} runs, load average {os.getloadavg()[0]:.2f})")
     for label, (ir, med, best) in out.items():
-        print(f"{label:30} {ir:14,} {med * 1e3:10.1f} {best * 1e3:9.1f}")
+        spread = f"{min(instr[label]):,}-{max(instr[label]):,}"
+        print(f"{label:30} {ir:14,} ({spread:>27}) {med * 1e3:10.1f} {best * 1e3:9.1f}")
     (cli, cli_v), (lib, lib_v) = list(out.items())[:2]
     print(f"\n{cli} / {lib}: {cli_v[0] / lib_v[0]:.2f}x instructions, "
           f"{cli_v[1] / lib_v[1]:.2f}x median wall time", flush=True)
@@ -170,6 +182,8 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--verify", action="store_true",
                         help="repeat every N-cycle child and add a 3N one (repeatability)")
     parser.add_argument("--runs", type=int, default=30, help="wall-time runs per command")
+    parser.add_argument("--instr-runs", type=int, default=5,
+                        help="start-up runs under callgrind per command (median)")
     parser.add_argument("--skip-cycle", action="store_true")
     parser.add_argument("--skip-startup", action="store_true")
     args = parser.parse_args(argv)
@@ -178,7 +192,7 @@ def main(argv: list[str] | None = None) -> None:
     if not args.skip_cycle:
         run_cycle(args.instr_cycles, args.verify)
     if not args.skip_startup:
-        run_startup(args.runs)
+        run_startup(args.runs, args.instr_runs)
 
 
 if __name__ == "__main__":

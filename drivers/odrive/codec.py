@@ -35,7 +35,6 @@ from drivers.odrive.messages import (
     GET_ERROR_06,
     GET_MOTOR_ERROR_05,
     HEARTBEAT,
-    INPUT_POS_FF_SCALE,
     MAX_EXTENDED_NODE_ID,
     MAX_STANDARD_NODE_ID,
     SET_AXIS_STATE,
@@ -44,20 +43,12 @@ from drivers.odrive.messages import (
     SET_INPUT_VEL,
     TRAJ_DONE_05,
     TRANSITIONS,
-    ClearErrors,
-    Command,
     EncoderEstimates,
     ErrorStatus,
-    Estop,
     Feedback,
     Heartbeat,
     Layout,
     MotorErrorStatus,
-    Request,
-    SetAxisState,
-    SetControllerMode,
-    SetInputPos,
-    SetInputVel,
     Step,
     check_float32,
     check_u32,
@@ -340,43 +331,6 @@ class OdriveCodec:
             bool(b6 & 1),
             bool(b7 & CONTROLLER_ERROR_05),
         )
-
-    def decode_command(self, frame: Frame) -> Command | None:
-        """Decode a host-to-axis frame (the device side, used by the simulator).
-
-        :return: ``None`` for a frame of the other ID type or a command this codec does not
-            model.
-        :raises DecodeError: for a wrong DLC.
-        """
-        ids = self.split_id(frame)
-        if ids is None:
-            return None
-        node, cmd = ids
-        getter = cmd in self._feedback
-        if frame.is_remote_frame or (getter and frame.dlc == 0 and self.firmware is Firmware.V0_5):
-            return Request(node, CmdId(cmd)) if getter else None
-        if cmd == CmdId.SET_INPUT_VEL:
-            vel, torque = SET_INPUT_VEL.unpack(node, frame)
-            return SetInputVel(node, vel, torque)
-        if cmd == CmdId.SET_INPUT_POS:
-            pos, vel_ff, torque_ff = SET_INPUT_POS.unpack(node, frame)
-            return SetInputPos(
-                node, pos, vel_ff * INPUT_POS_FF_SCALE, torque_ff * INPUT_POS_FF_SCALE
-            )
-        if cmd == CmdId.SET_AXIS_STATE:
-            (state,) = SET_AXIS_STATE.unpack(node, frame)
-            state = int(state)
-            return SetAxisState(node, _AXIS_STATES.get(state, state))
-        if cmd == CmdId.SET_CONTROLLER_MODE:
-            control, inp = SET_CONTROLLER_MODE.unpack(node, frame)
-            return SetControllerMode(node, int(control), int(inp))
-        if cmd == CmdId.CLEAR_ERRORS:
-            values = self.clear_errors_layout.unpack(node, frame)
-            return ClearErrors(node, bool(values and values[0]))
-        if cmd == CmdId.ESTOP:
-            ESTOP.unpack(node, frame)
-            return Estop(node)
-        return None
 
 
 def unpack_estimates(node: int, frame: Frame) -> tuple[float, float]:

@@ -4,7 +4,8 @@ Each message is a :class:`Layout` (command ID, precompiled ``struct.Struct``, th
 DBC's signal names and the DLCs accepted); :class:`~drivers.odrive.codec.OdriveCodec`, the
 device simulator, the tests' cantools cross-check and the benchmarks all derive from these
 tables.  Beside them: the identifier and range constants with the checks of field values, the
-decoded messages as frozen dataclasses, and the table of allowed axis-state transitions.
+decoded feedback messages as frozen dataclasses, and the table of allowed axis-state
+transitions.  The commands as the device decodes them are in :mod:`drivers.odrive.commands`.
 """
 
 from __future__ import annotations
@@ -232,72 +233,8 @@ class MotorErrorStatus:
     motor_error: int
 
 
-@dataclass(frozen=True, slots=True)
-class SetInputVel:
-    """Set_Input_Vel (0x0D). :param vel_turns_s: turns/s. :param torque_ff_nm: N*m."""
-
-    node_id: int
-    vel_turns_s: float
-    torque_ff_nm: float = 0.0
-
-
-@dataclass(frozen=True, slots=True)
-class SetInputPos:
-    """Set_Input_Pos (0x0C). :param pos_turns: turns. :param vel_ff_turns_s: turns/s.
-    :param torque_ff_nm: N*m."""
-
-    node_id: int
-    pos_turns: float
-    vel_ff_turns_s: float = 0.0
-    torque_ff_nm: float = 0.0
-
-
-@dataclass(frozen=True, slots=True)
-class SetAxisState:
-    """Set_Axis_State (0x07). :param state: requested state (int if unknown)."""
-
-    node_id: int
-    state: AxisState | int
-
-
-@dataclass(frozen=True, slots=True)
-class SetControllerMode:
-    """Set_Controller_Mode (0x0B)."""
-
-    node_id: int
-    control_mode: int
-    input_mode: int
-
-
-@dataclass(frozen=True, slots=True)
-class ClearErrors:
-    """Clear_Errors (0x18). :param identify: 0.6 only: blink the LED."""
-
-    node_id: int
-    identify: bool = False
-
-
-@dataclass(frozen=True, slots=True)
-class Estop:
-    """Estop (0x02)."""
-
-    node_id: int
-
-
-@dataclass(frozen=True, slots=True)
-class Request:
-    """A request for a cyclic message (RTR frame, or DLC 0 data frame in 0.5)."""
-
-    node_id: int
-    cmd: CmdId
-
-
 #: Everything :meth:`OdriveCodec.decode` returns.
 Feedback: TypeAlias = Heartbeat | EncoderEstimates | ErrorStatus | MotorErrorStatus
-#: Everything :meth:`OdriveCodec.decode_command` returns.
-Command: TypeAlias = (
-    SetInputVel | SetInputPos | SetAxisState | SetControllerMode | ClearErrors | Estop | Request
-)
 
 
 class Step(enum.Enum):

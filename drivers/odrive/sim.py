@@ -44,6 +44,16 @@ import struct
 from typing import TYPE_CHECKING
 
 from drivers.odrive.codec import OdriveCodec
+from drivers.odrive.commands import (
+    ClearErrors,
+    Estop,
+    Request,
+    SetAxisState,
+    SetControllerMode,
+    SetInputPos,
+    SetInputVel,
+    decode_command,
+)
 from drivers.odrive.enums import (
     AxisError,
     AxisError05,
@@ -55,18 +65,7 @@ from drivers.odrive.enums import (
     MotorError05,
     ProcedureResult,
 )
-from drivers.odrive.messages import (
-    ClearErrors,
-    ErrorStatus,
-    Estop,
-    Heartbeat,
-    MotorErrorStatus,
-    Request,
-    SetAxisState,
-    SetControllerMode,
-    SetInputPos,
-    SetInputVel,
-)
+from drivers.odrive.messages import ErrorStatus, Heartbeat, MotorErrorStatus
 from drivers.odrive.options import OdriveOptions
 from drivers.odrive.watchdog import (
     OPCODE_READ,
@@ -169,7 +168,7 @@ class OdriveSimulator(DeviceSimulator):
         if v06 and ids[1] in _FEEDS_06:
             self._last_fed_s = now_s
         try:
-            cmd = self.codec.decode_command(frame)
+            cmd = decode_command(self.codec, frame)
         except DecodeError as err:
             log.debug("simulated ODrive %d ignores %s: %s", self.node_id, frame.to_cansend(), err)
             return []

@@ -17,9 +17,12 @@ The file itself is bounded too (:data:`MAX_BYTES`).
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import yaml
+from yaml.composer import Composer
+from yaml.constructor import SafeConstructor
+from yaml.resolver import Resolver
 
 from gateway.core.errors import ConfigError
 
@@ -38,8 +41,17 @@ def _line(node: yaml.Node | yaml.Event | yaml.Token) -> int:
     return mark.line + 1 if mark is not None else 0
 
 
-class _StrictLoader(yaml.SafeLoader):
-    """The safe loader with unique keys, no aliases and bounded scalars."""
+if TYPE_CHECKING:
+    _Mixin = yaml.SafeLoader  # what the mixin's methods call (the same methods in both loaders)
+else:
+    _Mixin = object
+
+
+class _Strict(_Mixin):
+    """The checks added to PyYAML's safe loading: unique keys, no aliases, bounded scalars.
+
+    A mixin of the loader classes below (it calls their composer and constructor).
+    """
 
     source = ""
     _depth = 0
@@ -111,8 +123,31 @@ class _StrictLoader(yaml.SafeLoader):
             )
 
 
-_StrictLoader.add_constructor("tag:yaml.org,2002:int", _StrictLoader.construct_yaml_int)
-_StrictLoader.add_constructor("tag:yaml.org,2002:float", _StrictLoader.construct_yaml_float)
+class _PyLoader(_Strict, yaml.SafeLoader):
+    """The strict loader in pure Python (PyYAML built without libyaml)."""
+
+
+_Loader: type[_Strict] = _PyLoader
+if yaml.__with_libyaml__:
+    from yaml._yaml import CParser
+
+    class _CLoader(_Strict, Composer, CParser, SafeConstructor, Resolver):
+        """The strict loader on libyaml's scanner and parser, about five times faster: the
+        composing (where the checks of :class:`_Strict` sit) and constructing stay PyYAML's
+        Python code, which read libyaml's events as they read the pure-Python parser's."""
+
+        def __init__(self, stream: str) -> None:
+            CParser.__init__(self, stream)
+            Composer.__init__(self)
+            SafeConstructor.__init__(self)
+            Resolver.__init__(self)
+
+    _Loader = _CLoader
+
+_LOADERS: tuple[type[_Strict], ...] = (_PyLoader,) if _Loader is _PyLoader else (_PyLoader, _Loader)
+for _cls in _LOADERS:
+    _cls.add_constructor("tag:yaml.org,2002:int", _Strict.construct_yaml_int)
+    _cls.add_constructor("tag:yaml.org,2002:float", _Strict.construct_yaml_float)
 
 
 def read_text(data: bytes, source: str) -> str:
@@ -144,15 +179,28 @@ def load_yaml(text: str, source: str) -> object:
             f"{source}: expected a configuration of at most {MAX_BYTES} bytes, got "
             f"{len(text)} characters"
         )
-    loader: _StrictLoader | None = None
     try:
-        loader = _StrictLoader(text)  # reads the first characters already
+        return _parse(_Loader, text, source)
+    except yaml.YAMLError as first:
+        err = first
+        if _Loader is not _PyLoader:
+            # libyaml's syntax errors lack the quoted line and caret of PyYAML's own: the
+            # pure-Python parser says it again (the same error, at the same place).
+            try:
+                _parse(_PyLoader, text, source)
+            except yaml.YAMLError as again:
+                err = again
+        raise ConfigError(f"{source}: not valid YAML: {err}") from err
+
+
+def _parse(cls: type[_Strict], text: str, source: str) -> object:
+    loader = None
+    try:
+        loader = cls(text)  # reads the first characters already
         loader.source = source
         return loader.get_single_data()
-    except ConfigError:
+    except ConfigError:  # a ValueError too, already worded
         raise
-    except yaml.YAMLError as err:
-        raise ConfigError(f"{source}: not valid YAML: {err}") from err
     except RecursionError as err:
         raise ConfigError(
             f"{source}: expected YAML of modest depth, got nesting too deep"

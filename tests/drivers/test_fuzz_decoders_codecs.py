@@ -21,6 +21,7 @@ from drivers.dbc import DbcDriver
 from drivers.dji.codec import decode_command as dji_decode_command
 from drivers.dji.codec import decode_feedback as dji_decode_feedback
 from drivers.odrive import Firmware, OdriveCodec
+from drivers.odrive.commands import decode_command
 from drivers.vesc.codec import decode as vesc_decode
 from drivers.vesc.codec import decode_command as vesc_decode_command
 from gateway.core.errors import DecodeError
@@ -82,7 +83,7 @@ CIA402 = Cia402Codec({1: PdoLayout(), 5: PdoLayout(rpdo=1, tpdo_position=1, tpdo
 
 def _odrive_decoders(fw: Firmware, ext: bool) -> Decoders:
     codec = OdriveCodec(fw, ext)
-    return [codec.decode, codec.decode_command]
+    return [codec.decode, functools.partial(decode_command, codec)]
 
 
 def _aims(ids: list[int], ext: bool = False) -> list[Own]:

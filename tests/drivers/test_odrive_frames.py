@@ -19,6 +19,14 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from drivers.odrive.codec import OdriveCodec
+from drivers.odrive.commands import (
+    ClearErrors,
+    Request,
+    SetAxisState,
+    SetControllerMode,
+    SetInputVel,
+    decode_command,
+)
 from drivers.odrive.enums import (
     AxisState,
     CmdId,
@@ -28,15 +36,10 @@ from drivers.odrive.messages import (
     ENCODER_ESTIMATES,
     SET_CONTROLLER_MODE,
     SET_INPUT_VEL,
-    ClearErrors,
     EncoderEstimates,
     ErrorStatus,
     Heartbeat,
     MotorErrorStatus,
-    Request,
-    SetAxisState,
-    SetControllerMode,
-    SetInputVel,
 )
 from gateway.core.errors import DecodeError, EncodeError
 from gateway.core.types import Frame
@@ -179,7 +182,7 @@ def _close32(got: float, want: float) -> bool:
 @given(node=ext_node, vel=st.floats(-1e30, 1e30), torque=st.floats(-1e3, 1e3))
 def test_round_trip_set_input_vel(node: int, vel: float, torque: float) -> None:
     codec = OdriveCodec(extended_id=True)
-    cmd = codec.decode_command(codec.make_set_input_vel(node, vel, torque))
+    cmd = decode_command(codec, codec.make_set_input_vel(node, vel, torque))
     assert isinstance(cmd, SetInputVel)
     assert cmd.node_id == node
     assert _close32(cmd.vel_turns_s, vel)
@@ -188,15 +191,15 @@ def test_round_trip_set_input_vel(node: int, vel: float, torque: float) -> None:
 
 @given(node=std_node, state=u32, control=u32, inp=u32, identify=st.booleans())
 def test_round_trip_commands(node: int, state: int, control: int, inp: int, identify: bool) -> None:
-    got = C6.decode_command(C6.make_set_axis_state(node, state))
+    got = decode_command(C6, C6.make_set_axis_state(node, state))
     assert isinstance(got, SetAxisState)
     assert (got.node_id, got.state) == (node, state)
-    assert C6.decode_command(C6.make_set_controller_mode(node, control, inp)) == (
+    assert decode_command(C6, C6.make_set_controller_mode(node, control, inp)) == (
         SetControllerMode(node, control, inp)
     )
-    assert C6.decode_command(C6.make_clear_errors(node, identify)) == ClearErrors(node, identify)
-    assert C5.decode_command(C5.make_clear_errors(node, identify)) == ClearErrors(node, False)
-    assert C6.decode_command(C6.make_request(node, CmdId.HEARTBEAT)) == Request(
+    assert decode_command(C6, C6.make_clear_errors(node, identify)) == ClearErrors(node, identify)
+    assert decode_command(C5, C5.make_clear_errors(node, identify)) == ClearErrors(node, False)
+    assert decode_command(C6, C6.make_request(node, CmdId.HEARTBEAT)) == Request(
         node, CmdId.HEARTBEAT
     )
 
@@ -281,7 +284,7 @@ def test_decode_ignores_what_is_not_a_reply() -> None:
     assert OdriveCodec(extended_id=True).decode(Frame(0x069, data)) is None
     assert C6.decode(Frame(0x069, is_remote_frame=True, dlc=8)) is None  # a request
     assert C5.decode(Frame(0x069, b"")) is None  # 0.5 answers DLC 0 data frames too
-    assert C5.decode_command(Frame(0x069, b"")) == Request(3, CmdId.GET_ENCODER_ESTIMATES)
+    assert decode_command(C5, Frame(0x069, b"")) == Request(3, CmdId.GET_ENCODER_ESTIMATES)
     assert C6.decode(Frame(0x06A, bytes(8))) is None  # Get_Encoder_Count: not used
     assert C6.decode(C6.make_set_input_vel(3, 1.0)) is None  # a command, not a reply
     unknown = C6.decode(Frame(0x061, hx("00000000 2A 10 00 00")))
@@ -289,8 +292,8 @@ def test_decode_ignores_what_is_not_a_reply() -> None:
 
 
 def test_decode_command_dlc() -> None:
-    assert C6.decode_command(Frame(0x067, hx("08000000"))) == SetAxisState(3, AxisState(8))
+    assert decode_command(C6, Frame(0x067, hx("08000000"))) == SetAxisState(3, AxisState(8))
     with pytest.raises(DecodeError, match="Expected 8 or 4 data bytes in Set_Axis_State"):
-        C6.decode_command(Frame(0x067, hx("080000")))
+        decode_command(C6, Frame(0x067, hx("080000")))
     with pytest.raises(DecodeError, match="Expected 8 data bytes in Set_Input_Vel"):
-        C6.decode_command(Frame(0x06D, hx("00002041")))
+        decode_command(C6, Frame(0x06D, hx("00002041")))

@@ -20,8 +20,8 @@ from hypothesis import strategies as st
 
 from drivers.odrive import OdriveDriver
 from drivers.odrive.codec import OdriveCodec
+from drivers.odrive.commands import SetControllerMode, SetInputPos, decode_command
 from drivers.odrive.enums import CmdId, ControlMode
-from drivers.odrive.messages import SetControllerMode, SetInputPos
 from gateway.config import load_config, parse_config
 from gateway.core.errors import ConfigError, EncodeError
 from gateway.core.linkage import virtual_angle
@@ -134,7 +134,7 @@ def test_set_input_pos_golden() -> None:
     frame = OdriveCodec().make_set_input_pos(0, 1.5, 2.0, -0.5)
     assert frame.arbitration_id == 0x00C
     assert frame.data == bytes.fromhex("0000C03FD0070CFE")
-    assert OdriveCodec().decode_command(frame) == SetInputPos(0, 1.5, 2.0, -0.5)
+    assert decode_command(OdriveCodec(), frame) == SetInputPos(0, 1.5, 2.0, -0.5)
 
 
 @given(
@@ -152,14 +152,14 @@ def test_set_input_pos_matches_official_dbc(
     assert decoded["Input_Pos"] == pos
     assert abs(decoded["Vel_FF"] - vel) <= 0.0005 + 1e-9
     assert abs(decoded["Torque_FF"] - torque) <= 0.0005 + 1e-9
-    back = OdriveCodec().decode_command(frame)
+    back = decode_command(OdriveCodec(), frame)
     assert isinstance(back, SetInputPos)
     assert back.pos_turns == pos and abs(back.vel_ff_turns_s - vel) <= 0.0005 + 1e-9
 
 
 def test_feed_forward_is_clipped_and_position_must_be_finite() -> None:
     codec = OdriveCodec()
-    big = codec.decode_command(codec.make_set_input_pos(1, 0.0, 1e6))
+    big = decode_command(codec, codec.make_set_input_pos(1, 0.0, 1e6))
     assert isinstance(big, SetInputPos) and big.vel_ff_turns_s == pytest.approx(32.767)
     with pytest.raises(EncodeError, match="Expected Input_Pos for node 1"):
         codec.make_set_input_pos(1, math.nan)
@@ -172,17 +172,17 @@ def test_driver_arms_steering_in_position_control() -> None:
     drive = factories.motor("odrive", 1, "front_left", gear_ratio=6.75, max_rpm=6000.0)
     drv = OdriveDriver([drive, _steer_motor()])
     codec = OdriveCodec()
-    modes = [codec.decode_command(f) for f in drv.enable(0.0)]
+    modes = [decode_command(codec, f) for f in drv.enable(0.0)]
     assert SetControllerMode(1, ControlMode.VELOCITY_CONTROL, 1) in modes
     assert SetControllerMode(5, ControlMode.POSITION_CONTROL, 1) in modes
-    first = [codec.decode_command(f) for f in drv.command([2.0, 0.5], 0.0)]
+    first = [decode_command(codec, f) for f in drv.command([2.0, 0.5], 0.0)]
     assert first[0] is not None and first[0].node_id == 1
     # 0.5 rad of the wheel's plane is 0.5 * 12.8 / (2 pi) motor turns; no rate known yet.
     assert isinstance(first[1], SetInputPos)
     assert first[1].node_id == 5 and first[1].vel_ff_turns_s == 0.0
     assert first[1].pos_turns == pytest.approx(0.5 * 12.8 / (2 * math.pi), rel=1e-6)
     # 0.01 s later at 0.6 rad: 10 rad/s of the plane, 10 * 12.8 / (2 pi) turns/s forward.
-    second = codec.decode_command(drv.command([2.0, 0.6], 0.01)[1])
+    second = decode_command(codec, drv.command([2.0, 0.6], 0.01)[1])
     assert isinstance(second, SetInputPos)
     assert second.vel_ff_turns_s == pytest.approx(10 * 12.8 / (2 * math.pi), abs=0.001)
     with pytest.raises(

@@ -9,8 +9,8 @@ from typing import TYPE_CHECKING
 import pytest
 
 from drivers.odrive.codec import OdriveCodec
+from drivers.odrive.commands import SetInputPos, decode_command
 from drivers.odrive.enums import AxisState, CmdId, ControlMode
-from drivers.odrive.messages import SetInputPos
 from gateway.cli import main
 from gateway.config import load_config
 from gateway.core.kinematics import Odometry
@@ -124,7 +124,7 @@ def test_frames_preview_includes_steering() -> None:
     kinds = sorted((f.arbitration_id >> 5, f.arbitration_id & 0x1F) for f in frames)
     assert kinds == [(n, CmdId.SET_INPUT_VEL) for n in (1, 2, 3, 4)] + [
         (n, CmdId.SET_INPUT_POS) for n in (5, 6, 7, 9)]
-    pos = [OdriveCodec().decode_command(f) for f in frames if f.arbitration_id & 0x1F == 0xC]
+    pos = [decode_command(OdriveCodec(), f) for f in frames if f.arbitration_id & 0x1F == 0xC]
     for cmd, angle in zip(pos, result.steer_rad, strict=True):
         assert isinstance(cmd, SetInputPos) and angle is not None
         assert cmd.pos_turns == pytest.approx(angle * 12.8 / (2 * math.pi), rel=1e-6)
