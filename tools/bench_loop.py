@@ -40,8 +40,9 @@ cycle".  With ``--sims thread`` the gateway's cost also carries the simulator th
 of the GIL, so that ratio is the pessimistic one; ``--sims inline`` compares like with like.
 ``tools/bench_throughput.py`` makes the same comparison in CPU time, frame for frame.
 
-Run: ``python tools/bench_loop.py [seconds] [--rt PRIORITY] [--cpu N] [--lock]
-[--sims thread|inline] [--spin-us US] [--platform]`` (default 10 s, normal scheduling).
+Run: ``python tools/bench_loop.py [seconds] [--rt PRIORITY] [--cpu N] [--lock] [--sims
+thread|inline] [--spin-us US] [--platform] [--bridge]`` (default 10 s, normal scheduling;
+``--bridge``: with a loopback Zenoh bridge, ROS 2 topics too, and an observer process).
 ``--platform`` then runs the same scheduler for as long, in the same thread and policy, doing
 the same constant arithmetic in every cycle (as much CPU time at the median as the gateway's
 cycle took), and rt-tests' ``cyclictest`` (C) at the same rate and priority when it is
@@ -250,6 +251,9 @@ def main() -> None:
     parser.add_argument("--spin-us", type=float, default=None, metavar="US",
                         help="spin this long before each deadline instead of sleeping "
                              "(gateway.spin_us; default: the config's, 200 us)")
+    parser.add_argument("--bridge", action="store_true",
+                        help="with a Zenoh bridge (loopback, ROS 2 topics too) and an observer "
+                             "process subscribed to everything it publishes")
     parser.add_argument("--client", metavar="SOCKET", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.client:
@@ -261,6 +265,11 @@ def main() -> None:
         cfg.loop, rate_hz=1000.0, odom_rate_hz=50.0, rt_priority=args.rt, rt_cpu=args.cpu,
         lock_memory=args.lock,
         spin_us=cfg.loop.spin_us if args.spin_us is None else args.spin_us))
+    observer = None
+    if args.bridge:
+        from bridge_peer import with_bridge  # noqa: PLC0415 - only with --bridge
+
+        cfg, observer = with_bridge(cfg)
     folder = tempfile.mkdtemp(prefix="wgb", dir="/tmp")
     path = f"{folder}/b.sock"
     inline = args.sims == "inline"
@@ -301,6 +310,10 @@ def main() -> None:
             out, _ = sender.communicate()
     stats = timer.snapshot()
     steal_end = steal_s()
+    if observer is not None:
+        seen, _ = observer.communicate("", timeout=10.0)
+        print(f"bridge: the observer received {seen.strip().splitlines()[-1]} (odometry at "
+              f"{cfg.loop.odom_rate_hz:g} Hz, status at {cfg.loop.status_rate_hz:g} Hz)")
     sent_ns: dict[int, int] = {}
     for line in out.splitlines():
         if line.strip():

@@ -45,7 +45,7 @@ def _choices(kind: type[enum.Enum]) -> tuple[object, ...]:
 #: The top-level keys of a configuration file.
 TOP_KEYS = frozenset(
     {"name", "drive", "geometry", "wheels", "motors", "motor_defaults", "steering",
-     "steering_defaults", "limits", "kinematics", "bus", "gateway"}
+     "steering_defaults", "limits", "kinematics", "bus", "gateway", "bridge", "foxglove"}
 )
 #: The keys of a motor block that every driver takes (``motor_defaults:`` is merged in first);
 #: any other key is a protocol key of the driver.

@@ -36,6 +36,7 @@ from pathlib import Path
 from types import MappingProxyType
 from typing import TYPE_CHECKING
 
+from gateway.config.bridge import parse_bridge, parse_foxglove
 from gateway.config.keys import (
     BUS_KEYS,
     CAN_ID_KEYS,
@@ -55,12 +56,13 @@ from gateway.config.motors import (
 )
 from gateway.config.yaml_text import MAX_BYTES, load_yaml, read_text
 from gateway.core.can_ids import CanIds
+from gateway.core.choice import choice
 from gateway.core.errors import ConfigError, KinematicsError
 from gateway.core.kinematics import PRESETS, Limits, RobotModel, Wheel, WheelType
 from gateway.core.kinematics.model import validate_wheel
 from gateway.core.options import OptionSpec, validate_block
 from gateway.core.protection import Guard, WatchdogPolicy, check_timeout
-from gateway.core.settings import LOOP_CHOICES, BusConfig, GatewayConfig, LoopConfig, choice
+from gateway.core.settings import LOOP_CHOICES, BusConfig, GatewayConfig, LoopConfig
 from gateway.drive.ownership import own_id_collisions
 
 if TYPE_CHECKING:
@@ -223,9 +225,14 @@ def parse_config(
             f"writable by every local user, who could then drive the robot; expected 0o660 "
             f"(the owner and the group wheelgate), with socket_uids for finer control"
         )
+    bridge = None
+    if "bridge" in raw:
+        bridge, said = parse_bridge(raw["bridge"], source, name)
+        warnings += said
+    foxglove = parse_foxglove(raw["foxglove"], source) if "foxglove" in raw else None
     config = GatewayConfig(
         source, name, str(drive), MappingProxyType(geometry), model, motors, limits, bus, loop,
-        steering, tuple(warnings),
+        steering, tuple(warnings), bridge, foxglove,
     )
     from gateway.drive.driveset import DriveSet  # noqa: PLC0415 - the drivers load after the config
 

@@ -17,11 +17,12 @@ from types import MappingProxyType
 from typing import TYPE_CHECKING
 
 from gateway.config.keys import LINKAGE_KEYS, MOTOR_KEYS, STEERING_KEYS
+from gateway.core.choice import choice
 from gateway.core.errors import ConfigError, DriverNotFoundError
 from gateway.core.kinematics import WheelType
 from gateway.core.linkage import virtual_angle
 from gateway.core.options import validate_block
-from gateway.core.settings import Linkage, choice
+from gateway.core.settings import Linkage
 from gateway.core.types import MotorConfig, MotorRole
 from gateway.drive.registry import get_driver_class, valid_drivers
 

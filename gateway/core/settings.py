@@ -18,34 +18,21 @@ configuration imports them from :mod:`gateway.config`.
 
 from __future__ import annotations
 
-import enum
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, TypeVar
+from typing import TYPE_CHECKING
 
 from gateway.core.can_ids import CanIds
-from gateway.core.errors import ConfigError
+from gateway.core.choice import Choice, choice
 from gateway.core.protection import WatchdogPolicy
 from gateway.core.tracking import DEFAULT_LIMITS, TrackingLimits
 
 if TYPE_CHECKING:
+    import enum
     from collections.abc import Mapping
 
+    from gateway.core.bridge_settings import BridgeSettings, FoxgloveSettings
     from gateway.core.kinematics import Limits, RobotModel, Wheel
     from gateway.core.types import MotorConfig
-
-_C = TypeVar("_C", bound=enum.Enum)
-
-
-class Choice(str, enum.Enum):
-    """A configuration value out of a fixed set: a ``str`` whose ``str()`` and ``format()``
-    are its value (``enum.StrEnum`` needs Python 3.11; wheelgate supports 3.10)."""
-
-    def __str__(self) -> str:
-        return str(self.value)
-
-    def __format__(self, spec: str) -> str:
-        return format(str(self.value), spec)
-
 
 class InfeasiblePolicy(Choice):
     """``gateway.infeasible_policy``: what an infeasible twist gets."""
@@ -90,20 +77,6 @@ class Linkage(Choice):
     DIRECT = "direct"
     #: An Ackermann linkage: the angle is a virtual middle wheel's (:mod:`gateway.core.linkage`).
     ACKERMANN = "ackermann"
-
-
-def choice(kind: type[_C], value: object, where: str) -> _C:
-    """``value`` as a member of ``kind`` (a member, or its value).
-
-    :raises ConfigError: naming ``where``, the choices and what came.
-    """
-    if isinstance(value, kind):
-        return value
-    try:
-        return kind(value)
-    except ValueError:
-        allowed = ", ".join(repr(m.value) for m in kind)
-        raise ConfigError(f"{where}: expected one of {allowed}, got {value!r}") from None
 
 
 #: The ``gateway:`` keys whose values are choices, with their enums.
@@ -227,6 +200,8 @@ class GatewayConfig:
         turns; steered wheels without one are steered outside the gateway.
     :param warnings: what is allowed but probably wrong (``check`` prints them, ``run`` logs
         them at start).
+    :param bridge: the ``bridge:`` block (Zenoh, ROS 2), ``None`` when absent.
+    :param foxglove: the ``foxglove:`` block (live view), ``None`` when absent.
     """
 
     source: str
@@ -240,6 +215,8 @@ class GatewayConfig:
     loop: LoopConfig = field(default_factory=LoopConfig)
     steering: tuple[MotorConfig, ...] = ()
     warnings: tuple[str, ...] = ()
+    bridge: BridgeSettings | None = None
+    foxglove: FoxgloveSettings | None = None
 
     @property
     def wheels(self) -> tuple[Wheel, ...]:

@@ -34,6 +34,8 @@ class Source(enum.Enum):
 
     SOCKET = "socket"
     CAN = "can"
+    #: The Zenoh bridge (native keys or ROS 2).
+    BRIDGE = "bridge"
     INTERNAL = "internal"
 
 

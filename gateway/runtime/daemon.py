@@ -29,6 +29,7 @@ from gateway.core.settings import FeedbackRecovery
 from gateway.core.types import DriveState, ErrorCode, GatewayState
 from gateway.runtime.latch import EstopLatch, latch_path
 from gateway.runtime.loop import Gateway
+from gateway.runtime.remote import Remote
 from gateway.runtime.report import build_status
 from gateway.runtime.requests import RequestHandler
 from gateway.runtime.sdnotify import SystemdNotifier
@@ -74,6 +75,7 @@ class Daemon:
     :param record: candump-format log of every frame sent and received.
     :param socket_path: the control socket; the config's, or the default, when omitted.
     :param notifier: sd_notify client; from the environment when omitted.
+    :param record_mcap: record the live view's channels to this MCAP file ('' for none).
     """
 
     def __init__(
@@ -83,6 +85,7 @@ class Daemon:
         record: str | None = None,
         socket_path: str | None = None,
         notifier: SystemdNotifier | None = None,
+        record_mcap: str = "",
     ) -> None:
         if sim and config.bus.interface != "virtual":
             log.info("--sim: using the virtual bus instead of %s", config.bus.interface)
@@ -128,6 +131,15 @@ class Daemon:
         self.requests = RequestHandler(self.gateway, self.server, self.latch, self.status)
         # When each twist accepted since the last cycle arrived (the latency's start).
         self._pending_twists = self.requests.pending_twists
+        # The Zenoh bridge and the live view, when configured; started here, before
+        # realtime_setup, so that their threads (Zenoh's own too) never run SCHED_FIFO.
+        try:
+            self.remote = Remote(self.gateway, self.latch, self.status, self._pending_twists,
+                                 record_mcap)
+        except BaseException:
+            self.close()
+            raise
+        self._closers.append(self.remote.close)
         self._watchdog_s = self.notifier.watchdog_period_s
         self._next_watchdog = 0.0
         self.rt_notes: list[str] = []
@@ -238,6 +250,7 @@ class Daemon:
             topic = event_topic(news)
             if server.has_subscribers(topic):
                 server.publish(topic, event_line(news))
+        self.remote.post(gw.outbox)
         gw.outbox.clear()
         if gw.state is not self._state:
             if gw.state is GatewayState.ESTOP:
@@ -337,6 +350,8 @@ class Daemon:
             now = time.monotonic()
             for client, request in events:
                 self.handle_safely(client, request, now)
+        if self.remote.active:
+            self.remote.serve(time.monotonic())
 
     def shutdown(self) -> None:
         """Zero and disarm every motor, then close everything (safe to call twice)."""

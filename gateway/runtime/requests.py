@@ -9,7 +9,7 @@ The daemon (:mod:`gateway.runtime.daemon`) calls it between cycles, from its loo
 from __future__ import annotations
 
 import time
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 from gateway.core.control import Accepted, Source
 from gateway.wire.socket import (
@@ -27,33 +27,49 @@ from gateway.wire.socket import (
 from gateway.wire.socket.status import odometry_to_json, status_to_json
 
 if TYPE_CHECKING:
-    from collections.abc import Callable
+    from collections.abc import Callable, Iterable
 
     from gateway.core.status import GatewayStatus
-    from gateway.core.types import Frame
+    from gateway.core.types import Frame, Twist
     from gateway.runtime.latch import EstopLatch
     from gateway.runtime.loop import Gateway
-    from gateway.runtime.server import ControlServer
-    from gateway.wire.socket import Request
+    from gateway.wire.socket import Request, Topic
 
-__all__ = ["RequestHandler"]
+__all__ = ["Replier", "RequestHandler"]
+
+
+class Replier(Protocol):
+    """Where a handler's replies go: the control socket's clients, or the Zenoh bridge's."""
+
+    def reply(self, client_id: int, data: bytes) -> bool: ...
+
+    def subscribe(self, client_id: int, topics: Iterable[Topic]) -> bool: ...
+
+    def unsubscribe(self, client_id: int) -> bool: ...
 
 
 class RequestHandler:
-    """Answers control-socket requests.
+    """Answers control-socket requests (and the same requests from the Zenoh bridge).
 
     :param gateway: the gateway whose cycle the daemon runs.
-    :param server: the control server the replies go out through.
+    :param server: where the replies go out.
     :param latch: the e-stop latch on disk (an ``estop`` request sets it).
     :param status: everything a ``status`` request returns, now.
+    :param source: where the twists come from (for the log).
+    :param origin: how an e-stop's reason names where it came from.
     """
 
-    def __init__(self, gateway: Gateway, server: ControlServer, latch: EstopLatch,
-                 status: Callable[[], GatewayStatus]) -> None:
+    def __init__(self, gateway: Gateway, server: Replier, latch: EstopLatch,
+                 status: Callable[[], GatewayStatus], source: Source = Source.SOCKET,
+                 origin: str = "the control socket") -> None:
         self.gateway = gateway
         self.server = server
         self.latch = latch
         self.status = status
+        self.source = source
+        self.origin = origin
+        #: The twist the last twist request made the target (``None``: refused).
+        self.last_accepted: Twist | None = None
         #: ``time.perf_counter()`` when each twist accepted since the last cycle arrived:
         #: where the daemon's twist-to-frames latency starts (the daemon empties it).
         self.pending_twists: list[float] = []
@@ -66,7 +82,8 @@ class RequestHandler:
             return
         rid = request.id
         if isinstance(request, TwistRequest):
-            result = gw.twist(request.twist, now_s, Source.SOCKET)
+            result = gw.twist(request.twist, now_s, self.source)
+            self.last_accepted = result.twist if isinstance(result, Accepted) else None
             if isinstance(result, Accepted):
                 self.pending_twists.append(time.perf_counter())
                 server.reply(client, reply_ok(rid, {
@@ -103,7 +120,7 @@ class RequestHandler:
         if request.op is Op.STOP:
             sup.stop(now_s)
         elif request.op is Op.ESTOP:
-            sup.estop("e-stop requested on the control socket")
+            sup.estop(f"e-stop requested on {self.origin}")
             self.latch.set(sup.reason)
         elif request.op is Op.ENABLE:
             sup.enable(now_s)

@@ -87,7 +87,8 @@ def with_(path: str, value: object) -> dict[str, object]:
 @pytest.mark.parametrize(
     ("path", "value", "message"),
     [
-        ("colour", "red", "robot.yaml: colour: unknown key (known keys: bus, drive, gateway, "),
+        ("colour", "red", "robot.yaml: colour: unknown key (known keys: bridge, bus, drive, "
+                          "foxglove, gateway, "),
         ("drive", "hovercraft", "robot.yaml: drive: expected one of ackermann, differential, "),
         ("geometry.track", "wide", "robot.yaml: geometry.track: expected float, got 'wide'"),
         ("geometry.track", -0.3, "robot.yaml: geometry.track: expected at least 0, got -0.3"),

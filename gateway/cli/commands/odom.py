@@ -1,4 +1,4 @@
-"""``wheelgate odom``: replay a candump log through the drivers and the odometry.
+"""``wheelgate odom``: replay a candump log or a live-view recording through the odometry.
 
 The log is read line by line (a line that cannot be read is reported with its number and
 skipped), every frame goes to the drivers the configuration names, stamped with its recorded
@@ -6,6 +6,11 @@ time, and the odometry integrates the wheels' positions as the gateway does
 (:mod:`gateway.apps.replay.replay`).  Prints the final pose, the distance, what was read and how
 fast;
 ``--csv`` writes the trajectory, ``--plot`` draws it (needs ``wheelgate[plot]``).
+
+An MCAP file (``wheelgate run --record-mcap``; told by its ``.mcap`` suffix or its magic bytes)
+is replayed from its ``/wheels`` and ``/steering`` channels instead
+(:mod:`gateway.apps.replay.mcap_source`, needs ``wheelgate[foxglove]``), and its end compared
+with the recording's own ``/odom`` (:mod:`gateway.apps.replay.mcap_report`).
 """
 
 from __future__ import annotations
@@ -22,6 +27,8 @@ from typing import IO, TYPE_CHECKING, Any, TextIO, cast
 
 import click
 
+from gateway.apps.replay import mcap_report
+from gateway.apps.replay.mcap_source import McapMissingError, McapReplay, RecordingError, is_mcap
 from gateway.apps.replay.replay import Replay, SteeringSource
 from gateway.cli import config_option, json_option
 from gateway.cli.commands._common import load
@@ -30,6 +37,7 @@ if TYPE_CHECKING:
     from collections.abc import Iterable, Iterator
     from types import ModuleType
 
+    from gateway.apps.replay.mcap_source import McapSummary
     from gateway.apps.replay.replay import ReplaySummary, Sample
     from gateway.core.settings import GatewayConfig
 
@@ -153,7 +161,11 @@ def command(
 
     Steered wheels take their angles from their steering actuators' feedback when the
     configuration gives every one an actuator; otherwise the log has none: see the summary's
-    "steering" line."""
+    "steering" line.
+
+    A LOG.mcap (wheelgate run --record-mcap) is replayed from its /wheels angles (and
+    /steering) and compared with its own /odom; --min-interval-ms and --progress do not apply
+    to it."""
     if min_interval_ms is not None and not math.isfinite(min_interval_ms):
         raise click.BadParameter(f"expected a finite number, got {min_interval_ms!r}",
                                  param_hint="--min-interval-ms")
@@ -163,10 +175,13 @@ def command(
     if csv_path is not None:
         _writable(csv_path, "--csv")
     cfg = load(ctx, config_path)
-    replay = Replay(cfg, None if min_interval_ms is None else min_interval_ms / 1000.0)
+    mcap = is_mcap(log_path)
+    replay = None if mcap else Replay(cfg, None if min_interval_ms is None
+                                      else min_interval_ms / 1000.0)
+    recording = McapReplay(cfg) if mcap else None
     stderr = sys.stderr
     bar_file: TextIO | None = None
-    if not quiet and (progress or stderr.isatty()):
+    if not quiet and not mcap and (progress or stderr.isatty()):
         bar_file = stderr if stderr.isatty() else cast("TextIO", _Tty(stderr))
     sink = _Sink(every, plotting is not None)
     with contextlib.ExitStack() as stack:
@@ -174,18 +189,26 @@ def command(
             sink.start_csv(stack.enter_context(open(csv_path, "w", newline="", encoding="utf-8")),
                            cfg)
         started = time.perf_counter()
-        log_file = stack.enter_context(open(log_path, encoding="ascii", errors="replace"))
-        lines: Iterable[str] = log_file
-        if bar_file is not None:
-            bar = stack.enter_context(click.progressbar(
-                length=os.path.getsize(log_path), label="replaying", file=bar_file))
-            lines = _progress(log_file, bar)
-        for sample in replay.feed_lines(lines):
-            sink.take(sample)
+        if recording is not None:
+            samples = recording.feed_file(log_path)
+        else:
+            assert replay is not None
+            log_file = stack.enter_context(open(log_path, encoding="ascii", errors="replace"))
+            lines: Iterable[str] = log_file
+            if bar_file is not None:
+                bar = stack.enter_context(click.progressbar(
+                    length=os.path.getsize(log_path), label="replaying", file=bar_file))
+                lines = _progress(log_file, bar)
+            samples = replay.feed_lines(lines)
+        try:
+            for sample in samples:
+                sink.take(sample)
+        except McapMissingError as err:
+            raise UsageExit(str(err)) from err
+        except RecordingError as err:
+            raise click.ClickException(str(err)) from err
         sink.finish()
         wall = time.perf_counter() - started
-    summary = replay.summary()
-    _report_errors(replay, quiet)
     plotted = None
     if plotting is not None and plot_path is not None and sink.kept:
         fig = plotting.plot_trajectory(sink.kept, cfg, robots=robots)
@@ -194,6 +217,13 @@ def command(
         except OSError as err:
             raise click.FileError(plot_path, str(err)) from err
         plotted = plot_path
+    if recording is not None:
+        _finish_mcap(cfg, log_path, recording.summary(), wall, as_json, csv_path, sink.rows,
+                     plotted)
+        return
+    assert replay is not None
+    summary = replay.summary()
+    _report_errors(replay, quiet)
     if as_json:
         click.echo(json.dumps(_json(cfg, log_path, summary, wall, replay,
                                     {"path": csv_path, "rows": sink.rows} if csv_path else None,
@@ -213,6 +243,28 @@ def command(
                if summary.silent_wheels else "")
             + " (is it the right config?)"
         )
+
+
+def _finish_mcap(cfg: GatewayConfig, path: str, s: McapSummary, wall: float, as_json: bool,
+                 csv_path: str | None, rows: int, plotted: str | None) -> None:
+    """Print a recording's replay (:mod:`gateway.apps.replay.mcap_report`); exit 1 when it
+    gave no odometry."""
+    if as_json:
+        click.echo(json.dumps({**mcap_report.summary_json(cfg, path, s, wall),
+                               "csv": {"path": csv_path, "rows": rows} if csv_path else None,
+                               "plot": plotted}))
+    else:
+        for line in mcap_report.summary_lines(cfg, path, s, wall):
+            click.echo(line)
+        if csv_path is not None:
+            click.echo(f"csv: {csv_path} ({rows:,} rows)")
+        if plotted is not None:
+            click.echo(f"plot: {plotted}")
+    for warning in mcap_report.warnings(cfg, path, s):
+        click.echo(f"warning: {warning}", err=True)
+    why = mcap_report.failure(cfg, path, s)
+    if why is not None:
+        raise click.ClickException(why)
 
 
 class _Sink:

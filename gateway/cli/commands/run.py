@@ -23,6 +23,9 @@ log = logging.getLogger("gateway.run")
               help="Log every frame sent and received, candump format (.log).")
 @click.option("--socket", "socket_path", type=click.Path(dir_okay=False), default=None,
               help="Control socket path (default: the config's, else /run/wheelgate/...).")
+@click.option("--record-mcap", type=click.Path(dir_okay=False, writable=True), default=None,
+              help="Record odometry, transforms, wheel speeds, state and errors to an MCAP "
+                   "file (needs wheelgate[foxglove]; `wheelgate odom FILE.mcap` replays it).")
 @click.option("--duration", type=click.FloatRange(min=0.0, min_open=True), default=None,
               help="Stop after this many seconds, as on SIGTERM (default: run until stopped).")
 @click.pass_context
@@ -32,6 +35,7 @@ def command(
     sim: bool,
     record: str | None,
     socket_path: str | None,
+    record_mcap: str | None,
     duration: float | None,
 ) -> None:
     """Run the gateway: twists in, wheel frames out, odometry back (SIGTERM or Ctrl-C stops
@@ -41,13 +45,23 @@ def command(
         log.warning("%s", warning)
     for label, prot in DriveSet(cfg).protections():
         log.info("controller-side stop of %s: %s", label, prot.describe())
-    daemon = Daemon(cfg, sim=sim, record=record, socket_path=socket_path)
+    daemon = Daemon(cfg, sim=sim, record=record, socket_path=socket_path,
+                    record_mcap=record_mcap or "")
     click.echo(
         f"wheelgate: {cfg.name} ({cfg.drive}, {cfg.model.n} wheels) on "
         f"{'virtual (simulated controllers)' if sim else cfg.bus.interface}:{cfg.bus.channel} "
         f"at {cfg.loop.rate_hz:g} Hz; control socket {daemon.socket_path}",
         err=True,
     )
+    remote = daemon.remote
+    if remote.bridge is not None:
+        click.echo(f"wheelgate: Zenoh bridge on keys {remote.bridge.keys.root}/..., listening "
+                   f"on {', '.join(remote.bridge.settings.zenoh.listen) or 'nothing'}", err=True)
+    if remote.view is not None:
+        parts = [f"Foxglove WebSocket on {remote.view.url}"] if remote.view.url else []
+        if remote.view.mcap_path:
+            parts.append(f"recording to {remote.view.mcap_path}")
+        click.echo(f"wheelgate: live view: {', '.join(parts)}", err=True)
     timer = None
     if duration is not None:
         timer = threading.Timer(duration, daemon.request_stop)

@@ -1,0 +1,165 @@
+"""The ``bridge:`` and ``foxglove:`` blocks of a configuration, checked without importing Zenoh
+or the Foxglove SDK (``wheelgate check`` works on a core install).
+
+::
+
+    bridge:
+      zenoh: {mode: peer, listen: ["tcp/127.0.0.1:7447"], connect: [], multicast_scouting: false}
+      namespace: robot1
+      ros2: {domain_id: 0, cmd_vel: cmd_vel, odom: odom}
+      deadman: stop
+    foxglove: {host: 127.0.0.1, port: 8765}
+
+A Zenoh endpoint is ``<protocol>/<address>`` (Zenoh's locator syntax,
+https://zenoh.io/docs/manual/configuration/); a listen endpoint on every interface
+(``0.0.0.0``, ``[::]``) is accepted, as it was asked for, with a warning.
+"""
+
+from __future__ import annotations
+
+import re
+from types import MappingProxyType
+from typing import TYPE_CHECKING
+
+from gateway.core.bridge_settings import (
+    BridgeSettings,
+    DeadmanAction,
+    FoxgloveSettings,
+    Ros2Settings,
+    ZenohMode,
+    ZenohSettings,
+)
+from gateway.core.choice import choice
+from gateway.core.errors import ConfigError
+from gateway.core.options import OptionSpec, validate_block
+from gateway.wire.ros2.names import resolve_topic_name, validate_namespace, validate_node_name
+
+if TYPE_CHECKING:
+    from collections.abc import Mapping
+
+__all__ = ["BRIDGE_KEYS", "FOXGLOVE_KEYS", "parse_bridge", "parse_foxglove"]
+
+_MODES = tuple(m.value for m in ZenohMode)
+_ACTIONS = tuple(a.value for a in DeadmanAction)
+
+BRIDGE_KEYS: Mapping[str, OptionSpec] = MappingProxyType({
+    "zenoh": OptionSpec(dict, {}, help="the Zenoh session: mode, listen, connect, ..."),
+    "namespace": OptionSpec(str, "", help="wheelgate/<namespace>/... and the ROS 2 namespace"),
+    "ros2": OptionSpec(dict, {}, help="ROS 2 topics over rmw_zenoh (omit for native keys only)"),
+    "deadman": OptionSpec(str, "stop", choices=_ACTIONS,
+                          help="what a lost commander does: stop or estop"),
+})
+ZENOH_KEYS: Mapping[str, OptionSpec] = MappingProxyType({
+    "mode": OptionSpec(str, "peer", choices=_MODES),
+    "listen": OptionSpec(list, [], help="endpoints to listen on, e.g. tcp/127.0.0.1:7447"),
+    "connect": OptionSpec(list, [], help="endpoints to connect to (a router or a peer)"),
+    "multicast_scouting": OptionSpec(bool, False),
+    "lease_s": OptionSpec(float, 10.0, minimum=0.1, maximum=3600.0,
+                          help="seconds a silent peer (and its tokens) stays alive"),
+})
+ROS2_KEYS: Mapping[str, OptionSpec] = MappingProxyType({
+    "domain_id": OptionSpec(int, 0, minimum=0, maximum=232, help="ROS_DOMAIN_ID"),
+    "cmd_vel": OptionSpec(str, "cmd_vel"),
+    "odom": OptionSpec(str, "odom"),
+    "tf": OptionSpec(bool, True, help="publish odom -> base_link on /tf"),
+    "odom_frame": OptionSpec(str, "odom"),
+    "base_frame": OptionSpec(str, "base_link"),
+    "node_name": OptionSpec(str, "wheelgate"),
+})
+FOXGLOVE_KEYS: Mapping[str, OptionSpec] = MappingProxyType({
+    "host": OptionSpec(str, "127.0.0.1", help="address of the WebSocket server"),
+    "port": OptionSpec(int, 8765, minimum=0, maximum=65535, help="0: any free port"),
+    "mcap": OptionSpec(str, "", help="also record the channels to this MCAP file"),
+})
+
+#: A Zenoh locator: protocol, slash, address (host:port, a path for unix sockets).
+_ENDPOINT = re.compile(r"^(tcp|udp|tls|quic|ws|unixsock-stream|unixpipe)/\S+$")
+_EVERYWHERE = re.compile(r"^[a-z-]+/(0\.0\.0\.0|\[::\]|::)(:|$)")
+#: One token of a name: ROS 2 naming rules (alphanumerics and underscores, no leading digit).
+_TOKEN = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+
+
+def _endpoints(value: object, where: str) -> tuple[str, ...]:
+    if not isinstance(value, list):
+        raise ConfigError(f"{where}: expected a list of endpoints, got {value!r}")
+    for i, item in enumerate(value):
+        if not (isinstance(item, str) and _ENDPOINT.match(item)):
+            raise ConfigError(
+                f"{where}[{i}]: expected an endpoint '<protocol>/<address>' such as "
+                f"'tcp/127.0.0.1:7447', got {item!r}"
+            )
+    return tuple(value)
+
+
+def check_name(value: str, where: str) -> str:
+    """A name of tokens of letters, digits and underscores (not starting with a digit)
+    separated by ``/``, without a leading ``/``: a namespace as wheelgate's keys take it, a
+    frame id as tf2 wants it.
+
+    :raises ConfigError: naming ``where``, the rule and what came.
+    """
+    if not value or value[:1] == "/" or not all(_TOKEN.match(t) for t in value.split("/")):
+        raise ConfigError(
+            f"{where}: expected a name of tokens of letters, digits and underscores, not "
+            f"starting with a digit, separated by '/', no leading '/', got {value!r}"
+        )
+    return value
+
+
+def parse_bridge(raw: object, source: str, robot: str) -> tuple[BridgeSettings, list[str]]:
+    """The ``bridge:`` block and its warnings.
+
+    :param robot: the robot's name: the native keys' namespace when none is given.
+    :raises ConfigError: naming the key, what was expected and what came.
+    """
+    where = f"{source}: bridge"
+    v = validate_block(raw, BRIDGE_KEYS, where, "bridge keys")
+    z = validate_block(v["zenoh"], ZENOH_KEYS, f"{where}.zenoh", "zenoh keys")
+    zenoh = ZenohSettings(
+        mode=choice(ZenohMode, z["mode"], f"{where}.zenoh.mode"),
+        listen=_endpoints(z["listen"], f"{where}.zenoh.listen"),
+        connect=_endpoints(z["connect"], f"{where}.zenoh.connect"),
+        multicast_scouting=bool(z["multicast_scouting"]),
+        lease_s=float(z["lease_s"]),  # type: ignore[arg-type]
+    )
+    warnings = [
+        f"{where}.zenoh.listen: {e} listens on every network interface: anyone on those "
+        f"networks can drive the robot; expected a loopback or one interface's address"
+        for e in zenoh.listen if _EVERYWHERE.match(e)
+    ]
+    if zenoh.multicast_scouting:
+        warnings.append(f"{where}.zenoh.multicast_scouting: on: the robot announces itself to "
+                        f"every host of its networks")
+    namespace = str(v["namespace"])
+    if namespace:
+        check_name(namespace, f"{where}.namespace")
+        validate_namespace(namespace, f"{where}.namespace")
+    native = namespace or robot
+    if not _TOKEN.match(native.replace("/", "_")):
+        raise ConfigError(
+            f"{where}.namespace: the robot's name {robot!r} cannot name its keys; expected a "
+            f"namespace of letters, digits and underscores"
+        )
+    ros2 = None
+    if "ros2" in (raw if isinstance(raw, dict) else {}):
+        r = validate_block(v["ros2"], ROS2_KEYS, f"{where}.ros2", "ros2 keys")
+        for key in ("cmd_vel", "odom"):  # relative to the namespace, or absolute
+            resolve_topic_name(str(r[key]), namespace or "/", f"{where}.ros2.{key}")
+        validate_node_name(str(r["node_name"]), f"{where}.ros2.node_name")
+        for key in ("odom_frame", "base_frame"):
+            check_name(str(r[key]), f"{where}.ros2.{key}")
+        if r["odom_frame"] == r["base_frame"]:
+            raise ConfigError(f"{where}.ros2.base_frame: expected a frame other than "
+                              f"odom_frame, got {r['base_frame']!r} for both")
+        ros2 = Ros2Settings(**r)  # type: ignore[arg-type]
+    deadman = choice(DeadmanAction, v["deadman"], f"{where}.deadman")
+    return BridgeSettings(zenoh, native, ros2, deadman, namespace), warnings
+
+
+def parse_foxglove(raw: object, source: str) -> FoxgloveSettings:
+    """The ``foxglove:`` block.
+
+    :raises ConfigError: naming the key, what was expected and what came.
+    """
+    v = validate_block(raw, FOXGLOVE_KEYS, f"{source}: foxglove", "foxglove keys")
+    return FoxgloveSettings(str(v["host"]), int(v["port"]), str(v["mcap"]))  # type: ignore[call-overload]

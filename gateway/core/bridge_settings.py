@@ -1,0 +1,116 @@
+"""The ``bridge:`` and ``foxglove:`` blocks, validated: frozen dataclasses, no network code.
+
+The configuration loader (:mod:`gateway.config.bridge`) fills these in without importing Zenoh or
+the Foxglove SDK; the daemon starts :mod:`gateway.runtime.bridge` and
+:mod:`gateway.runtime.liveview` from them.  Nothing listens on a network address that these do
+not name: Zenoh's own defaults (listening on every interface, multicast scouting) are turned
+off unless the block asks for them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from gateway.core.choice import Choice
+
+__all__ = [
+    "BridgeSettings",
+    "DeadmanAction",
+    "FoxgloveSettings",
+    "Ros2Settings",
+    "ZenohMode",
+    "ZenohSettings",
+]
+
+
+class ZenohMode(Choice):
+    """How the bridge's Zenoh session joins the network."""
+
+    #: Talks to the peers it connects to or that connect to it.
+    PEER = "peer"
+    #: Talks through the router it connects to (e.g. ROS 2's ``rmw_zenohd``).
+    CLIENT = "client"
+
+
+class DeadmanAction(Choice):
+    """What happens when the commander whose twist the robot follows disappears."""
+
+    #: The target goes to zero within the deceleration limits.
+    STOP = "stop"
+    #: E-stop (latched; an explicit enable releases it).
+    ESTOP = "estop"
+
+
+@dataclass(frozen=True, slots=True)
+class ZenohSettings:
+    """The Zenoh session (``bridge.zenoh``).
+
+    :param mode: peer or client.
+    :param listen: endpoints to listen on, e.g. ``("tcp/127.0.0.1:7447",)``; none by default.
+    :param connect: endpoints to connect to (a router, or another peer).
+    :param multicast_scouting: whether to find peers by UDP multicast (off by default).
+    :param lease_s: how long a silent peer stays alive (its liveliness tokens with it): the
+        deadman's reaction to a frozen commander.
+    """
+
+    mode: ZenohMode = ZenohMode.PEER
+    listen: tuple[str, ...] = ()
+    connect: tuple[str, ...] = ()
+    multicast_scouting: bool = False
+    lease_s: float = 10.0
+
+
+@dataclass(frozen=True, slots=True)
+class Ros2Settings:
+    """ROS 2 over rmw_zenoh (``bridge.ros2``).
+
+    :param domain_id: ``ROS_DOMAIN_ID`` of the ROS 2 machines.
+    :param cmd_vel: the topic twists come in on (``Twist`` or ``TwistStamped``).
+    :param odom: the topic ``nav_msgs/msg/Odometry`` goes out on.
+    :param tf: whether to publish the odom -> base_link transform on ``/tf``.
+    :param odom_frame: the odometry's frame id.
+    :param base_frame: the robot's frame id (``child_frame_id``).
+    :param node_name: the ROS node name the bridge's endpoints belong to.
+    """
+
+    domain_id: int = 0
+    cmd_vel: str = "cmd_vel"
+    odom: str = "odom"
+    tf: bool = True
+    odom_frame: str = "odom"
+    base_frame: str = "base_link"
+    node_name: str = "wheelgate"
+
+
+@dataclass(frozen=True, slots=True)
+class BridgeSettings:
+    """The ``bridge:`` block.
+
+    :param zenoh: the session.
+    :param namespace: the robot's namespace: ``wheelgate/<namespace>/...`` for the native
+        keys (the robot's ``name`` when not given) and the ROS 2 namespace of its topics
+        (none when not given).
+    :param ros2: ROS 2 topics, or ``None`` for the native keys only.
+    :param deadman: what a lost commander does to the robot.
+    """
+
+    zenoh: ZenohSettings
+    namespace: str
+    ros2: Ros2Settings | None = None
+    deadman: DeadmanAction = DeadmanAction.STOP
+    #: Whether ``namespace`` was given (it then namespaces the ROS 2 topics too).
+    ros_namespace: str = ""
+
+
+@dataclass(frozen=True, slots=True)
+class FoxgloveSettings:
+    """The ``foxglove:`` block: a live view for the Foxglove app.
+
+    :param host: the address the WebSocket server listens on.
+    :param port: its port (0: any free one, logged at start).
+    :param mcap: a file the same channels are recorded to ('' for none).
+    """
+
+    host: str = "127.0.0.1"
+    port: int = 8765
+    mcap: str = ""

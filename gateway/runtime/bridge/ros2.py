@@ -1,0 +1,214 @@
+"""ROS 2 over rmw_zenoh, without ROS: ``cmd_vel`` in; ``odom`` and ``/tf`` out.
+
+As the public repository ros2/rmw_zenoh (``docs/design.md``) describes its wire: data on the key
+``<domain>/<topic>/<DDS type>/<type hash>`` in XCDR1 with an attachment (sequence number per
+publisher, time, GID) on every sample, and the graph as liveliness tokens under ``@ros2_lv``
+-- one for the node, one per publisher (``MP``) and subscription (``MS``) -- which is what
+``ros2 topic list`` and ``ros2 node list`` show (:mod:`gateway.wire.ros2`).
+
+* **In**: ``geometry_msgs/msg/Twist`` and ``TwistStamped`` on the ``cmd_vel`` topic (any type
+  hash: Jazzy's and Humble's ``TypeHashNotSupported``); linear x, y and angular z become a
+  twist request validated exactly as the control socket's (a twist with non-zero linear z or
+  angular x, y is followed in the plane).  The publisher's GID in the attachment names the
+  commander (``ros2:<gid>``); its ``MP`` token's disappearance is the deadman's trigger, GIDs
+  being the XXH3 hash of the token key (:func:`gateway.wire.ros2.keys.gid_of`).
+* **Out**: ``nav_msgs/msg/Odometry`` on ``odom`` (frame ``odom_frame``, child ``base_frame``,
+  covariances zero: not estimated) and, with ``tf: true``, ``tf2_msgs/msg/TFMessage`` with the
+  ``odom_frame`` -> ``base_frame`` transform on ``/tf`` (Nav2 needs it there).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import time
+from typing import TYPE_CHECKING, Any
+
+from gateway.core.errors import DecodeError, EncodeError
+from gateway.core.status import LastError
+from gateway.core.types import ErrorCode
+from gateway.wire.ros2 import (
+    ODOMETRY,
+    TF_MESSAGE,
+    TWIST,
+    TWIST_STAMPED,
+    EntityKind,
+    Header,
+    Odometry,
+    QosProfile,
+    Quaternion,
+    TFMessage,
+    TransformStamped,
+    Twist3D,
+    Vector3,
+    decode_attachment,
+    decode_twist,
+    decode_twist_stamped,
+    encode_attachment,
+    encode_odometry,
+    encode_tf_message,
+    entity_token,
+    gid_of,
+    node_token,
+    ns_to_stamp,
+    parse_token,
+    resolve_topic_name,
+    topic_key,
+    topic_subscription_key,
+)
+from gateway.wire.socket import ProtocolError, TwistRequest, parse_request
+
+if TYPE_CHECKING:
+    from collections.abc import Callable
+
+    from gateway.core.bridge_settings import Ros2Settings
+    from gateway.runtime.mailbox import Snapshot
+
+log = logging.getLogger(__name__)
+
+__all__ = ["Ros2Side", "commander_name", "twist_request"]
+
+#: ``/tf`` publishers keep 100 (tf2_ros's ``DynamicBroadcasterQoS``).
+TF_QOS = QosProfile(depth=100)
+
+
+def commander_name(gid: bytes) -> str:
+    """The deadman's name of the ROS publisher with this GID."""
+    return f"ros2:{gid.hex()}"
+
+
+def twist_request(twist: Twist3D, key: str) -> TwistRequest:
+    """The socket's twist request for a ROS twist, validated as the socket validates it.
+
+    :raises ProtocolError: a component that is not finite or beyond the socket's bound.
+    """
+    line = json.dumps({"op": "twist", "vx": twist.linear_x, "vy": twist.linear_y,
+                       "wz": twist.angular_z})
+    try:
+        request = parse_request(line)
+    except ProtocolError as err:
+        raise ProtocolError(f"{key}: {err}") from None
+    if not isinstance(request, TwistRequest):  # a twist line parses to a twist request
+        raise ProtocolError(f"{key}: expected a twist, got {request!r}")
+    return request
+
+
+class _Publisher:
+    """One ROS publisher: its Zenoh publisher, token, GID and sequence number."""
+
+    def __init__(self, session: Any, key: str, token: str) -> None:
+        self.zenoh = session.declare_publisher(key)
+        self.token = session.liveliness().declare_token(token)
+        self.gid = gid_of(token)
+        self.seq = 0
+
+    def put(self, payload: bytes) -> None:
+        self.seq += 1
+        self.zenoh.put(payload, attachment=encode_attachment(self.seq, time.time_ns(), self.gid))
+
+
+class Ros2Side:
+    """The ROS 2 endpoints of the bridge (see the module's doc).
+
+    :param session: the bridge's Zenoh session.
+    :param settings: the ``bridge.ros2`` block.
+    :param namespace: the ROS namespace ('' for none).
+    :param twist: takes a twist request and its commander (Zenoh's threads call it).
+    :param commander: a commander's token came (``True``) or went (Zenoh's threads call it).
+    :param error: reports a sample that could not be used.
+    """
+
+    def __init__(self, session: Any, settings: Ros2Settings, namespace: str,
+                 twist: Callable[[TwistRequest, str | None], None],
+                 commander: Callable[[str, bool], object],
+                 error: Callable[[LastError], None]) -> None:
+        self.settings = settings
+        self._twist, self._commander, self._error = twist, commander, error
+        ns = "/" + namespace if namespace else "/"
+        domain, zid, name = settings.domain_id, str(session.zid()), settings.node_name
+        self.cmd_vel = resolve_topic_name(settings.cmd_vel, ns)
+        self.odom_topic = resolve_topic_name(settings.odom, ns)
+        ids = iter(range(1, 100))
+        self._entities: list[Any] = [
+            session.liveliness().declare_token(node_token(domain, zid, 0, ns, name))]
+        for ros_type, decode in ((TWIST, _plain), (TWIST_STAMPED, _stamped)):
+            self._entities.append(session.declare_subscriber(
+                topic_subscription_key(domain, self.cmd_vel, ros_type),
+                lambda sample, decode=decode: self._on_twist(sample, decode)))
+            self._entities.append(session.liveliness().declare_token(entity_token(
+                EntityKind.SUBSCRIPTION, domain, zid, 0, next(ids), ns, name, self.cmd_vel,
+                ros_type, QosProfile())))
+        self.odom = _Publisher(session, topic_key(domain, self.odom_topic, ODOMETRY), entity_token(
+            EntityKind.PUBLISHER, domain, zid, 0, next(ids), ns, name, self.odom_topic,
+            ODOMETRY, QosProfile()))
+        self.tf = None if not settings.tf else _Publisher(
+            session, topic_key(domain, "/tf", TF_MESSAGE), entity_token(
+                EntityKind.PUBLISHER, domain, zid, 0, next(ids), ns, name, "/tf", TF_MESSAGE,
+                TF_QOS))
+        self._types = {TWIST.dds_name, TWIST_STAMPED.dds_name}
+        self._entities.append(session.liveliness().declare_subscriber(
+            f"@ros2_lv/{domain}/**", self._on_token, history=True))
+
+    # ----------------------------------------------------------------- in (Zenoh's threads)
+
+    def _on_twist(self, sample: Any, decode: Callable[[bytes], Twist3D]) -> None:
+        key = str(sample.key_expr)
+        try:
+            twist = decode(sample.payload.to_bytes())
+            attachment = sample.attachment
+            commander = None
+            if attachment is not None:
+                commander = commander_name(decode_attachment(attachment.to_bytes()).gid)
+            request = twist_request(twist, key)
+        except (DecodeError, ProtocolError) as err:
+            self._error(LastError(ErrorCode.BAD_COMMAND, f"{key}: {err}" if isinstance(
+                err, DecodeError) else str(err)))
+            return
+        self._twist(request, commander)
+
+    def _on_token(self, sample: Any) -> None:
+        try:
+            token = parse_token(str(sample.key_expr))
+        except DecodeError:
+            return  # another rmw's or a newer layout's token: not a commander of ours
+        if (token.kind is EntityKind.PUBLISHER and token.topic == self.cmd_vel
+                and token.type_name in self._types):
+            self._commander(commander_name(token.gid), str(sample.kind).endswith("PUT"))
+
+    # ----------------------------------------------------------------- out (the worker)
+
+    def publish(self, snap: Snapshot) -> None:
+        """Odometry (and the transform) of one snapshot."""
+        s = self.settings
+        odom = snap.odometry
+        pose, twist = odom.pose, odom.twist
+        header = Header(ns_to_stamp(snap.stamp_ns), s.odom_frame)
+        half = 0.5 * pose.theta_rad
+        rotation = Quaternion(0.0, 0.0, math.sin(half), math.cos(half))
+        position = Vector3(pose.x_m, pose.y_m, 0.0)
+        try:
+            self.odom.put(encode_odometry(Odometry(
+                header, s.base_frame, position, rotation,
+                twist=Twist3D(twist.vx_m_s, twist.vy_m_s, 0.0, 0.0, 0.0, twist.wz_rad_s))))
+            if self.tf is not None:
+                self.tf.put(encode_tf_message(TFMessage((TransformStamped(
+                    header, s.base_frame, position, rotation),))))
+        except EncodeError as err:  # e.g. a stamp beyond int32 seconds (2038)
+            log.warning("bridge: ROS 2 odometry not sent: %s", err)
+
+    def close(self) -> None:
+        """Withdraw the tokens (the node leaves ``ros2 node list``)."""
+        for publisher in (self.odom, self.tf):
+            if publisher is not None:
+                publisher.token.undeclare()
+        for entity in self._entities:
+            entity.undeclare()
+
+
+def _plain(payload: bytes) -> Twist3D:
+    return decode_twist(payload)
+
+
+def _stamped(payload: bytes) -> Twist3D:
+    return decode_twist_stamped(payload).twist

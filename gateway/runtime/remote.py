@@ -1,0 +1,195 @@
+"""What the daemon shows and takes beyond its socket: the Zenoh bridge and the live view.
+
+:class:`Remote` owns them for the daemon: it drains the bridge's requests between cycles into a
+:class:`~gateway.runtime.requests.RequestHandler` of their own (the socket's logic; twists go
+through exactly the socket's path: newest valid wins, the limits, ``cmd_timeout_s``), acts on
+a lost commander (:mod:`gateway.runtime.bridge.deadman`), and posts the loop's news -- a
+:class:`~gateway.runtime.mailbox.Snapshot` at the odometry rate, the state, every error -- to
+each worker's mailbox.  The modules behind it (and Zenoh, the Foxglove SDK) are imported only
+when the configuration asks for them.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from typing import TYPE_CHECKING, Any
+
+from gateway.core.bridge_settings import DeadmanAction, FoxgloveSettings
+from gateway.core.errors import GatewayError
+from gateway.core.events import OdometryEvent, StatusEvent
+from gateway.core.status import LastError
+from gateway.core.supervision import Source
+from gateway.core.types import ErrorCode
+from gateway.runtime.bridge.inbox import CommanderEvent
+from gateway.runtime.mailbox import Snapshot, SteerSample, WheelSample
+from gateway.runtime.requests import RequestHandler
+from gateway.wire.socket import reply_error
+
+if TYPE_CHECKING:
+    from collections.abc import Callable, Sequence
+
+    from gateway.core.events import OutboxEvent
+    from gateway.core.status import GatewayStatus
+    from gateway.core.types import Frame
+    from gateway.runtime.bridge.bridge import Bridge
+    from gateway.runtime.latch import EstopLatch
+    from gateway.runtime.loop import Gateway
+    from gateway.runtime.mailbox import Mailbox
+
+log = logging.getLogger(__name__)
+
+__all__ = ["Remote", "snapshot_of"]
+
+
+class Remote:
+    """The daemon's bridge and live view (either may be absent).
+
+    :param gateway: the gateway whose cycle the daemon runs.
+    :param latch: the e-stop latch (a bridge ``estop`` sets it, as the socket's).
+    :param status: everything a ``status`` request returns, now.
+    :param pending_twists: the daemon's list of accepted twists' arrival times (latency).
+    :param record_mcap: record the live view's channels to this file ('' for none).
+    :raises GatewayError: when a configured bridge or view cannot start (naming why).
+    """
+
+    def __init__(self, gateway: Gateway, latch: EstopLatch,
+                 status: Callable[[], GatewayStatus], pending_twists: list[float],
+                 record_mcap: str = "") -> None:
+        config = gateway.config
+        self.gateway = gateway
+        self.latch = latch
+        self.bridge: Bridge | None = None
+        self.view: Any = None
+        self._mailboxes: list[Mailbox[Any]] = []
+        try:
+            if config.bridge is not None:
+                # Imported only with a bridge: block (and Zenoh only by the bridge).
+                from gateway.runtime.bridge.bridge import Bridge  # noqa: PLC0415
+                from gateway.runtime.bridge.deadman import Deadman  # noqa: PLC0415
+
+                self.bridge = Bridge(config.bridge)
+                self._mailboxes.append(self.bridge.mailbox)
+                self.requests = RequestHandler(gateway, self.bridge, latch, status,
+                                               Source.BRIDGE, "the Zenoh bridge")
+                self.requests.pending_twists = pending_twists
+                self.deadman = Deadman()
+            if config.foxglove is not None or record_mcap:
+                from gateway.runtime.liveview import LiveView  # noqa: PLC0415 - optional
+
+                wheel_names = tuple(m.wheel for m in config.motors if m is not None)
+                steer_names = tuple(a.wheel for a in config.steering)
+                self.view = LiveView(config.foxglove or FoxgloveSettings(), config.name,
+                                     wheel_names, steer_names, record_mcap=record_mcap,
+                                     serve=config.foxglove is not None)
+                self.view.start()
+                self._mailboxes.append(self.view.mailbox)
+        except BaseException:
+            self.close()
+            raise
+
+    @property
+    def active(self) -> bool:
+        """Whether there is anything to serve or post to."""
+        return bool(self._mailboxes)
+
+    # ----------------------------------------------------------------- requests
+
+    def serve(self, now_s: float) -> None:
+        """Handle what came in over the bridge since the last call (loop thread)."""
+        bridge = self.bridge
+        if bridge is None:
+            return
+        for item in bridge.poll():
+            if isinstance(item, CommanderEvent):
+                self._commander(item.commander, item.alive, now_s)
+                continue
+            try:
+                self.requests.handle(item.client, item.request, now_s)
+            except (GatewayError, ValueError, UnicodeError) as err:  # never out of the loop
+                log.warning("bridge request failed: %s", err)
+                bridge.reply(item.client, reply_error(None, ErrorCode.BAD_COMMAND,
+                                                      f"request failed: {err}"))
+                continue
+            accepted = self.requests.last_accepted
+            if item.commander is not None and accepted is not None:
+                self.deadman.accepted(item.commander, accepted)
+
+    def _commander(self, name: str, alive: bool, now_s: float) -> None:
+        if alive:
+            self.deadman.appeared(name)
+            log.info("bridge: commander %s is alive", name)
+            return
+        gw = self.gateway
+        sup = gw.supervisor
+        if not self.deadman.lost(name, sup.target):
+            log.info("bridge: commander %s is gone (the robot was not following it)", name)
+            return
+        assert self.bridge is not None
+        action = self.bridge.settings.deadman
+        out: list[Frame] = []
+        if action is DeadmanAction.ESTOP:
+            sup.estop(f"commander {name} disappeared (deadman: estop)")
+            self.latch.set(sup.reason)
+            gw.report_error(ErrorCode.ESTOP, sup.reason, out)
+        else:
+            sup.stop(now_s)
+            gw.report_error(ErrorCode.COMMAND_TIMEOUT, f"commander {name} disappeared (its "
+                            f"liveliness token is gone): stopping", out)
+        gw.edge.send(out)
+        log.warning("bridge: commander %s disappeared while the robot followed it: %s", name,
+                    action.value)
+
+    # ----------------------------------------------------------------- news
+
+    def post(self, outbox: Sequence[OutboxEvent]) -> None:
+        """Hand this cycle's news to the workers (loop thread; never waits for them)."""
+        if not self._mailboxes or not outbox:
+            return
+        snapshot = None
+        status = None
+        errors = []
+        for news in outbox:
+            if isinstance(news, OdometryEvent):
+                snapshot = snapshot_of(self.gateway, news)
+            elif isinstance(news, StatusEvent):
+                status = news
+            elif isinstance(news, LastError):
+                errors.append(news)
+        for box in self._mailboxes:
+            box.post(snapshot, status, tuple(errors))
+
+    def close(self) -> None:
+        """Stop the workers and close the session (the gateway's token disappears)."""
+        if self.bridge is not None:
+            self.bridge.close()
+        if self.view is not None:
+            self.view.close()
+
+
+def snapshot_of(gw: Gateway, odometry: OdometryEvent) -> Snapshot:
+    """What the loop shows the world now (see :class:`~gateway.runtime.mailbox.Snapshot`)."""
+    config = gw.config
+    feedback = gw.drives.motor_feedback()
+    commanded = gw.prev.wheel_rad_s
+    wheels = []
+    k = 0
+    for i, motor in enumerate(config.motors):
+        if motor is None:
+            continue
+        fb = feedback[k]
+        k += 1
+        wheels.append(WheelSample(
+            motor.wheel, commanded[i], None if fb is None else fb.velocity_rad_s,
+            None if fb is None else fb.position_rad,
+        ))
+    steering = []
+    if config.steering:
+        angles = gw.drives.steer_setpoints(gw.prev.steer_rad)
+        for j, actuator in enumerate(config.steering):
+            fb = feedback[k + j]
+            steering.append(SteerSample(actuator.wheel, angles[j],
+                                        None if fb is None else fb.position_rad))
+    sup = gw.supervisor
+    return Snapshot(time.time_ns(), odometry.state, sup.state, sup.reason, tuple(wheels),
+                    tuple(steering))

@@ -1,0 +1,138 @@
+"""The ``bridge:`` and ``foxglove:`` blocks: defaults that listen nowhere, precise errors, the
+warnings, and ``check`` without Zenoh or the Foxglove SDK imported."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from typing import TYPE_CHECKING
+
+import pytest
+import yaml
+
+from gateway.config import parse_config
+from gateway.core.bridge_settings import BridgeSettings, DeadmanAction, ZenohMode
+from gateway.core.errors import ConfigError
+from tests.conftest import REPO
+
+if TYPE_CHECKING:
+    from pathlib import Path
+
+    from gateway.core.settings import GatewayConfig
+
+DEFAULT = yaml.safe_load((REPO / "gateway" / "data" / "default.yaml").read_text())
+
+
+def parse(**blocks: object) -> tuple[GatewayConfig, tuple[str, ...]]:
+    cfg = parse_config({**DEFAULT, **blocks}, "robot.yaml")
+    return cfg, cfg.warnings
+
+
+def bridge(**blocks: object) -> BridgeSettings:
+    b = parse(**blocks)[0].bridge
+    assert b is not None
+    return b
+
+
+def test_without_the_blocks_there_is_no_bridge_and_no_view() -> None:
+    cfg = parse_config(DEFAULT, "robot.yaml")
+    assert cfg.bridge is None and cfg.foxglove is None
+
+
+def test_an_empty_bridge_block_listens_nowhere_and_scouts_nothing() -> None:
+    b = bridge(bridge={})
+    warnings = parse(bridge={})[1]
+    assert b.zenoh.mode is ZenohMode.PEER
+    assert b.zenoh.listen == () and b.zenoh.connect == ()
+    assert b.zenoh.multicast_scouting is False
+    assert b.namespace == "demo_mecanum" and b.ros_namespace == ""
+    assert b.ros2 is None and b.deadman is DeadmanAction.STOP
+    assert not [w for w in warnings if "bridge" in w]
+
+
+def test_the_issue_example_reads_as_written() -> None:
+    b = bridge(bridge={
+        "zenoh": {"mode": "peer", "listen": ["tcp/127.0.0.1:7447"], "connect": [],
+                  "multicast_scouting": False},
+        "namespace": "robot1",
+        "ros2": {"domain_id": 0, "cmd_vel": "cmd_vel", "odom": "odom"},
+    })
+    assert b.ros2 is not None
+    assert b.zenoh.listen == ("tcp/127.0.0.1:7447",)
+    assert b.namespace == "robot1" and b.ros_namespace == "robot1"
+    assert b.ros2.cmd_vel == "cmd_vel" and b.ros2.odom_frame == "odom"
+    assert b.ros2.base_frame == "base_link" and b.ros2.tf is True
+
+
+@pytest.mark.parametrize(("block", "message"), [
+    ({"zenoh": {"listen": ["7447"]}},
+     "bridge.zenoh.listen[0]: expected an endpoint '<protocol>/<address>' such as "
+     "'tcp/127.0.0.1:7447', got '7447'"),
+    ({"zenoh": {"listen": "tcp/127.0.0.1:7447"}},
+     "bridge.zenoh.listen: expected list, got 'tcp/127.0.0.1:7447'"),
+    ({"zenoh": {"mode": "router"}}, "bridge.zenoh.mode: expected one of 'peer', 'client'"),
+    ({"zenoh": {"lease_s": 0}}, "bridge.zenoh.lease_s: expected at least 0.1, got 0"),
+    ({"zenoh": {"listne": []}}, "bridge.zenoh.listne: unknown key"),
+    ({"namespace": "robot 1"}, "bridge.namespace: expected a name of tokens"),
+    ({"namespace": "/robot1"}, "bridge.namespace: expected a name of tokens"),
+    ({"namespace": "1robot"}, "bridge.namespace: expected a name of tokens"),
+    ({"ros2": {"cmd_vel": "cmd vel"}},
+     "bridge.ros2.cmd_vel: expected letters, digits and \"_\" in tokens separated by single "
+     "\"/\", no token starting with a digit, got 'cmd vel' (character ' ')"),
+    ({"ros2": {"cmd_vel": "cmd_vel/"}}, "bridge.ros2.cmd_vel: expected no trailing '/'"),
+    ({"ros2": {"node_name": "a/b"}},
+     "bridge.ros2.node_name: expected a node name without '/', got 'a/b'"),
+    ({"ros2": {"odom_frame": "/odom"}}, "bridge.ros2.odom_frame: expected a name of tokens"),
+    ({"ros2": {"base_frame": "odom"}},
+     "bridge.ros2.base_frame: expected a frame other than odom_frame, got 'odom' for both"),
+    ({"ros2": {"domain_id": 300}}, "bridge.ros2.domain_id: expected at most 232, got 300"),
+    ({"deadman": "halt"}, "bridge.deadman: expected one of 'stop', 'estop', got 'halt'"),
+    ({"ros": {}}, "bridge.ros: unknown key (known bridge keys: deadman, namespace, ros2, zenoh)"),
+    ("yes", "bridge: expected a mapping, got 'yes'"),
+])
+def test_a_bad_bridge_block_names_the_key(block: object, message: str) -> None:
+    with pytest.raises(ConfigError) as err:
+        parse(bridge=block)
+    assert str(err.value).startswith("robot.yaml: "), err.value
+    assert message in str(err.value), err.value
+
+
+def test_an_absolute_topic_is_accepted() -> None:
+    ros2 = bridge(bridge={"ros2": {"cmd_vel": "/teleop/cmd_vel"}}).ros2
+    assert ros2 is not None and ros2.cmd_vel == "/teleop/cmd_vel"
+
+
+def test_listening_everywhere_and_multicast_are_warned_about() -> None:
+    _, warnings = parse(bridge={"zenoh": {"listen": ["tcp/0.0.0.0:7447", "tcp/[::]:7448"],
+                                          "multicast_scouting": True}})
+    text = "\n".join(warnings)
+    assert "tcp/0.0.0.0:7447 listens on every network interface" in text
+    assert "tcp/[::]:7448 listens on every network interface" in text
+    assert "multicast_scouting: on" in text
+
+
+def test_the_foxglove_block() -> None:
+    fox = parse(foxglove={})[0].foxglove
+    assert fox is not None
+    assert (fox.host, fox.port, fox.mcap) == ("127.0.0.1", 8765, "")
+    with pytest.raises(ConfigError, match=r"robot.yaml: foxglove.port: expected at most 65535"):
+        parse(foxglove={"port": 70000})
+    with pytest.raises(ConfigError, match=r"robot.yaml: foxglove.hots: unknown key"):
+        parse(foxglove={"hots": "x"})
+
+
+def test_check_validates_the_blocks_without_importing_zenoh_or_foxglove(tmp_path: Path) -> None:
+    path = tmp_path / "robot.yaml"
+    path.write_text(yaml.safe_dump({**DEFAULT, "bridge": {"ros2": {}}, "foxglove": {}}))
+    code = (
+        "import sys\n"
+        "from gateway.cli import main\n"
+        f"try:\n    main(['check', '-c', {str(path)!r}])\n"
+        "except SystemExit as e:\n    assert e.code in (0, None), e.code\n"
+        "bad = sorted(m for m in sys.modules if m.split('.')[0] in ('zenoh', 'foxglove', 'mcap'))\n"
+        "assert not bad, bad\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=60, check=False)
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert "ok" in done.stdout

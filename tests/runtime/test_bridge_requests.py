@@ -1,0 +1,66 @@
+"""A request over the bridge gets exactly the socket's reply: the same handler, the same path
+(newest valid wins, the limits), and an infeasible twist's error with its details."""
+
+from __future__ import annotations
+
+import json
+from typing import TYPE_CHECKING
+
+from gateway.core.supervision import Source
+from gateway.runtime.requests import RequestHandler
+from gateway.wire.socket import ProtocolError, parse_request
+from tests.conftest import CONFIG_DIR
+from tests.e2e_helpers import Rig, virtual_config
+
+if TYPE_CHECKING:
+    from collections.abc import Iterable
+
+    from gateway.wire.socket import Topic
+
+
+class Replies:
+    """A reply sink, as the control server or the bridge is one."""
+
+    def __init__(self) -> None:
+        self.lines: list[bytes] = []
+
+    def reply(self, client_id: int, data: bytes) -> bool:
+        self.lines.append(data)
+        return True
+
+    def subscribe(self, client_id: int, topics: Iterable[Topic]) -> bool:
+        return True
+
+    def unsubscribe(self, client_id: int) -> bool:
+        return True
+
+
+def test_an_infeasible_twist_gets_the_same_reply_over_the_bridge(sock_path: str) -> None:
+    cfg = virtual_config(CONFIG_DIR / "turtlebot3_burger.yaml", "bridge-requests",
+                         rate_hz=100.0)
+    with Rig(cfg, sock_path) as rig:
+        assert rig.daemon is not None
+        rig.enable()
+        socket_side, bridge_side = Replies(), Replies()
+        handlers = [
+            RequestHandler(rig.gw, socket_side, rig.daemon.latch, rig.daemon.status),
+            RequestHandler(rig.gw, bridge_side, rig.daemon.latch, rig.daemon.status,
+                           Source.BRIDGE, "the Zenoh bridge"),
+        ]
+        for line in (b'{"op": "twist", "vx": 0.1, "vy": 0.2, "id": 7}',
+                     b'{"op": "twist", "vx": 0.1, "id": 8}', b'{"op": "twist", "vx": "x"}'):
+            for handler in handlers:
+                try:
+                    request = parse_request(line)
+                except ProtocolError as err:
+                    handler.handle(1, err, rig.t)
+                else:
+                    handler.handle(1, request, rig.t)
+        assert socket_side.lines == bridge_side.lines
+        refused = json.loads(bridge_side.lines[0])
+        assert refused["ok"] is False and refused["id"] == 7
+        assert refused["error"]["code"] == "infeasible_twist"
+        assert {"wheel", "constraint", "residual_m_s", "nearest"} <= set(refused["error"])
+        assert json.loads(bridge_side.lines[1])["id"] == 8
+        assert json.loads(bridge_side.lines[2])["ok"] is False
+        assert handlers[1].last_accepted is not None and handlers[0].last_accepted is not None

@@ -1,0 +1,113 @@
+"""ROS 2 over rmw_zenoh against the daemon as a process: a separate process acting as a ROS 2
+node from the documented wire format (``tools/bridge_peer.py ros-node``: no ROS installed)
+sends ``Twist`` or ``TwistStamped`` on ``/robot1/cmd_vel`` and reads ``Odometry`` on
+``/robot1/odom`` and the transform on ``/tf``; the gateway's node and endpoints are in the
+graph; killing the node stops the robot (its publisher's token carries its GID)."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import time
+from typing import TYPE_CHECKING, Any
+
+import pytest
+
+from gateway.wire.ros2 import EntityKind, parse_token
+from tests.runtime import bridge_helpers
+from tests.runtime.bridge_helpers import (
+    Observer,
+    disappeared,
+    ended,
+    moving,
+    spawn_ros_node,
+    still,
+)
+
+if TYPE_CHECKING:
+    import subprocess
+    from collections.abc import Iterator
+
+pytest.importorskip("zenoh", reason="eclipse-zenoh not installed: pip install 'wheelgate[zenoh]'")
+pytestmark = pytest.mark.timeout(90)
+
+# The shared fixtures (bridge_helpers.py), bound here so that pytest finds them.
+gateway = bridge_helpers.gateway
+observer = bridge_helpers.observer
+
+CMD_VEL = "/robot1/cmd_vel"
+ODOM = "/robot1/odom"
+
+
+def lines(proc: subprocess.Popen[bytes], count: int, timeout_s: float = 20.0) -> Iterator[
+        dict[str, Any]]:
+    """The node's next ``count`` JSON lines."""
+    assert proc.stdout is not None
+    end = time.monotonic() + timeout_s
+    for _ in range(count):
+        assert time.monotonic() < end
+        yield json.loads(proc.stdout.readline())
+
+
+@pytest.mark.parametrize("flavour", [[], ["--stamped"], ["--humble"]],
+                         ids=["Twist", "TwistStamped", "Humble-key"])
+def test_a_ros_node_drives_the_robot_and_reads_odometry_and_tf(
+        gateway: tuple[subprocess.Popen[bytes], str], observer: Observer,
+        flavour: list[str]) -> None:
+    _, connect = gateway
+    node = spawn_ros_node(connect, "--cmd-vel", CMD_VEL, "--odom", ODOM, "--vx", "0.3",
+                          *flavour)
+    try:
+        observer.wait(moving(0.3))
+        seen = list(lines(node, 40))
+        odom = [e for e in seen if e["topic"] == "odom"]
+        tf = [e for e in seen if e["topic"] == "tf"]
+        assert odom and tf, seen
+        assert odom[-1]["frame"] == "odom" and odom[-1]["child"] == "base_link"
+        assert abs(odom[-1]["vx"] - 0.3) < 0.02
+        seqs = [e["seq"] for e in odom]
+        assert seqs == list(range(seqs[0], seqs[0] + len(seqs))), seqs  # no gap
+        assert tf[-1]["frame"] == "odom" and tf[-1]["child"] == "base_link"
+        assert tf[-1]["x"] > 0.0 and abs(tf[-1]["qw"] - 1.0) < 1e-6
+    finally:
+        ended(node)
+
+
+def test_the_gateway_is_in_the_ros_graph(observer: Observer) -> None:
+    tokens = [parse_token(str(r.ok.key_expr)) for r in
+              observer.s.liveliness().get("@ros2_lv/0/**", timeout=5.0) if r.ok is not None]
+    ours = {(t.kind, t.topic, t.type_name) for t in tokens if t.node_name == "wheelgate"}
+    assert (EntityKind.NODE, None, None) in ours
+    assert (EntityKind.SUBSCRIPTION, CMD_VEL, "geometry_msgs::msg::dds_::Twist_") in ours
+    assert (EntityKind.SUBSCRIPTION, CMD_VEL, "geometry_msgs::msg::dds_::TwistStamped_") in ours
+    assert (EntityKind.PUBLISHER, ODOM, "nav_msgs::msg::dds_::Odometry_") in ours
+    assert (EntityKind.PUBLISHER, "/tf", "tf2_msgs::msg::dds_::TFMessage_") in ours
+    node = next(t for t in tokens if t.node_name == "wheelgate")
+    assert node.namespace == "/robot1"
+
+
+def test_killing_the_ros_node_stops_the_robot(
+        gateway: tuple[subprocess.Popen[bytes], str], observer: Observer) -> None:
+    _, connect = gateway
+    node = spawn_ros_node(connect, "--cmd-vel", CMD_VEL, "--vx", "0.25", "--quiet")
+    try:
+        observer.wait(moving(0.25))
+        killed = time.monotonic()
+        os.kill(node.pid, signal.SIGKILL)
+        stopped = observer.wait(disappeared("ros2:"), after=killed, timeout_s=5.0)
+        assert stopped - killed < 1.0, stopped - killed  # cmd_timeout_s is 30 s
+        observer.wait(still, after=stopped)
+    finally:
+        ended(node)
+
+
+def test_a_bad_ros_sample_is_reported_and_changes_nothing(
+        gateway: tuple[subprocess.Popen[bytes], str], observer: Observer) -> None:
+    from gateway.wire.ros2 import TWIST, topic_key
+
+    before = time.monotonic()
+    observer.s.put(topic_key(0, CMD_VEL, TWIST), b"\x00\x01\x00\x00short")
+    observer.wait(lambda k, e: k == "error" and "geometry_msgs/msg/Twist" in e["message"],
+                  after=before, timeout_s=5.0)
+    assert observer.query("status")["state"] == "running"
