@@ -60,7 +60,7 @@ from gateway.core.choice import choice
 from gateway.core.errors import ConfigError, KinematicsError
 from gateway.core.kinematics import PRESETS, Limits, RobotModel, Wheel, WheelType
 from gateway.core.kinematics.model import validate_wheel
-from gateway.core.options import OptionSpec, validate_block
+from gateway.core.options import OptionSpec, unknown_key, validate_block
 from gateway.core.protection import Guard, WatchdogPolicy, check_timeout
 from gateway.core.settings import LOOP_CHOICES, BusConfig, GatewayConfig, LoopConfig
 from gateway.drive.ownership import own_id_collisions
@@ -162,9 +162,7 @@ def parse_config(
         raise ConfigError(f"{source}: expected a mapping at the top level, got {raw!r}")
     for key in raw:
         if key not in TOP_KEYS:
-            raise ConfigError(
-                f"{source}: {key}: unknown key (known keys: {', '.join(sorted(TOP_KEYS))})"
-            )
+            raise unknown_key(f"{source}: {key}", key, {"top-level keys": TOP_KEYS})
     drive = raw.get("drive")
     choices = [*sorted(PRESETS), "generic"]
     if drive not in choices:

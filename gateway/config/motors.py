@@ -21,7 +21,7 @@ from gateway.core.choice import choice
 from gateway.core.errors import ConfigError, DriverNotFoundError
 from gateway.core.kinematics import WheelType
 from gateway.core.linkage import virtual_angle
-from gateway.core.options import validate_block
+from gateway.core.options import unknown_key, validate_block
 from gateway.core.settings import Linkage
 from gateway.core.types import MotorConfig, MotorRole
 from gateway.drive.registry import get_driver_class, valid_drivers
@@ -259,6 +259,12 @@ def motor_block(
         )
     node_id = int(v["node_id"])  # type: ignore[call-overload]
     protocol = {k: x for k, x in merged.items() if k not in keys}
+    for key in protocol:
+        if key not in cls.OPTIONS and key != "config_dir":
+            raise unknown_key(f"{where}.{key}", key, {
+                "steering keys" if steers else "motor keys": keys,
+                f"{driver} keys": cls.OPTIONS,
+            })
     if "config_dir" in cls.OPTIONS and "config_dir" not in protocol:
         # Relative paths in protocol keys (a DBC file) are relative to the config file.
         protocol["config_dir"] = config_dir

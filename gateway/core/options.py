@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
+import difflib
 import math
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 
 from gateway.core.errors import ConfigError
@@ -71,8 +72,7 @@ def validate_block(
         raise ConfigError(f"{where}: expected a mapping, got {raw!r}")
     for key in raw:
         if key not in specs:
-            known = ", ".join(sorted(specs)) or "none"
-            raise ConfigError(f"{where}.{key}: unknown key (known {what}: {known})")
+            raise unknown_key(f"{where}.{key}", key, {what: specs})
     out: dict[str, object] = {}
     for key, spec in specs.items():
         if key in raw:
@@ -83,3 +83,23 @@ def validate_block(
         else:
             out[key] = spec.default
     return out
+
+
+def unknown_key(where: str, key: object, known: Mapping[str, Iterable[str]]) -> ConfigError:
+    """The error for an unknown ``key``: the nearest known key when one is close (a typo such as
+    ``inverted`` for ``invert``), then every group of keys that would be accepted there.
+
+    :param where: the key's path, for the message.
+    :param known: the accepted keys, by how to name their group (``"motor keys"``).
+
+    >>> print(unknown_key("left.inverted", "inverted", {"motor keys": ["invert", "node_id"],
+    ...                                                   "odrive keys": ["firmware"]}))
+    left.inverted: unknown key; did you mean 'invert'? (known motor keys: invert, node_id; \
+odrive keys: firmware)
+    """
+    names = sorted({k for keys in known.values() for k in keys})
+    close = difflib.get_close_matches(str(key), names, n=1, cutoff=0.7)
+    hint = f"; did you mean {close[0]!r}?" if close else ""
+    groups = "; ".join(f"{what}: {', '.join(sorted(keys)) or 'none'}"
+                       for what, keys in known.items())
+    return ConfigError(f"{where}: unknown key{hint} (known {groups})")

@@ -12,6 +12,7 @@ import time
 from typing import TYPE_CHECKING, Protocol
 
 from gateway.core.control import Accepted, Source
+from gateway.core.kinematics.limits import binding_limit
 from gateway.wire.socket import (
     CommandRequest,
     Op,
@@ -86,8 +87,10 @@ class RequestHandler:
             self.last_accepted = result.twist if isinstance(result, Accepted) else None
             if isinstance(result, Accepted):
                 self.pending_twists.append(time.perf_counter())
+                applied, limited_by = self._applied(result)
                 server.reply(client, reply_ok(rid, {
                     "twist": result.twist, "projected": result.projected,
+                    "applied": applied, "limited_by": limited_by,
                     **({"warning": str(result.error)} if result.error else {}),
                 }))
                 return
@@ -111,6 +114,18 @@ class RequestHandler:
             server.reply(client, reply_ok(rid, {"topics": sorted(t.value for t in request.topics)}))
             return
         self._command(client, request, now_s)
+
+    def _applied(self, result: Accepted) -> tuple[Twist, str | None]:
+        """The twist the wheels will follow once the speed limits have scaled the accepted one
+        (the acceleration limits only ramp towards it), and the limit that scaled it."""
+        gw = self.gateway
+        ik = result.ik
+        if ik is None:
+            ik = gw.model.try_ik(result.twist, gw.prev.steer_rad)
+            if ik is None:  # cannot happen for an accepted twist; report it unscaled
+                return result.twist, None
+        scale, why = binding_limit(gw.model, ik, gw.config.limits)
+        return (result.twist.scaled(scale), why) if scale < 1.0 else (result.twist, None)
 
     def _command(self, client: int, request: CommandRequest, now_s: float) -> None:
         sup, rid = self.gateway.supervisor, request.id

@@ -87,7 +87,8 @@ def test_the_issue_example_reads_as_written() -> None:
      "bridge.ros2.base_frame: expected a frame other than odom_frame, got 'odom' for both"),
     ({"ros2": {"domain_id": 300}}, "bridge.ros2.domain_id: expected at most 232, got 300"),
     ({"deadman": "halt"}, "bridge.deadman: expected one of 'stop', 'estop', got 'halt'"),
-    ({"ros": {}}, "bridge.ros: unknown key (known bridge keys: deadman, namespace, ros2, zenoh)"),
+    ({"ros": {}}, "bridge.ros: unknown key; did you mean 'ros2'? (known bridge keys: deadman, "
+     "namespace, ros2, zenoh)"),
     ("yes", "bridge: expected a mapping, got 'yes'"),
 ])
 def test_a_bad_bridge_block_names_the_key(block: object, message: str) -> None:

@@ -11,7 +11,7 @@ import yaml
 from gateway.config import DEFAULT_NAME, load_config, parse_config
 from gateway.core.errors import ConfigError
 from gateway.core.settings import BusConfig, LoopConfig
-from tests.conftest import CONFIG_DIR, SIM_ODRIVE_ENDPOINTS
+from tests.conftest import CONFIG_DIR, REPO, SIM_ODRIVE_ENDPOINTS
 
 if TYPE_CHECKING:
     from pathlib import Path
@@ -87,8 +87,8 @@ def with_(path: str, value: object) -> dict[str, object]:
 @pytest.mark.parametrize(
     ("path", "value", "message"),
     [
-        ("colour", "red", "robot.yaml: colour: unknown key (known keys: bridge, bus, drive, "
-                          "foxglove, gateway, "),
+        ("colour", "red", "robot.yaml: colour: unknown key (known top-level keys: bridge, bus, "
+                          "drive, foxglove, gateway, "),
         ("drive", "hovercraft", "robot.yaml: drive: expected one of ackermann, differential, "),
         ("geometry.track", "wide", "robot.yaml: geometry.track: expected float, got 'wide'"),
         ("geometry.track", -0.3, "robot.yaml: geometry.track: expected at least 0, got -0.3"),
@@ -181,7 +181,8 @@ def test_bus_precedence(monkeypatch: pytest.MonkeyPatch) -> None:
         ({"can_ids": {"twist": 0x101}}, "robot.yaml: gateway.can_ids"),
         ({"can_ids": {"status": 0x800}}, "robot.yaml: gateway.can_ids.status"),
         ({"socket_uids": ["root"]}, "robot.yaml: gateway.socket_uids: expected a list of user IDs"),
-        ({"spin": 1}, "robot.yaml: gateway.spin: unknown key (known gateway keys: "),
+        ({"spin": 1},
+         "robot.yaml: gateway.spin: unknown key; did you mean 'spin_us'? (known gateway keys: "),
     ],
 )
 def test_bad_gateway_block(block: dict[str, object], message: str) -> None:
@@ -205,3 +206,17 @@ def test_dataclass_defaults_are_those_of_empty_blocks(monkeypatch: pytest.Monkey
     cfg = parse_config(BASE, "r")
     assert cfg.loop == LoopConfig()
     assert cfg.bus == BusConfig()
+
+
+def test_an_unknown_motor_key_suggests_the_nearest_and_lists_every_motor_key() -> None:
+    raw = yaml.safe_load((REPO / "gateway" / "data" / "default.yaml").read_text())
+    raw["motors"]["front_left"]["inverted"] = True
+    with pytest.raises(ConfigError) as err:
+        parse_config(raw, "robot.yaml")
+    text = str(err.value)
+    assert text.startswith("robot.yaml: motors.front_left.inverted: unknown key; did you mean "
+                           "'invert'? (known motor keys: driver, gear_ratio, invert, max_rpm, "
+                           "node_id; odrive keys: "), text
+    raw["motors"]["front_left"] = {"node_id": 1, "colour": "red"}
+    with pytest.raises(ConfigError, match=r"colour: unknown key \(known motor keys"):
+        parse_config(raw, "robot.yaml")  # nothing close: no suggestion

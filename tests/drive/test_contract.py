@@ -114,8 +114,8 @@ def test_options_are_a_typed_dataclass_with_the_common_keys_declared_once() -> N
 
 
 @pytest.mark.parametrize(("block", "message"), [
-    ({"bitrat": 1}, "motor 'left'.bitrat: unknown key (known protocol keys for this driver: "
-                    "bitrate, controller_timeout_s, liveness_s)"),
+    ({"bitrat": 1}, "motor 'left'.bitrat: unknown key; did you mean 'bitrate'? (known protocol "
+                    "keys for this driver: bitrate, controller_timeout_s, liveness_s)"),
     ({"bitrate": 125_000}, "motor 'left'.bitrate: expected one of 250000, 500000, got 125000"),
     ({"liveness_s": 0.0}, "motor 'left'.liveness_s: expected at least 0.001, got 0.0"),
     ({"controller_timeout_s": "1"}, "motor 'left'.controller_timeout_s: expected float, got '1'"),

@@ -64,3 +64,21 @@ def test_an_infeasible_twist_gets_the_same_reply_over_the_bridge(sock_path: str)
         assert json.loads(bridge_side.lines[1])["id"] == 8
         assert json.loads(bridge_side.lines[2])["ok"] is False
         assert handlers[1].last_accepted is not None and handlers[0].last_accepted is not None
+
+
+def test_the_reply_says_what_the_robot_will_follow(sock_path: str) -> None:
+    """Asked 5 m/s, the demo robot follows 1.5 m/s (its max_linear_m_s), and says so."""
+    cfg = virtual_config(None, "bridge-applied", rate_hz=100.0)
+    with Rig(cfg, sock_path) as rig:
+        assert rig.daemon is not None
+        rig.enable()
+        replies = Replies()
+        handler = RequestHandler(rig.gw, replies, rig.daemon.latch, rig.daemon.status)
+        for line in (b'{"op": "twist", "vx": 5.0}', b'{"op": "twist", "vx": 0.2, "wz": 0.1}'):
+            request = parse_request(line)
+            handler.handle(1, request, rig.t)
+        fast, slow = (json.loads(line) for line in replies.lines)
+        assert fast["twist"]["vx_m_s"] == 5.0
+        assert fast["applied"] == {"vx_m_s": 1.5, "vy_m_s": 0.0, "wz_rad_s": 0.0}
+        assert fast["limited_by"] == "max_linear_m_s 1.5 m/s"
+        assert slow["applied"] == slow["twist"] and slow["limited_by"] is None

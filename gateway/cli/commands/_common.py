@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING, Any
 import click
 
 from gateway.config import client_socket_path, load_config
+from gateway.wire.socket.messages import MAX_TWIST_COMPONENT
 
 if TYPE_CHECKING:
     from gateway.core.errors import InfeasibleTwistError
@@ -45,9 +46,13 @@ def socket_for(ctx: click.Context, config_path: str | None, socket_path: str | N
 
 def twist_options(func: Any) -> Any:
     """``--vx --vy --wz`` options."""
+    # Bounded as the control socket bounds a twist (MAX_TWIST_COMPONENT): a larger value is a
+    # usage error (exit 2) in every command, never 300-digit output or a refusal by the daemon.
+    bound = click.FloatRange(-MAX_TWIST_COMPONENT, MAX_TWIST_COMPONENT)
     for name, unit in (("wz", "rad/s, CCW positive"), ("vy", "m/s, left"), ("vx", "m/s, forward")):
-        func = click.option(f"--{name}", type=float, default=0.0, show_default=True,
-                            help=f"Body twist component ({unit}).")(func)
+        func = click.option(f"--{name}", type=bound, default=0.0, show_default=True,
+                            help=f"Body twist component ({unit}, at most "
+                                 f"{MAX_TWIST_COMPONENT:g} either way).")(func)
     return func
 
 

@@ -3,12 +3,16 @@
 from __future__ import annotations
 
 import time
+from typing import TYPE_CHECKING
 
 import click
 
 from gateway.cli import EXIT_INFEASIBLE, config_option
 from gateway.cli.commands._common import check_finite, socket_for, twist_options
 from gateway.runtime.client import ControlClient
+
+if TYPE_CHECKING:
+    from collections.abc import Mapping
 
 
 @click.command()
@@ -51,5 +55,27 @@ def command(
             time.sleep(period)
         if duration > 0:
             client.request({"op": "stop"})
-    applied = reply.get("twist")
-    click.echo(f"ok: following {applied}")
+    click.echo(following(reply, {"vx_m_s": vx, "vy_m_s": vy, "wz_rad_s": wz}))
+
+
+def _twist_text(t: Mapping[str, object]) -> str:
+    """``vx 0.3 m/s, vy 0 m/s, wz 0.5 rad/s``: millimetre and milliradian resolution, no ``-0``."""
+    def num(key: str) -> str:
+        value = t.get(key)
+        return "?" if not isinstance(value, (int, float)) else f"{round(value, 3) + 0.0:g}"
+    return f"vx {num('vx_m_s')} m/s, vy {num('vy_m_s')} m/s, wz {num('wz_rad_s')} rad/s"
+
+
+def following(reply: Mapping[str, object], asked: Mapping[str, float]) -> str:
+    """What an accepted twist's reply means for the robot, in one line: the twist it follows
+    after the speed limits, and why when that is not what was asked."""
+    applied = reply.get("applied") or reply.get("twist")
+    if not isinstance(applied, dict):
+        return f"ok: {reply}"
+    text = f"ok: following {_twist_text(applied)}"
+    notes = []
+    if reply.get("projected"):
+        notes.append("the nearest feasible twist to the one asked")
+    if reply.get("limited_by"):
+        notes.append(f"asked {_twist_text(asked)}; limited by {reply['limited_by']}")
+    return text + (f" ({'; '.join(notes)})" if notes else "")

@@ -80,6 +80,26 @@ def speed_scale(model: RobotModel, result: IkResult, limits: Limits) -> float:
     return scale
 
 
+def binding_limit(model: RobotModel, result: IkResult, limits: Limits) -> tuple[float, str]:
+    """:func:`speed_scale` and, when it is below 1, the limit that sets it, for people
+    (``"max_linear_m_s 1.5 m/s"``, ``"the wheel front_left's max_rpm (31.4 rad/s)"``);
+    ``""`` when nothing limits the twist."""
+    t = result.twist
+    best, why = 1.0, ""
+    lin = math.hypot(t.vx_m_s, t.vy_m_s)
+    if lin > limits.max_linear_m_s:
+        best, why = limits.max_linear_m_s / lin, f"max_linear_m_s {limits.max_linear_m_s:g} m/s"
+    if abs(t.wz_rad_s) > limits.max_angular_rad_s:
+        factor = limits.max_angular_rad_s / abs(t.wz_rad_s)
+        if factor < best:
+            best, why = factor, f"max_angular_rad_s {limits.max_angular_rad_s:g} rad/s"
+    for wheel, speed, cap in zip(model.wheels, result.wheel_rad_s, limits.max_wheel_rad_s,
+                                 strict=True):
+        if abs(speed) > cap and cap / abs(speed) < best:
+            best, why = cap / abs(speed), f"the wheel {wheel.name}'s max_rpm ({cap:.4g} rad/s)"
+    return best, why
+
+
 def _scaled(result: IkResult, factor: float) -> IkResult:
     return IkResult(
         result.twist.scaled(factor),
