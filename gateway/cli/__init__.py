@@ -106,9 +106,22 @@ def main(
     level = logging.WARNING - 10 * min(verbose, 2)
     handler = logging.StreamHandler(sys.stderr)
     handler.setFormatter(JournalFormatter() if os.environ.get("JOURNAL_STREAM") else
-                         logging.Formatter("%(levelname)s %(name)s: %(message)s"))
+                         logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s"))
     logging.basicConfig(level=level, handlers=[handler])
+    if interface is not None:
+        check_interface(interface, "--interface")
     ctx.obj = {"interface": interface, "channel": channel, "debug": debug}
+
+
+def check_interface(interface: str, hint: str) -> None:
+    """A usage error (exit 2) naming python-can's interfaces when ``interface`` is none of them
+    (python-can is imported here, not at start-up: only a command that names one pays)."""
+    from can.interfaces import VALID_INTERFACES  # noqa: PLC0415 - see the docstring
+
+    if interface not in VALID_INTERFACES:
+        raise click.BadParameter(
+            f"expected a python-can interface, one of {', '.join(sorted(VALID_INTERFACES))}; "
+            f"got {interface!r}", param_hint=hint)
 
 
 def config_option(func: Callable[..., Any]) -> Callable[..., Any]:

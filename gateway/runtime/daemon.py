@@ -328,7 +328,10 @@ class Daemon:
             probe.after_wait(woke)
             text = probe.report(woke)
             if text is not None:
-                log.warning("control loop: %s", text)
+                # With simulated controllers in this process (--sim), late starts are the
+                # simulators' GIL share on a desktop, not news: INFO, not a WARNING every 10 s.
+                log.log(logging.INFO if self.sim is not None else logging.WARNING,
+                        "control loop: %s", text)
         self._serve(self.server.poll(0.0))
 
     def _wait_fine(self, timeout_s: float) -> None:

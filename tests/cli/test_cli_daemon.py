@@ -6,6 +6,7 @@ import json
 from typing import TYPE_CHECKING
 
 from gateway.cli import main
+from tests.conftest import CONFIG_DIR
 
 if TYPE_CHECKING:
 
@@ -51,3 +52,20 @@ def test_no_daemon_is_a_clear_error(runner: CliRunner, sock_path: str) -> None:
     result = runner.invoke(main, ["status", "--socket", sock_path])
     assert result.exit_code == 1
     assert sock_path in result.stderr
+
+
+def test_another_robots_config_is_refused_for_motion_and_warned_for_status(
+        runner: CliRunner, daemon: Daemon, sock_path: str) -> None:
+    """The daemon runs the TurtleBot: a twist given with the mecanum's configuration would
+    drive the wrong robot."""
+    mecanum = str(CONFIG_DIR / "mecanum.yaml")
+    result = runner.invoke(main, ["twist", "-c", mecanum, "--socket", sock_path, "--vx", "0.1"])
+    assert result.exit_code == 2, result.output
+    assert "runs the robot 'turtlebot3_burger', not 'mecanum'" in result.stderr
+    assert "refusing to drive it" in result.stderr
+    status = runner.invoke(main, ["status", "-c", mecanum, "--socket", sock_path])
+    assert status.exit_code == 0, status.output
+    assert "warning: the daemon on this socket runs the robot 'turtlebot3_burger'" in status.stderr
+    same = runner.invoke(main, ["twist", "-c", str(CONFIG_DIR / "turtlebot3_burger.yaml"),
+                                "--socket", sock_path, "--vx", "0.1"])
+    assert same.exit_code == 0, same.output

@@ -7,6 +7,7 @@ import json
 import logging
 import os
 import re
+import threading
 import time
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -14,14 +15,15 @@ from typing import TYPE_CHECKING
 import pytest
 
 from gateway.cli import main
+from gateway.config import load_config
+from gateway.runtime.daemon import Daemon
+from gateway.runtime.sdnotify import SystemdNotifier
 from gateway.runtime.timing import MissCause, MissProbe, Scheduler
 from gateway.runtime.timing.misses import REPORT_INTERVAL_S, SchedStat
 from tests.runtime.timing_helpers import FakeClock
 
 if TYPE_CHECKING:
     from click.testing import CliRunner
-
-    from gateway.runtime.daemon import Daemon
 
 PERIOD_S = 0.010  # 100 Hz
 SPIN_S = 200e-6
@@ -133,11 +135,15 @@ def test_the_daemon_logs_the_reports(daemon: Daemon, monkeypatch: pytest.MonkeyP
     assert probe is not None
     lines = iter(["3 late starts (as if)"])
     monkeypatch.setattr(probe, "report", lambda now_s: next(lines, None))
-    with caplog.at_level(logging.WARNING, logger="gateway.runtime.daemon"):
+    with caplog.at_level(logging.INFO, logger="gateway.runtime.daemon"):
         deadline = time.monotonic() + 5.0
         while "control loop: 3 late starts (as if)" not in caplog.text:
             assert time.monotonic() < deadline, caplog.text
             time.sleep(0.01)
+    # This daemon runs its simulators in-process (--sim): late starts are INFO there, a
+    # WARNING only with real controllers.
+    record = next(r for r in caplog.records if "3 late starts" in r.getMessage())
+    assert daemon.sim is not None and record.levelno == logging.INFO
 
 
 def test_without_statistics_nothing_is_classified() -> None:
@@ -181,3 +187,29 @@ def test_status_prints_late_starts_by_cause(runner: CliRunner, daemon: Daemon,
                       result.stdout)
     assert found is not None, result.stdout
     assert all(int(n) >= k for n, k in zip(found.groups(), (300, 200, 500), strict=True))
+
+
+def test_with_real_controllers_late_starts_are_a_warning(
+        sock_path: str, channel: str, monkeypatch: pytest.MonkeyPatch,
+        caplog: pytest.LogCaptureFixture) -> None:
+    """No simulators in the process: a late start is the machine's or the loop's, a WARNING."""
+    cfg = load_config(None, {"channel": channel})
+    d = Daemon(cfg, sim=False, socket_path=sock_path, notifier=SystemdNotifier(None))
+    thread = threading.Thread(target=d.run, daemon=True)
+    with caplog.at_level(logging.INFO, logger="gateway.runtime.daemon"):
+        thread.start()
+        try:
+            deadline = time.monotonic() + 5.0
+            while d.miss_probe is None:
+                assert time.monotonic() < deadline
+                time.sleep(0.01)
+            lines = iter(["2 late starts (as if)"])
+            monkeypatch.setattr(d.miss_probe, "report", lambda now_s: next(lines, None))
+            while "control loop: 2 late starts (as if)" not in caplog.text:
+                assert time.monotonic() < deadline + 5.0, caplog.text
+                time.sleep(0.01)
+        finally:
+            d.request_stop()
+            thread.join(timeout=10)
+    record = next(r for r in caplog.records if "2 late starts" in r.getMessage())
+    assert record.levelno == logging.WARNING

@@ -44,6 +44,28 @@ def socket_for(ctx: click.Context, config_path: str | None, socket_path: str | N
     return client_socket_path()
 
 
+def other_robot(ctx: click.Context, config_path: str | None, running: object) -> str | None:
+    """With ``-c``, why the daemon's robot (``running``: its status's ``robot``) is not the
+    configuration's; ``None`` when it is, or when there is nothing to compare."""
+    if config_path is None or not isinstance(running, str):
+        return None
+    name = load(ctx, config_path).name
+    if running == name:
+        return None
+    return (f"the daemon on this socket runs the robot {running!r}, not {name!r} of "
+            f"{config_path}")
+
+
+def refuse_other_robot(ctx: click.Context, config_path: str | None, client: Any) -> None:
+    """Before driving with ``-c``: a usage error (exit 2) when the daemon runs another robot
+    (a TurtleBot's twist must not drive the mecanum)."""
+    if config_path is None:
+        return
+    why = other_robot(ctx, config_path, client.request({"op": "status"}).get("robot"))
+    if why is not None:
+        raise click.UsageError(f"{why}: refusing to drive it (drop -c, or use its socket)")
+
+
 def twist_options(func: Any) -> Any:
     """``--vx --vy --wz`` options."""
     # Bounded as the control socket bounds a twist (MAX_TWIST_COMPONENT): a larger value is a

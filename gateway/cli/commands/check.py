@@ -6,7 +6,7 @@ import math
 
 import click
 
-from gateway.cli import config_option
+from gateway.cli import check_interface, config_option
 from gateway.cli.commands._common import load, rad_s_to_rpm
 from gateway.core.kinematics import PRESETS
 from gateway.drive.driveset import DriveSet
@@ -22,6 +22,7 @@ def _num(value: float) -> str:
 def command(ctx: click.Context, config_path: str | None) -> None:
     """Validate a configuration and print a summary of the robot."""
     cfg = load(ctx, config_path)
+    check_interface(cfg.bus.interface, f"{cfg.source}: bus.interface")
     model = cfg.model
     mob = model.mobility
     click.echo(f"config:   {cfg.source}")

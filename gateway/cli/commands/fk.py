@@ -9,6 +9,7 @@ import click
 
 from gateway.cli import config_option, json_option
 from gateway.cli.commands._common import load, twist_json
+from gateway.core.errors import KinematicsError
 
 
 def _pairs(values: tuple[str, ...], option: str) -> dict[str, float]:
@@ -64,7 +65,13 @@ def command(
         steer[i] = value
     if all(s is None for s in speeds):
         raise click.BadParameter("give at least one wheel speed", param_hint="--wheel")
-    result = model.fk(speeds, steer)
+    try:
+        result = model.fk(speeds, steer)
+    except KinematicsError as err:
+        # Too few wheels to fix the twist: a usage error that names what is missing.
+        missing = [w.name for w, s in zip(model.wheels, speeds, strict=True) if s is None]
+        raise click.BadParameter(f"{err}; not given: {', '.join(missing)}",
+                                 param_hint="--wheel") from err
     if as_json:
         click.echo(json.dumps({
             "twist": twist_json(result.twist),

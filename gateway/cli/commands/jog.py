@@ -35,7 +35,7 @@ import click
 from gateway.apps.jog.keys import DEFAULT_DEADMAN_S, STOP, JogState, Request, jog_limits, split_keys
 from gateway.apps.jog.screen import Screen, read_status, render, reply_error
 from gateway.cli import config_option
-from gateway.cli.commands._common import check_finite, load, socket_for
+from gateway.cli.commands._common import check_finite, load, refuse_other_robot, socket_for
 from gateway.runtime.client import ClientError, ControlClient
 from gateway.runtime.daemon import Daemon
 from gateway.runtime.sdnotify import SystemdNotifier
@@ -363,6 +363,8 @@ def command(
         except ClientError as err:
             raise click.ClickException(str(err)) from err
         stack.callback(link.close)
+        if not standalone and link.client is not None:
+            refuse_other_robot(ctx, config_path, link.client)
         state = JogState.start(limits, deadman_s=deadman)
         title = (f"{cfg.name} ({cfg.drive})"
                  + (f", standalone{', simulated' if sim else ''}" if standalone else ""))

@@ -72,4 +72,6 @@ def command(
     finally:
         if timer is not None:
             timer.cancel()
+    why = f" ({daemon.stop_signal})" if daemon.stop_signal else ""
+    click.echo(f"wheelgate: stopped{why}; every motor was sent zero and disarm", err=True)
     ctx.exit(code)

@@ -9,7 +9,8 @@ from typing import TYPE_CHECKING
 import click
 
 from gateway.cli import config_option, json_option
-from gateway.cli.commands._common import socket_for
+from gateway.cli.commands._common import other_robot, socket_for
+from gateway.core.errors import GatewayError
 from gateway.core.protection import ProtectionState
 from gateway.core.status import fault_names, state_name
 from gateway.runtime.client import ControlClient
@@ -28,11 +29,23 @@ if TYPE_CHECKING:
 def command(
     ctx: click.Context, config_path: str | None, socket_path: str | None, as_json: bool
 ) -> None:
-    """Print the running gateway's state, motors, odometry, counters and timing."""
-    with ControlClient(socket_for(ctx, config_path, socket_path)) as client:
-        reply = client.request({"op": "status"})
+    """Print the running gateway's state, motors, odometry, counters and timing (with --json,
+    a failure too is a JSON object on stdout: ``{"ok": false, "error": {...}}``)."""
+    try:
+        with ControlClient(socket_for(ctx, config_path, socket_path)) as client:
+            reply = client.request({"op": "status"})
+    except GatewayError as err:
+        if not as_json:
+            raise
+        reply = {"ok": False, "error": {"code": "no_gateway", "message": str(err)}}
     if not reply.get("ok"):
+        if as_json:
+            click.echo(json.dumps({"ok": False, "error": reply.get("error")}))
+            ctx.exit(1)
         raise click.ClickException(str((reply.get("error") or {}).get("message", reply)))
+    why = other_robot(ctx, config_path, reply.get("robot"))
+    if why is not None:
+        click.echo(f"warning: {why}", err=True)
     status = status_from_json(reply)
     if as_json:
         click.echo(json.dumps(status_to_json(status)))

@@ -8,7 +8,12 @@ from typing import TYPE_CHECKING
 import click
 
 from gateway.cli import EXIT_INFEASIBLE, config_option
-from gateway.cli.commands._common import check_finite, socket_for, twist_options
+from gateway.cli.commands._common import (
+    check_finite,
+    refuse_other_robot,
+    socket_for,
+    twist_options,
+)
 from gateway.runtime.client import ControlClient
 
 if TYPE_CHECKING:
@@ -39,6 +44,7 @@ def command(
     check_finite(vx=vx, vy=vy, wz=wz)
     path = socket_for(ctx, config_path, socket_path)
     with ControlClient(path) as client:
+        refuse_other_robot(ctx, config_path, client)
         end = time.monotonic() + duration
         period = 1.0 / rate
         while True:
