@@ -32,7 +32,6 @@ from gateway.core.bridge_settings import (
 from gateway.core.choice import choice
 from gateway.core.errors import ConfigError
 from gateway.core.options import OptionSpec, validate_block
-from gateway.wire.ros2.names import resolve_topic_name, validate_namespace, validate_node_name
 
 if TYPE_CHECKING:
     from collections.abc import Mapping
@@ -133,7 +132,6 @@ def parse_bridge(raw: object, source: str, robot: str) -> tuple[BridgeSettings, 
     namespace = str(v["namespace"])
     if namespace:
         check_name(namespace, f"{where}.namespace")
-        validate_namespace(namespace, f"{where}.namespace")
     native = namespace or robot
     if not _TOKEN.match(native.replace("/", "_")):
         raise ConfigError(
@@ -143,6 +141,15 @@ def parse_bridge(raw: object, source: str, robot: str) -> tuple[BridgeSettings, 
     ros2 = None
     if "ros2" in (raw if isinstance(raw, dict) else {}):
         r = validate_block(v["ros2"], ROS2_KEYS, f"{where}.ros2", "ros2 keys")
+        # ROS's naming rules, from the bridge's wire layer: loaded only for a ros2: block.
+        from gateway.wire.ros2.names import (  # noqa: PLC0415
+            resolve_topic_name,
+            validate_namespace,
+            validate_node_name,
+        )
+
+        if namespace:
+            validate_namespace(namespace, f"{where}.namespace")
         for key in ("cmd_vel", "odom"):  # relative to the namespace, or absolute
             resolve_topic_name(str(r[key]), namespace or "/", f"{where}.ros2.{key}")
         validate_node_name(str(r["node_name"]), f"{where}.ros2.node_name")

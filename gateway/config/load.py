@@ -36,7 +36,6 @@ from pathlib import Path
 from types import MappingProxyType
 from typing import TYPE_CHECKING
 
-from gateway.config.bridge import parse_bridge, parse_foxglove
 from gateway.config.keys import (
     BUS_KEYS,
     CAN_ID_KEYS,
@@ -223,11 +222,16 @@ def parse_config(
             f"writable by every local user, who could then drive the robot; expected 0o660 "
             f"(the owner and the group wheelgate), with socket_uids for finer control"
         )
-    bridge = None
-    if "bridge" in raw:
-        bridge, said = parse_bridge(raw["bridge"], source, name)
-        warnings += said
-    foxglove = parse_foxglove(raw["foxglove"], source) if "foxglove" in raw else None
+    bridge = foxglove = None
+    if "bridge" in raw or "foxglove" in raw:
+        # Loaded only for these blocks: their settings classes cost start-up time otherwise.
+        from gateway.config.bridge import parse_bridge, parse_foxglove  # noqa: PLC0415
+
+        if "bridge" in raw:
+            bridge, said = parse_bridge(raw["bridge"], source, name)
+            warnings += said
+        if "foxglove" in raw:
+            foxglove = parse_foxglove(raw["foxglove"], source)
     config = GatewayConfig(
         source, name, str(drive), MappingProxyType(geometry), model, motors, limits, bus, loop,
         steering, tuple(warnings), bridge, foxglove,

@@ -111,6 +111,11 @@ frame_of: Callable[[tuple[int, bytes, bool, bool, int, float]], Frame] = functoo
 )
 
 
+#: Largest accepted twist component magnitude (m/s or rad/s) from any outside source (the
+#: control socket, the bridge, the CLI); larger is surely a mistake.
+MAX_TWIST_COMPONENT = 100.0
+
+
 @dataclass(frozen=True, slots=True)
 class Twist:
     """A body twist in the REP-103 body frame: x forward, y left, z up, CCW positive.

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Any
 import click
 
 from gateway.config import client_socket_path, load_config
-from gateway.wire.socket.messages import MAX_TWIST_COMPONENT
+from gateway.core.types import MAX_TWIST_COMPONENT
 
 if TYPE_CHECKING:
     from gateway.core.errors import InfeasibleTwistError

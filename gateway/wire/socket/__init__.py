@@ -38,12 +38,12 @@ dataclasses an object of their fields, tuples lists.
 
 from __future__ import annotations
 
+from gateway.core.types import MAX_TWIST_COMPONENT
 from gateway.wire.socket.events import event_line, event_to_json, event_topic
 from gateway.wire.socket.messages import (
     MAX_ID_CHARS,
     MAX_MESSAGE_BYTES,
     MAX_REQUEST_BYTES,
-    MAX_TWIST_COMPONENT,
     CommandRequest,
     Op,
     ProtocolError,

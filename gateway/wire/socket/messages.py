@@ -29,8 +29,6 @@ MAX_MESSAGE_BYTES = 4096
 MAX_REQUEST_BYTES = 1024
 #: Longest accepted string request id, in characters.
 MAX_ID_CHARS = 64
-#: Largest accepted twist component magnitude (m/s or rad/s); larger is surely a mistake.
-MAX_TWIST_COMPONENT = 100.0
 
 #: A request id as it appears on the wire.
 RequestId: TypeAlias = int | str

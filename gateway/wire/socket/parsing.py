@@ -13,11 +13,10 @@ from collections import deque
 from typing import TYPE_CHECKING, Any
 
 from gateway.core.kinematics.odometry import Pose
-from gateway.core.types import Twist
+from gateway.core.types import MAX_TWIST_COMPONENT, Twist
 from gateway.wire.socket.messages import (
     MAX_ID_CHARS,
     MAX_MESSAGE_BYTES,
-    MAX_TWIST_COMPONENT,
     CommandRequest,
     Op,
     ProtocolError,

@@ -1,16 +1,20 @@
-"""Twist components are bounded the same way in every command (the control socket's bound):
-beyond it, or not finite, is a usage error with exit status 2, before anything is computed or
-sent."""
+"""Inputs the CLI takes: twist components bounded the same way in every command (the control
+socket's bound: beyond it, or not finite, a usage error with exit status 2, before anything is
+computed or sent), the twist command's account of what the robot follows, and what ``ik``
+imports (start-up)."""
 
 from __future__ import annotations
 
+import ast
+import subprocess
+import sys
 from typing import TYPE_CHECKING
 
 import pytest
 
 from gateway.cli import main
 from gateway.cli.commands.twist import following
-from gateway.wire.socket.messages import MAX_TWIST_COMPONENT
+from gateway.core.types import MAX_TWIST_COMPONENT
 
 if TYPE_CHECKING:
     from click.testing import CliRunner
@@ -44,3 +48,19 @@ def test_the_twist_command_says_what_the_robot_follows_and_why() -> None:
         "limited by max_linear_m_s 1.5 m/s)")
     plain = {**reply, "applied": reply["twist"], "limited_by": None}
     assert following(plain, asked) == "ok: following vx 5 m/s, vy 0 m/s, wz 0 rad/s"
+
+
+def test_ik_loads_nothing_it_does_not_use() -> None:
+    """Start-up is measured in tools/bench_anchor.py; this guards its cheapest losses: the
+    bridge's and the socket's wire formats, python-can, Zenoh and the optional blocks' settings
+    are not imported to compute wheel speeds."""
+    code = ("import sys\nfrom gateway.cli import main\n"
+            "try:\n    main(['ik', '--vx', '0.1'])\nexcept SystemExit:\n    pass\n"
+            "print(sorted(sys.modules))\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=60, check=True)
+    loaded = set(ast.literal_eval(done.stdout.strip().splitlines()[-1]))
+    unwanted = {"can", "zenoh", "foxglove", "gateway.wire.ros2", "gateway.wire.socket",
+                "gateway.config.bridge", "gateway.core.bridge_settings", "gateway.runtime",
+                "importlib.resources", "zipfile", "tempfile"}
+    assert not unwanted & loaded, sorted(unwanted & loaded)
