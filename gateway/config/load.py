@@ -216,6 +216,12 @@ def parse_config(
     if not isinstance(name, str):
         raise ConfigError(f"{source}: name: expected str, got {name!r}")
     warnings = []
+    if "bus" not in raw and bus.interface == "virtual" and source != DEFAULT_NAME:
+        warnings.append(
+            f"{source}: no bus: block: the robot is driven on python-can's virtual bus "
+            f"{bus.channel!r}, where only simulated controllers answer (`wheelgate run --sim`); "
+            f"a robot needs e.g. bus: {{interface: socketcan, channel: can0}}"
+        )
     if loop.socket_mode & 0o002:
         warnings.append(
             f"{source}: gateway.socket_mode: {loop.socket_mode:#o} makes the control socket "

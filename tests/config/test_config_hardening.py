@@ -94,3 +94,16 @@ def test_a_world_writable_socket_is_warned_about(tmp_path: Path, runner: CliRunn
 def test_every_shipped_config_still_loads() -> None:
     for path in sorted(CONFIG_DIR.glob("*.yaml")):
         load_config(path)
+
+
+def test_a_file_without_a_bus_block_is_warned_about(tmp_path: Path) -> None:
+    """No bus: block means the virtual bus, where only simulators answer: a real robot's
+    configuration without one would never reach its controllers."""
+    text = "\n".join(line for line in MECANUM.splitlines()
+                     if not line.startswith(("bus:", "  interface:", "  channel:", "  bitrate:")))
+    assert "bus:" not in text
+    cfg = load_config(write(tmp_path, text))
+    assert any("no bus: block" in w and "virtual bus" in w for w in cfg.warnings), cfg.warnings
+    told = load_config(write(tmp_path, text), {"interface": "socketcan", "channel": "can0"})
+    assert not any("no bus: block" in w for w in told.warnings)
+    assert not any("no bus: block" in w for w in load_config(None).warnings)  # the demo's own
