@@ -117,7 +117,6 @@ class Remote:
 
     def _commander(self, name: str, alive: bool, now_s: float) -> None:
         if alive:
-            self.deadman.appeared(name)
             log.info("bridge: commander %s is alive", name)
             return
         gw = self.gateway

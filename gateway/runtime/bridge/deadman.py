@@ -27,20 +27,13 @@ class Deadman:
 
     def __init__(self) -> None:
         self._followed: dict[str, Twist] = {}
-        #: Commanders whose token is alive.
-        self.alive: set[str] = set()
 
     def accepted(self, commander: str, twist: Twist) -> None:
         """``commander``'s twist became the target (the object the supervisor holds)."""
         self._followed[commander] = twist
 
-    def appeared(self, commander: str) -> None:
-        """``commander``'s token appeared."""
-        self.alive.add(commander)
-
     def lost(self, commander: str, target: Twist) -> bool:
         """``commander``'s token disappeared; whether the robot was following it (``target``
         is the supervisor's target now)."""
-        self.alive.discard(commander)
         followed = self._followed.pop(commander, None)
         return followed is not None and followed is target
