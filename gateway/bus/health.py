@@ -186,10 +186,11 @@ class BurstTracker:
     """What the bus did not take of the bursts, and what goes first in the next one.
 
     A burst the transmit queue cannot hold is cut where the queue refused; the frames left
-    over go *first* in the next burst (in their order), so no command frame starves behind
-    the others while the bus is slow, and every wheel's command is at most one cycle older
-    than the others'.  A frame key (identifier and type) that stays unsent for
-    ``fault_after`` bursts in a row that contained it is reported by :meth:`after_send`.
+    over go *first* in the next burst, the longest left out first (the burst's order among
+    equals), so no command frame starves behind the others while the bus is slow: with room
+    for ``k`` of ``n`` frames a cycle, each goes out at least every ``ceil(n / k)`` cycles.
+    A frame key (identifier and type) that stays unsent for ``fault_after`` bursts in a row
+    that contained it is reported by :meth:`after_send`.
 
     :param fault_after: bursts in a row after which an unsent frame is a fault.
     """
@@ -207,6 +208,9 @@ class BurstTracker:
         first = [f for f in frames if (f.arbitration_id, f.is_extended_id) in missed]
         if not first:
             return frames
+        # Longest left out first: in the burst's own order, a queue with room for one frame a
+        # cycle would send the first two wheels' commands by turns and never the others'.
+        first.sort(key=lambda f: -missed[f.arbitration_id, f.is_extended_id])
         return first + [f for f in frames if (f.arbitration_id, f.is_extended_id) not in missed]
 
     def after_send(self, frames: Sequence[Frame], sent: int) -> tuple[tuple[int, bool], int] | None:

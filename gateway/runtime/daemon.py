@@ -181,6 +181,10 @@ class Daemon:
         """Ask the loop to stop (signal handler: every signal of :data:`STOP_SIGNALS`)."""
         if signum and not self._stop:
             self.stop_signal = signal.Signals(signum).name
+            if signum == signal.SIGABRT:
+                # systemd's watchdog sends SIGABRT to a stalled loop: where every thread was
+                # is the first thing to know (run by Python between bytecodes, GIL held).
+                faulthandler.dump_traceback(all_threads=True)
         self._stop = True
 
     def run(self, max_cycles: int | None = None) -> int:
@@ -190,11 +194,15 @@ class Daemon:
         signals = STOP_SIGNALS if main_thread else ()
         old = {s: signal.signal(s, self.request_stop) for s in signals}
         if main_thread and not faulthandler.is_enabled():
-            # After the handlers above, so that a fatal signal's traceback (SIGSEGV, a SIGABRT
-            # from systemd's watchdog: where the loop was stuck) is written and the Python
-            # handler still runs (faulthandler chains to the handler it found).
+            # A crash in C (SIGSEGV, SIGBUS, SIGFPE, SIGILL) writes every thread's traceback.
+            # SIGABRT is taken back from faulthandler: its handler walks the other threads'
+            # frames while they run (no GIL in a signal handler) and can itself crash the
+            # process (seen: a segfault inside the dump, exit -11, no zero sent).  Python's
+            # handler below writes the same tracebacks safely, with the GIL held.
             faulthandler.enable(all_threads=True)
             self._closers.append(faulthandler.disable)
+            if signal.SIGABRT in old:
+                signal.signal(signal.SIGABRT, self.request_stop)
         try:
             self.rt_notes = realtime_setup(
                 self.config.loop.rt_priority or None,

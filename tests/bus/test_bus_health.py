@@ -102,6 +102,27 @@ def test_frames_left_out_go_first_and_a_starving_one_is_reported() -> None:
     assert tracker.missed == {}
 
 
+@pytest.mark.parametrize("n", [2, 3, 4, 6, 8])
+@pytest.mark.parametrize("room", [1, 2, 3, 5])
+def test_with_room_for_k_of_n_frames_each_goes_out_every_ceil_n_over_k_bursts(
+    n: int, room: int
+) -> None:
+    # A queue that takes the same number of frames every cycle: no frame waits longer than
+    # its turn (round robin), whatever the burst's own order.
+    tracker = BurstTracker(fault_after=1000)
+    burst = _frames(*range(1, n + 1))
+    last = dict.fromkeys(range(1, n + 1), -1)
+    longest = 0
+    for cycle in range(60):
+        ordered = tracker.order(burst)
+        tracker.after_send(ordered, room)
+        for f in ordered[:room]:
+            longest = max(longest, cycle - last[f.arbitration_id])
+            last[f.arbitration_id] = cycle
+    assert longest <= -(-n // room), (n, room, longest)
+    assert min(last.values()) >= 60 - -(-n // room)
+
+
 def test_a_log_line_per_interval_with_the_count() -> None:
     throttle = LogThrottle(5.0)
     assert throttle.note(0.0) == 1

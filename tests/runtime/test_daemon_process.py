@@ -90,6 +90,12 @@ def test_signal_sends_zero_and_disarm_then_exits_0(
             proc.wait()
         _, err = proc.communicate()
     assert code == 0, err.decode()
+    # No fatal-signal handler between the signal and the stop: faulthandler's SIGABRT handler
+    # walked the running threads and could crash the process before the zero went out.
+    assert b"Fatal Python error" not in err, err.decode()
+    if signum == signal.SIGABRT:
+        # systemd's watchdog signal: where each thread was is written (by Python, safely).
+        assert b"most recent call first" in err, err.decode()
     # Bounded, not a timing assertion: the daemon's own grace is 0.3 s of its 1 s budget.
     assert elapsed < 5.0
     after = read_notify(nsock, b"STOPPING=1", 2.0)
