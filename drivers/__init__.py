@@ -2,7 +2,8 @@
 
 :data:`BUILTIN_DRIVERS` maps a config ``driver:`` name to ``(module, class)``; classes are
 imported lazily by :mod:`gateway.drive.registry`; :data:`BUILTIN_SIMULATORS` names their device
-simulators, found by :mod:`gateway.sim.registry`.  Third-party packages add drivers through the
+simulators, found by :mod:`gateway.sim.registry`, and :data:`BUILTIN_SCANNERS` their
+``wheelgate scan`` probes.  Third-party packages add drivers through the
 ``gateway.drivers`` entry-point group.
 """
 
@@ -25,4 +26,14 @@ BUILTIN_SIMULATORS: dict[str, tuple[str, str]] = {
     "cia402": ("drivers.cia402.sim", "simulator_for"),
     "dji": ("drivers.dji.sim", "simulator_for"),
     "dbc": ("drivers.dbc.sim", "simulator_for"),
+}
+
+#: Driver name -> (module, class) of its protocol's ``wheelgate scan`` probe
+#: (:class:`gateway.drive.scan.ScanProbe`, found by :mod:`gateway.apps.scan.registry`); a DBC
+#: file names no controller to look for, so ``dbc`` has none.
+BUILTIN_SCANNERS: dict[str, tuple[str, str]] = {
+    "odrive": ("drivers.odrive.scan", "OdriveProbe"),
+    "vesc": ("drivers.vesc.scan", "VescProbe"),
+    "cia402": ("drivers.cia402.scan", "CanopenProbe"),
+    "dji": ("drivers.dji.scan", "DjiProbe"),
 }

@@ -182,20 +182,26 @@ class Session:
         """Stop the gateway, then the simulators and candump (killed if they linger)."""
         for name in ("run", "sim", "candump"):
             proc = self.procs.get(name)
-            if proc is None or proc.poll() is not None:
-                continue
-            proc.send_signal(signal.SIGTERM)
-            try:
-                proc.wait(timeout=60)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
+            if proc is not None:
+                stop(proc)
         for proc in self.procs.values():
             for stream in (proc.stdout, proc.stderr):
                 if stream is not None:
                     stream.close()
         for f in self._files:
             f.close()
+
+
+def stop(proc: subprocess.Popen[bytes], timeout_s: float = 60.0) -> None:
+    """SIGTERM a process that still runs and wait for it; killed if it lingers."""
+    if proc.poll() is not None:
+        return
+    proc.send_signal(signal.SIGTERM)
+    try:
+        proc.wait(timeout=timeout_s)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
 
 
 def pose_error(odo: dict[str, Any], truth: dict[str, Any]) -> float:

@@ -1,13 +1,13 @@
 """The object dictionary of the simulated CiA 402 drive, with CiA 301 write rules.
 
-It holds the objects the gateway touches (0x1000, 0x1001, 0x1016, 0x1017, PDO parameters
-0x1400-0x1403 / 0x1600-0x1603 / 0x1800-0x1803 / 0x1A00-0x1A03, and 0x6007, 0x6040, 0x6041,
-0x605A, 0x6060, 0x6061, 0x6064, 0x606C, 0x607A, 0x6084, 0x6085, 0x60FF, 0x6502) and refuses
-what a real device refuses, with the SDO abort code CiA 301 gives: unknown object or subindex,
-read-only, wrong length, a mapping change while the PDO is valid or before its count is
-cleared, an unmappable object or more than 64 bits, a COB-ID change of a valid PDO, an
-unsupported mode of operation, a heartbeat consumer entry with reserved bits or a node ID
-beyond 127, an abort connection option or quick stop option code the device does not have
+It holds the objects the gateway and ``wheelgate scan`` touch (0x1000, 0x1001, 0x1016, 0x1017,
+0x1018, PDO parameters 0x1400-0x1403 / 0x1600-0x1603 / 0x1800-0x1803 / 0x1A00-0x1A03, and
+0x6007, 0x6040, 0x6041, 0x605A, 0x6060, 0x6061, 0x6064, 0x606C, 0x607A, 0x6084, 0x6085, 0x60FF,
+0x6502) and refuses what a real device refuses, with the SDO abort code CiA 301 gives: unknown
+object or subindex, read-only, wrong length, a mapping change while the PDO is valid or before
+its count is cleared, an unmappable object or more than 64 bits, a COB-ID change of a valid
+PDO, an unsupported mode of operation, a heartbeat consumer entry with reserved bits or a node
+ID beyond 127, an abort connection option or quick stop option code the device does not have
 (0x06090030 "value range of parameter exceeded"), a deceleration of 0 (0x06090032).
 
 Factory values of the protection objects:
@@ -59,6 +59,11 @@ FACTORY_ABORT_OPTION = 1
 #: Factory value of 0x605A: 2, quick-stop ramp, then SWITCH ON DISABLED.
 FACTORY_QUICK_STOP_OPTION = 2
 
+#: The identity object 0x1018 (CiA 301: every device has one, at least its vendor-ID):
+#: vendor-ID 0 (CiA assigns none to a simulator), product code 0x402, revision number 1.0
+#: (major.minor in the high and low 16 bits); the serial number is the node ID.
+IDENTITY = (0x00000000, 0x00000402, 0x00010000)
+
 #: Default mappings of PDO 1..4 (entries ``index << 16 | sub << 8 | bits``).
 _RPDO_DEFAULTS: tuple[tuple[int, ...], ...] = (
     (0x60400010,), (0x60400010, 0x60600008), (0x60400010, 0x60FF0020), ())
@@ -105,6 +110,7 @@ class SimObjectDictionary:
             (0x1016, 0): Entry(_U8, 1, writable=False),
             (0x1016, 1): Entry(_U32, 0),
             (0x1017, 0): Entry(_U16, self.heartbeat_ms),
+            (0x1018, 0): Entry(_U8, 4, writable=False),
             (0x6007, 0): Entry(_I16, FACTORY_ABORT_OPTION),
             (0x6040, 0): Entry(_U16, 0, mappable=True),
             (0x6041, 0): Entry(_U16, 0, writable=False, mappable=True),
@@ -119,6 +125,8 @@ class SimObjectDictionary:
             (0x60FF, 0): Entry(_I32, 0, mappable=True),
             (0x6502, 0): Entry(_U32, self.supported_modes, writable=False),
         }
+        for sub, value in enumerate((*IDENTITY, self.node_id), start=1):
+            od[(0x1018, sub)] = Entry(_U32, value, writable=False)
         n = self.node_id
         for k in range(4):
             off = PDO_COB_INVALID if k == 3 else 0

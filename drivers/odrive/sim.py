@@ -25,10 +25,13 @@ Modelled behaviour:
   Set_Input_Pos/Vel/Torque and Set_Axis_State feed it, the stricter reading of the official
   ``can_watchdog.py`` example.  Expired in CLOSED_LOOP_CONTROL, it latches
   WATCHDOG_TIMER_EXPIRED and disarms (the motor coasts);
+* 0.6 Get_Version requests (RTR or DLC 0) are answered, as the firmware answers any ``Get_*``
+  request, with the endpoints' firmware and hardware version, or :data:`FACTORY_VERSION`
+  without endpoints; 0.5 has no Get_Version (command 0x00 is CANopen NMT's there) and ignores
+  it;
 * 0.6 parameter access, for the watchdog's two endpoints only (``endpoints``, the IDs the
-  motor block names): Get_Version answers with the endpoints' firmware and hardware version,
-  RxSdo reads answer with TxSdo, writes are taken without an answer (firmware before 0.6.11);
-  other endpoints get no answer;
+  motor block names): RxSdo reads answer with TxSdo, writes are taken without an answer
+  (firmware before 0.6.11); other endpoints get no answer;
 * an injected FAULT latches DRV_FAULT (0.6) or MOTOR_FAILED + motor DRV_FAULT (0.5) and
   disarms; Clear_Errors clears, but latches again at once while the injected cause remains;
 * Estop latches ESTOP_REQUESTED and disarms;
@@ -88,6 +91,9 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 TAU = 2.0 * math.pi
+#: ``(firmware, hardware)`` version a 0.6 axis without watchdog endpoints reports in
+#: Get_Version: 0.0.0, which no real ODrive reports (the demo's endpoints name it too).
+FACTORY_VERSION = ("0.0.0", "")
 
 
 class OdriveSimulator(DeviceSimulator):
@@ -163,7 +169,7 @@ class OdriveSimulator(DeviceSimulator):
         v06 = self.codec.firmware is Firmware.V0_6
         if not v06:
             self._last_fed_s = now_s
-        elif self.endpoints is not None and ids[1] in (CmdId.GET_VERSION, RX_SDO):
+        elif ids[1] == CmdId.GET_VERSION or (self.endpoints is not None and ids[1] == RX_SDO):
             return self._parameter_access(frame, ids[1])
         if v06 and ids[1] in _FEEDS_06:
             self._last_fed_s = now_s
@@ -299,17 +305,23 @@ class OdriveSimulator(DeviceSimulator):
             self.node_id, self.position_turns, self.model.velocity_rad_s / TAU
         )
 
+    def _version(self, frame: Frame) -> list[Frame]:
+        """Get_Version (0.6): the endpoints' versions, else :data:`FACTORY_VERSION`."""
+        if frame.dlc != 0:
+            return []  # not a request
+        ep = self.endpoints
+        fw, hw = FACTORY_VERSION if ep is None else (ep.fw_version, ep.hw_version)
+        arb = self.codec.arbitration_id(self.node_id, CmdId.GET_VERSION)
+        return [Frame(arb, version_reply(fw, hw), self.codec.extended_id)]
+
     def _parameter_access(self, frame: Frame, cmd: int) -> list[Frame]:
-        """Get_Version and RxSdo for the watchdog's endpoints (0.6)."""
+        """Get_Version, and RxSdo for the watchdog's endpoints (0.6)."""
+        if cmd == CmdId.GET_VERSION:
+            return self._version(frame)
         ep = self.endpoints
         assert ep is not None
         arb = self.codec.arbitration_id
         ext = self.codec.extended_id
-        if cmd == CmdId.GET_VERSION:
-            if frame.dlc != 0:
-                return []  # not a request
-            reply = version_reply(ep.fw_version, ep.hw_version)
-            return [Frame(arb(self.node_id, CmdId.GET_VERSION), reply, ext)]
         sdo = parse_sdo(frame.data)
         if sdo is None:
             return []

@@ -1,7 +1,8 @@
 """The ``wheelgate`` command: a click group that loads one module per subcommand.
 
 Errors are mapped to exit codes in one place: 0 ok, 1 other gateway error, 2 bad usage or
-configuration, 3 infeasible twist.  ``--debug`` re-raises to show the traceback.
+configuration, 3 infeasible twist (and ``spin``'s own 4: something to fix, with the advice).
+``--debug`` re-raises to show the traceback.
 """
 
 from __future__ import annotations
@@ -33,6 +34,9 @@ COMMANDS: dict[str, str] = {
     "monitor": "monitor",
     "odom": "odom",
     "sim": "sim",
+    "init": "init",
+    "spin": "spin",
+    "scan": "scan",
 }
 
 EXIT_ERROR = 1

@@ -92,14 +92,28 @@ WHEEL_KEYS: Mapping[str, OptionSpec] = MappingProxyType({
 })
 #: The keys of ``limits:``.
 LIMIT_KEYS: Mapping[str, OptionSpec] = MappingProxyType({
-    "max_wheel_accel_rad_s2": OptionSpec(float, math.inf, minimum=1e-9),
+    "max_wheel_accel_rad_s2": OptionSpec(float, math.inf, minimum=1e-9,
+                                         help="how fast a wheel's speed may change, rad/s^2"),
+    "max_wheel_decel_rad_s2": OptionSpec(float, 0.0, minimum=0.0,
+                                         help="how fast a wheel may slow down, rad/s^2; 0: "
+                                              "max_wheel_accel_rad_s2"),
     "max_linear_m_s": OptionSpec(float, math.inf, minimum=0.0),
     "max_angular_rad_s": OptionSpec(float, math.inf, minimum=0.0),
 })
+#: The range of a calibration multiplier: a correction, not a different robot.
+MIN_MULTIPLIER, MAX_MULTIPLIER = 0.5, 2.0
 #: The keys of ``kinematics:``.
 KINEMATICS_KEYS: Mapping[str, OptionSpec] = MappingProxyType({
     "slip_tolerance_m_s": OptionSpec(float, 1e-3, minimum=0.0),
+    # Calibration as ros2_control's diff_drive_controller has it (wheel_separation_multiplier,
+    # left/right_wheel_radius_multiplier): measured corrections on the nominal geometry.
+    "wheel_separation_multiplier": OptionSpec(
+        float, 1.0, minimum=MIN_MULTIPLIER, maximum=MAX_MULTIPLIER,
+        help="factor on the geometry's track (a drive with a track)"),
+    "wheel_radius_multipliers": OptionSpec(
+        dict, {}, help="wheel name -> factor on its radius"),
 })
+
 #: The keys of ``gateway:``, the daemon's settings (:class:`gateway.core.settings.LoopConfig`).
 GATEWAY_KEYS: Mapping[str, OptionSpec] = MappingProxyType({
     "rate_hz": OptionSpec(float, 200.0, minimum=50.0, maximum=1000.0,

@@ -36,14 +36,12 @@ from pathlib import Path
 from types import MappingProxyType
 from typing import TYPE_CHECKING
 
+from gateway.config.daemon_blocks import parse_bus, parse_loop
+from gateway.config.gather import Problems
 from gateway.config.keys import (
-    BUS_KEYS,
-    CAN_ID_KEYS,
-    GATEWAY_KEYS,
     KINEMATICS_KEYS,
     LIMIT_KEYS,
     TOP_KEYS,
-    WHEEL_KEYS,
 )
 from gateway.config.motors import (
     check_nodes,
@@ -51,17 +49,17 @@ from gateway.config.motors import (
     motor_block,
     motor_path,
     preset_motors,
+    radius_multipliers,
     steering_blocks,
 )
+from gateway.config.wheels import MAX_WHEELS, generic_wheels, preset_wheels
 from gateway.config.yaml_text import MAX_BYTES, load_yaml, read_text
-from gateway.core.can_ids import CanIds
-from gateway.core.choice import choice
 from gateway.core.errors import ConfigError, KinematicsError
-from gateway.core.kinematics import PRESETS, Limits, RobotModel, Wheel, WheelType
-from gateway.core.kinematics.model import validate_wheel
-from gateway.core.options import OptionSpec, unknown_key, validate_block
+from gateway.core.kinematics import PRESETS, Limits, RobotModel
+from gateway.core.options import unknown_key, validate_block
 from gateway.core.protection import Guard, WatchdogPolicy, check_timeout
-from gateway.core.settings import LOOP_CHOICES, BusConfig, GatewayConfig, LoopConfig
+from gateway.core.settings import BusConfig, GatewayConfig, LoopConfig
+from gateway.core.types import MotorConfig
 from gateway.drive.ownership import own_id_collisions
 
 if TYPE_CHECKING:
@@ -81,8 +79,6 @@ __all__ = [
     "parse_config",
 ]
 
-#: The most wheels a robot may have (a bound on what a config can make the loader build).
-MAX_WHEELS = 64
 #: Name shown for the configuration embedded in the package.
 DEFAULT_NAME = "<embedded default>"
 
@@ -156,91 +152,51 @@ def load_config(
 def parse_config(
     raw: object, source: str, overrides: Mapping[str, object] | None = None
 ) -> GatewayConfig:
-    """Validate an already-loaded YAML document (see :func:`load_config`)."""
+    """Validate an already-loaded YAML document (see :func:`load_config`).
+
+    :raises ConfigError: with every problem of the file, one line each (block by block; a
+        block that needs a broken one is not checked).
+    """
     if not isinstance(raw, dict):
         raise ConfigError(f"{source}: expected a mapping at the top level, got {raw!r}")
+    found = Problems()
     for key in raw:
         if key not in TOP_KEYS:
-            raise unknown_key(f"{source}: {key}", key, {"top-level keys": TOP_KEYS})
-    drive = raw.get("drive")
-    choices = [*sorted(PRESETS), "generic"]
-    if drive not in choices:
-        raise ConfigError(f"{source}: drive: expected one of {', '.join(choices)}, got {drive!r}")
-    config_dir = "" if source == DEFAULT_NAME else str(Path(source).resolve().parent)
-    defaults = raw.get("motor_defaults", {})
-    if not isinstance(defaults, dict):
-        raise ConfigError(f"{source}: motor_defaults: expected a mapping, got {defaults!r}")
-    if drive == "generic":
-        for key in ("geometry", "motors"):
-            if key in raw:
-                raise ConfigError(
-                    f"{source}: {key}: not used with drive: generic (motors go in wheels[i].motor)"
-                )
-        geometry: dict[str, object] = {}
-        wheels, motor_raw = _generic_wheels(raw.get("wheels"), source)
-    else:
-        if "wheels" in raw:
-            raise ConfigError(
-                f"{source}: wheels: only used with drive: generic; a {drive} drive takes "
-                f"geometry: and motors:"
-            )
-        geometry, wheels = _preset_wheels(str(drive), raw.get("geometry"), source)
-        motor_raw = preset_motors(raw.get("motors"), wheels, source)
-    motors = tuple(
-        None if block is None
-        else motor_block(
-            block, defaults, w.name, f"{source}: {motor_path(drive, i, w.name)}", config_dir
-        )
-        for i, (w, block) in enumerate(zip(wheels, motor_raw, strict=True))
-    )
-    steering = steering_blocks(
-        raw.get("steering"), raw.get("steering_defaults", {}), wheels, source, config_dir
-    )
-    check_nodes((*motors, *steering), source)
-    wheels = limit_steer_rates(wheels, steering)
-    kin = validate_block(raw.get("kinematics", {}), KINEMATICS_KEYS, f"{source}: kinematics")
-    try:
-        model = RobotModel(wheels, slip_tolerance_m_s=float(kin["slip_tolerance_m_s"]))  # type: ignore[arg-type]
-    except KinematicsError as err:
-        raise ConfigError(f"{source}: {err}") from err
-    lim = validate_block(raw.get("limits", {}), LIMIT_KEYS, f"{source}: limits")
+            found.add(str(unknown_key(f"{source}: {key}", key, {"top-level keys": TOP_KEYS})))
+    robot = _robot(raw, source, found)
+    lim = found.check(lambda: validate_block(raw.get("limits", {}), LIMIT_KEYS,
+                                             f"{source}: limits"))
+    bus = found.check(lambda: parse_bus(raw.get("bus", {}), source, overrides or {}))
+    loop = found.check(lambda: parse_loop(raw.get("gateway", {}), source))
+    name = raw.get("name", Path(source).stem if source != DEFAULT_NAME else "default")
+    if not isinstance(name, str):
+        found.add(f"{source}: name: expected str, got {name!r}")
+    bridge = foxglove = None
+    bridge_said: list[str] = []
+    if "bridge" in raw or "foxglove" in raw:
+        # Loaded only for these blocks: their settings classes cost start-up time otherwise.
+        from gateway.config.bridge import parse_bridge, parse_foxglove  # noqa: PLC0415
+
+        if "bridge" in raw and isinstance(name, str):
+            parsed = found.check(lambda: parse_bridge(raw["bridge"], source, name))
+            if parsed is not None:
+                bridge, bridge_said = parsed
+        if "foxglove" in raw:
+            foxglove = found.check(lambda: parse_foxglove(raw["foxglove"], source))
+    found.raise_any()
+    assert robot is not None and lim is not None and bus is not None and loop is not None
+    drive, geometry, model, motors, steering, calibration = robot
     limits = Limits(
         max_wheel_rad_s=tuple(math.inf if m is None else m.max_wheel_rad_s for m in motors),
         max_wheel_accel_rad_s2=float(lim["max_wheel_accel_rad_s2"]),  # type: ignore[arg-type]
         max_linear_m_s=float(lim["max_linear_m_s"]),  # type: ignore[arg-type]
         max_angular_rad_s=float(lim["max_angular_rad_s"]),  # type: ignore[arg-type]
+        max_wheel_decel_rad_s2=float(lim["max_wheel_decel_rad_s2"]) or None,  # type: ignore[arg-type]
     )
-    bus = _bus(raw.get("bus", {}), source, overrides or {})
-    loop = _loop(raw.get("gateway", {}), source)
-    name = raw.get("name", Path(source).stem if source != DEFAULT_NAME else "default")
-    if not isinstance(name, str):
-        raise ConfigError(f"{source}: name: expected str, got {name!r}")
-    warnings = []
-    if "bus" not in raw and bus.interface == "virtual" and source != DEFAULT_NAME:
-        warnings.append(
-            f"{source}: no bus: block: the robot is driven on python-can's virtual bus "
-            f"{bus.channel!r}, where only simulated controllers answer (`wheelgate run --sim`); "
-            f"a robot needs e.g. bus: {{interface: socketcan, channel: can0}}"
-        )
-    if loop.socket_mode & 0o002:
-        warnings.append(
-            f"{source}: gateway.socket_mode: {loop.socket_mode:#o} makes the control socket "
-            f"writable by every local user, who could then drive the robot; expected 0o660 "
-            f"(the owner and the group wheelgate), with socket_uids for finer control"
-        )
-    bridge = foxglove = None
-    if "bridge" in raw or "foxglove" in raw:
-        # Loaded only for these blocks: their settings classes cost start-up time otherwise.
-        from gateway.config.bridge import parse_bridge, parse_foxglove  # noqa: PLC0415
-
-        if "bridge" in raw:
-            bridge, said = parse_bridge(raw["bridge"], source, name)
-            warnings += said
-        if "foxglove" in raw:
-            foxglove = parse_foxglove(raw["foxglove"], source)
+    warnings = _warnings(raw, source, bus, loop) + bridge_said
     config = GatewayConfig(
-        source, name, str(drive), MappingProxyType(geometry), model, motors, limits, bus, loop,
-        steering, tuple(warnings), bridge, foxglove,
+        source, str(name), drive, MappingProxyType(geometry), model, motors, limits, bus, loop,
+        steering, tuple(warnings), bridge, foxglove, MappingProxyType(calibration),
     )
     from gateway.drive.driveset import DriveSet  # noqa: PLC0415 - the drivers load after the config
 
@@ -248,6 +204,112 @@ def parse_config(
     _check_own_ids(config, drives)
     more = _check_protection(config, drives)
     return dataclasses.replace(config, warnings=(*config.warnings, *more)) if more else config
+
+
+_Robot = tuple[str, dict[str, object], RobotModel, tuple[MotorConfig | None, ...],
+               tuple[MotorConfig, ...], dict[str, float]]
+
+
+def _robot(raw: dict[str, object], source: str, found: Problems) -> _Robot | None:
+    """The drive, its geometry, the model, the motors and the steering actuators; ``None``
+    with the problems in ``found`` (each motor block checked on its own)."""
+    drive = raw.get("drive")
+    choices = [*sorted(PRESETS), "generic"]
+    if drive not in choices:
+        found.add(f"{source}: drive: expected one of {', '.join(choices)}, got {drive!r}")
+        return None
+    config_dir = "" if source == DEFAULT_NAME else str(Path(source).resolve().parent)
+    defaults = raw.get("motor_defaults", {})
+    if not isinstance(defaults, dict):
+        found.add(f"{source}: motor_defaults: expected a mapping, got {defaults!r}")
+        return None
+    kin = found.check(lambda: validate_block(raw.get("kinematics", {}), KINEMATICS_KEYS,
+                                             f"{source}: kinematics", "kinematics keys"))
+    geometry: dict[str, object] = {}
+    if drive == "generic":
+        for key in ("geometry", "motors"):
+            if key in raw:
+                found.add(f"{source}: {key}: not used with drive: generic (motors go in "
+                          f"wheels[i].motor)")
+        parsed = found.check(lambda: generic_wheels(raw.get("wheels"), source))
+        if parsed is None:
+            return None
+        wheels, motor_raw = parsed
+    else:
+        if "wheels" in raw:
+            found.add(f"{source}: wheels: only used with drive: generic; a {drive} drive takes "
+                      f"geometry: and motors:")
+        separation = 1.0 if kin is None else float(kin["wheel_separation_multiplier"])  # type: ignore[arg-type]
+        preset = found.check(lambda: preset_wheels(str(drive), raw.get("geometry"), source,
+                                                    separation))
+        if preset is None:
+            return None
+        geometry, wheels = preset
+        blocks = found.check(lambda: preset_motors(raw.get("motors"), wheels, source))
+        if blocks is None:
+            return None
+        motor_raw = blocks
+    motors = tuple(
+        None if block is None
+        else found.check(lambda w=w, i=i, block=block: motor_block(  # type: ignore[misc]
+            block, defaults, w.name, f"{source}: {motor_path(drive, i, w.name)}", config_dir))
+        for i, (w, block) in enumerate(zip(wheels, motor_raw, strict=True))
+    )
+    steering = found.check(lambda: steering_blocks(
+        raw.get("steering"), raw.get("steering_defaults", {}), wheels, source, config_dir))
+    calibration: dict[str, float] = {}
+    if kin is not None:
+        if drive == "generic" and kin["wheel_separation_multiplier"] != 1.0:
+            found.add(f"{source}: kinematics.wheel_separation_multiplier: expected a preset "
+                      f"drive with a track; with drive: generic, give the measured positions "
+                      f"in wheels:")
+        radii = found.check(lambda: radius_multipliers(kin["wheel_radius_multipliers"], wheels,
+                                                       f"{source}: kinematics"))
+        wheels = wheels if radii is None else [
+            dataclasses.replace(w, radius=w.radius * radii.get(w.name, 1.0)) for w in wheels]
+        calibration.update((f"radius {name}", f) for name, f in (radii or {}).items() if f != 1.0)
+        if kin["wheel_separation_multiplier"] != 1.0:
+            calibration["wheel_separation_multiplier"] = float(kin["wheel_separation_multiplier"])  # type: ignore[arg-type]
+    if steering is None or kin is None or any(
+        m is None for m, block in zip(motors, motor_raw, strict=True) if block is not None
+    ):
+        return None
+    found.check(lambda: check_nodes((*motors, *steering), source))
+    wheels = limit_steer_rates(wheels, steering)
+    try:
+        model = RobotModel(wheels, slip_tolerance_m_s=float(kin["slip_tolerance_m_s"]))  # type: ignore[arg-type]
+    except KinematicsError as err:
+        found.add(f"{source}: {err}")
+        return None
+    return str(drive), geometry, model, motors, steering, calibration
+
+
+def _warnings(raw: dict[str, object], source: str, bus: BusConfig, loop: LoopConfig) -> list[str]:
+    """What a valid file may still get wrong: no bus: block, no acceleration limit, a socket
+    every user may write."""
+    warnings = []
+    if "bus" not in raw and bus.interface == "virtual" and source != DEFAULT_NAME:
+        warnings.append(
+            f"{source}: no bus: block: the robot is driven on python-can's virtual bus "
+            f"{bus.channel!r}, where only simulated controllers answer (`wheelgate run --sim`); "
+            f"a robot needs e.g. bus: {{interface: socketcan, channel: can0}}"
+        )
+    limits = raw.get("limits")
+    if not isinstance(limits, dict) or "max_wheel_accel_rad_s2" not in limits:
+        what = "no limits: block" if limits is None else "limits: no max_wheel_accel_rad_s2"
+        warnings.append(
+            f"{source}: {what}: a twist steps every wheel to its new speed in one cycle "
+            f"(wheel slip, a jolt, a tipping robot) and only each motor's max_rpm bounds the "
+            f"speed; set e.g. limits: {{max_wheel_accel_rad_s2: 30.0}} (rad/s^2 at the wheel), "
+            f"and max_linear_m_s, max_angular_rad_s for the body"
+        )
+    if loop.socket_mode & 0o002:
+        warnings.append(
+            f"{source}: gateway.socket_mode: {loop.socket_mode:#o} makes the control socket "
+            f"writable by every local user, who could then drive the robot; expected 0o660 "
+            f"(the owner and the group wheelgate), with socket_uids for finer control"
+        )
+    return warnings
 
 
 def _check_protection(config: GatewayConfig, drives: DriveSet) -> list[str]:
@@ -292,104 +354,3 @@ def _check_own_ids(config: GatewayConfig, drives: DriveSet) -> None:
         )
 
 
-def _preset_wheels(drive: str, raw: object, source: str) -> tuple[dict[str, object], list[Wheel]]:
-    preset = PRESETS[drive]
-    specs = {
-        key: OptionSpec(
-            str if key in preset.choices else type(default) if default is not None else float,
-            default,
-            choices=tuple(preset.choices.get(key, ())),
-            minimum=None if key in preset.choices or key == "first_wheel_angle" else 0.0,
-        )
-        for key, default in preset.params.items()
-    }
-    for key in ("wheel_count",):
-        if key in specs:
-            specs[key] = OptionSpec(int, specs[key].default, minimum=3 if drive == "omni" else 2,
-                                    maximum=MAX_WHEELS)
-    params = validate_block(
-        raw if raw is not None else {}, specs, f"{source}: geometry", f"{drive} geometry keys"
-    )
-    for key, value in params.items():
-        if key in ("wheel_radius", "track", "wheelbase", "wheel_distance") and value == 0.0:
-            raise ConfigError(f"{source}: geometry.{key}: expected a length > 0 m, got 0")
-    return params, preset.build(params)  # type: ignore[arg-type]
-
-
-def _generic_wheels(
-    raw: object, source: str
-) -> tuple[list[Wheel], list[dict[str, object] | None]]:
-    if not isinstance(raw, list) or not raw or len(raw) > MAX_WHEELS:
-        shown = f"a list of {len(raw)}" if isinstance(raw, list) and raw else repr(raw)[:80]
-        raise ConfigError(
-            f"{source}: wheels: expected a list of 1 to {MAX_WHEELS} wheels, got {shown}"
-        )
-    wheels: list[Wheel] = []
-    motors: list[dict[str, object] | None] = []
-    for i, item in enumerate(raw):
-        v = validate_block(item, WHEEL_KEYS, f"{source}: wheels[{i}]", "wheel keys")
-        motor = v.pop("motor")
-        group = v.pop("steer_group")
-        try:
-            wheel = Wheel(
-                name=str(v["name"]),
-                type=WheelType(v["type"]),
-                steer_group=str(group) or None,
-                driven=bool(motor),
-                **{k: float(x) for k, x in v.items() if k not in ("name", "type")},  # type: ignore[arg-type]
-            )
-            validate_wheel(wheel)
-        except (KinematicsError, ValueError) as err:
-            raise ConfigError(f"{source}: wheels[{i}]: {err}") from err
-        wheels.append(wheel)
-        motors.append(motor or None)  # type: ignore[arg-type]
-    return wheels, motors
-
-
-
-def _bus(raw: object, source: str, overrides: Mapping[str, object]) -> BusConfig:
-    v = validate_block(raw, BUS_KEYS, f"{source}: bus", "bus keys")
-    for key, spec in BUS_KEYS.items():
-        env = os.environ.get(f"GATEWAY_{key.upper()}")
-        if env is not None:
-            value: object = env
-            if key == "bitrate":
-                try:
-                    value = int(env)
-                except ValueError:
-                    raise ConfigError(
-                        f"GATEWAY_BITRATE: expected an integer bit rate, got {env!r}"
-                    ) from None
-            v[key] = spec.validate(value, f"GATEWAY_{key.upper()}")
-        if overrides.get(key) is not None:
-            v[key] = spec.validate(overrides[key], f"--{key}")
-    return BusConfig(str(v["interface"]), str(v["channel"]), int(v["bitrate"]))  # type: ignore[call-overload]
-
-
-def _loop(raw: object, source: str) -> LoopConfig:
-    v = validate_block(raw, GATEWAY_KEYS, f"{source}: gateway", "gateway keys")
-    ids = validate_block(v["can_ids"], CAN_ID_KEYS, f"{source}: gateway.can_ids", "CAN ID keys")
-    try:
-        can_ids = CanIds.from_mapping(ids)
-    except ConfigError as err:
-        raise ConfigError(f"{source}: {err}") from err
-    uids = v["socket_uids"]
-    if not isinstance(uids, list) or not all(
-        isinstance(u, int) and not isinstance(u, bool) and u >= 0 for u in uids
-    ):
-        raise ConfigError(
-            f"{source}: gateway.socket_uids: expected a list of user IDs, got {uids!r}"
-        )
-    if float(v["odom_rate_hz"]) > float(v["rate_hz"]):  # type: ignore[arg-type]
-        raise ConfigError(
-            f"{source}: gateway.odom_rate_hz: expected at most rate_hz ({v['rate_hz']}), "
-            f"got {v['odom_rate_hz']}"
-        )
-    for key, kind in LOOP_CHOICES.items():
-        v[key] = choice(kind, v[key], f"{source}: gateway.{key}")
-    fields = {k: x for k, x in v.items() if k not in ("can_ids", "socket_uids")}
-    return LoopConfig(
-        **fields,  # type: ignore[arg-type]
-        socket_uids=tuple(uids),
-        can_ids=can_ids,
-    )

@@ -16,7 +16,13 @@ import math
 from types import MappingProxyType
 from typing import TYPE_CHECKING
 
-from gateway.config.keys import LINKAGE_KEYS, MOTOR_KEYS, STEERING_KEYS
+from gateway.config.keys import (
+    LINKAGE_KEYS,
+    MAX_MULTIPLIER,
+    MIN_MULTIPLIER,
+    MOTOR_KEYS,
+    STEERING_KEYS,
+)
 from gateway.core.choice import choice
 from gateway.core.errors import ConfigError, DriverNotFoundError
 from gateway.core.kinematics import WheelType
@@ -240,7 +246,8 @@ def motor_block(
     :param steers: the wheels a steering actuator turns (empty for a drive motor).
     :param travel: the actuator's steering range, rad.
     :param linkage: how the actuator's angle turns its wheels.
-    :raises ConfigError: naming the key of the first problem.
+    :raises ConfigError: naming the key of each problem (the general keys first; the
+        protocol's keys when the general ones are right).
     """
     keys = STEERING_KEYS if steers else MOTOR_KEYS
     merged = {**defaults, **raw}
@@ -259,16 +266,19 @@ def motor_block(
         )
     node_id = int(v["node_id"])  # type: ignore[call-overload]
     protocol = {k: x for k, x in merged.items() if k not in keys}
-    for key in protocol:
-        if key not in cls.OPTIONS and key != "config_dir":
-            raise unknown_key(f"{where}.{key}", key, {
-                "steering keys" if steers else "motor keys": keys,
-                f"{driver} keys": cls.OPTIONS,
-            })
+    unknown = [str(unknown_key(f"{where}.{key}", key, {
+        "steering keys" if steers else "motor keys": keys, f"{driver} keys": cls.OPTIONS,
+    })) for key in protocol if key not in cls.OPTIONS and key != "config_dir"]
+    protocol = {k: x for k, x in protocol.items() if k in cls.OPTIONS or k == "config_dir"}
     if "config_dir" in cls.OPTIONS and "config_dir" not in protocol:
         # Relative paths in protocol keys (a DBC file) are relative to the config file.
         protocol["config_dir"] = config_dir
-    options = cls.validate_options(protocol, where)
+    try:
+        options = cls.validate_options(protocol, where)
+    except ConfigError as err:  # the unknown keys and the protocol's own problems, together
+        raise ConfigError.of([*unknown, *err.problems]) from err
+    if unknown:
+        raise ConfigError.of(unknown)
     cls.validate_node_id(node_id, f"{where}.node_id", options)
     return MotorConfig(
         wheel=wheel,
@@ -310,3 +320,30 @@ def check_nodes(motors: tuple[MotorConfig | None, ...], source: str) -> None:
                 f"{m.driver} node_id {m.node_id}; expected unique node IDs"
             )
         seen[key] = m.wheel
+
+
+def radius_multipliers(raw: object, wheels: list[Wheel], where: str) -> dict[str, float]:
+    """``kinematics.wheel_radius_multipliers``: wheel name -> factor on its radius, each in
+    [:data:`MIN_MULTIPLIER`, :data:`MAX_MULTIPLIER`] (a measured correction, as
+    ros2_control's ``left_wheel_radius_multiplier``).
+
+    :raises ConfigError: for an unknown wheel (with the nearest name) or a bad factor.
+    """
+    where = f"{where}.wheel_radius_multipliers"
+    if not isinstance(raw, dict):
+        raise ConfigError(f"{where}: expected a mapping of wheel name to factor, got {raw!r}")
+    names = [w.name for w in wheels]
+    out: dict[str, float] = {}
+    problems = []
+    for name, value in raw.items():
+        if name not in names:
+            problems.append(str(unknown_key(f"{where}.{name}", name, {"wheels": names})))
+        elif (isinstance(value, bool) or not isinstance(value, int | float)
+              or not MIN_MULTIPLIER <= value <= MAX_MULTIPLIER):
+            problems.append(f"{where}.{name}: expected a factor from {MIN_MULTIPLIER} to "
+                            f"{MAX_MULTIPLIER}, got {value!r}")
+        else:
+            out[name] = float(value)
+    if problems:
+        raise ConfigError.of(problems)
+    return out

@@ -43,7 +43,32 @@ class GatewayError(Exception):
 
 
 class ConfigError(GatewayError, ValueError):
-    """A configuration file or value is wrong; the message gives the file and key path."""
+    """A configuration file or value is wrong; the message gives the file and key path.
+
+    One error may carry several problems (every one a file's check found): the message has
+    one line per problem, and :attr:`problems` holds them apart.
+
+    >>> err = ConfigError.of(["a.yaml: name: expected str, got 1", "a.yaml: drive: missing"])
+    >>> err.problems[1]
+    'a.yaml: drive: missing'
+    >>> print(err)
+    a.yaml: name: expected str, got 1
+    a.yaml: drive: missing
+    """
+
+    _problems: tuple[str, ...] = ()
+
+    @property
+    def problems(self) -> tuple[str, ...]:
+        """Each problem's message (one, unless made by :meth:`of`)."""
+        return self._problems or (str(self),)
+
+    @classmethod
+    def of(cls, problems: list[str] | tuple[str, ...]) -> ConfigError:
+        """One error for several problems, one line each."""
+        err = cls("\n".join(problems))
+        err._problems = tuple(problems)
+        return err
 
 
 class DriverNotFoundError(GatewayError, LookupError):

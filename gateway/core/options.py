@@ -66,22 +66,27 @@ def validate_block(
     :param specs: the allowed keys.
     :param where: file and key path of the block, for messages.
     :param what: how to name the allowed keys in the unknown-key message.
-    :raises ConfigError: for a non-mapping, an unknown key, a missing required key or a bad value.
+    :raises ConfigError: for a non-mapping, unknown keys, missing required keys or bad values
+        (every one of the block's problems, one line each).
     """
     if not isinstance(raw, Mapping):
         raise ConfigError(f"{where}: expected a mapping, got {raw!r}")
-    for key in raw:
-        if key not in specs:
-            raise unknown_key(f"{where}.{key}", key, {what: specs})
+    problems = [str(unknown_key(f"{where}.{key}", key, {what: specs}))
+                for key in raw if key not in specs]
     out: dict[str, object] = {}
     for key, spec in specs.items():
         if key in raw:
-            out[key] = spec.validate(raw[key], f"{where}.{key}")
+            try:
+                out[key] = spec.validate(raw[key], f"{where}.{key}")
+            except ConfigError as err:
+                problems += err.problems
         elif spec.default is None:
             hint = f" ({spec.help})" if spec.help else ""
-            raise ConfigError(f"{where}.{key}: required key is missing{hint}")
+            problems.append(f"{where}.{key}: required key is missing{hint}")
         else:
             out[key] = spec.default
+    if problems:
+        raise ConfigError.of(problems)
     return out
 
 

@@ -202,6 +202,9 @@ class GatewayConfig:
         them at start).
     :param bridge: the ``bridge:`` block (Zenoh, ROS 2), ``None`` when absent.
     :param foxglove: the ``foxglove:`` block (live view), ``None`` when absent.
+    :param calibration: the calibration multipliers that are not 1 (``kinematics:``:
+        ``wheel_separation_multiplier``, and ``radius NAME`` per wheel); the model's geometry
+        has them applied, ``geometry`` is as written.
     """
 
     source: str
@@ -217,6 +220,7 @@ class GatewayConfig:
     warnings: tuple[str, ...] = ()
     bridge: BridgeSettings | None = None
     foxglove: FoxgloveSettings | None = None
+    calibration: Mapping[str, float] = field(default_factory=dict)
 
     @property
     def wheels(self) -> tuple[Wheel, ...]:

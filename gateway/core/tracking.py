@@ -48,6 +48,8 @@ import operator
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+from gateway.core.numfmt import fixed
+
 if TYPE_CHECKING:
     from collections.abc import Sequence
 
@@ -114,8 +116,8 @@ class TrackingFault:
         """
         error = abs(self.measured_rad_s - self.command_rad_s)
         return (
-            f"does not follow its command: {self.measured_rad_s + 0.0:.2f} rad/s measured, "
-            f"{self.command_rad_s:.2f} rad/s commanded (error {error:.2f} rad/s, "
+            f"does not follow its command: {fixed(self.measured_rad_s, 2)} rad/s measured, "
+            f"{fixed(self.command_rad_s, 2)} rad/s commanded (error {error:.2f} rad/s, "
             f"window {self.window_rad_s:.2f} rad/s) for a net {self.duration_s:.3f} s"
         )
 
@@ -286,8 +288,8 @@ class SteerFault:
         """
         error = abs(self.measured_rad - self.command_rad)
         return (
-            f"does not reach its angle: {self.measured_rad + 0.0:.3f} rad measured, "
-            f"{self.command_rad:.3f} rad commanded (error {error:.3f} rad, "
+            f"does not reach its angle: {fixed(self.measured_rad, 3)} rad measured, "
+            f"{fixed(self.command_rad, 3)} rad commanded (error {error:.3f} rad, "
             f"window {self.window_rad:.3f} rad) for a net {self.duration_s:.3f} s"
         )
 

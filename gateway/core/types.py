@@ -13,6 +13,8 @@ from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import TYPE_CHECKING, NamedTuple
 
+from gateway.core.numfmt import short
+
 if TYPE_CHECKING:
     from collections.abc import Callable, Mapping
 
@@ -142,9 +144,10 @@ class Twist:
         return Twist(self.vx_m_s * factor, self.vy_m_s * factor, self.wz_rad_s * factor)
 
     def __str__(self) -> str:
+        """``(vx=0.5 m/s, vy=0 m/s, wz=0.25 rad/s)``, to 0.1 mm/s and 0.1 mrad/s."""
         return (
-            f"(vx={self.vx_m_s:.4g} m/s, vy={self.vy_m_s:.4g} m/s, "
-            f"wz={self.wz_rad_s:.4g} rad/s)"
+            f"(vx={short(self.vx_m_s, 4)} m/s, vy={short(self.vy_m_s, 4)} m/s, "
+            f"wz={short(self.wz_rad_s, 4)} rad/s)"
         )
 
 

@@ -30,7 +30,7 @@ from gateway.core.types import DriveState, ErrorCode, GatewayState
 from gateway.runtime.latch import EstopLatch, latch_path
 from gateway.runtime.loop import Gateway
 from gateway.runtime.remote import Remote
-from gateway.runtime.report import build_status
+from gateway.runtime.report import announcement, build_status
 from gateway.runtime.requests import RequestHandler
 from gateway.runtime.sdnotify import SystemdNotifier
 from gateway.runtime.server import ControlServer
@@ -41,6 +41,7 @@ from gateway.wire.socket import reply_error
 from gateway.wire.socket.events import event_line, event_topic
 
 if TYPE_CHECKING:
+    from collections.abc import Callable
     from types import FrameType
 
     from gateway.core.settings import GatewayConfig
@@ -94,6 +95,8 @@ class Daemon:
             )
         self.config = config
         self.notifier = notifier if notifier is not None else SystemdNotifier.from_env()
+        self.announce: Callable[[str], None] | None = None  #: lines for the person (run)
+        self._announced_running = False
         self._stop = False
         #: The name of the signal that stopped the daemon, if one did.
         self.stop_signal = ""
@@ -194,11 +197,9 @@ class Daemon:
         signals = STOP_SIGNALS if main_thread else ()
         old = {s: signal.signal(s, self.request_stop) for s in signals}
         if main_thread and not faulthandler.is_enabled():
-            # A crash in C (SIGSEGV, SIGBUS, SIGFPE, SIGILL) writes every thread's traceback.
-            # SIGABRT is taken back from faulthandler: its handler walks the other threads'
-            # frames while they run (no GIL in a signal handler) and can itself crash the
-            # process (seen: a segfault inside the dump, exit -11, no zero sent).  Python's
-            # handler below writes the same tracebacks safely, with the GIL held.
+            # A crash in C writes every thread's traceback.  SIGABRT is taken back: there
+            # faulthandler walks running threads' frames and can crash the process (seen:
+            # exit -11, no zero sent); request_stop writes them safely, with the GIL held.
             faulthandler.enable(all_threads=True)
             self._closers.append(faulthandler.disable)
             if signal.SIGABRT in old:
@@ -265,10 +266,17 @@ class Daemon:
                 self.latch.set(gw.supervisor.reason)  # from CAN, or anything but the socket
             elif self._state is GatewayState.ESTOP:
                 self.latch.clear()  # only an explicit enable leaves ESTOP
-            self._state = gw.state
+            before, self._state = self._state, gw.state
             text = self._status_text()
             self.notifier.status(text)
             log.info("state %s", text)
+            if self.announce is not None:
+                line = announcement(self.config, before, gw.state, self._announced_running,
+                                    gw.supervisor.reason, self.sim is not None,
+                                    self.socket_path)
+                self._announced_running |= gw.state is GatewayState.RUNNING
+                if line:
+                    self.announce(line)
         if gw.state is GatewayState.RUNNING and not self._ready:
             self._mark_ready()
         if self._watchdog_s is not None and now_s >= self._next_watchdog and self._healthy():

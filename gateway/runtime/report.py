@@ -28,12 +28,14 @@ from gateway.core.status import (
     TimingReport,
     TrackingReport,
 )
+from gateway.core.types import GatewayState
 
 if TYPE_CHECKING:
     from collections.abc import Mapping, Sequence
 
     from gateway.bus.edge import EdgeCounts
     from gateway.core.counts import SupervisorCounts
+    from gateway.core.settings import GatewayConfig
     from gateway.core.status import ServerCounters
     from gateway.core.types import MotorStatus
     from gateway.runtime.counts import LoopCounts
@@ -163,3 +165,25 @@ def build_status(
             ),
         ),
     )
+
+
+def announcement(config: GatewayConfig, before: GatewayState, now: GatewayState,
+                 announced_running: bool, reason: str, simulated: bool, socket_path: str) -> str:
+    """The line for the person who started the daemon on a state change ('' for none): the
+    first time the motors run, and a start that failed (with why, on a virtual bus with no
+    simulator)."""
+    where = f"{config.bus.interface} {config.bus.channel}"
+    if now is GatewayState.RUNNING and not announced_running:
+        drives = sum(m is not None for m in config.motors)
+        steer = f" and {len(config.steering)} steering actuators" if config.steering else ""
+        return (f"wheelgate: running on {where}: {drives} motors{steer} enabled; control "
+                f"socket {socket_path}")
+    if now is GatewayState.FAULT and before is GatewayState.ENABLING:
+        line = f"wheelgate: the motors did not enable: {reason}"
+        if config.bus.interface == "virtual" and not simulated:
+            line += (f". This is python-can's virtual bus {config.bus.channel!r}, where only "
+                     f"simulated controllers answer: run `wheelgate run --sim`, or give the "
+                     f"robot's bus (bus: {{interface: socketcan, channel: can0}} in the "
+                     f"configuration, or --interface/--channel)")
+        return line
+    return ""

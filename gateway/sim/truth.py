@@ -15,6 +15,7 @@ import math
 from typing import TYPE_CHECKING, Any
 
 from gateway.core.kinematics import Odometry
+from gateway.core.numfmt import fixed
 from gateway.core.steer_log import fixed_subset
 
 if TYPE_CHECKING:
@@ -124,18 +125,13 @@ def state_line(state: dict[str, Any], prefix: str = "sim") -> str:
     if pose is None:
         head += "unknown"
     else:
-        head += (f"x={_zero(pose['x'], 3):+.3f} y={_zero(pose['y'], 3):+.3f} "
-                 f"th={_zero(math.degrees(pose['theta']), 1):+.1f}deg")
+        head += (f"x={fixed(pose['x'], 3, sign=True)} y={fixed(pose['y'], 3, sign=True)} "
+                 f"th={fixed(math.degrees(pose['theta']), 1, sign=True)}deg")
     parts = [head]
     for d in state["devices"]:
         if d["steer_rad"] is not None:
-            value = f"{_zero(math.degrees(d['steer_rad']), 1):+.1f}deg"
+            value = f"{fixed(math.degrees(d['steer_rad']), 1, sign=True)}deg"
         else:
-            value = f"{_zero(d['wheel_rad_s'], 2):.2f} rad/s"
+            value = f"{fixed(d['wheel_rad_s'], 2)} rad/s"
         parts.append(f"{d['name']} {value} {'armed' if d['armed'] else 'idle'}")
     return " | ".join(parts)
-
-
-def _zero(value: float, digits: int) -> float:
-    """``value`` rounded, without the minus sign of a negative zero (``-0.00``)."""
-    return round(value, digits) + 0.0

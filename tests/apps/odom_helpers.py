@@ -72,7 +72,8 @@ def record(name: str, folder: Path) -> Session:
     in ``_external`` drives that robot without its steering actuators (steered outside the
     gateway, so the log holds no angles)."""
     base = name.removesuffix("_external")
-    cfg = virtual_config(CONFIG_DIR / f"{base}.yaml", f"wg-odom-{name}", rate_hz=100.0)
+    source = None if base == "default" else CONFIG_DIR / f"{base}.yaml"  # the embedded demo
+    cfg = virtual_config(source, f"wg-odom-{name}", rate_hz=100.0)
     if base != name:
         cfg = dataclasses.replace(cfg, steering=())
     legs = short_legs(cfg) if base == "ackermann" else path_legs(cfg, "square")

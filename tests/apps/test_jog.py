@@ -1,4 +1,5 @@
-"""The pure part of ``wheelgate jog`` (key map, speeds, deadman, screen) and its CLI errors."""
+"""The pure part of ``wheelgate jog`` (key map, speeds, deadman) and its CLI errors; the screen
+is tests/apps/test_jog_screen.py."""
 
 from __future__ import annotations
 
@@ -21,16 +22,12 @@ from gateway.apps.jog.keys import (
     jog_limits,
     key_name,
     split_keys,
+    step_error,
 )
-from gateway.apps.jog.screen import Screen, read_status, render, reply_error
 from gateway.cli import COMMANDS, main
 from gateway.config import load_config
-from gateway.core.kinematics.odometry import OdometryState, Pose
-from gateway.core.status import CommandReport
 from gateway.core.types import Twist
-from gateway.wire.socket.status import status_to_json
 from tests.conftest import CONFIG_DIR
-from tests.wire.status_samples import sample_status
 
 if TYPE_CHECKING:
     from click.testing import CliRunner
@@ -168,6 +165,36 @@ def test_start_clamps_the_default_speeds() -> None:
     assert JogState.start(HOLO).message == "ready"
 
 
+def test_start_takes_the_first_speeds_given() -> None:
+    # jog --speed/--turn, as teleop_twist_keyboard's speed and turn parameters.
+    state = JogState.start(HOLO, 1.5, 0.25)
+    assert (state.linear_m_s, state.angular_rad_s, state.message) == (1.5, 0.25, "ready")
+    assert twist_of(state.on_key("u", 0.0).requests) == Twist(1.5, 0.0, 0.25)
+    assert state.on_key("q", 0.0).state.linear_m_s == pytest.approx(1.65)
+    assert JogState.start(HOLO, None, 3.0).linear_m_s == 0.5  # None: teleop's 0.5 m/s
+
+
+@pytest.mark.parametrize(("value", "ok"), [
+    (0.5, True), (4.654, True), (4.6542, True), (4.6543, False), (0.0, False), (-0.5, False),
+    (math.nan, False), (math.inf, False), (-math.inf, False), (1e-9, True),
+])
+def test_step_error_bounds(value: float, ok: bool) -> None:
+    why = step_error(value, 4.654211338651545, "motor max_rpm", "a linear", "m/s")
+    assert (why == "") is ok
+    if not ok:
+        assert why == ("expected a linear speed above 0 and at most 4.654 m/s (motor max_rpm), "
+                       f"got {value!r}")
+
+
+def test_the_limit_said_is_one_that_is_accepted() -> None:
+    burger = 0.2108008670558751  # 61 rpm wheels: rounded, 0.211 would be refused
+    assert step_error(0.3, burger, "motor max_rpm", "a linear", "m/s").startswith(
+        "expected a linear speed above 0 and at most 0.21 m/s (motor max_rpm)")
+    assert step_error(0.21, burger, "motor max_rpm", "a linear", "m/s") == ""
+    assert "(the control socket's largest twist)" in step_error(200.0, 100.0, NO_LIMIT,
+                                                                "a linear", "m/s")
+
+
 @pytest.mark.parametrize(("name", "holonomic"), [
     ("mecanum", True), ("omni3", True), ("omni_delta", True), ("omni3_swedish", True),
     ("swerve", True), ("synchro", True), ("turtlebot3_burger", False),
@@ -284,72 +311,6 @@ def test_request_payloads() -> None:
     assert STOP.payload() == {"op": "stop"}
 
 
-# --------------------------------------------------------------------- daemon replies, screen
-
-STATUS = sample_status(
-    robot="turtlebot3_burger",
-    command=CommandReport(Twist(0.25, 0.0, 0.5), Twist(0.25, 0.0, 0.5), False, 0.5, 1.0),
-    odometry=OdometryState(Pose(1.5, -0.25, 0.125), Twist(0.25, 0.0, 0.5), 0.0, 1.0, 3.0),
-)
-
-
-def test_the_status_is_read_from_its_reply() -> None:
-    assert read_status({"ok": True, "id": 4, **status_to_json(STATUS)}) == (STATUS, "")
-    reply = {"ok": True, "id": 4, **status_to_json(STATUS), "motors": [{"name": "left"}]}
-    assert read_status(reply) == (
-        None, "status: status.motors[0].node_id: expected an integer, got nothing")
-
-
-def test_reply_error() -> None:
-    assert reply_error({"ok": True}) == ""
-    assert reply_error({"ok": False, "error": {"code": "infeasible_twist",
-                                               "message": "wheel 'left' slides"}}) == \
-        "wheel 'left' slides"
-    assert reply_error({"ok": False, "error": {"code": "estop"}}) == "estop"
-    assert "without a message" in reply_error({"ok": False})
-
-
-def test_render_moving_with_status() -> None:
-    lim = jog_limits(load_config(CONFIG_DIR / "turtlebot3_burger.yaml"))
-    state = JogState.start(lim).on_key("u", 0.0).state
-    lines = render(Screen("turtlebot3_burger", "burger (differential)", "connected: /s", state,
-                          STATUS,
-                          "Twist is infeasible: " + "x" * 150, ("WARNING a: b",)), width=80)
-    text = "\n".join(lines)
-    assert all(len(ln) <= 80 for ln in lines)
-    assert lines[0] == "wheelgate jog: burger (differential)   connected: /s"
-    assert "Holonomic (shift):   (not on this differential drive)" in text
-    assert "quit: Ctrl-C, Ctrl-D or Esc" in text
-    assert "command: MOVING 'u'  vx=+0.211 m/s vy=+0.000 m/s wz=+1.000 rad/s" in text
-    assert "(limits scale it to 72%)" in render(Screen("t", "t", "c", state), width=200)[10]
-    assert "speeds:  linear 0.211 m/s (max 0.211, motor max_rpm)" in text
-    error = [ln for ln in lines if ln.startswith(("last error:", "    x"))]
-    assert len(error) == 3  # wrapped, at most 3 lines
-    assert "daemon: state running   applied vx=+0.250 m/s" in text
-    assert "odometry: x=+1.500 m y=-0.250 m theta=+0.125 rad   v=(+0.250, +0.000, +0.500)" \
-        in text
-    assert "  left           enabled   wheel   +6.00 rad/s  feedback    2.0 ms  no faults" in lines
-    assert ("  right          fault     wheel             -  feedback         -  "
-            "over_tempera") in lines  # cut at the width
-    assert lines[-1] == "log: WARNING a: b"
-    assert not any(ln.startswith("warning:") for ln in lines)
-
-
-def test_render_warns_when_the_daemon_drives_another_robot() -> None:
-    screen = Screen("default", "default (mecanum)", "connected: /s", JogState.start(HOLO),
-                    STATUS)
-    assert ("warning: the daemon drives 'turtlebot3_burger', but the key limits are those of "
-            "'default' (pass its configuration with -c)") in render(screen, width=200)
-
-
-def test_render_stopped_without_status() -> None:
-    lines = render(Screen("m", "m", "DISCONNECTED: gone (retrying)", JogState.start(HOLO)))
-    assert "command: STOPPED" in lines
-    assert "daemon: no status yet" in lines
-    assert "last error: -" in lines
-    assert "not on this" not in lines[1]
-
-
 # --------------------------------------------------------------------- command line
 
 
@@ -377,6 +338,30 @@ def test_usage_errors(runner: CliRunner, jog_registered: None, args: list[str],
     result = runner.invoke(main, ["jog", *args])
     assert result.exit_code == 2, result.output
     assert message in result.stderr
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["--speed", "5"], "Invalid value for --speed: expected a linear speed above 0 and at "
+                       "most 4.654 m/s (motor max_rpm), got 5.0"),
+    (["--turn", "13.2"], "Invalid value for --turn: expected an angular speed above 0 and "
+                         "at most 13.164 rad/s (motor max_rpm), got 13.2"),
+    (["--speed", "nan"], "Invalid value for --speed: expected a linear speed above 0"),
+    (["--turn", "inf"], "Invalid value for --turn: expected an angular speed above 0"),
+    (["--speed", "0"], "got 0.0"),
+    (["--turn", "-1"], "got -1.0"),
+    (["--speed", "fast"], "Invalid value for '--speed': 'fast' is not a valid float"),
+])
+def test_speed_and_turn_beyond_the_robot_are_usage_errors(
+        runner: CliRunner, jog_registered: None, args: list[str], message: str) -> None:
+    result = runner.invoke(main, ["jog", "-c", str(CONFIG_DIR / "swerve.yaml"), *args])
+    assert result.exit_code == 2, result.output
+    assert message in result.stderr
+
+
+def test_speed_and_turn_within_the_robot_pass(runner: CliRunner, jog_registered: None) -> None:
+    result = runner.invoke(main, ["jog", "-c", str(CONFIG_DIR / "swerve.yaml"), "--speed",
+                                  "4.654", "--turn", "0.1"])
+    assert "jog reads keys from a terminal" in result.stderr  # the next check, not theirs
 
 
 def test_missing_config_file(runner: CliRunner, jog_registered: None) -> None:

@@ -1,33 +1,32 @@
 """``wheelgate jog`` in a real pseudo-terminal: keys in, the redrawn screen out.
 
-Each test starts the command as a child process on the slave side of a pty (its stdin is a
-terminal, so it takes raw mode), writes keys to the master side and reads back the screen:
-every frame starts with ``ESC [ H`` and ends with ``ESC [ J``, so the last complete frame is the
-screen as the user sees it.  Every wait is bounded; the child is killed in ``finally``.
+Each test starts the command as a child process on the slave side of a pty
+(:class:`tests.pty_helpers.Pty`: its stdin is a terminal, so it takes raw mode), writes keys to
+the master side and reads back the screen: every frame starts with ``ESC [ H`` and ends with
+``ESC [ J``, so the last complete frame is the screen as the user sees it.  Every wait is
+bounded; the child is killed at the end of the test.
 """
 
 from __future__ import annotations
 
-import fcntl
 import json
+import math
 import os
 import re
-import select
 import signal
-import struct
-import subprocess
 import sys
-import termios
-import time
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 import pytest
 
 from gateway.cli import COMMANDS
-from tests.conftest import CONFIG_DIR, REPO
+from gateway.config import load_config
+from gateway.core.types import Twist
+from tests.conftest import CONFIG_DIR
+from tests.pty_helpers import ANSI, Pty
 
 if TYPE_CHECKING:
-    from collections.abc import Callable, Iterator
+    from collections.abc import Iterator
     from pathlib import Path
 
 #: ``python -m gateway jog`` once ``jog`` is registered in ``gateway.cli.COMMANDS``; until
@@ -37,102 +36,24 @@ JOG = ([sys.executable, "-m", "gateway", "jog"] if "jog" in COMMANDS else
 
 CTRL_C = b"\x03"
 ESC = b"\x1b"
-_ANSI = re.compile(r"\x1b\[[0-9;?]*[A-Za-z]")
 _ODOMETRY = re.compile(r"odometry: x=(\S+) m y=(\S+) m theta=\S+ rad\s+v=\((\S+), (\S+), (\S+)\)")
 
 pytestmark = pytest.mark.timeout(20)
 
 
-class Pty:
-    """The command running on a pseudo-terminal of ``cols`` x ``rows``."""
-
-    def __init__(self, args: list[str], cols: int = 140, rows: int = 50) -> None:
-        master, slave = os.openpty()
-        try:
-            fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", rows, cols, 0, 0))
-            self.proc = subprocess.Popen(
-                [*JOG, *args], stdin=slave, stdout=slave, stderr=slave, cwd=REPO,
-                start_new_session=True,
-            )
-        except BaseException:
-            os.close(master)
-            raise
-        finally:
-            os.close(slave)
-        self.fd = master
-        self.raw = b""
-        self.eof = False
-
-    def pump(self, timeout_s: float) -> None:
-        """Read whatever the child wrote within ``timeout_s``."""
-        if self.eof:
-            time.sleep(timeout_s)
-            return
-        ready, _, _ = select.select([self.fd], [], [], timeout_s)
-        if ready:
-            try:
-                chunk = os.read(self.fd, 65536)
-            except OSError:  # EIO: every slave descriptor is closed, the child is gone
-                chunk = b""
-            self.raw += chunk
-            self.eof = not chunk
-
-    @property
-    def text(self) -> str:
-        """Everything written, escape codes removed."""
-        return _ANSI.sub("", self.raw.decode("utf-8", "replace")).replace("\r", "")
-
-    def screen(self) -> str:
-        """The last complete frame."""
-        text = self.raw.decode("utf-8", "replace")
-        end = text.rfind("\x1b[J")
-        start = text.rfind("\x1b[H", 0, end)
-        if start < 0:
-            return ""
-        return _ANSI.sub("", text[start:end]).replace("\r", "")
-
-    def wait_for(self, what: str, check: Callable[[str], bool], timeout_s: float = 8.0) -> str:
-        """Pump until ``check(screen)`` holds; the screen then."""
-        end = time.monotonic() + timeout_s
-        while time.monotonic() < end:
-            self.pump(0.05)
-            if check(self.screen()):
-                return self.screen()
-        raise AssertionError(f"timed out waiting for {what}; screen:\n{self.screen()}\n"
-                             f"output tail:\n{self.text[-2000:]}")
-
-    def send(self, keys: bytes) -> None:
-        os.write(self.fd, keys)
-
-    def hold(self, key: bytes, seconds: float, every_s: float = 0.04) -> None:
-        """Auto-repeat: ``key`` every ``every_s`` for ``seconds``, reading meanwhile."""
-        end = time.monotonic() + seconds
-        while time.monotonic() < end:
-            self.send(key)
-            self.pump(every_s)
-
-    def wait_exit(self, timeout_s: float = 10.0) -> int:
-        end = time.monotonic() + timeout_s
-        while self.proc.poll() is None and time.monotonic() < end:
-            self.pump(0.05)
-        code = self.proc.wait(timeout=max(0.1, end - time.monotonic()))
-        while not self.eof:
-            self.pump(0.05)
-        return code
-
-    def close(self) -> None:
-        if self.proc.poll() is None:
-            self.proc.kill()
-            self.proc.wait(timeout=5)
-        os.close(self.fd)
+class Spawn(Protocol):
+    def __call__(self, args: list[str], cols: int = ..., rows: int = ...,
+                 env: dict[str, str | None] | None = ...) -> Pty: ...
 
 
 @pytest.fixture
-def spawn() -> Iterator[Callable[[list[str]], Pty]]:
+def spawn() -> Iterator[Spawn]:
+    """``jog`` with these arguments on a pty (140 x 50 unless told)."""
     started: list[Pty] = []
 
-    def start(args: list[str]) -> Pty:
-        started.append(Pty(args))
+    def start(args: list[str], cols: int = 140, rows: int = 50,
+              env: dict[str, str | None] | None = None) -> Pty:
+        started.append(Pty([*JOG, *args], cols, rows, env))
         return started[-1]
 
     yield start
@@ -162,7 +83,7 @@ def running(screen: str) -> bool:
 
 
 def test_mecanum_moves_deadman_stops_holonomic_and_ctrl_c(
-        spawn: Callable[[list[str]], Pty], tmp_path: Path) -> None:
+        spawn: Spawn, tmp_path: Path) -> None:
     log = tmp_path / "jog.jsonl"
     term = spawn(["--standalone", "-c", str(CONFIG_DIR / "mecanum.yaml"), "--sim",
                   "--log", str(log)])
@@ -209,7 +130,7 @@ def test_mecanum_moves_deadman_stops_holonomic_and_ctrl_c(
 
 
 def test_differential_refuses_holonomic_keys_and_esc_quits(
-        spawn: Callable[[list[str]], Pty], tmp_path: Path) -> None:
+        spawn: Spawn, tmp_path: Path) -> None:
     log = tmp_path / "jog.jsonl"
     term = spawn(["--standalone", "-c", str(CONFIG_DIR / "turtlebot3_burger.yaml"), "--sim",
                   "--log", str(log)])
@@ -228,7 +149,7 @@ def test_differential_refuses_holonomic_keys_and_esc_quits(
     assert sent(log)[-1]["request"] == {"op": "stop"}
 
 
-def test_hangup_sends_stop_and_restores(spawn: Callable[[list[str]], Pty],
+def test_hangup_sends_stop_and_restores(spawn: Spawn,
                                         tmp_path: Path) -> None:
     log = tmp_path / "jog.jsonl"
     term = spawn(["--standalone", "-c", str(CONFIG_DIR / "turtlebot3_burger.yaml"), "--sim",
@@ -243,14 +164,14 @@ def test_hangup_sends_stop_and_restores(spawn: Callable[[list[str]], Pty],
     assert sent(log)[0]["request"]["op"] == "twist"  # type: ignore[index]
 
 
-def test_no_daemon_names_the_socket(spawn: Callable[[list[str]], Pty], tmp_path: Path) -> None:
+def test_no_daemon_names_the_socket(spawn: Spawn, tmp_path: Path) -> None:
     path = str(tmp_path / "none.sock")
     term = spawn(["--socket", path])
     assert term.wait_exit() == 1
     assert f"no gateway is listening on {path}" in term.text
 
 
-def test_closed_terminal_sends_stop(spawn: Callable[[list[str]], Pty], tmp_path: Path) -> None:
+def test_closed_terminal_sends_stop(spawn: Spawn, tmp_path: Path) -> None:
     log = tmp_path / "jog.jsonl"
     term = spawn(["--standalone", "-c", str(CONFIG_DIR / "turtlebot3_burger.yaml"), "--sim",
                   "--log", str(log)])
@@ -263,3 +184,46 @@ def test_closed_terminal_sends_stop(spawn: Callable[[list[str]], Pty], tmp_path:
     assert term.proc.wait(timeout=10) == 0
     assert sent(log)[-1]["request"] == {"op": "stop"}
     assert sent(log)[-1]["reply"]["ok"] is True  # type: ignore[index]
+
+
+def test_swerve_fits_80_by_24_with_its_steering_angles_and_speed(
+        spawn: Spawn, tmp_path: Path) -> None:
+    swerve = load_config(CONFIG_DIR / "swerve.yaml")
+    term = spawn(["--standalone", "-c", str(CONFIG_DIR / "swerve.yaml"), "--sim",
+                  "--speed", "0.25"], cols=80, rows=24)
+    screen = term.wait_for("the daemon to run", running)
+    assert line(screen, "speeds:").startswith("speeds:  linear 0.250 m/s (max 4.65")
+    term.hold(b"u", 1.2)
+    screen = term.screen()
+    assert line(screen, "command:").startswith(
+        "command: MOVING 'u'  vx=+0.250 m/s vy=+0.000 m/s wz=+1.000 rad/s")
+    wanted = swerve.model.ik(Twist(0.25, 0.0, 1.0)).steer_rad
+    for wheel, angle in zip(swerve.model.names, wanted, strict=True):
+        assert angle is not None
+        row = line(screen, f"  {wheel} ")  # one line per wheel, its angle beside its speed
+        shown = float(row.split("rad/s")[1].split("deg")[0])
+        # The actuator may turn the wheel the other way round and drive it backwards.
+        assert abs((shown - math.degrees(angle) + 90.0) % 180.0 - 90.0) < 0.5, row
+    frames = re.findall(r"\x1b\[H(.*?)\x1b\[J", term.raw.decode("utf-8", "replace"), re.S)
+    assert len(frames) > 5
+    for frame in frames:
+        lines = ANSI.sub("", frame).replace("\r", "").split("\n")
+        assert len(lines) <= 24 and max(len(ln) for ln in lines) <= 79, frame
+    term.send(CTRL_C)
+    assert term.wait_exit() == 0, term.text[-2000:]
+
+
+@pytest.mark.parametrize("no_color", [None, "1"])
+def test_errors_in_colour_unless_no_color(spawn: Spawn, no_color: str | None) -> None:
+    term = spawn(["--standalone", "-c", str(CONFIG_DIR / "ackermann.yaml"), "--sim"],
+                 cols=80, rows=24, env={"NO_COLOR": no_color, "TERM": "xterm"})
+    term.wait_for("the daemon to run", running)
+    term.send(b"j")  # a turn in place: the daemon refuses it
+    term.wait_for("the refusal", lambda s: "is infeasible" in line(s, "last error:"))
+    coloured = [ln for ln in term.raw_screen().split("\r\n") if "\x1b[31m" in ln]
+    if no_color is None:
+        assert coloured and coloured[0].startswith("last error: \x1b[31mTwist (vx=0 m/s")
+    else:
+        assert not re.search(r"\x1b\[[0-9;]*m", term.raw.decode("utf-8", "replace"))
+    term.send(ESC)
+    assert term.wait_exit() == 0, term.text[-2000:]

@@ -6,6 +6,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import re
 from types import MappingProxyType
 from typing import TYPE_CHECKING
 
@@ -229,3 +230,96 @@ def test_status_monitor_shows_the_bus_errors_and_the_faults() -> None:
 def test_status_monitor_needs_a_reply_first() -> None:
     with pytest.raises(DecodeError, match="expected a status reply"):
         StatusMonitor(default_config()).snapshot()
+
+
+# --------------------------------------------------------------------- the screen at 80 x 24
+
+#: The swerve robot's steering angles (rad) and how the screen writes them.
+ANGLES = {"front_left": (0.7853981633974483, "+45.0"), "front_right": (0.3217505, "+18.4"),
+          "rear_left": (-0.7853981633974483, "-45.0"), "rear_right": (-0.3217505, "-18.4")}
+_SGR = re.compile(r"\x1b\[[0-9;]*m")
+
+
+def swerve_snapshot(fault: bool = False) -> MonitorSnapshot:
+    """The swerve robot's daemon, twice a second apart: four drive motors (the second faulted
+    if ``fault``), four steering actuators at :data:`ANGLES`, 40 frame IDs."""
+    cfg = config_at("swerve.yaml")
+    motors = [MotorReport(m.wheel, m.node_id, DriveState.ENABLED, DriveFault.NONE, "", 0.004,
+                          3.0, -2.7755575615628914e-17) for m in cfg.motors if m is not None]
+    if fault:
+        motors[1] = MotorReport("front_right", 2, DriveState.FAULT, DriveFault.OVER_CURRENT,
+                                "", None, None, None)
+    motors += [MotorReport(a.wheel, a.node_id, DriveState.ENABLED, DriveFault.NONE, "", 0.004,
+                           ANGLES[a.steers[0]][0], 0.0) for a in cfg.steering]
+    mon = StatusMonitor(cfg, source="daemon /run/wheelgate/wheelgate.sock")
+    for t, n in ((10.0, 0), (11.0, 100)):
+        status = daemon_status(t, n, n * STD8_NOMINAL)
+        frames = tuple(FrameCount(can_id, False, Direction.RX, n) for can_id in range(1, 41))
+        mon.update(dataclasses.replace(status, robot="swerve", motors=tuple(motors),
+                                       bus=dataclasses.replace(status.bus, frames=frames)))
+    return mon.snapshot()
+
+
+def test_swerve_fits_80_by_24_with_its_steering_angles_and_pages_the_ids() -> None:
+    lines = render(swerve_snapshot(), 80, 24).splitlines()
+    assert len(lines) <= 24 and max(len(ln) for ln in lines) <= 80, "\n".join(lines)
+    header = next(ln for ln in lines if ln.startswith("WHEEL"))
+    assert header.split() == ["WHEEL", "NODE", "STATE", "rad/s", "rpm", "steer", "deg", "age",
+                              "ms", "FAULTS"]
+    rows = {ln.split()[0]: ln.split() for ln in lines[lines.index(header) + 1:][:4]}
+    for (wheel, (_, angle)), node in zip(ANGLES.items(), ("1/5", "2/6", "3/7", "4/9"),
+                                         strict=True):
+        assert rows[wheel][1:3] == [node, "enabled"]
+        assert rows[wheel][5] == angle  # the steering angle beside its wheel, in degrees
+        assert rows[wheel][3] == "0.000"  # not -0.000
+    assert not any("steering" in ln for ln in lines)
+    page = next(ln for ln in lines if ln.startswith("IDs "))
+    per = int(page.split()[1].split("-")[1])
+    pages = -(-40 // per)
+    assert per >= 6
+    assert page == f"IDs 1-{per} of 40, page 1/{pages} (a taller terminal shows more)"
+    assert lines[lines.index(page) - 1].startswith(f"0x{per:03X} rx")
+    second = render(swerve_snapshot(), 80, 24, page=1)
+    assert f"IDs {per + 1}-{2 * per} of 40, page 2/{pages}" in second
+    assert f"\n0x{per + 1:03X} rx" in second
+    assert page in render(swerve_snapshot(), 80, 24, page=pages)  # the pages go round
+    assert lines[-2].startswith("errors: rejected by odrive 3, send failures 2")
+
+
+def test_swerve_on_a_big_terminal_has_a_row_per_motor_and_every_id() -> None:
+    lines = render(swerve_snapshot(), 140, 80).splitlines()
+    at = next(i for i, ln in enumerate(lines) if ln.startswith("front_left"))
+    assert lines[at].split()[:3] == ["front_left", "odrive", "1"]
+    assert lines[at + 1].split()[:8] == ["steering", "odrive", "5", "enabled", "0.000", "0.0",
+                                         "0.785", "+45.0"]
+    assert sum(ln.startswith("0x0") for ln in lines) == 40
+    assert "  q: quit" not in lines[0]
+    assert render(swerve_snapshot(), 140, 80, keys=True).splitlines()[0].endswith("q: quit")
+
+
+def test_faults_errors_and_notes_in_colour() -> None:
+    snap = dataclasses.replace(swerve_snapshot(fault=True), state="fault",
+                               notes=("gateway: motor 'front_right' faulted",))
+    plain = render(snap, 80, 24)
+    assert "\x1b" not in plain
+    text = render(snap, 80, 24, colour=True)
+    assert _SGR.sub("", text) == plain  # only colour is added
+    lines = text.splitlines()
+    assert "\x1b[31m    gateway fault\x1b[0m" in lines
+    fault = next(ln for ln in lines if ln.startswith("front_right"))
+    assert "\x1b[31mfault" in fault and fault.endswith("\x1b[0m")
+    assert "errors: \x1b[33mrejected by odrive 3" in text
+    assert "\x1b[33mnote: gateway: motor 'front_right' faulted\x1b[0m" in lines
+
+
+def test_short_terminals_give_way_but_keep_the_width_and_the_height() -> None:
+    snap = swerve_snapshot(fault=True)
+    for width, height in ((80, 14), (80, 9), (60, 5), (30, 2)):
+        lines = render(snap, width, height).splitlines()
+        assert len(lines) <= height and max(len(ln) for ln in lines) <= width, (width, height)
+    lines = render(snap, 80, 14).splitlines()
+    assert sum(ln.split()[0] in ANGLES for ln in lines) == 4  # every wheel before more IDs
+    assert lines[-1] == "errors: rejected by odrive 3, send failures 2, bad can twists 1, others 0"
+    assert lines[-2].startswith("IDs 1-4 of 40")
+    assert render(snap, 80, 9).splitlines()[4] == (
+        "... 3 more motors (a taller terminal shows them)")

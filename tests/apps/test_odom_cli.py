@@ -13,8 +13,9 @@ from typing import TYPE_CHECKING
 
 import pytest
 
+from gateway.apps.replay.candump_report import MAX_REPORTED
 from gateway.cli import COMMANDS, main
-from gateway.cli.commands.odom import CSV_COLUMNS, MAX_REPORTED, NO_MATPLOTLIB, command
+from gateway.cli.commands.odom import CSV_COLUMNS, command, install_hint
 from gateway.config import load_config
 from tests.apps import odom_helpers
 from tests.apps.odom_helpers import (
@@ -168,7 +169,7 @@ def test_cli_missing_config_exits_2(sessions: Callable[[str], Session], runner: 
     assert "robot.yaml: cannot read the file" in result.stderr
 
 
-def test_cli_plot_without_matplotlib_exits_2_before_replaying(
+def test_cli_plot_without_matplotlib_still_writes_the_csv_then_exits_2(
     sessions: Callable[[str], Session], runner: CliRunner, tmp_path: Path,
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
@@ -178,9 +179,40 @@ def test_cli_plot_without_matplotlib_exits_2_before_replaying(
     result = run(runner, "-c", str(DIFF), str(s.log), "--plot", str(tmp_path / "p.png"),
                  "--csv", str(out))
     assert result.exit_code == 2
-    assert NO_MATPLOTLIB in result.stderr
-    assert not out.exists()
+    assert "warning: --plot: plotting needs matplotlib" in result.stderr
+    assert f"--plot {tmp_path / 'p.png'}: not drawn" in result.stderr
+    # Said at once, before the replay; the CSV and the summary are there all the same.
+    assert result.stderr.index("warning: --plot") < result.stderr.index("not drawn")
+    rows = out.read_text().splitlines()
+    assert rows[0].startswith(",".join(CSV_COLUMNS)) and len(rows) > 100
+    assert f"csv: {out}" in result.stdout and "final pose:" in result.stdout
     assert not (tmp_path / "p.png").exists()
+
+
+def test_the_install_hint_names_this_python_and_the_clone_of_an_editable_install(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path,
+) -> None:
+    import importlib.metadata
+    import json
+
+    class Dist:
+        def __init__(self, text: str | None) -> None:
+            self.text = text
+
+        def read_text(self, name: str) -> str | None:
+            assert name == "direct_url.json"
+            return self.text
+
+    clone = {"url": f"file://{tmp_path}/wheelgate", "dir_info": {"editable": True}}
+    for origin, expected in (
+        (clone, f"{sys.executable} -m pip install -e '{tmp_path}/wheelgate[plot]'"),
+        ({"url": "https://example.org/w.whl", "archive_info": {}},
+         f"{sys.executable} -m pip install 'wheelgate[plot]'"),
+        (None, f"{sys.executable} -m pip install 'wheelgate[plot]'"),
+    ):
+        text = None if origin is None else json.dumps(origin)
+        monkeypatch.setattr(importlib.metadata, "distribution", lambda _n, t=text: Dist(t))
+        assert install_hint("plot") == expected
 
 
 def test_cli_plot_writes_a_png(sessions: Callable[[str], Session], runner: CliRunner,
@@ -201,3 +233,38 @@ def test_cli_wrong_config_exits_1(sessions: Callable[[str], Session],
     assert result.exit_code == 1
     assert "no odometry: 0 of" in result.stderr
     assert "is it the right config?" in result.stderr
+
+
+def test_a_log_of_another_robot_is_warned_about(
+    sessions: Callable[[str], Session], runner: CliRunner,
+) -> None:
+    # The demo's mecanum log (ODrive nodes 1 to 4) replayed with the TurtleBot's configuration
+    # (ODrive nodes 1 and 2): two of the four wheels make a path that never was; the frames of
+    # nodes 3 and 4 give it away.
+    s = sessions("default")
+    result = run(runner, "-c", str(DIFF), str(s.log))
+    warned = [line for line in result.stderr.splitlines() if "does not name" in line]
+    assert len(warned) == 1, result.stderr
+    assert "ODrive node 3, ODrive node 4" in warned[0] and "another robot's log" in warned[0]
+    share = float(warned[0].split("warning: ")[1].split("%")[0])
+    assert 45 <= share <= 55  # half the controllers' frames are of the two unnamed nodes
+    report = json.loads(run(runner, "-c", str(DIFF), str(s.log), "--json").stdout)
+    assert [(d["protocol"], d["node_id"]) for d in report["foreign_controllers"]["devices"]] \
+        == [("ODrive", 3), ("ODrive", 4)]
+    # The right configuration: nothing foreign, and the gateway's own pose frames agree.
+    mine = run(runner, str(s.log))
+    assert "does not name" not in mine.stderr and mine.exit_code == 0, mine.stderr
+    assert "gateway: " in mine.stdout and "from the gateway's own odometry" in mine.stdout
+    assert json.loads(run(runner, str(s.log), "--json").stdout)["foreign_controllers"] is None
+
+
+def test_a_replay_that_departs_from_the_gateways_pose_is_warned_about(
+    sessions: Callable[[str], Session], runner: CliRunner, tmp_path: Path,
+) -> None:
+    s = sessions("turtlebot3_burger")
+    wrong = tmp_path / "tb3.yaml"
+    wrong.write_text(DIFF.read_text().replace("wheel_radius: 0.033", "wheel_radius: 0.036"))
+    assert wrong.read_text() != DIFF.read_text()
+    result = run(runner, "-c", str(wrong), str(s.log))
+    assert "departs from the gateway's own odometry" in result.stderr, result.stderr
+    assert "departs" not in run(runner, "-c", str(DIFF), str(s.log)).stderr

@@ -9,6 +9,7 @@ simulators' exact wheel angles).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import TYPE_CHECKING
 
@@ -18,7 +19,7 @@ import yaml
 from gateway.apps.replay.replay import Replay, SteeringSource, fixed_subset, reconstruct_steer
 from gateway.cli.commands.odom import command
 from gateway.config import load_config
-from gateway.core.kinematics import se2_exp
+from gateway.core.kinematics import RobotModel, se2_exp
 from gateway.core.types import Twist
 from tests.apps import odom_helpers
 from tests.apps.odom_helpers import (
@@ -29,6 +30,7 @@ from tests.apps.odom_helpers import (
     replay_file,
 )
 from tests.conftest import CONFIG_DIR
+from tests.e2e_helpers import virtual_config
 
 if TYPE_CHECKING:
     from collections.abc import Callable
@@ -256,3 +258,33 @@ def test_reconstructed_steering_respects_limits() -> None:
     prev = model.neutral_steer
     # Sideways motion needs 90 degrees, beyond max_steer: the angles stay.
     assert reconstruct_steer(model, Twist(0.0, 0.5, 0.0), prev, [None] * model.n) == prev
+
+
+def test_the_replay_is_judged_by_the_gateways_own_pose_frames(
+    sessions: Callable[[str], Session],
+) -> None:
+    # A --record log holds the gateway's WG_Odom_Pose frames: the replay of the same encoder
+    # frames agrees with them to the frames' millimetre and an update's lag, and a replay with
+    # a wrong wheel radius (5 % too big) is told apart by as much.
+    s = sessions("turtlebot3_burger")
+    check = replay_file(s.config, s.log).summary().pose_check
+    assert check is not None
+    assert check.frames > 50
+    assert check.position_error_m < 0.005 and abs(check.heading_error_rad) < 0.005, check
+    assert check.max_position_error_m < 0.01 and check.max_heading_error_rad < 0.01, check
+    wheels = tuple(dataclasses.replace(w, radius=w.radius * 1.05) for w in s.config.model.wheels)
+    wrong = dataclasses.replace(s.config, model=RobotModel(wheels))
+    bad = replay_file(wrong, s.log).summary().pose_check
+    assert bad is not None
+    # A square of 1 m sides: 5 % too far on a side is 5 cm off on the way.
+    assert bad.max_position_error_m > 0.04, bad
+    assert bad.gateway == check.gateway  # the log's frames are the log's
+
+
+def test_a_log_without_pose_frames_has_no_check() -> None:
+    cfg = virtual_config(CONFIG_DIR / "turtlebot3_burger.yaml", "wg-odom-nopose")
+    replay = Replay(cfg)
+    for _ in replay.feed_lines([line(0.0, 1, 0.0), line(0.0, 2, 0.0), line(0.1, 1, 1.0),
+                                line(0.1, 2, 1.0)]):
+        pass
+    assert replay.summary().pose_check is None

@@ -15,9 +15,11 @@ from gateway.apps.replay.plot import (
     SPEED_COLOUR,
     WHEEL_COLOUR,
     body_outline,
+    mark_step,
     pick_poses,
     robot_size,
     speed_arrow,
+    time_marks,
     to_world,
     wheel_box,
 )
@@ -139,7 +141,7 @@ def test_figure_axes_enclose_the_path_with_equal_scales(
     figure: tuple[Figure, list[Sample], GatewayConfig],
 ) -> None:
     fig, samples, cfg = figure
-    (ax,) = fig.axes
+    ax, _ = fig.axes  # the path, then the wheel speeds over time
     xs = [s.pose.x_m for s in samples]
     ys = [s.pose.y_m for s in samples]
     assert max(xs) == pytest.approx(2.0, abs=1e-6)
@@ -164,7 +166,7 @@ def test_figure_uses_the_seed_colours(figure: tuple[Figure, list[Sample], Gatewa
     from matplotlib.colors import to_hex
 
     fig, samples, cfg = figure
-    (ax,) = fig.axes
+    ax, _ = fig.axes  # the path, then the wheel speeds over time
     colours = [to_hex(line.get_color()).upper() for line in ax.get_lines()]
     assert colours.count(PATH_COLOUR) == 1
     robots = len(pick_poses(samples, 6))
@@ -193,7 +195,7 @@ def test_png_is_a_picture_of_the_path(figure: tuple[Figure, list[Sample], Gatewa
     save_figure(fig, str(png))
     img = imread(str(png))
     height, width = img.shape[:2]
-    assert 400 <= height <= 900
+    assert 600 <= height <= 1000
     assert 500 <= width <= 1200
     rgb = img[..., :3]
     inked = np.any(rgb < 0.9, axis=2).mean()
@@ -217,7 +219,7 @@ def test_steered_wheels_are_drawn_at_their_angle() -> None:
     samples = [sample(0.0, Pose(), 0.0, (None, None, 1.0), steer),
                sample(1.0, Pose(), 0.0, (None, None, 1.0), steer)]
     fig = plot_trajectory(samples, cfg, robots=1)
-    (ax,) = fig.axes
+    ax, _ = fig.axes  # the path, then the wheel speeds over time
     front = cfg.model.wheels[cfg.model.index("front")]
     boxes = [line for line in ax.get_lines() if to_hex(line.get_color()).upper() == WHEEL_COLOUR]
     spans = []
@@ -236,3 +238,64 @@ def test_nothing_to_plot_is_an_error() -> None:
 
     with pytest.raises(ValueError, match="at least one odometry sample"):
         plot_trajectory([], load_config(CONFIG_DIR / "mecanum.yaml"))
+
+
+def test_the_path_is_drawn_over_the_robots_with_time_marks(
+    figure: tuple[Figure, list[Sample], GatewayConfig],
+) -> None:
+    from matplotlib.colors import to_hex
+    from matplotlib.text import Annotation
+
+    fig, samples, _ = figure
+    ax, _ = fig.axes
+    lines = ax.get_lines()
+    (path,) = [line for line in lines if to_hex(line.get_color()).upper() == PATH_COLOUR]
+    others = [line for line in lines if to_hex(line.get_color()).upper()
+              in (BODY_COLOUR, WHEEL_COLOUR)]
+    assert all(path.get_zorder() > line.get_zorder() for line in others)
+    assert all((line.get_alpha() or 1.0) < 1.0 for line in others
+               if to_hex(line.get_color()).upper() == BODY_COLOUR)
+    # The square takes 2 x (4 + 2 + pi) = 18.3 s: a mark every 2 s, labelled, on the path.
+    marks = [t.get_text() for t in ax.texts]
+    assert marks == [f"{k} s" for k in range(2, 19, 2)], marks
+    for text, (index, seconds) in zip(ax.texts, time_marks(samples), strict=True):
+        assert isinstance(text, Annotation)
+        assert text.xy == (samples[index].pose.x_m, samples[index].pose.y_m)
+        assert samples[index].time_s - samples[0].time_s >= seconds - 1e-9
+
+
+def test_the_second_panel_shows_every_wheel_speed_over_time(
+    figure: tuple[Figure, list[Sample], GatewayConfig],
+) -> None:
+    fig, samples, cfg = figure
+    _, speeds = fig.axes
+    assert speeds.get_xlabel() == "time (s)"
+    assert speeds.get_ylabel() == "wheel speed (rad/s)"
+    assert [line.get_label() for line in speeds.get_lines()] == list(cfg.model.names)
+    for i, line in enumerate(speeds.get_lines()):
+        xs, ys = line.get_xydata().T  # type: ignore[union-attr]
+        assert list(xs) == pytest.approx([s.time_s - samples[0].time_s for s in samples])
+        assert list(ys) == pytest.approx([s.wheel_rad_s[i] for s in samples])
+
+
+def test_time_marks_fall_at_round_steps() -> None:
+    samples = [sample(100.0 + 0.3 * k, Pose(), 0.0, (0.0,)) for k in range(34)]  # 9.9 s
+    assert mark_step(9.9) == 1.0
+    assert [t for _, t in time_marks(samples)] == [float(k) for k in range(1, 10)]
+    assert all(samples[i].time_s - 100.0 >= t - 1e-9 for i, t in time_marks(samples))
+    assert time_marks([]) == []
+
+
+def test_a_robot_standing_still_gets_one_time_mark() -> None:
+    pytest.importorskip("matplotlib")
+    from gateway.apps.replay.plot import plot_trajectory
+
+    cfg = load_config(CONFIG_DIR / "mecanum.yaml")
+    still = [sample(0.1 * k, Pose(), 0.0, (0.0,) * 4) for k in range(50)]  # 5 s at rest
+    moving = [sample(5.0 + 0.1 * k, Pose(0.05 * k, 0.0, 0.0), 0.05 * k, (1.0,) * 4)
+              for k in range(1, 51)]  # then 2.5 m in 5 s
+    fig = plot_trajectory(still + moving, cfg)
+    ax, _ = fig.axes
+    labels = [t.get_text() for t in ax.texts]
+    assert labels[0] == "1 s" and not {"2 s", "3 s", "4 s"} & set(labels), labels
+    assert {"6 s", "7 s", "8 s", "9 s"} <= set(labels), labels

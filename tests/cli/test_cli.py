@@ -151,3 +151,31 @@ def test_debug_shows_traceback(runner: CliRunner) -> None:
     result = runner.invoke(main, ["--debug", "ik", "-c", TB3, "--vy", "1"])
     assert result.exit_code == 1
     assert type(result.exception).__name__ == "InfeasibleTwistError"
+
+
+def test_shell_completion_offers_every_command_and_option() -> None:
+    # The README's completion lines (click's _WHEELGATE_COMPLETE protocol) as the shell calls
+    # them: every subcommand for "wheelgate ", a command's own options for "wheelgate run --s".
+    import os
+    import subprocess
+    import sys
+
+    from gateway.cli import COMMANDS
+
+    def complete(words: str) -> list[str]:
+        env = {**os.environ, "_WHEELGATE_COMPLETE": "bash_complete", "COMP_WORDS": words,
+               "COMP_CWORD": str(len(words.split()) - (0 if words.endswith(" ") else 1))}
+        done = subprocess.run(
+            [sys.executable, "-c", "import sys; from gateway.cli import main; "
+             "sys.exit(main(prog_name='wheelgate'))"],
+            env=env, capture_output=True, text=True, timeout=30, check=True)
+        return [line.split(",", 1)[1] for line in done.stdout.splitlines()]
+
+    assert set(complete("wheelgate ")) == set(COMMANDS)
+    assert {"--sim", "--socket"} <= set(complete("wheelgate run --s"))
+    source = subprocess.run(
+        [sys.executable, "-c", "import sys; from gateway.cli import main; "
+         "sys.exit(main(prog_name='wheelgate'))"],
+        env={**os.environ, "_WHEELGATE_COMPLETE": "bash_source"}, capture_output=True,
+        text=True, timeout=30, check=True).stdout
+    assert "_wheelgate_completion" in source and "complete " in source

@@ -1,9 +1,12 @@
 """``wheelgate monitor`` end to end: a log, a virtual bus with simulated controllers, a daemon
-in a thread, and bad arguments."""
+in a thread, bad arguments, and the live screen on an 80 x 24 terminal (a pty)."""
 
 from __future__ import annotations
 
 import json
+import re
+import sys
+import time
 from typing import TYPE_CHECKING
 
 import pytest
@@ -11,8 +14,9 @@ import pytest
 from gateway import cli
 from gateway.cli import main
 from gateway.sim.bus import SimulatedControllers
-from tests.apps.monitor_helpers import Session, default_config
+from tests.apps.monitor_helpers import Session, config_at, default_config
 from tests.conftest import CONFIG_DIR
+from tests.pty_helpers import ANSI, MONITOR_FRAME, Pty
 
 if TYPE_CHECKING:
     from pathlib import Path
@@ -234,3 +238,62 @@ def test_bad_config_exits_2(runner: CliRunner, log_file: Path, tmp_path: Path) -
     result = monitor(runner, "-c", str(bad), "--log", str(log_file), "--once")
     assert result.exit_code == 2
     assert str(bad) in result.stderr
+
+
+# --------------------------------------------------------------------- on a terminal
+
+
+@pytest.fixture
+def swerve_log(tmp_path: Path) -> Path:
+    """Eight seconds of the swerve robot (four drive motors, four steering actuators), with one
+    unreadable line (an error count that is not zero: shown in colour)."""
+    frames = Session(config_at("swerve.yaml")).run(8.0, [2.0, 2.0, 2.0, 2.0])
+    lines = [f"({EPOCH + t:.6f}) can0 {f.to_cansend()} {'T' if d == 'tx' else 'R'}"
+             for t, f, d in frames]
+    lines.insert(BAD_LINE - 1, "(1700000000.1) can0 06D#00112233445566778899 R")
+    path = tmp_path / "swerve.log"
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def live_monitor(log: Path, **env: str | None) -> Pty:
+    """``wheelgate monitor`` replaying ``log`` at its own speed on an 80 x 24 terminal."""
+    return Pty([sys.executable, "-m", "gateway", "monitor", "-c", str(CONFIG_DIR / "swerve.yaml"),
+                "--log", str(log)], cols=80, rows=24, env={"TERM": "xterm", **env}, cleared=True)
+
+
+@pytest.mark.timeout(30)
+def test_live_screen_fits_80_by_24_pages_and_quits_on_q(swerve_log: Path) -> None:
+    term = live_monitor(swerve_log, NO_COLOR=None)
+    try:
+        screen = term.wait_for("the swerve robot", lambda s: "front_left" in s and "IDs" in s)
+        frames = term.raw.decode().split(MONITOR_FRAME)[1:-1]  # the complete ones
+        for frame in [*frames, term.raw_screen()]:
+            lines = ANSI.sub("", frame).replace("\r", "").split("\n")
+            assert len(lines) <= 24 and max(len(ln) for ln in lines) <= 80, frame
+        assert "q: quit" in screen
+        wheel = next(ln for ln in screen.splitlines() if ln.startswith("front_left"))
+        assert wheel.split()[1:3] == ["1/5", "enabled"] and wheel.split()[5] == "+0.0"
+        errors = term.raw_screen().split("\n")[-1]
+        assert errors.startswith("errors: \x1b[33m")  # colour on a terminal
+        assert errors.endswith("unreadable lines 1\x1b[0m")
+        term.send(b" ")
+        term.wait_for("the next page", lambda s: "page 2/" in s)
+        started = time.monotonic()
+        term.send(b"q")
+        assert term.wait_exit(5.0) == 0, term.text[-2000:]
+        assert time.monotonic() - started < 2.0  # q, not the end of the 8 s log
+    finally:
+        term.close()
+
+
+@pytest.mark.timeout(30)
+def test_no_color_is_honoured(swerve_log: Path) -> None:
+    term = live_monitor(swerve_log, NO_COLOR="1")
+    try:
+        term.wait_for("the swerve robot", lambda s: "unreadable lines 1" in s)
+        assert not re.search(r"\x1b\[[0-9;]*m", term.raw.decode())
+        term.send(b"q")
+        assert term.wait_exit(5.0) == 0
+    finally:
+        term.close()

@@ -107,3 +107,82 @@ def test_a_file_without_a_bus_block_is_warned_about(tmp_path: Path) -> None:
     told = load_config(write(tmp_path, text), {"interface": "socketcan", "channel": "can0"})
     assert not any("no bus: block" in w for w in told.warnings)
     assert not any("no bus: block" in w for w in load_config(None).warnings)  # the demo's own
+
+
+def test_a_file_without_an_acceleration_limit_is_warned_about(tmp_path: Path) -> None:
+    """No limits (or no max_wheel_accel_rad_s2): a twist steps the wheels to full speed in
+    one cycle; the shipped examples and the demo set one and are not warned about."""
+    lines = MECANUM.splitlines()
+    start = next(i for i, line in enumerate(lines) if line.startswith("limits:"))
+    end = next(i for i in range(start + 1, len(lines)) if not lines[i].startswith("  "))
+    without = "\n".join(lines[:start] + lines[end:])
+    only_speed = "\n".join([*lines[:start], "limits: {max_linear_m_s: 1.0}", *lines[end:]])
+    for text, what in ((without, "no limits: block"),
+                       (only_speed, "limits: no max_wheel_accel_rad_s2")):
+        warned = [w for w in load_config(write(tmp_path, text)).warnings
+                  if "max_wheel_accel_rad_s2" in w]
+        assert len(warned) == 1 and what in warned[0], warned
+    for path in (None, *sorted(CONFIG_DIR.glob("*.yaml"))):
+        assert not any("max_wheel_accel_rad_s2" in w for w in load_config(path).warnings), path
+
+
+def test_every_problem_of_a_file_is_reported_at_once(tmp_path: Path) -> None:
+    # Five problems in five blocks, and two in one block: a person fixing the file sees all
+    # seven in one run, each naming the file and its key path, in the file's order of blocks.
+    path = write(tmp_path, """\
+drive: mecanum
+colour: red
+geometry: {wheel_radius: 0.05, wheelbase: 0.4, track: 0.36}
+motor_defaults: {driver: odrive, gear_ratio: 10, max_rpm: 3000}
+motors:
+  front_left: {node_id: 1, inverted: true}
+  front_right: {node_id: 2, invert: true}
+  rear_left: {node_id: 3}
+  rear_right: {node_id: 4, invert: yes please}
+limits: {max_linear_m_s: -1, max_angular_rad_s: fast}
+bus: {interface: virtual, channel: wheelgate, bitrate: 0}
+gateway: {rate_hz: 5}
+""")
+    with pytest.raises(ConfigError) as info:
+        load_config(path)
+    problems = info.value.problems
+    assert len(problems) == 7, problems
+    where = [p.split(": ")[1] for p in problems]
+    assert where == ["colour", "motors.front_left.inverted", "motors.rear_right.invert",
+                     "limits.max_linear_m_s", "limits.max_angular_rad_s", "bus.bitrate",
+                     "gateway.rate_hz"], problems
+    assert all(p.startswith(f"{path}: ") for p in problems)
+    assert "did you mean 'invert'?" in problems[1]
+    assert str(info.value).splitlines() == list(problems)
+
+
+def test_a_block_that_needs_a_broken_one_is_not_checked(tmp_path: Path) -> None:
+    # An unknown drive has no wheels to put motors on: its motors are not judged (no second,
+    # misleading problem), but the independent blocks still are.
+    path = write(tmp_path, """\
+drive: mecanumm
+motors: {front_left: {node_id: 1}}
+limits: {max_linear_m_s: -1}
+""")
+    with pytest.raises(ConfigError) as info:
+        load_config(path)
+    problems = info.value.problems
+    assert len(problems) == 2, problems
+    assert "drive: expected one of" in problems[0] and "mecanumm" in problems[0]
+    assert "limits.max_linear_m_s" in problems[1]
+
+
+def test_a_motor_block_reports_its_unknown_keys_and_its_protocol_problems_together(
+    tmp_path: Path,
+) -> None:
+    path = write(tmp_path, """\
+drive: differential
+geometry: {wheel_radius: 0.05, track: 0.3}
+motor_defaults: {driver: vesc, max_rpm: 3000, gear_ratio: 5, controller_timeout_s: 1.0}
+motors: {left: {node_id: 1, inverted: true}, right: {node_id: 2}}
+bus: {interface: socketcan, channel: can0}
+""")
+    with pytest.raises(ConfigError) as info:
+        load_config(path)
+    assert [p.split(": ")[1] for p in info.value.problems] == [
+        "motors.left.inverted", "motors.left.pole_pairs", "motors.right.pole_pairs"]

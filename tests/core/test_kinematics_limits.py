@@ -80,3 +80,36 @@ def test_limits_must_match_the_model() -> None:
     m = model("differential", wheel_radius=0.1, track=0.4)
     with pytest.raises(KinematicsError, match="Expected 2 wheel speed limits, but got 1"):
         apply_limits(m, m.ik(Twist()), Limits((1.0,)))
+
+
+def test_deceleration_has_its_own_limit_and_a_reversal_takes_the_smaller() -> None:
+    m = model("differential", wheel_radius=0.1, track=0.4)
+    limits = Limits((math.inf, math.inf), max_wheel_accel_rad_s2=10.0,
+                    max_wheel_decel_rad_s2=40.0)
+    cruise = m.ik(Twist(1.0))  # both wheels 10 rad/s
+    steps = {}
+    for name, target in (("brake", Twist()), ("faster", Twist(2.0)), ("reverse", Twist(-1.0))):
+        out, report = apply_limits(m, m.ik(target), limits, cruise, 0.01)
+        assert report.accel_scale < 1.0, name
+        steps[name] = max(abs(a - b) for a, b in
+                          zip(out.wheel_rad_s, cruise.wheel_rad_s, strict=True))
+    assert steps == pytest.approx({"brake": 0.4, "faster": 0.1, "reverse": 0.1})
+    # A wheel slowing while the other speeds up: each wheel within its own step.
+    out, _ = apply_limits(m, m.ik(Twist(1.0, 0.0, 5.0)), limits, cruise, 0.01)
+    left, right = (a - b for a, b in zip(out.wheel_rad_s, cruise.wheel_rad_s, strict=True))
+    assert left < 0.0 < right and right == pytest.approx(0.1) and abs(left) <= 0.4
+    # Unset, deceleration is the acceleration limit (the behaviour before the key existed).
+    same = Limits((math.inf, math.inf), max_wheel_accel_rad_s2=10.0)
+    out, _ = apply_limits(m, m.ik(Twist()), same, cruise, 0.01)
+    assert out.wheel_rad_s == pytest.approx((9.9, 9.9))
+
+
+@pytest.mark.parametrize("name", ["swerve", "mecanum", "ackermann"])
+def test_equal_steps_give_the_single_limit_factor(name: str) -> None:
+    # change_scale with accel == decel is exactly the one-limit factor, steered or not.
+    params = {"wheel_radius": 0.05, "wheelbase": 0.5, "track": 0.4}
+    m = model(name, **params)
+    prev = Twist(0.4, 0.0, 0.3)
+    for d in ((0.1, 0.0, 0.2), (-0.8, 0.0, -0.3), (0.2, 0.0, 0.0)):
+        expected = min(1.0, 0.05 / m.max_wheel_change(*d))
+        assert m.change_scale(prev, d, 0.05, 0.05) == pytest.approx(expected)

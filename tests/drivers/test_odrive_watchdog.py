@@ -212,6 +212,7 @@ def _config(tmp_path: Path, motor_defaults: str, gateway: str = "") -> Path:
         f"motor_defaults: {{driver: odrive, gear_ratio: 5.0, max_rpm: 3000, {motor_defaults}}}\n"
         "motors: {left: {node_id: 1}, right: {node_id: 2, invert: true}}\n"
         "bus: {interface: virtual, channel: watchdog}\n"  # said: no warning for a missing bus
+        "limits: {max_wheel_accel_rad_s2: 30.0}\n"  # nor for missing limits
         + (f"gateway: {{{gateway}}}\n" if gateway else "")
     )
     return path

@@ -150,3 +150,32 @@ def test_ready_with_the_motors_unpowered_and_the_status_says_what_it_waits_for(
     finally:
         proc.send_signal(signal.SIGTERM)
         proc.communicate(timeout=10)
+
+
+@pytest.mark.timeout(60)
+def test_run_says_when_the_motors_run_and_why_they_do_not(sock_path: str, tmp_path: Path,
+                                                           channel: str) -> None:
+    # The lines a person reads on starting the daemon, in order: the bus is open, then the
+    # motors are enabled; on a virtual bus with no simulator, that only simulators answer there.
+    def run(*args: str) -> list[str]:
+        done = subprocess.run(
+            [sys.executable, "-m", "gateway", "--interface", "virtual", "--channel", channel,
+             "run", "--socket", sock_path, "--duration", "3", *args],
+            check=False, capture_output=True, text=True, timeout=50)
+        assert done.returncode == 0, done.stderr
+        return [line for line in done.stderr.splitlines() if line.startswith("wheelgate: ")]
+
+    lines = run("--sim")
+    assert lines[0].startswith(f"wheelgate: demo_mecanum (mecanum, 4 wheels) at 200 Hz: bus "
+                               f"virtual {channel} open with simulated controllers"), lines
+    assert lines[1] == (f"wheelgate: running on virtual {channel}: 4 motors enabled; control "
+                        f"socket {sock_path}"), lines
+    assert lines[-1].startswith("wheelgate: stopped"), lines
+    quick = tmp_path / "robot.yaml"
+    quick.write_text(CONFIG_DIR.joinpath("turtlebot3_burger.yaml").read_text().replace(
+        "bus:", "gateway: {enable_timeout_s: 1.0}\nbus:") + "")
+    lines = run("-c", str(quick))
+    assert not any("running on" in line for line in lines), lines
+    failed = [line for line in lines if "did not enable" in line]
+    assert len(failed) == 1 and "where only simulated controllers answer" in failed[0], lines
+    assert "`wheelgate run --sim`" in failed[0]

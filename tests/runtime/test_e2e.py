@@ -36,7 +36,8 @@ def drive(rig: Rig, shape: str, pilot: SocketPilot | None) -> None:
             r.send_can_twist(t)
         elif cycle[0] % 5 == 0:  # 20 Hz at 100 Hz, well inside the 0.5 s command timeout
             pilot.send(op="twist", vx=t.vx_m_s, vy=t.vy_m_s, wz=t.wz_rad_s)
-            assert all(m["ok"] for m in pilot.messages() if "ok" in m)
+            replies = pilot.messages()
+            assert all(m["ok"] for m in replies if "ok" in m), replies
         cycle[0] += 1
 
     for twist, seconds in legs:

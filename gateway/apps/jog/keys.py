@@ -10,7 +10,11 @@ The keys are those of ROS ``teleop_twist_keyboard``::
 ``k``, space and any other key stop; ``q``/``z`` scale both speeds by 1.1 / 0.9, ``w``/``x``
 the linear speed only, ``e``/``c`` the angular speed only; ``t``/``b`` (z up and down) do not
 apply to a ground robot and stop.  Because ``q`` speeds up, as in teleop_twist_keyboard, the
-session ends with Ctrl-C, Ctrl-D or Esc, and always with a stop.
+session ends with Ctrl-C, Ctrl-D or Esc, and always with a stop.  The first speeds are
+teleop_twist_keyboard's ``speed`` and ``turn`` parameters, 0.5 m/s and 1.0 rad/s
+(``jog --speed`` and ``--turn``; ros-teleop/teleop_twist_keyboard, ``teleop_twist_keyboard.py``:
+``speed = rospy.get_param("~speed", 0.5)``, ``turn = rospy.get_param("~turn", 1.0)``), within
+the robot's limits (:func:`step_error`).
 
 Deadman: a motion key drives for as long as it keeps arriving (terminal auto-repeat); the
 current twist is re-sent every :data:`SEND_PERIOD_S`; when no motion key has come for the
@@ -68,15 +72,28 @@ NO_LIMIT = "no limit set"
 #: How often a held motion key re-sends its twist (10 Hz).
 SEND_PERIOD_S = 0.1
 
+#: The keys on the screen, in full: at most 79 columns, as on an 80-column terminal.
 HELP = (
-    "Moving around:        Holonomic (shift):",
-    "   u    i    o           U    I    O",
-    "   j    k    l           J    K    L",
-    "   m    ,    .           M    <    >",
-    "k, space, any other key: stop     t/b (z): not applicable, stop",
-    "q/z: both speeds +/-10%   w/x: linear only +/-10%   e/c: angular only +/-10%",
-    "quit: Ctrl-C, Ctrl-D or Esc (q speeds up, as in teleop_twist_keyboard); quitting sends stop",
+    "Moving around:        Holonomic (shift):      Speeds, +/-10 %:",
+    "   u    i    o           U    I    O             q/z  both",
+    "   j    k    l           J    K    L             w/x  linear only",
+    "   m    ,    .           M    <    >             e/c  angular only",
+    "k, space, any other key: stop      t/b (z): not applicable, stop",
+    "quit: Ctrl-C, Ctrl-D or Esc; quitting sends stop (q is a speed key)",
 )
+#: The line added to :data:`HELP` for a drive that cannot follow vy.
+HELP_NOT_HOLONOMIC = "holonomic (shift) keys: not on this {drive} drive; they stop"
+#: The keys in three lines, for a short terminal (``{deadman}``: the deadman time, s).
+HELP_COMPACT = (
+    "move: u i o / j k l / m , .   sideways (shift): U I O / J K L / M < >",
+    "stop: k, space, other keys   +/-10 %: q/z both speeds, w/x linear, e/c angular",
+    "quit: Ctrl-C, Ctrl-D or Esc (sends stop)   deadman: {deadman:g} s without a key, stop",
+)
+#: The first line of :data:`HELP_COMPACT` for a drive that cannot follow vy.
+HELP_COMPACT_NOT_HOLONOMIC = (
+    "move: u i o / j k l / m , .   (shift keys, sideways: not on this drive)")
+#: The keys in one line, for a very short terminal.
+HELP_LINE = "keys: uio/jkl/m,. move, shift sideways  k stop  q/z w/x e/c speeds  Ctrl-C quit"
 
 
 @dataclass(frozen=True, slots=True)
@@ -137,6 +154,43 @@ def jog_limits(config: GatewayConfig) -> JogLimits:
                        "limits.max_angular_rad_s")
     return JogLimits(lin, ang, lin_by, ang_by, model.feasible(Twist(0.0, 0.1, 0.0)),
                      config.drive, model, limits)
+
+
+def step_error(value: float, cap: float, by: str, what: str, unit: str) -> str:
+    """Why ``value`` cannot be the first speed of a key (``jog --speed`` or ``--turn``); ``""``
+    when it can: above 0, finite and within the robot's limit.
+
+    :param cap: the limit (m/s or rad/s); the message shows it rounded down to 0.001.
+    :param by: what sets the limit (:attr:`JogLimits.linear_by`).
+    :param what: the speed with its article, ``"a linear"`` or ``"an angular"``.
+    :param unit: ``"m/s"`` or ``"rad/s"``.
+
+    >>> step_error(0.5, 4.654211, "motor max_rpm", "a linear", "m/s")
+    ''
+    >>> step_error(5.0, 4.654211, "motor max_rpm", "a linear", "m/s")
+    'expected a linear speed above 0 and at most 4.654 m/s (motor max_rpm), got 5.0'
+    """
+    if math.isfinite(value) and 0.0 < value <= cap:
+        return ""
+    shown = math.floor(cap * 1000.0) / 1000.0  # a limit that, typed back, is accepted
+    why = "the control socket's largest twist" if by == NO_LIMIT else by
+    return (f"expected {what} speed above 0 and at most {shown:g} {unit} ({why}), "
+            f"got {value!r}")
+
+
+def steps_errors(limits: JogLimits, linear_m_s: float | None, angular_rad_s: float | None
+                 ) -> list[tuple[str, str]]:
+    """(option, why) for ``jog --speed`` (``linear_m_s``) and ``--turn`` when given and not
+    a first speed :func:`step_error` accepts."""
+    out = []
+    for option, value, cap, by, what, unit in (
+            ("--speed", linear_m_s, limits.max_linear_m_s, limits.linear_by, "a linear", "m/s"),
+            ("--turn", angular_rad_s, limits.max_angular_rad_s, limits.angular_by, "an angular",
+             "rad/s")):
+        why = "" if value is None else step_error(value, cap, by, what, unit)
+        if why:
+            out.append((option, why))
+    return out
 
 
 @dataclass(frozen=True, slots=True)
@@ -231,10 +285,13 @@ class JogState:
     ended: str = ""
 
     @classmethod
-    def start(cls, limits: JogLimits, linear_m_s: float = DEFAULT_LINEAR_M_S,
-              angular_rad_s: float = DEFAULT_ANGULAR_RAD_S,
+    def start(cls, limits: JogLimits, linear_m_s: float | None = None,
+              angular_rad_s: float | None = None,
               deadman_s: float = DEFAULT_DEADMAN_S) -> JogState:
-        """A stopped session whose speeds are clamped to ``limits`` (the message says so)."""
+        """A stopped session whose speeds (``None``: teleop_twist_keyboard's) are clamped to
+        ``limits`` (the message says so)."""
+        linear_m_s = DEFAULT_LINEAR_M_S if linear_m_s is None else linear_m_s
+        angular_rad_s = DEFAULT_ANGULAR_RAD_S if angular_rad_s is None else angular_rad_s
         lin = min(linear_m_s, limits.max_linear_m_s)
         ang = min(angular_rad_s, limits.max_angular_rad_s)
         notes = [f"{what} speed {want:g} {unit} clamped to {got:.3g} {unit} by {by}"

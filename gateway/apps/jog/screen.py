@@ -2,23 +2,40 @@
 :mod:`gateway.apps.jog.keys` and the daemon's last status (:class:`gateway.core.status.
 GatewayStatus`, which :func:`read_status` takes from a reply) -- into lines of text.  The
 terminal itself is handled by :mod:`gateway.cli.commands.jog`.  No I/O, no clock.
+
+The screen fits the terminal (:mod:`gateway.apps.layout`): on a short one the motors condense
+to one line per wheel (its speed and its steering actuator's angle), the key help to three
+lines then one, the messages and the log to a line each; no line is wider than the terminal.
+Faults and errors are red, warnings yellow, when the caller asks for colour.
 """
 
 from __future__ import annotations
 
-import textwrap
+import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
-from gateway.apps.jog.keys import HELP, key_name
+from gateway.apps.jog.keys import (
+    HELP,
+    HELP_COMPACT,
+    HELP_COMPACT_NOT_HOLONOMIC,
+    HELP_LINE,
+    HELP_NOT_HOLONOMIC,
+    key_name,
+)
+from gateway.apps.layout import Level, Line, fit, pack, paint, pair_steering, wrap
+from gateway.core.numfmt import fixed
 from gateway.core.status import fault_names, state_name
+from gateway.core.types import DriveFault, DriveState, GatewayState
 from gateway.wire.socket import ProtocolError
 from gateway.wire.socket.status import status_from_json
 
 if TYPE_CHECKING:
+    from collections.abc import Sequence
+
     from gateway.apps.jog.keys import JogState
-    from gateway.core.status import GatewayStatus
+    from gateway.core.status import GatewayStatus, MotorReport
     from gateway.core.types import Twist
 
 
@@ -58,6 +75,9 @@ class Screen:
     :param daemon: its last status, ``None`` before the first.
     :param last_error: the daemon's last refusal of a request (or a connection error).
     :param log: the last log lines of this process.
+    :param connected: whether the daemon answers (``connection`` is shown as an error if not).
+    :param steering: per steering actuator (its status name), the wheels it turns
+        (:func:`gateway.apps.layout.steering_of` of the configuration).
     """
 
     robot: str
@@ -67,61 +87,200 @@ class Screen:
     daemon: GatewayStatus | None = None
     last_error: str = ""
     log: tuple[str, ...] = ()
+    connected: bool = True
+    steering: Mapping[str, tuple[str, ...]] = field(default_factory=dict)
 
 
-def _fmt_twist(t: Twist) -> str:
-    return f"vx={t.vx_m_s:+.3f} m/s vy={t.vy_m_s:+.3f} m/s wz={t.wz_rad_s:+.3f} rad/s"
+def _twist(t: Twist) -> str:
+    return (f"vx={fixed(t.vx_m_s, 3, sign=True)} m/s vy={fixed(t.vy_m_s, 3, sign=True)} m/s "
+            f"wz={fixed(t.wz_rad_s, 3, sign=True)} rad/s")
 
 
-def _wrapped(text: str, width: int, max_lines: int = 3) -> list[str]:
-    return textwrap.wrap(text, width, subsequent_indent="    ", max_lines=max_lines) or [""]
+def _help(screen: Screen) -> list[list[Line]]:
+    """The key help, full, in three lines and in one."""
+    lim = screen.jog.limits
+    full = [*HELP, *([] if lim.holonomic else [HELP_NOT_HOLONOMIC.format(drive=lim.drive)]),
+            f"deadman: a move lasts while its key repeats; {screen.jog.deadman_s:g} s without "
+            "it sends stop"]
+    compact = [HELP_COMPACT[0] if lim.holonomic else HELP_COMPACT_NOT_HOLONOMIC,
+               HELP_COMPACT[1], HELP_COMPACT[2].format(deadman=screen.jog.deadman_s)]
+    return [[Line(t) for t in full], [Line(t) for t in compact], [Line(HELP_LINE)]]
 
 
-def render(screen: Screen, width: int = 100) -> list[str]:
-    """The screen as lines of at most ``width`` characters."""
+# --------------------------------------------------------------------- motors
+
+
+def _level(*motors: MotorReport) -> Level:
+    if any(m.faults != DriveFault.NONE or m.state is DriveState.FAULT for m in motors):
+        return Level.ERROR
+    if any(m.state is DriveState.OFFLINE for m in motors):
+        return Level.WARNING
+    return Level.PLAIN
+
+
+def _faults(m: MotorReport) -> str:
+    return ", ".join(fault_names(m.faults)) or "no faults"
+
+
+def _speed(m: MotorReport) -> str:
+    v = m.velocity_rad_s
+    return "-" if v is None else f"{fixed(v, 2, sign=True)} rad/s"
+
+
+def _angle(m: MotorReport) -> str:
+    a = m.position_rad
+    return "-" if a is None else f"{fixed(math.degrees(a), 1, sign=True)} deg"
+
+
+def _age(*motors: MotorReport) -> str:
+    ages = [m.feedback_age_s for m in motors]
+    if any(a is None for a in ages):
+        return "-"
+    return f"{fixed(max(a for a in ages if a is not None) * 1e3, 1)} ms"
+
+
+class _Rows:
+    """The motor table: one row per motor, or one per wheel with its steering actuator."""
+
+    def __init__(self, motors: Sequence[MotorReport], steering: Mapping[str, tuple[str, ...]]
+                 ) -> None:
+        self.motors = motors
+        self.pairs = pair_steering([m.name for m in motors], steering)
+        self.steered = any(m.name in steering for m in motors)
+        self.steering = steering
+        own = [motors[i].name for i, _ in self.pairs]
+        self.width = min(max([12, *(len(n) for n in own)]), 20)
+
+    def _row(self, name: str, state: str, speed: str, steer: str, age: str, faults: str,
+             level: Level) -> Line:
+        angle = f"  {steer:>10}" if self.steered else ""
+        text = f"  {name:<{self.width}.{self.width}} {state:<9} {speed:>12}{angle}  {age:>9}  "
+        return Line(text + faults, level, 3 + self.width)
+
+    def header(self) -> Line:
+        return self._row("wheel", "state", "speed", "steer", "feedback", "faults", Level.PLAIN)
+
+    def _alone(self, m: MotorReport, name: str = "") -> Line:
+        actuator = m.name in self.steering
+        return self._row(name or m.name, state_name(m.state), "" if actuator else _speed(m),
+                         _angle(m) if actuator else "", _age(m), _faults(m), _level(m))
+
+    def each(self) -> list[Line]:
+        """A row per motor, an actuator under its wheel."""
+        out = []
+        for i, j in self.pairs:
+            out.append(self._alone(self.motors[i]))
+            if j is not None:
+                out.append(self._alone(self.motors[j], "  steering"))
+        return out
+
+    def merged(self) -> list[Line]:
+        """A row per wheel: its speed and its steering actuator's angle."""
+        out = []
+        for i, j in self.pairs:
+            m = self.motors[i]
+            if j is None:
+                out.append(self._alone(m))
+                continue
+            a = self.motors[j]
+            faults = _faults(m)
+            if a.faults != DriveFault.NONE:
+                faults += f"; steering {state_name(a.state)}: {_faults(a)}"
+            elif a.state is not m.state and a.state is not DriveState.ENABLED:
+                faults += f"; steering {state_name(a.state)}"
+            out.append(self._row(m.name, state_name(m.state), _speed(m), _angle(a),
+                                 _age(m, a), faults, _level(m, a)))
+        return out
+
+
+def _motors(screen: Screen) -> list[list[Line]]:
+    """The motor table, from the fullest to the leanest: a row per motor; a row per wheel;
+    without its header; then fewer rows, the last saying how many are left out."""
+    d = screen.daemon
+    if d is None or not d.motors:
+        return [[]]
+    rows = _Rows(d.motors, screen.steering)
+    merged = rows.merged()
+    out = [[rows.header(), *rows.each()], [rows.header(), *merged], merged]
+    for keep in range(len(merged) - 1, -1, -1):
+        more = len(merged) - keep
+        out.append([*merged[:keep], Line(f"  ... {more} more (a taller terminal shows them)")])
+    return out
+
+
+# --------------------------------------------------------------------- the whole
+
+
+def _daemon(screen: Screen, width: int) -> list[list[Line]]:
+    d = screen.daemon
+    if d is None:
+        return [[Line("daemon: no status yet")]]
+    cmd, pose, vel = d.command, d.odometry.pose, d.odometry.twist
+    bad = d.state in (GatewayState.FAULT, GatewayState.ESTOP)
+    state = [f"daemon: state {state_name(d.state)}{f' ({d.reason})' if d.reason else ''}",
+             f"applied {_twist(cmd.applied)}",
+             f"speed x{cmd.speed_scale:.2f} accel x{cmd.accel_scale:.2f}"]
+    warning = "" if d.robot == screen.robot else (
+        f"warning: the daemon drives {d.robot!r}, but the key limits are those of "
+        f"{screen.robot!r} (pass its configuration with -c)")
+    odometry = (f"odometry: x={fixed(pose.x_m, 3, sign=True)} m y={fixed(pose.y_m, 3, sign=True)} "
+                f"m theta={fixed(pose.theta_rad, 3, sign=True)} rad   "
+                f"v=({fixed(vel.vx_m_s, 3, sign=True)}, {fixed(vel.vy_m_s, 3, sign=True)}, "
+                f"{fixed(vel.wz_rad_s, 3, sign=True)})")
+    level = Level.ERROR if bad else Level.PLAIN
+    return [[*pack(state, width, n, level, 8, "   "),
+             *(wrap(warning, width, n, Level.WARNING) if warning else []),
+             *wrap(odometry, width, n)] for n in (2, 1)]
+
+
+def _log(screen: Screen) -> list[list[Line]]:
+    lines = []
+    for text in screen.log:
+        level = (Level.ERROR if text.startswith(("ERROR", "CRITICAL")) else
+                 Level.WARNING if text.startswith("WARNING") else Level.PLAIN)
+        lines.append(Line(f"log: {text}", level, 5))
+    return [lines, lines[-1:], []]
+
+
+def render(screen: Screen, width: int = 100, height: int | None = None,
+           colour: bool = False) -> list[str]:
+    """The screen as at most ``height`` lines (``None``: as many as it takes) of at most
+    ``width`` characters, coloured (ANSI SGR) when ``colour``."""
     jog, lim = screen.jog, screen.jog.limits
-    help_lines = list(HELP)
-    if not lim.holonomic:
-        help_lines[0] += f"   (not on this {lim.drive} drive)"
     if jog.moving:
-        command = f"command: MOVING {key_name(jog.key)}  {_fmt_twist(jog.twist)}"
+        command = f"command: MOVING {key_name(jog.key)}  {_twist(jog.twist)}"
         scale = lim.command_scale(jog.twist)
         if scale is not None and scale < 1.0:
             command += f"  (limits scale it to {scale:.0%})"
     else:
         command = "command: STOPPED"
-    lines = [
-        f"wheelgate jog: {screen.title}   {screen.connection}",
-        *help_lines,
-        f"deadman: a move lasts while its key repeats; {jog.deadman_s:g} s without it: stop "
-        "(second net: the daemon's cmd_timeout_s)",
-        "",
-        command,
-        f"speeds:  linear {jog.linear_m_s:.3f} m/s (max {lim.max_linear_m_s:.3g}, "
-        f"{lim.linear_by})   angular {jog.angular_rad_s:.3f} rad/s "
-        f"(max {lim.max_angular_rad_s:.3g}, {lim.angular_by})",
-        *_wrapped(f"message: {jog.message}", width),
-        *_wrapped(f"last error: {screen.last_error or '-'}", width),
+    linear = (f"linear {fixed(jog.linear_m_s, 3)} m/s (max {lim.max_linear_m_s:.3g}, "
+              f"{lim.linear_by})")
+    angular = (f"angular {fixed(jog.angular_rad_s, 3)} rad/s (max {lim.max_angular_rad_s:.3g}, "
+               f"{lim.angular_by})")
+    speeds = [Line(f"speeds:  {linear}   {angular}")]
+    if len(speeds[0].text) > width:
+        speeds = [Line(f"speeds:  {linear}"), Line(f"         {angular}")]
+    error = screen.last_error or "-"
+    error_level = (Level.PLAIN if error == "-" else
+                   Level.WARNING if error.startswith("warning:") else Level.ERROR)
+    connection = Level.PLAIN if screen.connected else Level.ERROR
+    title = f"wheelgate jog: {screen.title}   "
+    sections: list[list[list[Line]]] = [
+        [wrap(title + screen.connection, width, 2, connection, len(title))],
+        _help(screen),
+        [[Line("")], []],
+        [wrap(command, width, 2)],
+        [speeds],
+        [wrap(f"message: {jog.message}", width, n) for n in (3, 1)],
+        [wrap(f"last error: {error}", width, n, error_level, 12) for n in (3, 1)],
+        _daemon(screen, width),
+        _motors(screen),
+        _log(screen),
     ]
-    d = screen.daemon
-    if d is None:
-        lines.append("daemon: no status yet")
-    else:
-        cmd, pose, vel = d.command, d.odometry.pose, d.odometry.twist
-        lines += [
-            f"daemon: state {state_name(d.state)}{f' ({d.reason})' if d.reason else ''}   "
-            f"applied {_fmt_twist(cmd.applied)}   speed x{cmd.speed_scale:.2f} "
-            f"accel x{cmd.accel_scale:.2f}",
-            *([] if d.robot == screen.robot else _wrapped(
-                f"warning: the daemon drives {d.robot!r}, but the key limits are those of "
-                f"{screen.robot!r} (pass its configuration with -c)", width)),
-            f"odometry: x={pose.x_m:+.3f} m y={pose.y_m:+.3f} m theta={pose.theta_rad:+.3f} rad"
-            f"   v=({vel.vx_m_s:+.3f}, {vel.vy_m_s:+.3f}, {vel.wz_rad_s:+.3f})",
-        ]
-        for m in d.motors:
-            speed = "-" if m.velocity_rad_s is None else f"{m.velocity_rad_s:+.2f} rad/s"
-            age = "-" if m.feedback_age_s is None else f"{m.feedback_age_s * 1e3:.1f} ms"
-            lines.append(f"  {m.name:<14} {state_name(m.state):<9} wheel {speed:>13}  "
-                         f"feedback {age:>9}  {', '.join(fault_names(m.faults)) or 'no faults'}")
-    lines += [f"log: {line}" for line in screen.log]
-    return [line[:width] for line in lines]
+    # Giving way, in turn: a row per wheel; the blank line; the help in three lines; one log
+    # line; one line of message, of error, of daemon; no log; the motors' header; the help in
+    # one line; then fewer motors.
+    motors = 8
+    give_way = [motors, 2, 1, 9, 5, 6, 7, 9, motors, 1, *[motors] * len(sections[motors])]
+    return [paint(line, width, colour) for line in fit(sections, height, give_way)]

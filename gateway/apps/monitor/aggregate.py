@@ -63,6 +63,12 @@ def _rpm(motor: MotorConfig | None, wheel_rad_s: float | None) -> float | None:
     return motor.wheel_to_motor_rad_s(wheel_rad_s) * _RPM_PER_RAD_S
 
 
+def _motors_by_name(config: GatewayConfig) -> dict[str, MotorConfig]:
+    """Every motor of ``config`` by the name its status carries: the drive motors and the
+    steering actuators."""
+    return {m.wheel: m for m in (*config.motors, *config.steering) if m is not None}
+
+
 def _check_window(window_s: float) -> float:
     if not (math.isfinite(window_s) and window_s > 0.0):
         raise ValueError(f"monitor window: expected a positive number of seconds, got {window_s}")
@@ -99,7 +105,7 @@ class BusMonitor:
         self.source = source
         self.drives = DriveSet(config)
         self.labeler = FrameLabeler(config)
-        self._motors = {m.wheel: m for m in config.motors if m is not None}
+        self._motors = _motors_by_name(config)
         self._rows: dict[tuple[int, bool, bool, str], _Row] = {}
         self._win: deque[tuple[float, _Row, int, int]] = deque()
         self._nominal = 0
@@ -188,7 +194,7 @@ class BusMonitor:
         velocity = None if fb is None else fb.velocity_rad_s
         return MotorView(st.name, driver, st.node_id, state, fault_names(st.faults), st.detail,
                          velocity, _rpm(motor, velocity), None if fb is None else fb.position_rad,
-                         st.feedback_age_s)
+                         st.feedback_age_s, () if motor is None else motor.steers)
 
 
 @dataclass(frozen=True, slots=True)
@@ -214,7 +220,7 @@ class StatusMonitor:
         self.window_s = _check_window(window_s)
         self.source = source
         self.labeler = FrameLabeler(config)
-        self._motors = {m.wheel: m for m in config.motors if m is not None}
+        self._motors = _motors_by_name(config)
         self._classes = {type(p).__name__: m.driver for m, p in self.labeler.probes()}
         self._samples: deque[_Sample] = deque()
         self._status: GatewayStatus | None = None
@@ -265,7 +271,8 @@ class StatusMonitor:
             out.append(MotorView(
                 m.name, motor.driver if motor is not None else "?", m.node_id,
                 state_name(m.state), fault_names(m.faults), m.detail, m.velocity_rad_s,
-                _rpm(motor, m.velocity_rad_s), m.position_rad, m.feedback_age_s))
+                _rpm(motor, m.velocity_rad_s), m.position_rad, m.feedback_age_s,
+                () if motor is None else motor.steers))
         return tuple(out)
 
     def _errors(self, status: GatewayStatus) -> tuple[tuple[str, int], ...]:

@@ -1,7 +1,8 @@
-"""What one screen of ``wheelgate monitor`` holds, and how it is drawn.
+"""What one screen of ``wheelgate monitor`` holds.
 
 Frozen snapshots (:class:`MonitorSnapshot` with :class:`MotorView`, :class:`IdView` and
-:class:`BusLoad`), drawn as text by :func:`render` and as JSON data by :func:`snapshot_json`.
+:class:`BusLoad`), written as JSON data by :func:`snapshot_json` and drawn as text by
+:func:`gateway.apps.monitor.screen.render`.
 """
 
 from __future__ import annotations
@@ -18,8 +19,10 @@ class MotorView:
 
     :param velocity_rad_s: wheel speed, rad/s.
     :param motor_rpm: motor shaft speed through gear ratio and inversion, rpm.
-    :param position_rad: wheel angle since the first feedback, rad.
+    :param position_rad: wheel angle since the first feedback, rad (a steering actuator: the
+        steering angle).
     :param feedback_age_s: time since the last feedback, s.
+    :param steers: a steering actuator's wheels (empty for a drive motor).
     """
 
     name: str
@@ -32,6 +35,7 @@ class MotorView:
     motor_rpm: float | None
     position_rad: float | None
     feedback_age_s: float | None
+    steers: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True, slots=True)
@@ -91,42 +95,9 @@ class MonitorSnapshot:
     notes: tuple[str, ...] = ()
 
 
-def _num(value: float | None, fmt: str, width: int, scale: float = 1.0) -> str:
-    return f"{'-':>{width}}" if value is None else f"{value * scale:{width}{fmt}}"
-
-
-def _hex_id(can_id: int, extended: bool) -> str:
+def hex_id(can_id: int, extended: bool) -> str:
+    """A CAN ID as the monitor writes it: 3 hex digits, or 8 for an extended one."""
     return f"0x{can_id:08X}" if extended else f"0x{can_id:03X}"
-
-
-def render(snap: MonitorSnapshot, width: int = 100) -> str:
-    """The snapshot as text lines no wider than ``width`` characters."""
-    load = snap.load
-    worst = "n/a" if load.worst_percent is None else f"{load.worst_percent:.1f} %"
-    lines = [
-        f"wheelgate monitor: {snap.source}  t = {snap.time_s:.3f} s (+{snap.elapsed_s:.3f} s)"
-        + (f"  gateway {snap.state}" if snap.state else ""),
-        f"bus {load.bitrate / 1000:g} kbit/s  load {load.nominal_percent:.1f} % nominal, "
-        f"{worst} worst case  {load.frames_per_s:.0f} frames/s over {snap.window_s:.2f} s  "
-        f"{snap.frames} frames",
-        "",
-        f"{'MOTOR':<14}{'DRIVER':<8}{'NODE':>4}  {'STATE':<9}{'rad/s':>9}{'rpm':>9}"
-        f"{'pos rad':>11}{'age ms':>9}  FAULTS",
-    ]
-    for m in snap.motors:
-        faults = ", ".join(m.faults) + (f" {m.detail}" if m.detail else "")
-        lines.append(
-            f"{m.name:<14.14}{m.driver:<8.8}{m.node_id:>4}  {m.state:<9}"
-            f"{_num(m.velocity_rad_s, '.3f', 9)}{_num(m.motor_rpm, '.1f', 9)}"
-            f"{_num(m.position_rad, '.3f', 11)}{_num(m.feedback_age_s, '.1f', 9, 1000.0)}  "
-            f"{faults or '-'}")
-    lines += ["", f"{'ID':<11} {'DIR':<3}{'RATE Hz':>9}{'COUNT':>10}  MESSAGE"]
-    for i in snap.ids:
-        lines.append(f"{_hex_id(i.arbitration_id, i.extended):<11} {i.direction:<3}"
-                     f"{i.rate_hz:9.1f}{i.count:10d}  {i.label.text}")
-    lines += ["", "errors: " + (", ".join(f"{name} {n}" for name, n in snap.errors) or "-")]
-    lines += [f"note: {note}" for note in snap.notes]
-    return "\n".join(line[:width] for line in lines)
 
 
 def snapshot_json(snap: MonitorSnapshot) -> dict[str, object]:
@@ -142,11 +113,11 @@ def snapshot_json(snap: MonitorSnapshot) -> dict[str, object]:
             {"name": m.name, "driver": m.driver, "node_id": m.node_id, "state": m.state,
              "faults": list(m.faults), "detail": m.detail, "velocity_rad_s": m.velocity_rad_s,
              "motor_rpm": m.motor_rpm, "position_rad": m.position_rad,
-             "feedback_age_s": m.feedback_age_s}
+             "feedback_age_s": m.feedback_age_s, "steers": list(m.steers)}
             for m in snap.motors
         ],
         "ids": [
-            {"id": i.arbitration_id, "id_hex": _hex_id(i.arbitration_id, i.extended),
+            {"id": i.arbitration_id, "id_hex": hex_id(i.arbitration_id, i.extended),
              "extended": i.extended, "remote": i.remote, "direction": i.direction,
              "count": i.count, "rate_hz": i.rate_hz, "label": i.label.text,
              "source": i.label.source, "node_id": i.label.node_id, "message": i.label.message,

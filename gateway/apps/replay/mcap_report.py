@@ -12,6 +12,7 @@ import math
 from typing import TYPE_CHECKING
 
 from gateway.apps.replay.mcap_source import pose_difference
+from gateway.core.numfmt import fixed
 from gateway.core.steer_log import SteeringSource
 from gateway.runtime.liveview_channels import ODOM_TOPIC, STEERING_TOPIC, WHEELS_TOPIC
 
@@ -20,12 +21,15 @@ if TYPE_CHECKING:
     from gateway.core.kinematics import Pose
     from gateway.core.settings import GatewayConfig
 
-__all__ = ["failure", "summary_json", "summary_lines", "warnings"]
+__all__ = ["failure", "pose_text", "summary_json", "summary_lines", "warnings"]
 
 
-def _pose(p: Pose) -> str:
-    return (f"x {p.x_m:+.4f} m, y {p.y_m:+.4f} m, theta {p.theta_rad:+.4f} rad "
-            f"({math.degrees(p.theta_rad):+.2f} deg)")
+def pose_text(p: Pose) -> str:
+    """``x +1.2500 m, y -0.5000 m, theta +0.1000 rad (+5.73 deg)``: the pose as both replays
+    write it (0.1 mm, 0.1 mrad)."""
+    return (f"x {fixed(p.x_m, 4, sign=True)} m, y {fixed(p.y_m, 4, sign=True)} m, "
+            f"theta {fixed(p.theta_rad, 4, sign=True)} rad "
+            f"({fixed(math.degrees(p.theta_rad), 2, sign=True)} deg)")
 
 
 def _factor(s: McapSummary, wall_s: float) -> float | None:
@@ -45,27 +49,28 @@ def summary_lines(cfg: GatewayConfig, path: str, s: McapSummary, wall_s: float) 
         f"time: {s.duration_s:.3f} s of recording replayed in {wall_s:.3f} s"
         + (f" ({factor:.1f}x real time)" if factor is not None else ""),
         f"odometry: {s.updates:,} updates, one per {WHEELS_TOPIC} message",
-        f"start: {_pose(s.start)} "
+        f"start: {pose_text(s.start)} "
         + ("(nothing was replayed)" if not s.updates else
            "(the recording's pose there)" if s.from_recording else
            f"(the origin: no {ODOM_TOPIC} before the first {WHEELS_TOPIC})"),
-        f"final pose: {_pose(s.pose)}",
-        f"distance: {s.distance_m:.3f} m",
+        f"final pose: {pose_text(s.pose)}",
+        f"distance: {fixed(s.distance_m, 3)} m",
         f"steering: {s.steering.value}",
     ]
     if s.recorded is None:
         lines.append(f"recorded: none (no {ODOM_TOPIC} messages: nothing to compare)")
         return lines
-    lines.append(f"recorded: {_pose(s.recorded)}; distance {s.recorded_distance_m or 0.0:.3f} "
-                 f"m (the last {ODOM_TOPIC} message)")
+    lines.append(f"recorded: {pose_text(s.recorded)}; distance "
+                 f"{fixed(s.recorded_distance_m or 0.0, 3)} m (the last {ODOM_TOPIC} message)")
     if not s.updates:
         lines.append("difference: none (nothing was replayed)")
         return lines
     dx, dy, dtheta = pose_difference(s.pose, s.recorded)
     lines += [
-        f"difference: x {dx:+.4f} m, y {dy:+.4f} m, theta {dtheta:+.4f} rad "
-        f"({math.hypot(dx, dy):.4f} m apart); distance "
-        f"{s.distance_m - (s.recorded_distance_m or 0.0):+.4f} m (replayed - recorded)",
+        f"difference: x {fixed(dx, 4, sign=True)} m, y {fixed(dy, 4, sign=True)} m, "
+        f"theta {fixed(dtheta, 4, sign=True)} rad ({fixed(math.hypot(dx, dy), 4)} m apart); "
+        f"distance {fixed(s.distance_m - (s.recorded_distance_m or 0.0), 4, sign=True)} m "
+        "(replayed - recorded)",
     ]
     return lines
 

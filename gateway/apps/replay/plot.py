@@ -3,7 +3,10 @@
 The path in grey, the robot at intervals along it in blue with its wheels in red (at their
 configured places, with their radius, turned by their plane and steering angles) and every
 driven wheel's speed as a green arrow along its rolling direction, proportional to the rim
-speed.  Axes in metres with equal scales.
+speed.  Axes in metres with equal scales.  The path is drawn over the outlines (they are
+faded), with time marks along it (:func:`time_marks`: a round step, about eight marks; one
+where the robot stood still); a
+second panel below shows every wheel's speed over the same time.
 
 The geometry (:func:`body_outline`, :func:`wheel_box`, :func:`speed_arrow`,
 :func:`pick_poses`) is pure and needs no matplotlib; :func:`plot_trajectory` imports
@@ -36,6 +39,10 @@ SPEED_COLOUR = "#00A000"
 ARROW_FRACTION = 0.75
 #: Most path points drawn (longer paths are thinned evenly).
 MAX_PATH_POINTS = 20_000
+#: How many time marks the path gets, about.
+TIME_MARKS = 8
+#: Opacity of the robot's body outlines, so the path and the wheels show through them.
+ROBOT_ALPHA = 0.55
 
 Point = tuple[float, float]
 
@@ -147,6 +154,37 @@ def pick_poses(samples: Sequence[Sample], count: int) -> list[int]:
     return picked
 
 
+def mark_step(duration_s: float, count: int = TIME_MARKS) -> float:
+    """A round time step (1, 2 or 5 times a power of ten) giving about ``count`` marks: the
+    one nearest ``duration_s / count`` on a log scale.
+
+    >>> mark_step(20.0), mark_step(3.0), mark_step(600.0), mark_step(0.0)
+    (2.0, 0.5, 100.0, 1.0)
+    """
+    if not duration_s > 0.0:
+        return 1.0
+    raw = duration_s / max(1, count)
+    power = 10.0 ** math.floor(math.log10(raw))
+    return min((k * power for k in (1.0, 2.0, 5.0, 10.0)),
+               key=lambda step: abs(math.log(step / raw)))
+
+
+def time_marks(samples: Sequence[Sample], count: int = TIME_MARKS) -> list[tuple[int, float]]:
+    """Where the path gets a time mark: ``(sample index, seconds since the first sample)`` at
+    every round step (:func:`mark_step`), the first sample at or after each."""
+    if not samples:
+        return []
+    t0 = samples[0].time_s
+    step = mark_step(samples[-1].time_s - t0, count)
+    marks: list[tuple[int, float]] = []
+    k = 1
+    for i, s in enumerate(samples):
+        if s.time_s - t0 >= k * step - 1e-9:
+            marks.append((i, round(k * step, 9)))
+            k = math.floor((s.time_s - t0) / step + 1e-9) + 1
+    return marks
+
+
 def robot_size(wheels: Sequence[Wheel]) -> float:
     """Half the largest extent of the robot's outline, m (at least two wheel radii)."""
     pts = body_outline(wheels)
@@ -176,14 +214,24 @@ def plot_trajectory(
     if not samples:
         raise ValueError("Expected at least one odometry sample to plot, but got none")
     wheels = config.model.wheels
-    fig = Figure(figsize=(7.0, 7.0), dpi=100)
+    fig = Figure(figsize=(7.0, 9.0), dpi=100)
     FigureCanvasAgg(fig)
-    ax = fig.add_subplot(1, 1, 1)
-    step = max(1, math.ceil(len(samples) / MAX_PATH_POINTS))
-    path = [*samples[::step], samples[-1]]
+    grid = fig.add_gridspec(2, 1, height_ratios=(3, 1), hspace=0.25)
+    ax = fig.add_subplot(grid[0])
+    path = _thinned(samples)
+    # Over the robot outlines (zorder), so the path stays visible where they cover it.
     ax.plot([s.pose.x_m for s in path], [s.pose.y_m for s in path], color=PATH_COLOUR,
-            lw=1.0, label="path", zorder=1)
+            lw=1.0, label="path", zorder=5)
     size = robot_size(wheels)
+    drawn: list[Pose] = []
+    for index, seconds in time_marks(samples):
+        pose = samples[index].pose
+        if drawn and math.hypot(pose.x_m - drawn[-1].x_m, pose.y_m - drawn[-1].y_m) < 0.2 * size:
+            continue  # standing still: one mark, not a pile of labels
+        drawn.append(pose)
+        ax.plot([pose.x_m], [pose.y_m], ".", color="black", ms=4, zorder=6)
+        ax.annotate(f"{seconds:g} s", (pose.x_m, pose.y_m), xytext=(3, 3),
+                    textcoords="offset points", fontsize="x-small", zorder=6)
     rims = [abs(v) * w.radius for s in samples for v, w in zip(s.wheel_rad_s, wheels,
                                                                   strict=True) if v is not None]
     top = max(rims, default=0.0)
@@ -205,7 +253,33 @@ def plot_trajectory(
     ax.set_title(title if title is not None else
                  f"{config.name}: {samples[-1].distance_m:.2f} m in {duration:.1f} s")
     ax.legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize="small")
+    _speed_panel(fig.add_subplot(grid[1]), samples, config)
     return fig
+
+
+def _thinned(samples: Sequence[Sample]) -> list[Sample]:
+    """At most about :data:`MAX_PATH_POINTS` samples, evenly, the last one always."""
+    step = max(1, math.ceil(len(samples) / MAX_PATH_POINTS))
+    shown = list(samples[::step])
+    if shown[-1] is not samples[-1]:
+        shown.append(samples[-1])
+    return shown
+
+
+def _speed_panel(ax: Axes, samples: Sequence[Sample], config: GatewayConfig) -> None:
+    """Every driven wheel's reported speed over the log's time (a gap where it had none)."""
+    t0 = samples[0].time_s
+    shown = _thinned(samples)
+    times = [s.time_s - t0 for s in shown]
+    for i, name in enumerate(config.model.names):
+        speeds = [math.nan if (v := s.wheel_rad_s[i]) is None else v for s in shown]
+        if all(math.isnan(v) for v in speeds):
+            continue  # a passive wheel
+        ax.plot(times, speeds, lw=1.0, label=name)
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("wheel speed (rad/s)")
+    ax.grid(True, color="#E0E0E0", lw=0.5)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize="small")
 
 
 def _draw_robot(ax: Axes, sample: Sample, wheels: Sequence[Wheel], outline: Sequence[Point],
@@ -214,7 +288,8 @@ def _draw_robot(ax: Axes, sample: Sample, wheels: Sequence[Wheel], outline: Sequ
     label is used once (and removed from ``labels``)."""
     pose = sample.pose
     xs, ys = to_world(outline, pose)
-    ax.plot(xs, ys, color=BODY_COLOUR, lw=2.0, label=labels.pop("robot", None), zorder=2)
+    ax.plot(xs, ys, color=BODY_COLOUR, lw=2.0, label=labels.pop("robot", None), zorder=2,
+            alpha=ROBOT_ALPHA)
     front = max(x for x, _ in outline)
     (x0, x1), (y0, y1) = to_world([(0.0, 0.0), (front, 0.0)], pose)
     head = 0.15 * front

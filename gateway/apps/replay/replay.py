@@ -34,6 +34,7 @@ import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+from gateway.apps.replay.gateway_pose import GatewayPoses
 from gateway.core.errors import DecodeError, KinematicsError
 from gateway.core.kinematics import Odometry
 from gateway.core.odom_feed import OdomFeed
@@ -45,6 +46,7 @@ from gateway.wire.candump import read_lines
 if TYPE_CHECKING:
     from collections.abc import Iterable, Iterator, Sequence
 
+    from gateway.apps.replay.gateway_pose import PoseCheck
     from gateway.core.kinematics import OdometryState, Pose
     from gateway.core.settings import GatewayConfig
     from gateway.core.types import Frame, Twist, WheelFeedback
@@ -112,6 +114,8 @@ class ReplaySummary:
     :param silent_wheels: driven wheels with no feedback in the log (the odometry starts once
         every driven wheel has reported, so one silent wheel leaves it at the origin), and
         steering actuators with none (their wheels are then replayed at the neutral angle).
+    :param pose_check: the replay against the log's own ``WG_Odom_Pose`` frames (a
+        ``wheelgate run --record`` log has them), ``None`` without two of them.
     """
 
     pose: Pose
@@ -126,6 +130,7 @@ class ReplaySummary:
     steering: SteeringSource
     skipped_updates: int = 0
     silent_wheels: tuple[str, ...] = ()
+    pose_check: PoseCheck | None = None
 
     @property
     def duration_s(self) -> float:
@@ -167,6 +172,8 @@ class Replay:
         self.max_interval_s = max_interval_s
         #: Lines that could not be read, in order (filled by :meth:`feed_lines`).
         self.errors: list[CandumpError] = []
+        #: Frames no driver took, by (identifier, extended): how many, and the last.
+        self.unclaimed: dict[tuple[int, bool], tuple[int, Frame]] = {}
         covered = {name for a in config.steering for name in a.steers}
         measured = bool(covered) and covered >= {w.name for w in self.model.wheels if w.steered}
         self._subset = None if measured else fixed_subset(config)
@@ -185,6 +192,7 @@ class Replay:
             WgCodec(config.loop.can_ids) if self.steering is SteeringSource.NEUTRAL else None
         )
         self._velocity_id = (config.loop.can_ids.odom_velocity, config.loop.can_ids.extended)
+        self._poses = GatewayPoses(config.loop.can_ids)
         # Wheels whose feedback must be there before the first update (a later first sample
         # would leave an interval with too few wheels to solve).
         self._needed = tuple(i for i, m in enumerate(config.motors) if m is not None)
@@ -252,6 +260,11 @@ class Replay:
             and frame.is_extended_id == self._velocity_id[1]
         ):
             self._take_gateway_twist(self._wg, frame)
+        elif (key := (frame.arbitration_id, frame.is_extended_id)) == self._poses.key:
+            self._poses.take(frame, self.odometry.state.pose)
+        else:  # no driver of this robot's took it: whose? (``wheelgate odom`` asks the scan)
+            seen = self.unclaimed.get(key)
+            self.unclaimed[key] = (1 if seen is None else seen[0] + 1, frame)
         return out
 
     def finish(self) -> Sample | None:
@@ -343,6 +356,7 @@ class Replay:
             end_s=self._group_s,
             steering=self.steering,
             skipped_updates=self._skipped,
+            pose_check=self._poses.check(),
             silent_wheels=(
                 *(self.model.names[i] for i in self._needed if feedback[i] is None),
                 *(a.wheel for a, fb in zip(self.config.steering, self.drives.steer_feedback(),

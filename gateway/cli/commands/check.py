@@ -9,6 +9,7 @@ import click
 from gateway.cli import check_interface, config_option
 from gateway.cli.commands._common import load, rad_s_to_rpm
 from gateway.core.kinematics import PRESETS
+from gateway.core.numfmt import fixed, short
 from gateway.drive.driveset import DriveSet
 
 
@@ -43,7 +44,7 @@ def command(ctx: click.Context, config_path: str | None) -> None:
     )
     click.echo(header)
     for w, m in zip(model.wheels, cfg.motors, strict=True):
-        steer = f"[{w.steer_min:.3g}, {w.steer_max:.3g}]" if w.steered else "-"
+        steer = f"[{short(w.steer_min, 2)}, {short(w.steer_max, 2)}]" if w.steered else "-"
         if w.steered and math.isfinite(w.max_steer_rate):
             steer += f" {w.max_steer_rate:.3g} rad/s"
         motor = (
@@ -54,8 +55,9 @@ def command(ctx: click.Context, config_path: str | None) -> None:
             + (", inverted" if m.invert else "")
         )
         click.echo(
-            f"  {w.name:<12} {w.type.value:<9} {w.alpha:>7.4f} {w.l:>7.4f} {w.beta:>7.4f} "
-            f"{w.radius:>7.4f} {w.gamma:>7.4f} {w.d:>6.3f}  {steer:<26} {motor}"
+            f"  {w.name:<12} {w.type.value:<9} {fixed(w.alpha, 4):>7} {fixed(w.l, 4):>7} "
+            f"{fixed(w.beta, 4):>7} {fixed(w.radius, 4):>7} {fixed(w.gamma, 4):>7} "
+            f"{fixed(w.d, 3):>6}  {steer:<26} {motor}"
         )
     if cfg.steering:
         click.echo("steering:")
@@ -67,9 +69,14 @@ def command(ctx: click.Context, config_path: str | None) -> None:
             f"plane)" + (", inverted" if a.invert else "")
             + (", through an Ackermann linkage" if a.linkage == "ackermann" else "")
         )
+    if cfg.calibration:
+        click.echo("calibration: " + ", ".join(f"{k} x{v:g}" for k, v in cfg.calibration.items())
+                   + " (applied to the wheels above)")
     lim = cfg.limits
+    decel = ("" if lim.max_wheel_decel_rad_s2 is None
+             else f" (decel {_num(lim.max_wheel_decel_rad_s2)})")
     click.echo(
-        f"limits:   wheel accel {_num(lim.max_wheel_accel_rad_s2)} rad/s^2, "
+        f"limits:   wheel accel {_num(lim.max_wheel_accel_rad_s2)} rad/s^2{decel}, "
         f"linear {_num(lim.max_linear_m_s)} m/s, angular {_num(lim.max_angular_rad_s)} rad/s"
     )
     click.echo(f"bus:      {cfg.bus.interface}:{cfg.bus.channel} at {cfg.bus.bitrate} bit/s")

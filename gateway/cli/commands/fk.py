@@ -10,6 +10,7 @@ import click
 from gateway.cli import config_option, json_option
 from gateway.cli.commands._common import load, twist_json
 from gateway.core.errors import KinematicsError
+from gateway.core.numfmt import fixed, short
 
 
 def _pairs(values: tuple[str, ...], option: str) -> dict[str, float]:
@@ -84,7 +85,9 @@ def command(
         }))
         return
     click.echo(f"twist: {result.twist}")
-    click.echo(f"residual: {result.residual_m_s:.4g} m/s (RMS over rolling and sliding equations)")
+    click.echo(f"residual: {short(result.residual_m_s, 6)} m/s (RMS over rolling and sliding "
+               "equations)")
     for w, r, s in zip(model.wheels, result.wheel_residual_m_s, speeds, strict=True):
         if s is not None:
-            click.echo(f"  {w.name:<12} measured {s:+.4f} rad/s, residual {r:+.4g} m/s")
+            click.echo(f"  {w.name:<12} measured {fixed(s, 4, sign=True)} rad/s, residual "
+                       f"{short(r, 6, sign=True)} m/s")

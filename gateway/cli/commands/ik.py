@@ -19,6 +19,7 @@ from gateway.cli.commands._common import (
 )
 from gateway.core.errors import InfeasibleTwistError
 from gateway.core.kinematics.limits import speed_scale
+from gateway.core.numfmt import fixed, short
 from gateway.core.types import Twist
 from gateway.drive.driveset import DriveSet
 
@@ -77,21 +78,23 @@ def command(
         f"  {'wheel':<12} {'rad/s':>10} {'wheel rpm':>10} {'motor rpm':>10}  steer"
     )
     for row in rows:
-        motor_rpm = "passive" if row["motor_rpm"] is None else f"{row['motor_rpm']:10.2f}"
+        motor_rpm = "passive" if row["motor_rpm"] is None else fixed(row["motor_rpm"], 2)
         steer = ""
         if "steer_rad" in row:
-            steer = f"{row['steer_rad']:+.4f} rad ({math.degrees(row['steer_rad']):+.1f} deg)"
+            steer = (f"{fixed(row['steer_rad'], 4, sign=True)} rad "
+                     f"({fixed(math.degrees(row['steer_rad']), 1, sign=True)} deg)")
         if "steer_rate_rad_s" in row:
-            steer += f", swivel {row['steer_rate_rad_s']:+.4f} rad/s"
+            steer += f", swivel {fixed(row['steer_rate_rad_s'], 4, sign=True)} rad/s"
         click.echo(
-            f"  {row['name']:<12} {row['speed_rad_s']:>10.4f} {row['wheel_rpm']:>10.2f} "
-            f"{motor_rpm:>10}  {steer}"
+            f"  {row['name']:<12} {fixed(row['speed_rad_s'], 4):>10} "
+            f"{fixed(row['wheel_rpm'], 2):>10} {motor_rpm:>10}  {steer}".rstrip()
         )
     for row, w in zip(rows, cfg.model.wheels, strict=True):
         if "not_speed_controlled" in row:
             high = row["not_speed_controlled"]["below_rad_s"]
+            at = short(abs(row["speed_rad_s"]), 4)
             click.echo(
-                f"note: wheel {row['name']!r} at {abs(row['speed_rad_s']):.4g} rad/s is below "
+                f"note: wheel {row['name']!r} at {at} rad/s is below "
                 f"its controller's slowest controlled speed ({high:.4g} rad/s, "
                 f"{high * w.radius:.3g} m/s): not "
                 f"speed-controlled, the controller stops the motor instead"

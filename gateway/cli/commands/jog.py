@@ -1,11 +1,11 @@
 """``wheelgate jog``: drive the robot from the keyboard, on one terminal screen.
 
-The terminal edge around :mod:`gateway.apps.jog.keys` and :mod:`gateway.apps.jog.screen`: raw mode
-(so
-Ctrl-C arrives as a key), one screen redrawn in place with ANSI escapes (alternate screen; no
-curses), ``select`` on stdin with the deadman's deadlines as timeouts, the daemon's status
-polled at 5 Hz.  With ``--standalone`` a :class:`~gateway.runtime.daemon.Daemon` runs in a thread of
-this process on a private socket.
+The terminal edge around :mod:`gateway.apps.jog.keys` and :mod:`gateway.apps.jog.screen`: raw
+mode (so Ctrl-C arrives as a key), one screen redrawn in place with ANSI escapes (alternate
+screen; no curses) and fitted to the terminal's size at every draw, faults in colour unless
+``NO_COLOR`` is set, ``select`` on stdin with the deadman's deadlines as timeouts, the
+daemon's status polled at 5 Hz.  With ``--standalone`` a
+:class:`~gateway.runtime.daemon.Daemon` runs in a thread of this process on a private socket.
 
 Whatever ends the session -- Ctrl-C, Ctrl-D, Esc, end of input, a closed terminal, SIGHUP,
 SIGTERM or SIGINT -- sends stop before the terminal mode is restored.  Should this program die
@@ -32,8 +32,10 @@ from typing import IO, TYPE_CHECKING, Any
 
 import click
 
-from gateway.apps.jog.keys import DEFAULT_DEADMAN_S, STOP, JogState, Request, jog_limits, split_keys
+from gateway.apps.jog import keys
+from gateway.apps.jog.keys import STOP, JogState, Request, jog_limits, split_keys, steps_errors
 from gateway.apps.jog.screen import Screen, read_status, render, reply_error
+from gateway.apps.layout import steering_of, wants_colour
 from gateway.cli import config_option
 from gateway.cli.commands._common import check_finite, load, refuse_other_robot, socket_for
 from gateway.runtime.client import ClientError, ControlClient
@@ -210,6 +212,7 @@ class _Terminal:
 
     def __init__(self, fd: int) -> None:
         self.fd = fd
+        self.colour = wants_colour(os.isatty(fd), os.environ)
         self.gone = False
         self._last: tuple[int, int, list[str]] = (0, 0, [])
 
@@ -222,22 +225,21 @@ class _Terminal:
                 self.gone = True
 
     def draw(self, screen: Screen) -> None:
-        try:
-            cols, rows = os.get_terminal_size(self.fd)
-        except OSError:
-            cols, rows = 100, 40
-        lines = render(screen, max(cols - 1, 20))[: max(rows - 1, 1)]
+        """Draw ``screen`` in the terminal's rows, a column short of its width (no wrap)."""
+        cols, rows = shutil.get_terminal_size((80, 24))
+        lines = render(screen, max(cols - 1, 20), max(rows, 1), self.colour)
         if (cols, rows, lines) != self._last:  # redraw on a change or a resize
             self._last = (cols, rows, lines)
-            self.write("\x1b[H" + "".join(line + "\x1b[K\r\n" for line in lines) + "\x1b[J")
+            self.write("\x1b[H" + "\x1b[K\r\n".join(lines) + "\x1b[K\x1b[J")
 
 
 def _session(fd_in: int, wake_fd: int, caught: list[str], term: _Terminal, link: _Link,
-             state: JogState, robot: str, title: str, logs: _LogCapture) -> JogState:
+             state: JogState, cfg: GatewayConfig, title: str, logs: _LogCapture) -> JogState:
     """The select loop; returns the final state (stop has been sent)."""
     last_error = ""
     view: GatewayStatus | None = None
     next_status = 0.0
+    steering = steering_of(cfg)
 
     def send(requests: tuple[Request, ...]) -> None:
         nonlocal last_error
@@ -264,8 +266,8 @@ def _session(fd_in: int, wake_fd: int, caught: list[str], term: _Terminal, link:
                 next_status = now + STATUS_PERIOD_S
             connection = (f"connected: {link.path}" if link.client is not None else
                           f"DISCONNECTED: {link.error} (retrying)")
-            term.draw(Screen(robot, title, connection, state, view, last_error,
-                             tuple(logs.lines)))
+            term.draw(Screen(cfg.name, title, connection, state, view, last_error,
+                             tuple(logs.lines), link.client is not None, steering))
             deadline = min(state.next_deadline_s(), next_status)
             ready, _, _ = select.select([fd_in, wake_fd], [], [], max(0.0, deadline - now))
             now = time.monotonic()
@@ -309,10 +311,16 @@ def _session(fd_in: int, wake_fd: int, caught: list[str], term: _Terminal, link:
               help="Own the bus: run the daemon in this process on a private socket.")
 @click.option("--sim", is_flag=True,
               help="With --standalone: simulate the motor controllers on a virtual bus.")
-@click.option("--deadman", type=click.FloatRange(min=0.1, max=5.0), default=DEFAULT_DEADMAN_S,
-              show_default=True,
+@click.option("--deadman", type=click.FloatRange(min=0.1, max=5.0),
+              default=keys.DEFAULT_DEADMAN_S, show_default=True,
               help="Stop when no motion key came for this long (s); keep it above the "
                    "keyboard's auto-repeat delay (250-500 ms).")
+@click.option("--speed", type=float, default=None,
+              help=f"First linear speed of the keys, m/s, at most the robot's limit "
+                   f"(teleop_twist_keyboard's speed; default {keys.DEFAULT_LINEAR_M_S:g}).")
+@click.option("--turn", type=float, default=None,
+              help=f"First angular speed of the keys, rad/s, at most the robot's limit "
+                   f"(teleop_twist_keyboard's turn; default {keys.DEFAULT_ANGULAR_RAD_S:g}).")
 @click.option("--log", "log_path", type=click.Path(dir_okay=False, writable=True), default=None,
               help="Write every twist and stop sent, with its reply, as JSON lines.")
 @click.pass_context
@@ -323,6 +331,8 @@ def command(
     standalone: bool,
     sim: bool,
     deadman: float,
+    speed: float | None,
+    turn: float | None,
     log_path: str | None,
 ) -> None:
     """Drive the robot from the keyboard (teleop_twist_keyboard keys) on one screen.
@@ -335,6 +345,7 @@ def command(
     A move lasts while its key repeats; --deadman seconds without one sends stop.
     Quit with Ctrl-C, Ctrl-D or Esc (q speeds up, as in teleop_twist_keyboard); quitting
     always sends stop.  Should this program die, the daemon's cmd_timeout_s stops the robot.
+    The screen fits the terminal; faults are red unless NO_COLOR is set.
     """
     check_finite(deadman=deadman)
     if sim and not standalone:
@@ -342,9 +353,11 @@ def command(
     if standalone and socket_path:
         raise click.UsageError("--standalone uses a private socket; drop --socket")
     cfg = load(ctx, config_path)
+    limits = jog_limits(cfg)
+    for option, why in steps_errors(limits, speed, turn):
+        raise click.BadParameter(why, param_hint=option)
     if not sys.stdin.isatty():
         raise click.UsageError("jog reads keys from a terminal, but stdin is not a terminal")
-    limits = jog_limits(cfg)
     with contextlib.ExitStack() as stack:
         log_file = None
         if log_path is not None:
@@ -365,7 +378,7 @@ def command(
         stack.callback(link.close)
         if not standalone and link.client is not None:
             refuse_other_robot(ctx, config_path, link.client)
-        state = JogState.start(limits, deadman_s=deadman)
+        state = JogState.start(limits, speed, turn, deadman)
         title = (f"{cfg.name} ({cfg.drive})"
                  + (f", standalone{', simulated' if sim else ''}" if standalone else ""))
         fd_in, term = sys.stdin.fileno(), _Terminal(sys.stdout.fileno())
@@ -377,7 +390,7 @@ def command(
         stack.enter_context(_raw_terminal(fd_in))
         term.write(_ENTER)
         stack.callback(term.write, _LEAVE)
-        state = _session(fd_in, wake_r, caught, term, link, state, cfg.name, title, logs)
+        state = _session(fd_in, wake_r, caught, term, link, state, cfg, title, logs)
     if link.last_op != "stop":
         raise click.ClickException(
             f"could not send stop to {path}: {link.error or 'refused'}; the daemon's "

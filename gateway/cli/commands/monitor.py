@@ -16,23 +16,33 @@ One of three sources:
   Unreadable lines are reported on stderr with their line number and skipped.
 
 The screen is redrawn in place (ANSI home and clear) ``--refresh`` times a second when stdout
-is a terminal, else printed one snapshot after the other.  ``--once`` prints one snapshot (of a
-log: at its end, read as fast as possible; of a bus or the daemon: after ``--window``
-seconds) and ``--json`` prints it as JSON.  Ctrl-C ends the monitor with exit code 0.
+is a terminal, fitted to its size (:mod:`gateway.apps.monitor.screen`: no line wider, no more
+lines than it has rows; the frame IDs paged) with faults in colour unless ``NO_COLOR`` is set;
+else printed whole, one snapshot after the other.  ``--once`` prints one snapshot (of a log: at
+its end, read as fast as possible; of a bus or the daemon: after ``--window`` seconds) and
+``--json`` prints it as JSON.  ``q`` (when stdin is a terminal too) or Ctrl-C ends the
+monitor with exit code 0; space and ``b`` (or Page Down and Page Up) page the frame IDs.
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
+import os
+import select
 import shutil
 import sys
+import termios
 import time
+import tty
 from typing import TYPE_CHECKING
 
 import can
 import click
 
+from gateway.apps.jog.keys import split_keys
+from gateway.apps.layout import wants_colour
 from gateway.apps.monitor import WINDOW_S, BusMonitor, StatusMonitor, render, snapshot_json
 from gateway.bus.can_bus import open_bus, to_frame
 from gateway.bus.edge import bus_options
@@ -44,7 +54,7 @@ from gateway.wire.candump import CandumpError, parse_line
 from gateway.wire.socket.status import status_from_json
 
 if TYPE_CHECKING:
-    from collections.abc import Callable
+    from collections.abc import Callable, Iterator
 
     from gateway.apps.monitor import MonitorSnapshot
     from gateway.core.settings import GatewayConfig
@@ -59,6 +69,16 @@ PIPE_WIDTH = 1000
 CLEAR = "\x1b[H\x1b[2J"
 #: CAN_ERR_FLAG of SocketCAN, which candump and python-can write into an error frame's ID.
 CAN_ERR_FLAG = 0x20000000
+#: Keys of the live view: quit, next and previous page of frame IDs (Page Down, Page Up).
+QUIT_KEYS = frozenset("qQ")
+NEXT_KEYS = frozenset({" ", "n", "\x1b[6~"})
+BACK_KEYS = frozenset({"b", "p", "\x1b[5~"})
+#: Longest wait for a frame while keys are read (s): how late ``q`` may be on a bus.
+KEY_POLL_S = 0.1
+
+
+class Quit(KeyboardInterrupt):
+    """``q`` was pressed: the monitor ends as on Ctrl-C (exit code 0)."""
 
 
 def _positive(limit: float, unit: str) -> Callable[[click.Context, click.Parameter, float], float]:
@@ -71,26 +91,94 @@ def _positive(limit: float, unit: str) -> Callable[[click.Context, click.Paramet
 
 
 class Screen:
-    """Where snapshots go: redrawn in place on a terminal, one after the other otherwise.
+    """Where snapshots go: redrawn in place on a terminal, one after the other otherwise; and
+    the keys of the live view, once :meth:`reading_keys` has put stdin in cbreak mode.
 
     :param as_json: print the final snapshot as JSON.
+    :param once: print only the final snapshot, whole (``--once``): it is not redrawn.
     """
 
-    def __init__(self, as_json: bool = False) -> None:
+    def __init__(self, as_json: bool = False, once: bool = False) -> None:
         self.as_json = as_json
+        self.once = once
         self.tty = sys.stdout.isatty()
+        self.colour = wants_colour(self.tty, os.environ)
+        #: stdin's descriptor while keys are read, else ``None``.
+        self.keys: int | None = None
+        #: The page of frame IDs shown (modulo the pages).
+        self.page = 0
+        self._last: MonitorSnapshot | None = None
 
-    def show(self, snap: MonitorSnapshot) -> None:
-        """Draw one live snapshot (cut to the terminal's width; whole lines into a pipe)."""
+    @contextlib.contextmanager
+    def reading_keys(self) -> Iterator[None]:
+        """Read keys while the live view runs, when stdin and stdout are terminals: stdin in
+        cbreak mode (a key arrives unechoed, without Enter; Ctrl-C still interrupts)."""
+        fd = sys.stdin.fileno() if self.tty and sys.stdin.isatty() else None
+        saved = None if fd is None else termios.tcgetattr(fd)
+        try:
+            if fd is not None:
+                tty.setcbreak(fd)
+                self.keys = fd
+            yield
+        finally:
+            self.keys = None
+            if fd is not None and saved is not None:
+                with contextlib.suppress(termios.error):
+                    termios.tcsetattr(fd, termios.TCSADRAIN, saved)
+            if self.tty and self._last is not None:
+                click.echo("")  # the prompt below the last screen
+
+    def _draw(self, snap: MonitorSnapshot) -> None:
+        self._last = snap
         if self.tty:
-            click.echo(CLEAR + render(snap, shutil.get_terminal_size((120, 24)).columns))
+            cols, rows = shutil.get_terminal_size((80, 24))
+            text = render(snap, max(cols - 1, 20), max(rows, 1), self.page, self.colour,
+                          self.keys is not None)
+            click.echo(CLEAR + text, nl=False)  # no newline after the last row: no scroll
         else:
             click.echo(render(snap, PIPE_WIDTH) + "\n")
 
+    def show(self, snap: MonitorSnapshot) -> None:
+        """Draw one live snapshot (fitted to the terminal; whole lines into a pipe), then take
+        the keys pressed since the last."""
+        self._draw(snap)
+        self.wait(0.0)
+
+    def wait(self, seconds: float) -> None:
+        """Sleep ``seconds`` (none without keys when 0), taking the keys meanwhile.
+
+        :raises Quit: on ``q``.
+        """
+        if self.keys is None:
+            if seconds > 0.0:
+                time.sleep(seconds)
+            return
+        end = time.monotonic() + seconds
+        while True:
+            ready, _, _ = select.select([self.keys], [], [], max(end - time.monotonic(), 0.0))
+            data = os.read(self.keys, 64) if ready else b""
+            if ready and not data:  # end of input: no more keys, only the time
+                self.keys = None
+                self.wait(max(end - time.monotonic(), 0.0))
+                return
+            for key in split_keys(data):
+                if key in QUIT_KEYS:
+                    raise Quit
+                turn = 1 if key in NEXT_KEYS else -1 if key in BACK_KEYS else 0
+                if turn and self._last is not None:
+                    self.page += turn
+                    self._draw(self._last)
+            if time.monotonic() >= end:
+                return
+
     def final(self, snap: MonitorSnapshot) -> None:
-        """Print the last snapshot (as JSON with ``--json``)."""
+        """Print the last snapshot (as JSON with ``--json``; with ``--once`` whole, as into a
+        pipe but cut to the terminal's width)."""
         if self.as_json:
             click.echo(json.dumps(snapshot_json(snap)))
+        elif self.once and self.tty:
+            cols = shutil.get_terminal_size((80, 24)).columns
+            click.echo(render(snap, max(cols - 1, 20), colour=self.colour))
         else:
             self.show(snap)
 
@@ -127,25 +215,33 @@ def command(
     if fast and log_path is None:
         raise click.UsageError("--fast applies to --log only")
     cfg = load(ctx, config_path)
-    screen = Screen(as_json)
+    screen = Screen(as_json, once)
     period = 1.0 / refresh
     try:
-        if log_path is not None:
-            watch_log(cfg, log_path, screen, period, window, fast=fast or once, once=once)
-        elif use_bus:
-            watch_bus(cfg, screen, period, window, once)
-        else:
-            path = socket_for(ctx, config_path, socket_path)
-            try:
-                client = ControlClient(path)
-            except ClientError as err:
-                hint = "" if socket_path else (
-                    "; to watch without a daemon use --bus, or --log FILE for a recording")
-                raise click.ClickException(f"{err}{hint}") from err
-            with client:
-                watch_daemon(cfg, client, screen, period, window, once)
-    except KeyboardInterrupt:
+        with contextlib.nullcontext() if once else screen.reading_keys():
+            if log_path is not None:
+                watch_log(cfg, log_path, screen, period, window, fast=fast or once, once=once)
+            elif use_bus:
+                watch_bus(cfg, screen, period, window, once)
+            else:
+                with _client(ctx, config_path, socket_path) as client:
+                    watch_daemon(cfg, client, screen, period, window, once)
+    except KeyboardInterrupt:  # Ctrl-C, or q (Quit)
         return
+
+
+def _client(ctx: click.Context, config_path: str | None, socket_path: str | None
+            ) -> ControlClient:
+    """A client of the daemon to watch.
+
+    :raises click.ClickException: when none answers, naming the other sources.
+    """
+    try:
+        return ControlClient(socket_for(ctx, config_path, socket_path))
+    except ClientError as err:
+        hint = "" if socket_path else (
+            "; to watch without a daemon use --bus, or --log FILE for a recording")
+        raise click.ClickException(f"{err}{hint}") from err
 
 
 def _is_error_frame(line: str) -> bool:
@@ -187,7 +283,7 @@ def watch_log(cfg: GatewayConfig, path: str, screen: Screen, period: float, wind
                     if now >= next_draw and t is not None:
                         screen.show(mon.snapshot(max(now - offset, t)))
                         next_draw = max(next_draw + period, now)
-                    time.sleep(max(min(entry.timestamp_s + offset, next_draw) - now, 0.0))
+                    screen.wait(max(min(entry.timestamp_s + offset, next_draw) - now, 0.0))
             t = entry.timestamp_s
             mon.feed(entry.frame, t, "rx" if entry.is_rx else "tx", decode=entry.is_rx)
             if not once and number & 0xFF == 0 and (now := time.monotonic()) >= next_draw:
@@ -233,13 +329,15 @@ def watch_bus(cfg: GatewayConfig, screen: Screen, period: float, window: float,
             if now >= next_draw and not once:
                 screen.show(mon.snapshot(now))
                 next_draw = max(next_draw + period, now)
+            wait = max(min(end, next_draw) - now, 0.0)
             try:
-                msg = bus.recv(max(min(end, next_draw) - now, 0.0))
+                msg = bus.recv(wait if screen.keys is None else min(wait, KEY_POLL_S))
             except (can.CanError, OSError) as err:
                 mon.count("receive errors")
                 click.echo(f"monitor: receiving from {cfg.bus.channel} failed: {err}", err=True)
                 time.sleep(min(period, 0.1))
                 continue
+            screen.wait(0.0)
             if msg is None:
                 continue
             t = time.monotonic()
@@ -285,6 +383,6 @@ def watch_daemon(cfg: GatewayConfig, client: ControlClient, screen: Screen, peri
     next_poll = time.monotonic()
     while True:
         next_poll = max(next_poll + period, time.monotonic())
-        time.sleep(max(next_poll - time.monotonic(), 0.0))
+        screen.wait(max(next_poll - time.monotonic(), 0.0))
         mon.update(_status(client))
         screen.show(mon.snapshot())

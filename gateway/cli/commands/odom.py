@@ -27,9 +27,10 @@ from typing import IO, TYPE_CHECKING, Any, TextIO, cast
 
 import click
 
-from gateway.apps.replay import mcap_report
+from gateway.apps.replay import candump_report, mcap_report
+from gateway.apps.replay.candump_report import MAX_REPORTED
 from gateway.apps.replay.mcap_source import McapMissingError, McapReplay, RecordingError, is_mcap
-from gateway.apps.replay.replay import Replay, SteeringSource
+from gateway.apps.replay.replay import Replay
 from gateway.cli import config_option, json_option
 from gateway.cli.commands._common import load
 
@@ -38,15 +39,11 @@ if TYPE_CHECKING:
     from types import ModuleType
 
     from gateway.apps.replay.mcap_source import McapSummary
-    from gateway.apps.replay.replay import ReplaySummary, Sample
+    from gateway.apps.replay.replay import Sample
     from gateway.core.settings import GatewayConfig
 
-#: Corrupt lines reported one by one; the rest are counted.
-MAX_REPORTED = 20
 #: Lines between two progress bar updates.
 PROGRESS_EVERY = 4096
-#: The message when ``--plot`` cannot work.
-NO_MATPLOTLIB = "plotting needs matplotlib: pip install 'wheelgate[plot]'"
 #: CSV columns before the wheels' speeds.
 CSV_COLUMNS = ("time_s", "x_m", "y_m", "theta_rad", "vx_m_s", "vy_m_s", "wz_rad_s", "slip_m_s")
 
@@ -57,13 +54,32 @@ class UsageExit(click.ClickException):
     exit_code = 2
 
 
-def _plotting() -> ModuleType:
-    """:mod:`gateway.apps.replay.plot`, or exit 2 when matplotlib is missing."""
+def _plotting() -> tuple[ModuleType | None, str | None]:
+    """:mod:`gateway.apps.replay.plot`, or ``None`` and why not (matplotlib is missing)."""
     try:
         importlib.import_module("matplotlib")
-        return importlib.import_module("gateway.apps.replay.plot")
+        return importlib.import_module("gateway.apps.replay.plot"), None
     except ImportError as err:
-        raise UsageExit(f"{NO_MATPLOTLIB} ({err})") from err
+        return None, f"plotting needs matplotlib ({err}): {install_hint('plot')}"
+
+
+def install_hint(extra: str) -> str:
+    """How to install an optional extra into this very environment: from the clone this
+    wheelgate was installed from in editable mode (``pip install -e``: PEP 610's
+    ``direct_url.json`` says where), from the package index otherwise."""
+    pip = f"{sys.executable} -m pip install"
+    try:
+        from importlib.metadata import distribution  # noqa: PLC0415 - only on this path
+
+        text = distribution("wheelgate").read_text("direct_url.json")
+        origin = json.loads(text) if text else {}
+    except (ImportError, ValueError, OSError):
+        origin = {}
+    url = origin.get("url", "") if isinstance(origin, dict) else ""
+    editable = isinstance(origin, dict) and origin.get("dir_info", {}).get("editable")
+    if editable and url.startswith("file://"):
+        return f"{pip} -e '{url.removeprefix('file://')}[{extra}]'"
+    return f"{pip} 'wheelgate[{extra}]'"
 
 
 def _writable(path: str, option: str) -> None:
@@ -169,7 +185,9 @@ def command(
     if min_interval_ms is not None and not math.isfinite(min_interval_ms):
         raise click.BadParameter(f"expected a finite number, got {min_interval_ms!r}",
                                  param_hint="--min-interval-ms")
-    plotting = _plotting() if plot_path is not None else None
+    plotting, no_plot = _plotting() if plot_path is not None else (None, None)
+    if no_plot is not None:  # the rest is still done: the CSV, the summary
+        click.echo(f"warning: --plot: {no_plot}", err=True)
     if plot_path is not None:
         _writable(plot_path, "--plot")
     if csv_path is not None:
@@ -224,17 +242,27 @@ def command(
     assert replay is not None
     summary = replay.summary()
     _report_errors(replay, quiet)
+    foreign = candump_report.foreign_controllers(cfg, replay, summary.motor_frames)
     if as_json:
-        click.echo(json.dumps(_json(cfg, log_path, summary, wall, replay,
-                                    {"path": csv_path, "rows": sink.rows} if csv_path else None,
-                                    plotted)))
+        click.echo(json.dumps({
+            **candump_report.summary_json(cfg, log_path, summary, wall, replay),
+            "foreign_controllers": None if foreign is None else {
+                "share": foreign.share, "devices": [
+                    {"protocol": p, "node_id": n, "frames": c} for p, n, c in foreign.devices]},
+            "csv": {"path": csv_path, "rows": sink.rows} if csv_path else None,
+            "plot": plotted}))
     else:
-        _print(cfg, log_path, summary, wall, replay)
+        for line in candump_report.summary_lines(cfg, log_path, summary, wall,
+                                                 replay.min_interval_s):
+            click.echo(line)
         if csv_path is not None:
             click.echo(f"csv: {csv_path} ({sink.rows:,} rows)")
         if plotted is not None:
             click.echo(f"plot: {plotted}")
-    _warn(cfg, summary)
+    for warning in candump_report.warnings(cfg, summary, foreign):
+        click.echo(f"warning: {warning}", err=True)
+    if no_plot is not None:
+        raise UsageExit(f"--plot {plot_path}: not drawn: {no_plot}")
     if summary.updates == 0:
         raise click.ClickException(
             f"{log_path}: no odometry: {summary.motor_frames:,} of {summary.entries:,} "
@@ -313,63 +341,3 @@ def _report_errors(replay: Replay, quiet: bool) -> None:
     if len(errors) > MAX_REPORTED:
         click.echo(f"warning: ... and {len(errors) - MAX_REPORTED:,} more unreadable lines",
                    err=True)
-
-
-def _warn(cfg: GatewayConfig, s: ReplaySummary) -> None:
-    if s.steering is SteeringSource.NEUTRAL:
-        click.echo(f"warning: {cfg.name} has steered wheels and the log holds no "
-                   "WG_Odom_Velocity frames: they were replayed at their neutral angles, so "
-                   "every turn of theirs is missing from the pose", err=True)
-    if s.silent_wheels and s.updates:
-        click.echo(f"warning: no feedback from {', '.join(s.silent_wheels)}", err=True)
-    if s.skipped_updates:
-        click.echo(f"warning: {s.skipped_updates} odometry intervals could not be solved "
-                   "(too few wheels with feedback); their motion is missing", err=True)
-
-
-def _factor(s: ReplaySummary, wall: float) -> float | None:
-    return s.duration_s / wall if wall > 0 and s.duration_s > 0 else None
-
-
-def _print(cfg: GatewayConfig, log_path: str, s: ReplaySummary, wall: float,
-           replay: Replay) -> None:
-    factor = _factor(s, wall)
-    p = s.pose
-    click.echo(f"robot: {cfg.name} ({cfg.drive}, {cfg.model.n} wheels); log: {log_path}")
-    click.echo(f"frames: {s.entries:,} read ({s.received:,} received, "
-               f"{s.entries - s.received:,} sent), {s.motor_frames:,} of the motors; "
-               f"{s.corrupt_lines:,} unreadable lines skipped")
-    click.echo(f"time: {s.duration_s:.3f} s of log replayed in {wall:.3f} s"
-               + (f" ({factor:.1f}x real time)" if factor is not None else ""))
-    click.echo(f"odometry: {s.updates:,} updates, at most one per "
-               f"{replay.min_interval_s * 1e3:g} ms of log time")
-    click.echo(f"final pose: x {p.x_m:+.4f} m, y {p.y_m:+.4f} m, theta {p.theta_rad:+.4f} rad "
-               f"({math.degrees(p.theta_rad):+.2f} deg)")
-    click.echo(f"distance: {s.distance_m:.3f} m")
-    click.echo(f"steering: {s.steering.value}")
-
-
-def _json(cfg: GatewayConfig, log_path: str, s: ReplaySummary, wall: float, replay: Replay,
-          csv_info: dict[str, object] | None, plot_path: str | None) -> dict[str, object]:
-    return {
-        "robot": cfg.name,
-        "log": log_path,
-        "pose": {"x": s.pose.x_m, "y": s.pose.y_m, "theta": s.pose.theta_rad},
-        "distance_m": s.distance_m,
-        "frames": {"read": s.entries, "received": s.received, "motors": s.motor_frames},
-        "unreadable_lines": s.corrupt_lines,
-        "unreadable": [{"line": e.line_number, "message": str(e)}
-                       for e in replay.errors[:MAX_REPORTED]],
-        "updates": s.updates,
-        "skipped_updates": s.skipped_updates,
-        "min_interval_s": replay.min_interval_s,
-        "start_s": s.start_s,
-        "duration_s": s.duration_s,
-        "replay_s": wall,
-        "speed_factor": _factor(s, wall),
-        "steering": s.steering.name.lower(),
-        "silent_wheels": list(s.silent_wheels),
-        "csv": csv_info,
-        "plot": plot_path,
-    }
-

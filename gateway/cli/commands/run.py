@@ -47,12 +47,15 @@ def command(
         log.info("controller-side stop of %s: %s", label, prot.describe())
     daemon = Daemon(cfg, sim=sim, record=record, socket_path=socket_path,
                     record_mcap=record_mcap or "")
+    bus = daemon.config.bus  # --sim moves the robot onto the virtual bus
+    motors = sum(m is not None for m in cfg.motors) + len(cfg.steering)
     click.echo(
-        f"wheelgate: {cfg.name} ({cfg.drive}, {cfg.model.n} wheels) on "
-        f"{'virtual (simulated controllers)' if sim else cfg.bus.interface}:{cfg.bus.channel} "
-        f"at {cfg.loop.rate_hz:g} Hz; control socket {daemon.socket_path}",
+        f"wheelgate: {cfg.name} ({cfg.drive}, {cfg.model.n} wheels) at {cfg.loop.rate_hz:g} "
+        f"Hz: bus {bus.interface} {bus.channel} open"
+        f"{' with simulated controllers' if sim else ''}; enabling {motors} motors",
         err=True,
     )
+    daemon.announce = lambda line: click.echo(line, err=True)
     remote = daemon.remote
     if remote.bridge is not None:
         click.echo(f"wheelgate: Zenoh bridge on keys {remote.bridge.keys.root}/..., listening "

@@ -11,6 +11,7 @@ import click
 from gateway.cli import config_option, json_option
 from gateway.cli.commands._common import other_robot, socket_for
 from gateway.core.errors import GatewayError
+from gateway.core.numfmt import fixed
 from gateway.core.protection import ProtectionState
 from gateway.core.status import fault_names, state_name
 from gateway.runtime.client import ControlClient
@@ -66,9 +67,10 @@ def status_lines(status: GatewayStatus) -> list[str]:
     odo = s.odometry
     pose, vel = odo.pose, odo.twist
     lines.append(
-        f"odometry: x={pose.x_m:.4f} m y={pose.y_m:.4f} m theta={pose.theta_rad:.4f} rad "
-        f"v=({vel.vx_m_s:.3f}, {vel.vy_m_s:.3f}, {vel.wz_rad_s:.3f}) slip={odo.slip_m_s:.4f} m/s "
-        f"distance={odo.distance_m:.3f} m")
+        f"odometry: x={fixed(pose.x_m, 4)} m y={fixed(pose.y_m, 4)} m "
+        f"theta={fixed(pose.theta_rad, 4)} rad v=({fixed(vel.vx_m_s, 3)}, "
+        f"{fixed(vel.vy_m_s, 3)}, {fixed(vel.wz_rad_s, 3)}) slip={fixed(odo.slip_m_s, 4)} m/s "
+        f"distance={fixed(odo.distance_m, 3)} m")
     width = max([12, *(len(m.name) for m in s.motors)])
     for m in s.motors:
         age = m.feedback_age_s

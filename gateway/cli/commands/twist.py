@@ -14,6 +14,7 @@ from gateway.cli.commands._common import (
     socket_for,
     twist_options,
 )
+from gateway.core.numfmt import short
 from gateway.runtime.client import ControlClient
 
 if TYPE_CHECKING:
@@ -68,7 +69,7 @@ def _twist_text(t: Mapping[str, object]) -> str:
     """``vx 0.3 m/s, vy 0 m/s, wz 0.5 rad/s``: millimetre and milliradian resolution, no ``-0``."""
     def num(key: str) -> str:
         value = t.get(key)
-        return "?" if not isinstance(value, (int, float)) else f"{round(value, 3) + 0.0:g}"
+        return "?" if not isinstance(value, (int, float)) else short(value, 3)
     return f"vx {num('vx_m_s')} m/s, vy {num('vy_m_s')} m/s, wz {num('wz_rad_s')} rad/s"
 
 

@@ -36,12 +36,22 @@ class Limits:
     :param max_wheel_accel_rad_s2: the largest change of any wheel's speed, rad/s^2.
     :param max_linear_m_s: cap on ``hypot(vx, vy)``, m/s.
     :param max_angular_rad_s: cap on ``|wz|``, rad/s.
+    :param max_wheel_decel_rad_s2: the largest change of a wheel's speed that slows it down,
+        rad/s^2; ``None``: ``max_wheel_accel_rad_s2``.  (A wheel that reverses takes the
+        smaller of the two.)
     """
 
     max_wheel_rad_s: tuple[float, ...]
     max_wheel_accel_rad_s2: float = math.inf
     max_linear_m_s: float = math.inf
     max_angular_rad_s: float = math.inf
+    max_wheel_decel_rad_s2: float | None = None
+
+    @property
+    def decel_rad_s2(self) -> float:
+        """The deceleration limit in force (rad/s^2)."""
+        decel = self.max_wheel_decel_rad_s2
+        return self.max_wheel_accel_rad_s2 if decel is None else decel
 
 
 @dataclass(frozen=True, slots=True)
@@ -138,11 +148,16 @@ def apply_limits(
     steer_limited: list[str] = []
     if prev is not None and dt_s > 0.0:
         max_step = limits.max_wheel_accel_rad_s2 * dt_s
+        brake_step = limits.decel_rad_s2 * dt_s
         p, c = prev.twist, result.twist
         d = (c.vx_m_s - p.vx_m_s, c.vy_m_s - p.vy_m_s, c.wz_rad_s - p.wz_rad_s)
-        need = model.max_wheel_change(*d)
-        if need > max_step:
-            s_accel = max_step / need
+        if brake_step == max_step:
+            need = model.max_wheel_change(*d)
+            factor = max_step / need if need > max_step else 1.0
+        else:
+            factor = model.change_scale(p, d, max_step, brake_step)
+        if factor < 1.0:
+            s_accel = factor
             t = Twist(p.vx_m_s + s_accel * d[0], p.vy_m_s + s_accel * d[1],
                       p.wz_rad_s + s_accel * d[2])
             interpolated = model.try_ik(t, prev.steer_rad)
@@ -152,7 +167,7 @@ def apply_limits(
                 # The straight change passes through twists the steering cannot follow:
                 # slow down along the previous path instead.
                 stop = model.max_wheel_change(p.vx_m_s, p.vy_m_s, p.wz_rad_s)
-                result = model.ik(p.scaled(max(0.0, 1.0 - max_step / stop)), prev.steer_rad)
+                result = model.ik(p.scaled(max(0.0, 1.0 - brake_step / stop)), prev.steer_rad)
                 s_accel = 0.0
         result, steer_limited = _limit_steering(model, result, prev, dt_s)
     report = LimitReport(s_speed, s_accel, tuple(steer_limited), requested)

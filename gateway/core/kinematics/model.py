@@ -206,6 +206,40 @@ class RobotModel:
             worst = max(worst, math.hypot(dvx - dwz * y, dvy + dwz * x) / w.radius)
         return worst
 
+    def change_scale(self, prev: Twist, d: tuple[float, float, float], accel_step: float,
+                     decel_step: float) -> float:
+        """The largest factor in [0, 1] on the twist change ``d`` from ``prev`` that changes no
+        wheel's speed by more than its step (rad/s): ``decel_step`` for a wheel that slows
+        down without reversing, the smaller step for one that reverses, ``accel_step`` else;
+        with equal steps ``min(1, step / max_wheel_change(*d))``."""
+        pvx, pvy, pwz = prev.vx_m_s, prev.vy_m_s, prev.wz_rad_s
+        dvx, dvy, dwz = d
+        both = min(accel_step, decel_step)
+        scale = 1.0
+        for _, a, b, c in self._fixed_rows:
+            change = abs(a * dvx + b * dvy + c * dwz)
+            if change == 0.0:
+                continue
+            before = a * pvx + b * pvy + c * pwz
+            after = before + a * dvx + b * dvy + c * dwz
+            if before * after < 0.0:
+                step = both
+            else:
+                step = decel_step if abs(after) <= abs(before) else accel_step
+            scale = min(scale, step / change)
+        for _, w, x, y, _ in self._steered:
+            change = math.hypot(dvx - dwz * y, dvy + dwz * x) / w.radius
+            if change == 0.0:
+                continue
+            bx, by = pvx - pwz * y, pvy + pwz * x
+            ax, ay = bx + dvx - dwz * y, by + dvy + dwz * x
+            if bx * ax + by * ay < 0.0:
+                step = both  # more than a quarter turn of the contact velocity: a reversal
+            else:
+                step = decel_step if math.hypot(ax, ay) <= math.hypot(bx, by) else accel_step
+            scale = min(scale, step / change)
+        return scale
+
     def try_ik(
         self, twist: Twist, steer: Sequence[float | None] | None = None
     ) -> IkResult | None:

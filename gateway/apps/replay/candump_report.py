@@ -1,0 +1,171 @@
+"""What ``wheelgate odom LOG`` says about a replayed candump log: text, JSON, warnings.
+
+Beside the replay's own lines (what was read, the final pose, the distance, where the steering
+angles came from) it judges the replay by what else the log holds:
+
+* the gateway's own odometry (``WG_Odom_Pose`` frames of a ``wheelgate run --record`` log,
+  :mod:`gateway.apps.replay.gateway_pose`): the ``gateway`` line gives the difference at the end
+  and the largest on the way; a difference above :data:`POSE_TOLERANCE_M` (or
+  :data:`POSE_TOLERANCE_RATIO` of the distance) is a warning, since both come from the same
+  encoder frames;
+* the controllers the log shows that the configuration does not name (found by the protocols'
+  scan probes, :mod:`gateway.apps.scan.classify`, among the frames no driver took): when they
+  send :data:`FOREIGN_SHARE` of the controllers' frames or more, the log is probably another
+  robot's (a mecanum log replayed with a two-wheeled configuration takes two of its four
+  wheels and reports a path that never was).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+from gateway.apps.replay.mcap_report import pose_text
+from gateway.core.numfmt import fixed
+from gateway.core.steer_log import SteeringSource
+
+if TYPE_CHECKING:
+    from gateway.apps.replay.replay import Replay, ReplaySummary
+    from gateway.core.settings import GatewayConfig
+
+#: Corrupt lines reported one by one; the rest are counted.
+MAX_REPORTED = 20
+#: A replay further than this from the gateway's own pose frames is warned about (m) ...
+POSE_TOLERANCE_M = 0.05
+#: ... or further than this share of the distance, whichever is larger.
+POSE_TOLERANCE_RATIO = 0.02
+#: The share of the controllers' frames, from controllers the configuration does not name,
+#: above which the log is said to be probably another robot's.
+FOREIGN_SHARE = 0.25
+
+
+def _factor(s: ReplaySummary, wall_s: float) -> float | None:
+    return s.duration_s / wall_s if wall_s > 0 and s.duration_s > 0 else None
+
+
+def summary_lines(cfg: GatewayConfig, log_path: str, s: ReplaySummary, wall_s: float,
+                  min_interval_s: float) -> list[str]:
+    """The summary, line by line."""
+    factor = _factor(s, wall_s)
+    lines = [
+        f"robot: {cfg.name} ({cfg.drive}, {cfg.model.n} wheels); log: {log_path}",
+        f"frames: {s.entries:,} read ({s.received:,} received, {s.entries - s.received:,} "
+        f"sent), {s.motor_frames:,} of the motors; {s.corrupt_lines:,} unreadable lines skipped",
+        f"time: {s.duration_s:.3f} s of log replayed in {wall_s:.3f} s"
+        + (f" ({factor:.1f}x real time)" if factor is not None else ""),
+        f"odometry: {s.updates:,} updates, at most one per {min_interval_s * 1e3:g} ms of log "
+        f"time",
+        f"final pose: {pose_text(s.pose)}",
+        f"distance: {fixed(s.distance_m, 3)} m",
+        f"steering: {s.steering.value}",
+    ]
+    check = s.pose_check
+    if check is not None:
+        lines.append(
+            f"gateway: {check.frames:,} WG_Odom_Pose frames in the log; the replay ends "
+            f"{fixed(check.position_error_m, 3)} m and "
+            f"{fixed(abs(check.heading_error_rad), 4)} rad from the gateway's own odometry "
+            f"(at most {fixed(check.max_position_error_m, 3)} m and "
+            f"{fixed(check.max_heading_error_rad, 4)} rad on the way)")
+    return lines
+
+
+def summary_json(cfg: GatewayConfig, log_path: str, s: ReplaySummary, wall_s: float,
+                 replay: Replay) -> dict[str, object]:
+    """The summary as ``--json`` prints it (full precision)."""
+    check = s.pose_check
+    return {
+        "robot": cfg.name,
+        "log": log_path,
+        "pose": {"x": s.pose.x_m, "y": s.pose.y_m, "theta": s.pose.theta_rad},
+        "distance_m": s.distance_m,
+        "frames": {"read": s.entries, "received": s.received, "motors": s.motor_frames},
+        "unreadable_lines": s.corrupt_lines,
+        "unreadable": [{"line": e.line_number, "message": str(e)}
+                       for e in replay.errors[:MAX_REPORTED]],
+        "updates": s.updates,
+        "skipped_updates": s.skipped_updates,
+        "min_interval_s": replay.min_interval_s,
+        "start_s": s.start_s,
+        "duration_s": s.duration_s,
+        "replay_s": wall_s,
+        "speed_factor": _factor(s, wall_s),
+        "steering": s.steering.name.lower(),
+        "silent_wheels": list(s.silent_wheels),
+        "gateway": None if check is None else {
+            "frames": check.frames,
+            "position_error_m": check.position_error_m,
+            "heading_error_rad": check.heading_error_rad,
+            "max_position_error_m": check.max_position_error_m,
+            "max_heading_error_rad": check.max_heading_error_rad,
+        },
+    }
+
+
+@dataclass(frozen=True, slots=True)
+class Foreign:
+    """Controllers in a log that the configuration does not name.
+
+    :param devices: ``(protocol title, node ID, frames)`` each.
+    :param share: their frames over all the controllers' frames (theirs and the robot's).
+    """
+
+    devices: tuple[tuple[str, int, int], ...]
+    share: float
+
+
+def foreign_controllers(cfg: GatewayConfig, replay: Replay,
+                        motor_frames: int) -> Foreign | None:
+    """The controllers the scan probes find among the frames no driver took (the gateway's
+    own messages aside), ``None`` when there are none."""
+    from gateway.apps.scan.classify import classify  # noqa: PLC0415 - only with such frames
+    from gateway.apps.scan.registry import load_probes  # noqa: PLC0415
+    from gateway.drive.scan import Heard  # noqa: PLC0415
+
+    if not replay.unclaimed:
+        return None
+    duration = max(replay.summary().duration_s, 1e-9)
+    heard = [Heard(i, ext, n, n / duration, last)
+             for (i, ext), (n, last) in replay.unclaimed.items()]
+    ids = cfg.loop.can_ids
+    own = {(ids.twist, ids.extended): "WG_Twist_Cmd", (ids.odom_pose, ids.extended):
+           "WG_Odom_Pose", (ids.odom_velocity, ids.extended): "WG_Odom_Velocity",
+           (ids.status, ids.extended): "WG_Status", (ids.error, ids.extended): "WG_Error"}
+    found = classify(load_probes(), heard, own).devices
+    if not found:
+        return None
+    devices = tuple((s.probe.TITLE or s.probe.PROTOCOL, s.found.node_id,
+                     sum(h.count for h in s.heard)) for s in found)
+    theirs = sum(n for _, _, n in devices)
+    return Foreign(devices, theirs / (theirs + motor_frames))
+
+
+def warnings(cfg: GatewayConfig, s: ReplaySummary, foreign: Foreign | None = None) -> list[str]:
+    """What the reader of the summary should not miss."""
+    out = []
+    if foreign is not None and foreign.share >= FOREIGN_SHARE:
+        named = ", ".join(f"{title} node {node}" for title, node, _ in foreign.devices[:8])
+        more = f" and {len(foreign.devices) - 8} more" if len(foreign.devices) > 8 else ""
+        out.append(
+            f"{foreign.share:.0%} of the controllers' frames in the log come from controllers "
+            f"{cfg.name}'s configuration does not name ({named}{more}): probably another "
+            f"robot's log; replay it with that robot's configuration (-c)")
+    if s.steering is SteeringSource.NEUTRAL:
+        out.append(f"{cfg.name} has steered wheels and the log holds no WG_Odom_Velocity "
+                   "frames: they were replayed at their neutral angles, so every turn of "
+                   "theirs is missing from the pose")
+    if s.silent_wheels and s.updates:
+        out.append(f"no feedback from {', '.join(s.silent_wheels)}")
+    if s.skipped_updates:
+        out.append(f"{s.skipped_updates} odometry intervals could not be solved (too few "
+                   "wheels with feedback); their motion is missing")
+    check = s.pose_check
+    if check is not None:
+        allowed = max(POSE_TOLERANCE_M, POSE_TOLERANCE_RATIO * s.distance_m)
+        if check.max_position_error_m > allowed:
+            out.append(
+                f"the replay departs from the gateway's own odometry in the log by up to "
+                f"{fixed(check.max_position_error_m, 3)} m (more than {allowed:.3g} m): the "
+                f"configuration is probably not the one the gateway ran (wheel radius, "
+                f"gear_ratio, invert, geometry), or its odometry was reset during the log")
+    return out

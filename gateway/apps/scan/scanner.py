@@ -1,0 +1,100 @@
+"""The thin edge of ``wheelgate scan``: opens the bus, listens, sends the protocol-defined
+requests the session asks for, and hands back its report.
+
+**What goes on the bus**, all of it read-only (each probe's module says why in detail):
+
+* ODrive: Get_Version (RTR, command 0x00) to each axis whose heartbeat was heard
+  (:mod:`drivers.odrive.scan`): a read that firmware 0.6 answers and 0.5 ignores;
+* VESC: PING to each controller ID 0..254 (:mod:`drivers.vesc.scan`): the firmware's own way
+  of finding controllers, answered with PONG; it moves nothing and feeds no timeout;
+* CANopen: expedited SDO uploads (reads) of 0x1000 and 0x1018:01..04 from each node whose
+  boot-up or heartbeat was heard (:mod:`drivers.cia402.scan`): reads of objects every CiA 301
+  device has; no NMT command, no SDO download, no SYNC;
+* DJI: nothing (the ESCs answer no request; their feedback comes unasked).
+
+No command, no state change, no configuration write: nothing can move a motor or disturb a
+gateway that runs beside the scan (which sees the answers as foreign frames).  Requests go out
+one at a time, 2 ms apart at the least, never on an identifier of another protocol's
+controller found on the bus (:mod:`gateway.apps.scan.session`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import time
+from typing import TYPE_CHECKING
+
+import can
+
+from gateway.apps.scan.registry import load_probes
+from gateway.apps.scan.session import ScanSession, ScanTiming
+from gateway.bus.can_bus import open_bus, to_frame, to_message
+from gateway.bus.edge import bus_options
+from gateway.core.errors import BusError
+
+if TYPE_CHECKING:
+    from collections.abc import Callable, Mapping, Sequence
+
+    from gateway.apps.scan.report import ScanReport
+    from gateway.core.types import MotorConfig
+    from gateway.drive.scan import ScanProbe
+
+log = logging.getLogger(__name__)
+
+
+def scan_bus(bus: can.BusABC, timing: ScanTiming, bus_name: str,
+             probes: Sequence[ScanProbe] | None = None,
+             own_ids: Mapping[tuple[int, bool], str] | None = None,
+             known: Sequence[MotorConfig] = (),
+             clock: Callable[[], float] = time.monotonic) -> ScanReport:
+    """Scan an open bus for ``timing.timeout_s`` seconds (the bus stays open).
+
+    :param bus_name: ``interface:channel``, for the report.
+    :param probes: the protocols' probes (default: every registered one).
+    :param own_ids: the gateway's own messages, ``(identifier, extended)`` -> name.
+    :param known: the configuration's motors, to name the controllers found.
+    :raises BusError: if receiving fails.
+    """
+    start = clock()
+    session = ScanSession(load_probes() if probes is None else probes, timing, start, own_ids,
+                          known)
+    failed: list[str] = []
+    try:
+        while not session.finished(now := clock()):
+            for frame in session.poll(now):
+                try:
+                    bus.send(to_message(frame))
+                except (can.CanError, OSError) as err:
+                    failed.append(f"{frame.to_cansend()}: {err}")
+            wait = min(timing.spacing_s, start + timing.timeout_s - now)
+            msg = bus.recv(max(wait, 0.0))
+            if msg is not None and not (msg.is_error_frame or msg.is_fd):
+                t = clock()
+                session.on_frame(to_frame(msg, t), t)
+    except (can.CanError, OSError) as err:
+        raise BusError(f"Receiving from {bus_name} failed: {err}") from err
+    report = session.report(clock(), bus_name)
+    if failed:
+        log.warning("scan: %d request(s) not sent, the first: %s", len(failed), failed[0])
+        note = f"{len(failed)} request(s) could not be sent, the first {failed[0]}"
+        report = dataclasses.replace(report, notes=(*report.notes, note))
+    return report
+
+
+def scan(interface: str, channel: str, timeout_s: float,
+         own_ids: Mapping[tuple[int, bool], str] | None = None,
+         known: Sequence[MotorConfig] = ()) -> ScanReport:
+    """Open the bus, scan it for ``timeout_s`` seconds, close it.
+
+    :raises BusError: if the bus cannot be opened or receiving fails.
+    :raises DriverNotFoundError: if a built-in probe fails to load.
+    """
+    probes = load_probes()
+    bus = open_bus(interface, channel, **bus_options(interface, None))
+    log.info("scan: listening on %s:%s for %g s", interface, channel, timeout_s)
+    try:
+        return scan_bus(bus, ScanTiming.for_timeout(timeout_s), f"{interface}:{channel}",
+                        probes, own_ids, known)
+    finally:
+        bus.shutdown()

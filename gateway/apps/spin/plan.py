@@ -1,0 +1,293 @@
+"""What ``wheelgate spin`` commands, pure: the speed profile of a drive motor or the sweep of a
+steering actuator, their bounds, the words that tell the operator what to watch, and the bus
+traffic that means someone else drives the motor.
+
+A drive motor ramps to ``speed`` (rad/s at the wheel) in ``ramp_s``, holds it and ramps back to
+zero by ``duration_s``; the encoder is judged over the hold, from :data:`SETTLE_S` after the
+ramp.  A steering actuator turns its wheels from where they stand by ``amplitude`` (15 degrees,
+less where its travel ends sooner) at ``speed`` (rad/s of steering angle), holds, and turns
+back; the encoder is judged over the hold.  Nothing here does I/O or reads the clock.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+from gateway.core.errors import GatewayError
+
+if TYPE_CHECKING:
+    from collections.abc import Iterable
+
+    from gateway.core.can_ids import CanIds
+    from gateway.core.kinematics import Wheel
+    from gateway.core.types import Frame, MotorConfig
+
+#: A drive motor's speed when none is given (rad/s at the wheel; at most half its limit).
+DEFAULT_SPEED_RAD_S = 1.0
+#: A steering actuator's rate when none is given (rad/s of steering angle).
+DEFAULT_STEER_RATE_RAD_S = 0.3
+#: The default, shortest and longest spin (s).
+DEFAULT_DURATION_S = 3.0
+MIN_DURATION_S = 1.0
+MAX_DURATION_S = 30.0
+#: The slowest speed judged (rad/s): slower, an encoder's counts say too little.
+MIN_SPEED_RAD_S = 0.1
+#: The shortest ramp of a drive motor (s), when the robot states no acceleration limit.
+MIN_RAMP_S = 0.2
+#: How long after the ramp the motion is left to settle before it is judged (s).
+SETTLE_S = 0.3
+#: The shortest time the steady motion must be measured for (s).
+MIN_WINDOW_S = 0.4
+#: A steering actuator's sweep, and the smallest one worth judging (rad).
+STEER_AMPLITUDE_RAD = math.radians(15.0)
+MIN_STEER_AMPLITUDE_RAD = math.radians(2.0)
+#: The compass words of a heading in the body frame, from forward, counter-clockwise.
+_COMPASS = ("forward", "forward-left", "left", "backward-left", "backward", "backward-right",
+            "right", "forward-right")
+
+
+class SpinUsageError(GatewayError, ValueError):
+    """A spin that cannot be commanded as asked; :attr:`option` names the option to change.
+
+    :param message: what was expected and what came.
+    :param option: the command-line option (``--speed``), for the usage error.
+    """
+
+    def __init__(self, message: str, option: str) -> None:
+        super().__init__(message)
+        self.option = option
+
+
+@dataclass(frozen=True, slots=True)
+class SpinPlan:
+    """One spin's command.
+
+    :param motor: the motor turned.
+    :param speed_rad_s: a drive motor's wheel speed (signed), a steering actuator's rate (> 0).
+    :param duration_s: how long the command lasts, ramps included (s).
+    :param ramp_s: a drive motor's ramp; a steering actuator's time to sweep out (s).
+    :param amplitude_rad: a steering actuator's sweep from ``origin_rad`` (signed; 0 for a drive
+        motor).
+    :param origin_rad: where a steering actuator's wheels stood when the spin began (rad).
+    :param floor_rad_s: a drive motor's slowest speed commanded on the ramps: slower ones are
+        commanded as zero (the top of the speeds its controller does not speed-control).
+    """
+
+    motor: MotorConfig
+    speed_rad_s: float
+    duration_s: float
+    ramp_s: float
+    amplitude_rad: float = 0.0
+    origin_rad: float = 0.0
+    floor_rad_s: float = 0.0
+
+    @property
+    def steering(self) -> bool:
+        """Whether a steering actuator is swept (else a wheel turned)."""
+        return self.motor.steering
+
+    @property
+    def commanded(self) -> float:
+        """What the steady motion is compared with: the wheel speed (rad/s), or the sweep's
+        offset from the origin (rad)."""
+        return self.amplitude_rad if self.steering else self.speed_rad_s
+
+    @property
+    def window(self) -> tuple[float, float]:
+        """When the motion is steady (s from the start of the command)."""
+        return self.ramp_s + SETTLE_S, self.duration_s - self.ramp_s
+
+    @property
+    def travel_rad(self) -> float:
+        """The wheel's turn the command asks for (rad; a sweep: its offset)."""
+        if self.steering:
+            return self.amplitude_rad
+        return self.speed_rad_s * (self.duration_s - self.ramp_s)
+
+    def setpoint(self, t_s: float) -> float:
+        """The setpoint ``t_s`` seconds into the command: wheel rad/s, or a steering angle."""
+        if t_s <= 0.0 or t_s >= self.duration_s:
+            shape = 0.0
+        else:
+            shape = min(1.0, t_s / self.ramp_s, (self.duration_s - t_s) / self.ramp_s)
+        if self.steering:
+            return self.origin_rad + self.amplitude_rad * shape
+        speed = self.speed_rad_s * shape
+        return speed if abs(speed) >= self.floor_rad_s else 0.0
+
+    def from_origin(self, origin_rad: float) -> SpinPlan:
+        """A steering sweep from where the wheels stand: towards the side with room (the
+        counter-clockwise side when both have), at most :data:`STEER_AMPLITUDE_RAD`.
+
+        :raises SpinUsageError: when neither side has :data:`MIN_STEER_AMPLITUDE_RAD` of travel.
+        """
+        if not self.steering:
+            return self
+        lo, hi = self.motor.steer_range_rad
+        want = abs(self.amplitude_rad) or STEER_AMPLITUDE_RAD
+        room_up, room_down = hi - origin_rad, origin_rad - lo
+        if room_up >= want:
+            amplitude = want
+        elif room_down >= want:
+            amplitude = -want
+        else:  # short of travel either way: most of the longer side, clear of its end stop
+            amplitude = 0.8 * room_up if room_up >= room_down else -0.8 * room_down
+        if abs(amplitude) < MIN_STEER_AMPLITUDE_RAD:
+            raise SpinUsageError(
+                f"{self.motor.wheel}: expected {math.degrees(MIN_STEER_AMPLITUDE_RAD):g} deg of "
+                f"travel on one side, but the wheels stand at {math.degrees(origin_rad):+.1f} deg "
+                f"within {math.degrees(lo):+.1f}..{math.degrees(hi):+.1f} deg", "MOTOR")
+        ramp = abs(amplitude) / self.speed_rad_s
+        return dataclasses.replace(self, amplitude_rad=amplitude, origin_rad=origin_rad,
+                                   ramp_s=ramp)
+
+
+def drive_plan(motor: MotorConfig, speed: float | None, duration_s: float, limit_rad_s: float,
+               accel_rad_s2: float, band: tuple[float, float] | None) -> SpinPlan:
+    """A drive motor's spin.
+
+    :param speed: the wheel speed asked for (rad/s, signed); ``None``: the default, at most half
+        ``limit_rad_s``, above the uncontrolled ``band``.
+    :param limit_rad_s: the wheel's speed limit (its ``max_rpm`` and the robot's limit).
+    :param accel_rad_s2: the wheels' acceleration limit (``inf``: none).
+    :param band: the speeds the controller does not speed-control (``low < |v| < high``).
+    :raises SpinUsageError: for a speed beyond the limit, below :data:`MIN_SPEED_RAD_S` or in
+        the band, or a duration too short to ramp and measure.
+    """
+    _check_duration(duration_s)
+    if speed is None:
+        speed = min(DEFAULT_SPEED_RAD_S, 0.5 * limit_rad_s)
+        if band is not None and band[0] < speed < band[1]:
+            speed = min(1.25 * band[1], limit_rad_s)
+    _check_speed(motor, speed, limit_rad_s, "rad/s at the wheel", "the robot's wheel speeds")
+    if band is not None and band[0] < abs(speed) < band[1]:
+        raise SpinUsageError(
+            f"{motor.wheel}: expected a speed outside {band[0]:.3g}..{band[1]:.3g} rad/s, which "
+            f"its {motor.driver} controller does not speed-control (its minimum speed), got "
+            f"{speed:g}; at least {band[1]:.3g} rad/s", "--speed")
+    ramp = max(abs(speed) / accel_rad_s2, MIN_RAMP_S)
+    plan = SpinPlan(motor, speed, duration_s, ramp, floor_rad_s=band[1] if band else 0.0)
+    _check_window(plan)
+    return plan
+
+
+def steer_plan(motor: MotorConfig, rate: float | None, duration_s: float,
+               limit_rad_s: float) -> SpinPlan:
+    """A steering actuator's sweep (its origin and side are chosen at the start,
+    :meth:`SpinPlan.from_origin`).
+
+    :param rate: the steering rate asked for (rad/s, > 0); ``None``: the default.
+    :param limit_rad_s: the steering rate limit (its wheels' and its ``max_rpm``).
+    :raises SpinUsageError: for a rate beyond the limit or a duration too short.
+    """
+    _check_duration(duration_s)
+    if rate is None:
+        rate = min(DEFAULT_STEER_RATE_RAD_S, 0.5 * limit_rad_s)
+    _check_speed(motor, rate, limit_rad_s, "rad/s of steering angle",
+                 "its wheels' max_steer_rate")
+    if rate < 0:
+        raise SpinUsageError(f"{motor.wheel}: expected a positive steering rate (the sweep "
+                             f"turns out and back), got {rate:g}", "--speed")
+    plan = SpinPlan(motor, rate, duration_s, STEER_AMPLITUDE_RAD / rate, STEER_AMPLITUDE_RAD)
+    _check_window(plan)
+    return plan
+
+
+def _check_duration(duration_s: float) -> None:
+    if not MIN_DURATION_S <= duration_s <= MAX_DURATION_S:
+        raise SpinUsageError(f"expected {MIN_DURATION_S:g} to {MAX_DURATION_S:g} s, got "
+                             f"{duration_s:g}", "--duration")
+
+
+def _check_speed(motor: MotorConfig, speed: float, limit: float, unit: str, whose: str) -> None:
+    if not MIN_SPEED_RAD_S <= abs(speed) <= limit:
+        raise SpinUsageError(
+            f"{motor.wheel}: expected {MIN_SPEED_RAD_S:g} to {limit:.3g} {unit} either way "
+            f"(the limit of max_rpm {motor.max_rpm:g} through gear_ratio {motor.gear_ratio:g} "
+            f"and {whose}), got {speed:g}", "--speed")
+
+
+def _check_window(plan: SpinPlan) -> None:
+    start, end = plan.window
+    if end - start < MIN_WINDOW_S:
+        least = plan.duration_s + MIN_WINDOW_S - (end - start)
+        what = "sweep out and back" if plan.steering else "ramp up and down"
+        raise SpinUsageError(
+            f"{plan.motor.wheel}: expected a duration that leaves {MIN_WINDOW_S:g} s to measure "
+            f"after it takes {plan.ramp_s:.2g} s each way to {what}, got {plan.duration_s:g} s; "
+            f"at least {least:.2g} s (or a slower --speed)", "--duration")
+
+
+def compass(heading_rad: float) -> str:
+    """The word for a direction in the body frame (x forward, y left).
+
+    >>> compass(0.0), compass(math.pi / 2), compass(-3.0)
+    ('forward', 'left', 'backward')
+    """
+    sector = round(heading_rad / (math.pi / 4)) % len(_COMPASS)
+    return _COMPASS[sector]
+
+
+def way(plan: SpinPlan, wheel: Wheel | None, travel_rad: float) -> str:
+    """Which way a turn of ``travel_rad`` goes, in words: a sweep's side seen from above, a
+    wheel's direction of rolling the robot (its positive way, without its ``wheel``)."""
+    if plan.steering:
+        return ("left (counter-clockwise seen from above)" if travel_rad >= 0
+                else "right (clockwise seen from above)")
+    if wheel is None:
+        return "its positive way" if travel_rad >= 0 else "against its positive way"
+    heading = wheel.heading() + (0.0 if travel_rad >= 0 else math.pi)
+    neutral = " (at its neutral steering angle)" if wheel.steered else ""
+    return f"rolling the robot {compass(heading)}{neutral}"
+
+
+def describe(plan: SpinPlan, wheel: Wheel | None) -> str:
+    """What the operator should see, in a sentence (``wheel``: a drive motor's wheel, for the
+    direction it rolls the robot).
+
+    >>> from gateway.core.types import MotorConfig
+    >>> plan = SpinPlan(MotorConfig("left", "odrive", 1), 1.0, 3.0, 0.2)
+    >>> describe(plan, None)
+    '+1.00 rad/s for 3.0 s: the wheel turns 0.45 turns (160 deg) its positive way'
+    """
+    if plan.steering:
+        return (f"its wheels turn {way(plan, wheel, plan.amplitude_rad)} by up to "
+                f"{math.degrees(abs(plan.amplitude_rad)):.0f} deg at {plan.speed_rad_s:.2f} "
+                f"rad/s, hold, and turn back")
+    travel = plan.travel_rad
+    return (f"{plan.speed_rad_s:+.2f} rad/s for {plan.duration_s:.1f} s: the wheel turns "
+            f"{abs(travel) / math.tau:.2f} turns ({math.degrees(abs(travel)):.0f} deg) "
+            f"{way(plan, wheel, travel)}")
+
+
+def command_ids(frames: Iterable[Frame]) -> frozenset[tuple[int, bool]]:
+    """The identifiers of a motor's command frames (its driver's ``preview_command``)."""
+    return frozenset((f.arbitration_id, f.is_extended_id) for f in frames)
+
+
+def someone_else(heard: Iterable[Frame], commands: frozenset[tuple[int, bool]],
+                 ids: CanIds, motor: MotorConfig) -> str | None:
+    """Why the bus is driven by someone else, from the frames heard before arming: a command
+    to this motor's controller (our own are not echoed), or a wheelgate's odometry, status or
+    error (a daemon runs on this bus); ``None``: nothing of the kind.
+
+    >>> from gateway.core.can_ids import CanIds
+    >>> from gateway.core.types import Frame, MotorConfig
+    >>> m = MotorConfig("left", "odrive", 1)
+    >>> someone_else([Frame(0x103, bytes(8))], frozenset(), CanIds(), m)
+    'heard 103#0000000000000000 (WG_Status of a running wheelgate) on the bus'
+    """
+    names = {ids.status: "WG_Status", ids.odom_pose: "WG_Odom_Pose",
+             ids.odom_velocity: "WG_Odom_Velocity", ids.error: "WG_Error"}
+    for frame in heard:
+        key = (frame.arbitration_id, frame.is_extended_id)
+        if key in commands:
+            return (f"heard {frame.to_cansend()} (a command to {motor.wheel}'s {motor.driver} "
+                    f"node {motor.node_id} from another sender) on the bus")
+        if frame.is_extended_id == ids.extended and frame.arbitration_id in names:
+            return (f"heard {frame.to_cansend()} ({names[frame.arbitration_id]} of a running "
+                    f"wheelgate) on the bus")
+    return None

@@ -1,0 +1,178 @@
+"""``wheelgate init``: a commented configuration from a shipped example, or the systemd unit.
+
+The text comes from :mod:`gateway.apps.init`; this edge reads the shipped files and the scan,
+loads the result from a temporary directory exactly as ``wheelgate check -c FILE`` will (so a
+configuration ``check`` refuses is never written), and writes it, with the DBC file it names if
+it names one, never over an existing file without ``--force``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import tempfile
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import click
+
+from gateway.apps.init import choose, describe, generate, parse_scan, shipped
+from gateway.config import load_config
+from gateway.core.errors import ConfigError
+
+if TYPE_CHECKING:
+    from typing import TextIO
+
+    from gateway.apps.init import Written
+    from gateway.core.settings import GatewayConfig
+
+#: The configuration's file when no ``-o`` is given (the systemd unit reads
+#: /etc/wheelgate/robot.yaml).
+DEFAULT_OUTPUT = "robot.yaml"
+#: ``-o`` for standard output.
+STDOUT = "-"
+
+
+@click.command()
+@click.option("--drive", "example", metavar="EXAMPLE",
+              help="The shipped example to start from: a name of --list, or a drive only one "
+                   "example has.")
+@click.option("--driver", metavar="NAME",
+              help="Put the drive motors on this driver instead of the example's (its keys come "
+                   "from a shipped example that uses it).")
+@click.option("--from-scan", "scan", type=click.File("r"), metavar="FILE",
+              help="Give the controllers, in order, the node IDs of a saved `wheelgate scan "
+                   "--json` output ('-': standard input, e.g. piped from the scan).")
+@click.option("-o", "--output", metavar="FILE",
+              help=f"Where to write: {DEFAULT_OUTPUT} (with --unit: {shipped.UNIT}) unless "
+                   f"given; '{STDOUT}': standard output.")
+@click.option("--force", is_flag=True, help="Replace files that exist.")
+@click.option("--unit", is_flag=True, help="Write the systemd unit instead of a configuration.")
+@click.option("--list", "listing", is_flag=True, help="List the shipped examples.")
+def command(example: str | None, driver: str | None, scan: TextIO | None, output: str | None,
+            force: bool, unit: bool, listing: bool) -> None:
+    """Write a commented robot configuration from a shipped example, for `check` and `run`.
+
+    It says what each block means and marks what to MEASURE on the robot and FILL IN; with
+    --from-scan the controllers get the node IDs that answered a scan.  It never replaces a
+    file unless --force.  Example: wheelgate init --drive mecanum -o robot.yaml
+    """
+    if listing:
+        _list()
+        return
+    if unit:
+        if example or driver or scan:
+            raise click.UsageError("--unit writes the systemd unit only; expected no --drive, "
+                                   "--driver or --from-scan with it")
+        target = output or shipped.UNIT
+        _write(target, [(target, shipped.read(shipped.UNIT))], force)
+        if target != STDOUT:
+            click.echo(f"wrote {target}: the systemd unit; install it as "
+                       f"/etc/systemd/system/{shipped.UNIT} (README, Running under systemd)")
+        return
+    if example is None:
+        raise click.UsageError(f"Missing option '--drive': the example to start from, one of "
+                               f"{', '.join(shipped.example_names())} (see --list)")
+    target = output or DEFAULT_OUTPUT
+    with contextlib.ExitStack() as stack:
+        written = _generate(stack, example, driver, scan, target)
+        config = _check(written, target)
+        files = [(target, written.text.encode("utf-8"))]
+        if target != STDOUT:
+            beside = Path(target).parent
+            files += [(str(beside / f), shipped.read(f)) for f in written.files]
+        _write(target, files, force)
+    _summary(written, files[1:], config, target, scan.name if scan else "")
+
+
+def _list() -> None:
+    rows = describe(_examples())
+    width = max(len(name) for name, _, _ in rows) + 2
+    click.echo(f"{'example':<{width}}{'drive':<14}drivers")
+    for name, drive, drivers in rows:
+        click.echo(f"{name:<{width}}{drive:<14}{drivers}")
+
+
+def _examples() -> dict[str, str]:
+    return {name: shipped.read_text(name + shipped.SUFFIX) for name in shipped.example_names()}
+
+
+def _generate(stack: contextlib.ExitStack, example: str, driver: str | None,
+              scan: TextIO | None, target: str) -> Written:
+    """The configuration's text; on standard output, the shipped files it names are named
+    where they are installed (there is no directory to put them beside it)."""
+    examples = _examples()
+    name = choose(examples, example)
+    others = [n for n in shipped.names() if not n.endswith(shipped.SUFFIX)]
+    place = {}
+    if target == STDOUT:
+        place = {n: str(stack.enter_context(shipped.path_of(n))) for n in others}
+    found = parse_scan(scan.read(), scan.name) if scan is not None else None
+    return generate(examples, name, driver, found, scan.name if scan else "",
+                    "robot.yaml" if target == STDOUT else target, others, place)
+
+
+def _check(written: Written, target: str) -> GatewayConfig:
+    """The configuration loaded as ``wheelgate check -c`` will load it, from a temporary
+    directory holding it and the files it names.
+
+    :raises ConfigError: what ``check`` would say, naming ``target``.
+    """
+    shown = "<stdout>" if target == STDOUT else target
+    with tempfile.TemporaryDirectory(prefix="wheelgate-init-") as folder:
+        path = Path(folder) / Path(shown).name
+        path.write_text(written.text, encoding="utf-8")
+        for name in written.files:
+            (Path(folder) / name).write_bytes(shipped.read(name))
+        try:
+            return load_config(path)
+        except ConfigError as err:
+            raise ConfigError(
+                f"the configuration made from {written.example!r} does not pass `wheelgate "
+                f"check`, so it was not written:\n" + str(err).replace(str(path), shown)
+            ) from err
+
+
+def _write(target: str, files: list[tuple[str, bytes]], force: bool) -> None:
+    """Write every file, or none when one exists and ``force`` is not given (a shipped file
+    beside the configuration that is there already with the same bytes is left as it is)."""
+    if target == STDOUT:
+        click.echo(files[0][1].decode("utf-8"), nl=False)
+        return
+    exist = [name for name, data in files if Path(name).exists()
+             and (name == target or Path(name).read_bytes() != data)]
+    if exist and not force:
+        raise click.UsageError(f"{', '.join(exist)}: the file exists; expected a new file "
+                               f"(--force replaces it)")
+    for name, data in files:
+        try:
+            Path(name).parent.mkdir(parents=True, exist_ok=True)
+            Path(name).write_bytes(data)
+        except OSError as err:
+            raise click.FileError(name, err.strerror) from err
+
+
+def _summary(written: Written, beside: list[tuple[str, bytes]], config: GatewayConfig,
+             target: str, scan: str) -> None:
+    """What was written and what to do next: on stdout, or on stderr when the configuration
+    went there."""
+    err = target == STDOUT
+    def say(line: str) -> None:
+        click.echo(line, err=err)
+    where = "to standard output" if err else target
+    say(f"wrote {where}: drive {written.drive}, from the example {written.example!r}, drive "
+        f"motors on {', '.join(written.drivers)}")
+    for name, _ in beside:
+        say(f"wrote {name}: the file its motor blocks name (the example's; use your own)")
+    if err and written.files:
+        say(f"note: it names {', '.join(written.files)} where wheelgate is installed; copy "
+            f"the file beside it and name it there")
+    if written.assignments:
+        say(f"node IDs from the scan {scan}, in order (jog each wheel to check it):")
+        width = max(len(a.block) for a in written.assignments) + 2
+        for a in written.assignments:
+            say(f"  {a.block:<{width}}{a.driver} node {a.node_id}")
+    if written.unused:
+        say("not used: " + ", ".join(f"{n.driver} node {n.node_id}" for n in written.unused))
+    warned = f", with {len(config.warnings)} warning(s)" if config.warnings else ""
+    check = "wheelgate check -c " + ("FILE" if err else target)
+    say(f"check: ok{warned}; next: MEASURE and FILL IN what its comments mark, then {check}")

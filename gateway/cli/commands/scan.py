@@ -1,0 +1,85 @@
+"""``wheelgate scan``: the controllers on the bus, by protocol, without moving anything.
+
+It listens to the configuration's bus (or ``--interface``/``--channel``) for ``--timeout``
+seconds and, after the first quarter, asks the controllers it heard a few protocol-defined,
+read-only questions (which, and why none can move a motor or change a setting:
+:mod:`gateway.apps.scan.scanner`): ODrive axes by heartbeat, and their firmware by Get_Version;
+VESCs by status frames and PING; CANopen nodes by boot-up and heartbeat, and their device type
+(0x1000) and identity (0x1018) by SDO reads; DJI ESCs by their feedback.  The gateway's own
+messages (``gateway.can_ids``) are named, and every other identifier is listed with its rate.
+With ``-c``, a controller that a motor block names (driver and node ID) is shown with its
+wheel, a motor block whose controller was not found is named at the end, and the frames the
+configured drivers send to all their controllers (CANopen SYNC and the gateway's own
+heartbeat, DJI commands) are named as the gateway's (:mod:`gateway.apps.scan.own`).  It may
+run beside a running gateway.
+
+Output: a table sorted by protocol and node ID (80 columns), then a summary line; ``--json``:
+a list of objects, one per row, each with ``protocol`` and ``node_id`` (``null`` for the
+gateway's messages and the unknown identifiers) and everything learned.  Exit 0 when the scan
+ran, whether or not anything answered (then it says so, with what to check); 2 for bad usage.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+
+import click
+
+from gateway.apps.scan import render, report_json, scan, summary, wrap
+from gateway.apps.scan.own import own_messages
+from gateway.cli import check_interface, config_option, json_option
+from gateway.cli.commands._common import VIRTUAL_HINT, load
+
+#: The longest --timeout (s).
+MAX_TIMEOUT_S = 3600.0
+#: The default --timeout (s): two ODrive heartbeat periods in the listening quarter, every
+#: VESC PING (255, 2 ms apart), and a CANopen heartbeat of 1 s.
+DEFAULT_TIMEOUT_S = 2.0
+
+
+def _timeout(ctx: click.Context, param: click.Parameter, value: float) -> float:
+    if not (math.isfinite(value) and 0.0 < value <= MAX_TIMEOUT_S):
+        raise click.BadParameter(f"expected seconds above 0 and at most {MAX_TIMEOUT_S:g}, "
+                                 f"got {value!r}")
+    return value
+
+
+def nothing_found_hint(interface: str, channel: str) -> str:
+    """What to check when no controller answered."""
+    if interface == "virtual":
+        return (f"python-can's virtual bus (channel {channel!r}) exists only inside this "
+                f"process, so no controller elsewhere is on it; {VIRTUAL_HINT}")
+    return (f"check the bus: --interface/--channel (or the configuration's bus: block; here "
+            f"{interface}:{channel}), that the link is up at the controllers' bitrate "
+            f"(ip -details link show {channel}), the wiring, the termination and the "
+            f"controllers' power; a CANopen node that booted before the scan and has no "
+            f"heartbeat (0x1017 = 0) stays silent")
+
+
+@click.command()
+@config_option
+@click.option("--timeout", "timeout_s", type=float, default=DEFAULT_TIMEOUT_S,
+              show_default=True, callback=_timeout,
+              help="Seconds to listen and ask (the first quarter only listens).")
+@json_option
+@click.pass_context
+def command(ctx: click.Context, config_path: str | None, timeout_s: float,
+            as_json: bool) -> None:
+    """List the controllers on the bus by protocol (ODrive, VESC, CANopen, DJI) and the other
+    IDs with their rates, sending only protocol-defined read-only requests."""
+    cfg = load(ctx, config_path)
+    bus = cfg.bus
+    check_interface(bus.interface, f"{cfg.source}: bus.interface")
+    own = own_messages(cfg, drivers=config_path is not None)
+    known = [*(m for m in cfg.motors if m is not None), *cfg.steering] if config_path else []
+    report = scan(bus.interface, bus.channel, timeout_s, own, known)
+    hint = None if report.controllers else nothing_found_hint(bus.interface, bus.channel)
+    if as_json:
+        click.echo(json.dumps(report_json(report)))
+        if hint is not None:
+            click.echo(wrap(f"{summary(report)}: {hint}"), err=True)
+        return
+    click.echo(render(report))
+    if hint is not None:
+        click.echo(wrap(f"hint: {hint}"))

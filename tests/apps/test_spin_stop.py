@@ -1,0 +1,183 @@
+"""``wheelgate spin`` stops the motor whatever ends the spin (a key, Ctrl-C, an exception), and
+refuses to run while a daemon or another sender drives the bus.  Checked on the bus and on the
+simulated wheel, not in what spin says it did."""
+
+from __future__ import annotations
+
+import os
+import signal
+import termios
+import time
+from typing import TYPE_CHECKING
+
+import pytest
+
+from gateway.apps.spin import runner as runner_module
+from gateway.apps.spin.plan import SpinPlan
+from gateway.apps.spin.runner import Deadman
+from gateway.bus.can_bus import send_frames
+from gateway.cli import main
+from gateway.core.errors import EncodeError
+from gateway.core.types import DriveState, GatewayState
+from tests.apps.spin_helpers import Listener, Shaft, robot_config
+
+if TYPE_CHECKING:
+    from collections.abc import Callable
+    from pathlib import Path
+
+    import can
+    from click.testing import CliRunner
+
+    from gateway.core.types import Frame
+    from gateway.runtime.daemon import Daemon
+
+pytestmark = pytest.mark.timeout(60)
+
+#: ODrive CANSimple of node 1: Set_Input_Vel (0x0D), Set_Axis_State (0x07) IDLE (1).
+SET_INPUT_VEL = 1 << 5 | 0x0D
+SET_AXIS_STATE = 1 << 5 | 0x07
+IDLE = bytes([1, 0, 0, 0])
+
+
+def when_turning(shaft: Shaft, act: Callable[[], object]) -> None:
+    """Call ``act`` once, from the simulator's thread, as soon as the wheel turns."""
+    done: list[float] = []
+
+    def step(now_s: float) -> None:
+        shaft._track(now_s)
+        if not done and shaft.sim.model.armed and shaft.sim.model.velocity_rad_s > 0.05:
+            done.append(now_s)
+            act()
+
+    shaft.ctl.on_step = step
+
+
+def assert_stopped(shaft: Shaft, sent: list[Frame]) -> None:
+    """The stop reached the bus after the last command, and the simulated wheel is disarmed
+    and standing."""
+    commands = [k for k, f in enumerate(sent) if f.arbitration_id == SET_INPUT_VEL]
+    stops = [k for k, f in enumerate(sent)
+             if f.arbitration_id == SET_AXIS_STATE and f.data[:4] == IDLE]
+    assert commands and stops and stops[-1] > commands[-1], [f.to_cansend() for f in sent]
+    deadline = time.monotonic() + 2.0
+    while shaft.sim.model.armed or abs(shaft.sim.model.velocity_rad_s) > 1e-3:
+        assert time.monotonic() < deadline, "the simulated wheel was not stopped"
+        time.sleep(0.01)
+
+
+def test_ctrl_c_stops_the_wheel(runner: CliRunner, channel: str, tmp_path: Path) -> None:
+    config = robot_config(tmp_path / "robot.yaml", channel)
+    with Shaft(config, "left") as shaft, Listener(channel) as bus:
+        when_turning(shaft, lambda: os.kill(os.getpid(), signal.SIGINT))
+        result = runner.invoke(main, ["spin", "-c", str(config), "left", "--duration", "10"])
+        assert_stopped(shaft, bus.frames())
+        assert shaft.turned() < 1.0  # far from the 9.8 rad of the whole spin
+    assert result.exit_code == 1, result.output
+    assert "stopped by Ctrl-C" in result.stderr
+    assert "left: nothing judged: stopped early by Ctrl-C; the motion was not measured" in (
+        result.stdout)
+
+
+def test_an_exception_stops_the_wheel(runner: CliRunner, channel: str, tmp_path: Path,
+                                      monkeypatch: pytest.MonkeyPatch) -> None:
+    setpoint = SpinPlan.setpoint
+
+    def broken(self: SpinPlan, t_s: float) -> float:
+        if t_s > 0.3:
+            raise EncodeError("broken on purpose")
+        return setpoint(self, t_s)
+
+    monkeypatch.setattr(SpinPlan, "setpoint", broken)
+    config = robot_config(tmp_path / "robot.yaml", channel)
+    with Shaft(config, "left") as shaft, Listener(channel) as bus:
+        result = runner.invoke(main, ["spin", "-c", str(config), "left", "--duration", "10"])
+        assert_stopped(shaft, bus.frames())
+    assert result.exit_code == 1, result.output
+    assert "Error: broken on purpose" in result.stderr
+
+
+def test_a_key_on_the_terminal_stops_the_wheel(channel: str, tmp_path: Path,
+                                               monkeypatch: pytest.MonkeyPatch,
+                                               capsys: pytest.CaptureFixture[str]) -> None:
+    config = robot_config(tmp_path / "robot.yaml", channel)
+    master, slave = os.openpty()
+    before = termios.tcgetattr(slave)
+    try:
+        with open(slave, encoding="utf-8", closefd=False) as tty_in:
+            monkeypatch.setattr("sys.stdin", tty_in)
+            with Shaft(config, "left") as shaft, Listener(channel) as bus:
+                when_turning(shaft, lambda: os.write(master, b"k"))
+                code = main.main(["spin", "-c", str(config), "left", "--duration", "10",
+                                  "--no-ask"], standalone_mode=False)
+                assert_stopped(shaft, bus.frames())
+        assert termios.tcgetattr(slave) == before  # cbreak mode undone
+    finally:
+        os.close(master)
+        os.close(slave)
+    assert code == 1
+    err = capsys.readouterr().err
+    assert "Any key or Ctrl-C stops" in err and "stopped by a key" in err
+
+
+def test_the_deadman_takes_keys_and_signals_and_restores_both() -> None:
+    master, slave = os.openpty()
+    before = termios.tcgetattr(slave)
+    handler = signal.getsignal(signal.SIGTERM)
+    try:
+        with Deadman(slave) as deadman:
+            assert not termios.tcgetattr(slave)[3] & termios.ICANON
+            assert deadman.wait(0.01) == ""
+            os.write(master, b"x")
+            assert deadman.wait(2.0) == "a key"
+        with Deadman(None) as deadman:
+            os.kill(os.getpid(), signal.SIGTERM)
+            assert deadman.wait(0.01) == "SIGTERM"
+        assert termios.tcgetattr(slave) == before
+        assert signal.getsignal(signal.SIGTERM) is handler
+    finally:
+        os.close(master)
+        os.close(slave)
+
+
+def test_refused_while_a_daemon_answers_on_the_socket(runner: CliRunner, daemon: Daemon,
+                                                      sock_path: str, channel: str,
+                                                      tmp_path: Path) -> None:
+    # Another channel: only the socket can tell.
+    config = robot_config(tmp_path / "robot.yaml", f"{channel}-spin",
+                          gateway={"socket": sock_path})
+    with Listener(f"{channel}-spin") as bus:
+        result = runner.invoke(main, ["spin", "-c", str(config), "left"])
+        assert bus.frames() == []
+    assert result.exit_code == 1, result.output
+    assert (f"Error: a wheelgate daemon answers on {sock_path} (robot 'turtlebot3_burger', state "
+            f"running): it drives the bus, and spin arms the motor itself; stop it first "
+            f"(systemctl stop wheelgate)") in result.stderr
+    assert "another robot's bus" not in result.stderr  # the same robot
+    other = robot_config(tmp_path / "other.yaml", f"{channel}-spin", name="tub",
+                         gateway={"socket": sock_path})
+    result = runner.invoke(main, ["spin", "-c", str(other), "left"])
+    assert result.exit_code == 1, result.output
+    assert ("wheelgate jog; if it drives another robot's bus, name 'tub''s own socket with "
+            "--socket") in result.stderr
+
+
+def test_refused_while_another_gateway_is_heard_on_the_bus(
+        runner: CliRunner, daemon: Daemon, channel: str, tmp_path: Path,
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    sent: list[Frame] = []
+
+    def spy(bus: can.BusABC, frames: list[Frame]) -> int:
+        sent.extend(frames)
+        return send_frames(bus, frames)
+
+    monkeypatch.setattr(runner_module, "send_frames", spy)
+    config = robot_config(tmp_path / "robot.yaml", channel)  # its socket: nobody's
+    result = runner.invoke(main, ["spin", "-c", str(config), "left"])
+    assert sent == []
+    assert result.exit_code == 1, result.output
+    assert "another gateway or tool drives left; refusing to spin it" in result.stderr
+    assert ("(a command to left's odrive node 1 from another sender)" in result.stderr
+            or "of a running wheelgate)" in result.stderr)
+    # The daemon's motors are armed as before.
+    assert daemon.gateway.state is GatewayState.RUNNING
+    assert set(daemon.gateway.drives.states(time.monotonic())) == {DriveState.ENABLED}

@@ -1,0 +1,180 @@
+"""``wheelgate init``: the file it writes passes ``wheelgate check``, it never replaces a file
+without ``--force``, and it says what it did; ``--unit`` and ``--list``."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import yaml
+
+from gateway.apps.init import Written
+from gateway.cli import main
+from tests.conftest import CONFIG_DIR
+
+if TYPE_CHECKING:
+    import pytest
+    from click.testing import CliRunner
+
+DBC = "example_controller.dbc"
+
+
+def test_it_writes_a_file_that_check_accepts(runner: CliRunner, tmp_path: Path) -> None:
+    out = tmp_path / "robot.yaml"
+    result = runner.invoke(main, ["init", "--drive", "mecanum", "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    assert result.stdout.splitlines()[0] == (
+        f"wrote {out}: drive mecanum, from the example 'mecanum', drive motors on dji")
+    assert f"then wheelgate check -c {out}" in result.stdout
+    assert "check: ok, with 4 warning(s)" in result.stdout  # the DJI ESCs' missing stop
+    assert yaml.safe_load(out.read_text()) == yaml.safe_load(
+        (CONFIG_DIR / "mecanum.yaml").read_text())
+    check = runner.invoke(main, ["check", "-c", str(out)])
+    assert check.exit_code == 0 and "ok, with 4 warning(s)" in check.output, check.output
+
+
+def test_without_o_it_writes_robot_yaml_here(runner: CliRunner, tmp_path: Path,
+                                            monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.chdir(tmp_path)
+    result = runner.invoke(main, ["init", "--drive", "omni3", "--driver", "vesc"])
+    assert result.exit_code == 0, result.output
+    raw = yaml.safe_load((tmp_path / "robot.yaml").read_text())
+    assert raw["motor_defaults"]["driver"] == "vesc"
+    assert "drive motors on vesc" in result.stdout
+
+
+def test_it_never_replaces_a_file_without_force(runner: CliRunner, tmp_path: Path) -> None:
+    out = tmp_path / "robot.yaml"
+    out.write_text("mine\n")
+    result = runner.invoke(main, ["init", "--drive", "mecanum", "-o", str(out)])
+    assert result.exit_code == 2
+    assert f"{out}: the file exists; expected a new file (--force replaces it)" in result.output
+    assert out.read_text() == "mine\n"
+    result = runner.invoke(main, ["init", "--drive", "mecanum", "-o", str(out), "--force"])
+    assert result.exit_code == 0, result.output
+    assert "name: mecanum" in out.read_text()
+
+
+def test_the_dbc_file_it_names_is_written_beside_it(runner: CliRunner, tmp_path: Path) -> None:
+    out = tmp_path / "new" / "robot.yaml"
+    result = runner.invoke(main, ["init", "--drive", "differential_tub", "--driver", "dbc",
+                                  "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    assert (out.parent / DBC).read_bytes() == (CONFIG_DIR / DBC).read_bytes()
+    assert f"wrote {out.parent / DBC}: the file its motor blocks name" in result.stdout
+    assert runner.invoke(main, ["check", "-c", str(out)]).exit_code == 0
+    # The same DBC file there already: left as it is.
+    again = runner.invoke(main, ["init", "--drive", "example_dbc", "-o",
+                                 str(out.parent / "b.yaml")])
+    assert again.exit_code == 0, again.output
+    # Another file of that name: refused, and nothing written.
+    (out.parent / DBC).write_text("VERSION \"mine\"\n")
+    refused = runner.invoke(main, ["init", "--drive", "example_dbc", "-o",
+                                   str(out.parent / "c.yaml")])
+    assert refused.exit_code == 2
+    assert f"{out.parent / DBC}: the file exists" in refused.output
+    assert not (out.parent / "c.yaml").exists()
+
+
+def test_to_standard_output_it_names_the_installed_dbc_file(
+        runner: CliRunner, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.chdir(tmp_path)
+    result = runner.invoke(main, ["init", "--drive", "example_dbc", "-o", "-"])
+    assert result.exit_code == 0, result.output
+    assert list(tmp_path.iterdir()) == []
+    raw = yaml.safe_load(result.stdout)
+    dbc = Path(raw["motor_defaults"]["dbc"])
+    assert dbc.is_absolute() and dbc.read_bytes() == (CONFIG_DIR / DBC).read_bytes()
+    assert result.stderr.startswith("wrote to standard output: drive differential, from the "
+                                    "example 'example_dbc'")
+    assert f"note: it names {DBC} where wheelgate is installed" in result.stderr
+
+
+def test_node_ids_come_from_a_saved_scan_or_standard_input(runner: CliRunner,
+                                                          tmp_path: Path) -> None:
+    rows: list[dict[str, object]] = [
+        {"protocol": "vesc", "node_id": n, "driver": "vesc"} for n in (31, 30)]
+    rows.append({"protocol": "wheelgate", "node_id": None, "driver": None})
+    scan = tmp_path / "scan.json"
+    scan.write_text(json.dumps(rows))
+    out = tmp_path / "robot.yaml"
+    result = runner.invoke(main, ["init", "--drive", "differential_tub", "--from-scan",
+                                  str(scan), "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    assert (f"node IDs from the scan {scan}, in order (jog each wheel to check it):\n"
+            "  motors.left   vesc node 30\n  motors.right  vesc node 31\n") in result.stdout
+    assert yaml.safe_load(out.read_text())["motors"] == {
+        "left": {"node_id": 30}, "right": {"node_id": 31, "invert": True}}
+    piped = runner.invoke(main, ["init", "--drive", "differential_tub", "--from-scan", "-",
+                                 "-o", "-"], input=json.dumps(rows))
+    assert piped.exit_code == 0, piped.output
+    assert yaml.safe_load(piped.stdout)["motors"]["left"] == {"node_id": 30}
+
+
+def test_a_scan_that_does_not_fit_is_a_usage_error_and_writes_nothing(
+        runner: CliRunner, tmp_path: Path) -> None:
+    scan = tmp_path / "scan.json"
+    scan.write_text(json.dumps([{"protocol": "vesc", "node_id": 1, "driver": "vesc"}]))
+    out = tmp_path / "robot.yaml"
+    result = runner.invoke(main, ["init", "--drive", "differential_tub", "--from-scan",
+                                  str(scan), "-o", str(out)])
+    assert result.exit_code == 2
+    assert (f"Error: {scan}: the scan found 1 vesc node(s) (1); expected 2, one per vesc "
+            "controller (motors.left, motors.right)") in result.output
+    assert not out.exists()
+    missing = runner.invoke(main, ["init", "--drive", "mecanum", "--from-scan",
+                                   str(tmp_path / "none.json")])
+    assert missing.exit_code == 2 and "none.json" in missing.output
+
+
+def test_a_configuration_check_refuses_is_never_written(
+        runner: CliRunner, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    bad = Written("mecanum", "mecanum", ("dji",), "name: x\ndrive: hexapod\n")
+    monkeypatch.setattr("gateway.cli.commands.init.generate", lambda *a, **k: bad)
+    out = tmp_path / "robot.yaml"
+    result = runner.invoke(main, ["init", "--drive", "mecanum", "-o", str(out)])
+    assert result.exit_code == 2
+    assert ("the configuration made from 'mecanum' does not pass `wheelgate check`, so it was "
+            f"not written:\n{out}: drive: expected one of ") in result.output
+    assert "wheelgate-init-" not in result.output and not out.exists()
+
+
+def test_drive_is_needed_and_must_name_an_example(runner: CliRunner, tmp_path: Path,
+                                                  monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.chdir(tmp_path)  # where robot.yaml would go
+    result = runner.invoke(main, ["init"])
+    assert result.exit_code == 2
+    assert "Missing option '--drive': the example to start from, one of ackermann, " \
+           "differential_castor" in result.output
+    result = runner.invoke(main, ["init", "--drive", "omni"])
+    assert result.exit_code == 2
+    assert "2 shipped examples have drive: omni (omni3, omni_delta)" in result.output
+    result = runner.invoke(main, ["init", "--drive", "mecanum", "--driver", "canopen"])
+    assert result.exit_code == 2 and "Unknown driver 'canopen'" in result.output
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_list_names_every_example_with_its_drive_and_drivers(runner: CliRunner) -> None:
+    result = runner.invoke(main, ["init", "--list"])
+    assert result.exit_code == 0
+    lines = result.output.splitlines()
+    assert lines[0].split() == ["example", "drive", "drivers"]
+    assert [line.split()[0] for line in lines[1:]] == sorted(
+        p.stem for p in CONFIG_DIR.glob("*.yaml"))
+    assert "ackermann            ackermann     vesc, odrive (steering)" in lines
+
+
+def test_unit_writes_the_systemd_unit(runner: CliRunner, tmp_path: Path,
+                                     monkeypatch: pytest.MonkeyPatch) -> None:
+    unit = (CONFIG_DIR / "wheelgate.service").read_bytes()
+    monkeypatch.chdir(tmp_path)
+    result = runner.invoke(main, ["init", "--unit"])
+    assert result.exit_code == 0, result.output
+    assert (tmp_path / "wheelgate.service").read_bytes() == unit
+    assert "install it as /etc/systemd/system/wheelgate.service" in result.stdout
+    assert runner.invoke(main, ["init", "--unit"]).exit_code == 2  # it exists
+    printed = runner.invoke(main, ["init", "--unit", "-o", "-"])
+    assert printed.exit_code == 0 and printed.stdout_bytes == unit
+    mixed = runner.invoke(main, ["init", "--unit", "--drive", "mecanum"])
+    assert mixed.exit_code == 2 and "--unit writes the systemd unit only" in mixed.output
