@@ -191,8 +191,10 @@ def test_controllers_powered_during_the_scan_are_found_by_what_they_send_at_powe
         tmp_path: Path, vcan: str) -> None:
     config = mixed_config(tmp_path)
     log = tmp_path / "sim.err"
+    # The simulators start once the scan listens, and must be up before its listening quarter
+    # ends (the VESC's PING follows it): 150 s leaves them 37 s in the VM (they take 10-20 s).
     scan = subprocess.Popen(wheelgate(vcan, "-v", "scan", "-c", str(config), "--json",
-                                      "--timeout", "200"),
+                                      "--timeout", "150"),
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=REPO)
     sim: subprocess.Popen[bytes] | None = None
     try:
