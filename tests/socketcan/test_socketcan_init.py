@@ -32,14 +32,12 @@ pytestmark = [pytest.mark.socketcan, pytest.mark.timeout(900)]
 SCAN_S = 20.0
 
 #: Per case: the example, the node IDs the simulators take (by block, in file order), the
-#: node IDs init must give them (the same blocks), the simulators' step rate.  Two cases, for
-#: the tier's time in the emulated VM (about 100 s each): nodes out of order (ODrive), and a
-#: drive motor with a steering actuator found by boot-up (CANopen); the VESC and DJI scans
-#: over a kernel bus are test_socketcan_scan.py's, the mapping of every driver's nodes the
-#: fast tests' (tests/apps/test_init_scan.py).
+#: node IDs init must give them (the same blocks), the simulators' step rate.  One case, for
+#: the tier's time in the emulated VM (about 100 s a case): a drive motor and a steering
+#: actuator found by boot-up, their nodes in the other order than the blocks' (CANopen); the
+#: ODrive, VESC and DJI scans over a kernel bus are test_socketcan_scan.py's, the mapping of
+#: every driver's nodes the fast tests' (tests/apps/test_init_scan.py).
 CASES: dict[str, dict[str, Any]] = {
-    "odrive": {"example": "turtlebot3_burger", "sim": {"motors.left": 6, "motors.right": 3},
-               "init": {"motors.left": 3, "motors.right": 6}},
     # CANopen nodes show themselves by boot-up (heartbeats start only when the gateway sets
     # them): the test resets them (NMT) while the scan listens, as a power cycle would.
     "cia402": {"example": "tricycle", "sim": {"motors.front": 9, "steering.front": 4},
