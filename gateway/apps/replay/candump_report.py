@@ -119,6 +119,7 @@ def foreign_controllers(cfg: GatewayConfig, replay: Replay,
     """The controllers the scan probes find among the frames no driver took (the gateway's
     own messages aside), ``None`` when there are none."""
     from gateway.apps.scan.classify import classify  # noqa: PLC0415 - only with such frames
+    from gateway.apps.scan.own import own_messages  # noqa: PLC0415
     from gateway.apps.scan.registry import load_probes  # noqa: PLC0415
     from gateway.drive.scan import Heard  # noqa: PLC0415
 
@@ -127,11 +128,7 @@ def foreign_controllers(cfg: GatewayConfig, replay: Replay,
     duration = max(replay.summary().duration_s, 1e-9)
     heard = [Heard(i, ext, n, n / duration, last)
              for (i, ext), (n, last) in replay.unclaimed.items()]
-    ids = cfg.loop.can_ids
-    own = {(ids.twist, ids.extended): "WG_Twist_Cmd", (ids.odom_pose, ids.extended):
-           "WG_Odom_Pose", (ids.odom_velocity, ids.extended): "WG_Odom_Velocity",
-           (ids.status, ids.extended): "WG_Status", (ids.error, ids.extended): "WG_Error"}
-    found = classify(load_probes(), heard, own).devices
+    found = classify(load_probes(), heard, own_messages(cfg, drivers=False)).devices
     if not found:
         return None
     devices = tuple((s.probe.TITLE or s.probe.PROTOCOL, s.found.node_id,

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from gateway.core.errors import DecodeError
-from gateway.core.kinematics import Pose
+from gateway.core.kinematics import Pose, wrap_angle
 from gateway.wire.can import WgCodec, unwrap_position_m
 
 if TYPE_CHECKING:
@@ -35,8 +35,7 @@ def relative(start: Pose, end: Pose) -> Pose:
     """``start^-1 * end``: where ``end`` lies seen from ``start`` (heading wrapped)."""
     c, s = math.cos(start.theta_rad), math.sin(start.theta_rad)
     dx, dy = end.x_m - start.x_m, end.y_m - start.y_m
-    theta = (end.theta_rad - start.theta_rad + math.pi) % (2 * math.pi) - math.pi
-    return Pose(c * dx + s * dy, -s * dx + c * dy, theta)
+    return Pose(c * dx + s * dy, -s * dx + c * dy, wrap_angle(end.theta_rad - start.theta_rad))
 
 
 @dataclass(frozen=True, slots=True)
@@ -101,7 +100,7 @@ class GatewayPoses:
         (g0, r0), (g1, r1) = self._first, self._last
         gateway, replay = relative(g0, g1), relative(r0, r1)
         error = math.hypot(gateway.x_m - replay.x_m, gateway.y_m - replay.y_m)
-        heading = (gateway.theta_rad - replay.theta_rad + math.pi) % (2 * math.pi) - math.pi
+        heading = wrap_angle(gateway.theta_rad - replay.theta_rad)
         return gateway, replay, error, heading
 
     def check(self) -> PoseCheck | None:
