@@ -142,10 +142,16 @@ def socketcan_missing(name: str = VCAN) -> str | None:
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """Skip the ``socketcan`` tier, with the reason, where there is no kernel CAN interface."""
+    """Skip the ``socketcan`` tier, with the reason, where there is no kernel CAN interface.
+    The tier lives in ``tests/socketcan/`` (``.ci/run`` collects that folder alone): a test
+    marked ``socketcan`` elsewhere is an error."""
     tier = [item for item in items if item.get_closest_marker("socketcan")]
     if not tier:
         return
+    home = Path(__file__).parent / "socketcan"
+    stray = [item.nodeid for item in tier if home not in item.path.parents]
+    if stray:
+        raise pytest.UsageError(f"tests marked socketcan must live in {home}, found: {stray}")
     why = socketcan_missing()
     if why is None:
         return

@@ -91,7 +91,9 @@ def main(argv: list[str] | None = None) -> None:
                         help="process CPU time (default; robust on a shared machine) or "
                              "perf_counter wall time (for an otherwise idle machine)")
     parser.add_argument("--profile", choices=sorted(PROTOCOLS),
-                        help="cProfile the saturated gateway cycles of one protocol")
+                        help="cProfile the gateway cycles of one protocol (see --mix)")
+    parser.add_argument("--mix", choices=("1 kHz mix", "saturated"), default="saturated",
+                        help="the feedback mix of --profile")
     parser.add_argument("--sort", default="tottime",
                         help="pstats sort key of --profile (tottime, cumulative, ncalls)")
     parser.add_argument("--instructions", action="store_true",
@@ -115,7 +117,7 @@ def main(argv: list[str] | None = None) -> None:
           f"{args.cycles} cycles x {args.repeats} repeats, clock {args.clock}, "
           f"load average {os.getloadavg()[0]:.2f}\n")
     if args.profile:
-        profile_one(args.profile, args.cycles * args.repeats, args.sort)
+        profile_one(args.profile, args.cycles * args.repeats, args.sort, args.mix)
         return
     print("protocol mix        sent  recv  gw us/c    best    gw fr/s  pcan us/c  pcan fr/s "
           " ratio  vs 9k")
@@ -147,14 +149,15 @@ def main(argv: list[str] | None = None) -> None:
           "gateway frames/s over 9,000")
 
 
-def profile_one(protocol: str, cycles: int, sort: str = "tottime") -> None:
-    """Print the 25 most expensive functions of the saturated cycles."""
+def profile_one(protocol: str, cycles: int, sort: str = "tottime",
+                mix: str = "saturated") -> None:
+    """Print the 30 most expensive functions of the cycles of ``mix``."""
     bench = Bench(protocol)
     try:
         bench.record_pool()
         bench.sent_estimate = bench.measure("1 kHz mix", 200, 1).sent_per_cycle
         prof = cProfile.Profile()
-        bench.measure("saturated", cycles, 1, prof)
+        bench.measure(mix, cycles, 1, prof)
     finally:
         bench.close()
     stats = pstats.Stats(prof)

@@ -129,7 +129,8 @@ class Cia402Driver(MotorDriver[Cia402Options]):
             Axis(m, o, NodeSequencer(m.node_id, f'node {m.node_id} ("{m.wheel}")', self.codec,
                                      configuration_steps(m.node_id, o, position=m.steering),
                                      position=m.steering,
-                                     may_arm=functools.partial(self.may_arm, i)),
+                                     may_arm=functools.partial(self.may_arm, i),
+                                     timeout_s=o.response_timeout_s),
                  self.codec.rpdo_ids[m.node_id])
             for i, (m, o) in enumerate(pairs)
         )

@@ -87,6 +87,12 @@ class Cia402Options(DriverOptions):
             help="silence (no heartbeat, PDO, EMCY or SDO) after which a node is OFFLINE",
         )
     )
+    response_timeout_s: float = option(
+        float, 0.5, minimum=0.01, maximum=60.0,
+        help="how long the enable sequence waits for each answer of the drive (an SDO "
+        "response, a read-back that must match, the statusword after NMT start and after each "
+        "controlword) before it fails naming the step (s)",
+    )
     rpdo: int = option(int, 4, minimum=1, maximum=4, help="RPDO number for the command")
     tpdo_position: int = option(
         int, 3, minimum=1, maximum=4, help="TPDO number for statusword + position"

@@ -16,7 +16,7 @@ stands): statusword bit 12 means "follows the target" in CSP, not "speed 0".
 The controller-side protection steps (:func:`~drivers.cia402.steps.protection_steps`: the
 heartbeat consumer 0x1016:01 and the abort connection option code 0x6007, written, then read
 back) come before NMT start, so before any controlword.  :attr:`NodeSequencer.protection` says
-where they stand; when one fails (an abort, no answer within :attr:`NodeSequencer.SDO_TIMEOUT_S`,
+where they stand; when one fails (an abort, no answer within :attr:`NodeSequencer.timeout_s`,
 a read-back other than written) :attr:`NodeSequencer.protection_error` says why, and the
 driver's :meth:`~gateway.drive.driver.MotorDriver.may_arm` decides: if not
 (``controller_watchdog: required``) the sequence ends there, the drive stays pre-operational and
@@ -97,18 +97,13 @@ class NodeSequencer:
     :param position: a steering actuator in cyclic synchronous position mode (see above).
     :param may_arm: asked when the protection failed: whether the drive may be armed all the
         same (default: never).
+    :param timeout_s: the deadline of each wait (an SDO answer, an :class:`SdoExpectStep`'s
+        expected value, the first statusword after NMT start, each state-machine transition):
+        the motor block's ``response_timeout_s``.
     """
 
-    #: Deadline for each SDO answer (s).
-    SDO_TIMEOUT_S = 0.5
-    #: Deadline for an :class:`SdoExpectStep` to read the expected value (s).
-    EXPECT_TIMEOUT_S = 0.5
     #: Pause between reads of an :class:`SdoExpectStep` (s).
     EXPECT_RETRY_S = 0.01
-    #: Deadline for the first statusword after NMT start (s).
-    STATUS_TIMEOUT_S = 0.5
-    #: Deadline for each state-machine transition (s).
-    STEP_TIMEOUT_S = 0.5
     #: Controlwords are resent at this period until the statusword follows (s).
     CW_RESEND_S = 0.02
     #: Longest wait for speed 0 before SHUTDOWN when stopping (s).
@@ -118,8 +113,9 @@ class NodeSequencer:
 
     def __init__(self, node_id: int, label: str, codec: Cia402Codec,
                  steps: tuple[Step, ...], *, position: bool = False,
-                 may_arm: Callable[[], bool] | None = None) -> None:
+                 may_arm: Callable[[], bool] | None = None, timeout_s: float = 0.5) -> None:
         self.node_id = node_id
+        self.timeout_s = timeout_s
         self.label = label
         self.codec = codec
         self.steps = steps
@@ -249,10 +245,10 @@ class NodeSequencer:
         if self.phase is Phase.AWAIT_STATUS:
             if self.state is not None:
                 self.phase = Phase.WALKING
-            elif now_s - self._step_s > self.STATUS_TIMEOUT_S:
+            elif now_s - self._step_s > self.timeout_s:
                 got = "none" if self.statusword is None else f"0x{self.statusword:04X}"
                 return self.fail(
-                    f"no valid statusword in a TPDO within {self.STATUS_TIMEOUT_S:g} s after "
+                    f"no valid statusword in a TPDO within {self.timeout_s:g} s after "
                     f"NMT start (last: {got})", DriveFault.COMMUNICATION)
             else:
                 return []
@@ -318,18 +314,18 @@ class NodeSequencer:
         step = self.steps[self._i]
         if isinstance(step, NmtStep):  # not reached: NMT steps never wait
             return self._issue(now_s)
-        if isinstance(step, SdoExpectStep) and now_s - self._step_s > self.EXPECT_TIMEOUT_S:
+        if isinstance(step, SdoExpectStep) and now_s - self._step_s > self.timeout_s:
             return self.fail(
                 f"0x{step.index:04X}:{step.subindex:02X} ({step.what}) reads "
                 f"{self._last_read}, expected {step.expected} within "
-                f"{self.EXPECT_TIMEOUT_S:g} s", DriveFault.CONTROLLER)
+                f"{self.timeout_s:g} s", DriveFault.CONTROLLER)
         if self._awaiting:
-            if now_s - self._sent_s > self.SDO_TIMEOUT_S:
+            if now_s - self._sent_s > self.timeout_s:
                 op = (f"write of {step.value} to" if isinstance(step, SdoWriteStep)
                       else "read of")
                 self._awaiting = False
                 self._step_failed(
-                    step, f"no SDO response within {self.SDO_TIMEOUT_S:g} s to the {op} "
+                    step, f"no SDO response within {self.timeout_s:g} s to the {op} "
                     f"0x{step.index:04X}:{step.subindex:02X} ({step.what})",
                     DriveFault.COMMUNICATION, now_s)
                 return self._issue(now_s) if self.phase is Phase.CONFIGURING else []
@@ -356,16 +352,16 @@ class NodeSequencer:
             return []
         current, target = self._edge
         word = TRANSITIONS.get(self._edge)
-        if now_s - self._step_s > self.STEP_TIMEOUT_S:
+        if now_s - self._step_s > self.timeout_s:
             if self.hold is None:
                 return self.fail(
                     f"no position actual value (0x6064) in a TPDO within "
-                    f"{self.STEP_TIMEOUT_S:g} s; a cyclic synchronous position drive is only "
+                    f"{self.timeout_s:g} s; a cyclic synchronous position drive is only "
                     f"enabled with its target set to where it stands", DriveFault.COMMUNICATION)
             how = "on its own" if word is None else f"after controlword 0x{word:04X}"
             return self.fail(
                 f"no transition {current.label} -> {target.label} within "
-                f"{self.STEP_TIMEOUT_S:g} s {how} (statusword 0x{self.statusword or 0:04X})",
+                f"{self.timeout_s:g} s {how} (statusword 0x{self.statusword or 0:04X})",
                 DriveFault.CONTROLLER)
         if word is None or now_s - self._cw_sent_s < self.CW_RESEND_S or self.hold is None:
             return []  # (no hold position yet: a CSP drive would run to target 0)
@@ -379,7 +375,7 @@ class NodeSequencer:
         if state in _STOPPED:
             self.phase = Phase.IDLE
             return []
-        if now_s - self._step_s > self.STOP_TIMEOUT_S + self.STEP_TIMEOUT_S:
+        if now_s - self._step_s > self.STOP_TIMEOUT_S + self.timeout_s:
             log.warning("%s: stop not confirmed by the statusword (0x%04X)",
                         self.label, self.statusword or 0)
             self.phase = Phase.IDLE

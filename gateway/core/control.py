@@ -260,7 +260,7 @@ class Supervisor:
             if now_s - self._enable_started_s > self.cfg.enable_timeout_s:
                 late = [i for i, s in enumerate(states) if s is not DriveState.ENABLED]
                 return self._fault(board, now_s, late, "did not enable within "
-                                                       f"{self.cfg.enable_timeout_s:g} s")
+                                   f"{self.cfg.enable_timeout_s:g} s", cause=True)
             return None
         if (
             state is GatewayState.FAULT
@@ -291,10 +291,9 @@ class Supervisor:
     ) -> Fault | None:
         if self._auto_attempts and now_s - self._running_since_s >= AUTO_RETRY_RESET_S:
             self._auto_attempts = 0
-        states = board.states(now_s)
-        if DriveState.FAULT in states or DriveState.OFFLINE in states:
-            bad = [i for i, s in enumerate(states)
-                   if s is DriveState.FAULT or s is DriveState.OFFLINE]
+        if board.troubled(now_s) and (bad := [
+                i for i, s in enumerate(board.states(now_s))
+                if s is DriveState.FAULT or s is DriveState.OFFLINE]):
             return self._fault(board, now_s, bad, "")
         if command_rad_s is None:
             return None
@@ -313,8 +312,8 @@ class Supervisor:
         return None
 
     def _fault(self, board: MotorBoard, now_s: float, which: Sequence[int], why: str,
-               code: ErrorCode = ErrorCode.MOTOR_FAULT) -> Fault:
-        """FAULT, naming the motors at positions ``which`` of ``board``."""
+               code: ErrorCode = ErrorCode.MOTOR_FAULT, cause: bool = False) -> Fault:
+        """FAULT for the motors ``which`` of ``board``: ``why``, else what they say."""
         statuses = board.status(now_s)
         motors = [statuses[i] for i in which]
         self.counts.faults += 1
@@ -323,16 +322,16 @@ class Supervisor:
         self.target = ZERO
         self.faulted = tuple(s.name for s in motors)
         parts = []
-        for s in motors:
-            if why:
-                text = why
-            elif s.state is DriveState.OFFLINE:
-                age = "no feedback yet" if s.feedback_age_s is None else (
-                    f"no feedback for {s.feedback_age_s:.3f} s")
-                text = f"stopped answering ({age})"
+        for s in motors:  # what it says: a fault, silence (with ``cause``, after ``why``)
+            offline = s.state is DriveState.OFFLINE
+            age = "no feedback yet" if s.feedback_age_s is None else (
+                f"no feedback for {s.feedback_age_s:.3f} s")
+            told = [f"reports a fault: {s.detail or repr(s.faults)}"] * bool(
+                s.faults or not (offline or why))
+            told += [f"stopped answering ({age})"] * offline
+            if not why and offline:
                 code = ErrorCode.FEEDBACK_TIMEOUT
-            else:
-                text = f"reports a fault: {s.detail or repr(s.faults)}"
+            text = ", and it ".join(([why, *told] if cause else [why]) if why else told)
             parts.append(f"motor {s.name!r} (node {s.node_id}) {text}")
         self.reason = "; ".join(parts)
         self.fault_code = code

@@ -102,11 +102,14 @@ class Decision:
 class MotorBoard(Protocol):
     """What the supervisor reads of the motors each cycle, in one order: the drive motors in
     model order of their wheels, then the steering actuators (the drive layer's drive set is
-    one).  Only :meth:`states` and :meth:`motor_feedback` are read every cycle; :meth:`status`
-    only for a fault's message."""
+    one).  Only :meth:`troubled` and :meth:`motor_feedback` are read every cycle, :meth:`states`
+    when troubled or enabling, :meth:`status` only for a fault's message."""
 
     def states(self, now_s: float) -> Sequence[DriveState]:
         """Every motor's state at ``now_s``."""
+
+    def troubled(self, now_s: float) -> bool:
+        """Whether any motor may be OFFLINE or FAULT at ``now_s`` (``False``: none is)."""
 
     def motor_feedback(self) -> Sequence[WheelFeedback | None]:
         """Every motor's latest feedback (``None``: none yet)."""
@@ -127,6 +130,10 @@ class StatusBoard:
     def states(self, now_s: float) -> list[DriveState]:
         """Every motor's state."""
         return [s.state for s in self.statuses]
+
+    def troubled(self, now_s: float) -> bool:
+        """Always ``True``: the states are at hand, read them."""
+        return True
 
     def motor_feedback(self) -> list[WheelFeedback | None]:
         """Every motor's feedback."""

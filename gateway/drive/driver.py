@@ -109,22 +109,20 @@ class MotorDriver(abc.ABC, Generic[OptT]):
         self._armed: list[bool] = [False] * n
         #: The controller-side protections that failed, per motor.
         self._failed = FailedProtections(n)
-        #: What to do when a protection this driver configures is not confirmed; the drive
-        #: set passes the configuration's ``gateway.controller_watchdog``.
+        #: What to do when a protection it configures is not confirmed (the drive set passes
+        #: ``gateway.controller_watchdog``).
         self.watchdog_policy = WatchdogPolicy.REQUIRED
-        #: Commands this driver sent that the controller will not follow as given, by reason
-        #: (e.g. a VESC speed below its minimum ERPM); shown in ``status``.
+        #: Commands sent that the controller will not follow as given, by reason (a VESC
+        #: speed below its minimum ERPM, say); shown in ``status``.
         self.command_counts: collections.Counter[str] = collections.Counter()
         #: Frames of this protocol that were rejected, by reason.
         self.rejected: collections.Counter[str] = collections.Counter()
-        #: The detail of the last rejection of each reason (the counter's keys are a fixed
-        #: set, so garbage traffic cannot grow it).
+        #: The last rejection's detail per reason (a fixed set: garbage cannot grow it).
         self.last_rejection: dict[str, str] = {}
         #: When each motor's liveness streams were last heard (:attr:`LIVENESS_STREAMS`).
         self.live = Liveness(n, self.LIVENESS_STREAMS, [o.liveness_s for o in self.opts])
         self._heard_s = self.live.oldest
-        #: Per motor, the largest setpoint magnitude :meth:`command` passes
-        #: (:func:`gateway.drive.setpoints.bounds`).
+        #: Per motor, the largest setpoint :meth:`command` passes (``setpoints.bounds``).
         self.bounds: tuple[float, ...] = bounds(self.motors)
         #: Per motor, wheel to motor side: ``gear_ratio * sign`` (motor = wheel * scale).
         self.motor_scale: tuple[float, ...] = tuple(m.gear_ratio * m.sign for m in self.motors)
@@ -147,9 +145,8 @@ class MotorDriver(abc.ABC, Generic[OptT]):
         return cls.NODE_ID_RANGE
 
     @classmethod
-    def validate_node_id(
-        cls, node_id: int, where: str, options: Mapping[str, object] | None = None
-    ) -> None:
+    def validate_node_id(cls, node_id: int, where: str,
+                         options: Mapping[str, object] | None = None) -> None:
         """Check a node ID against :meth:`node_id_range` of the motor block's validated
         protocol keys ``options`` (ODrive widens it with 29-bit identifiers).
 
@@ -378,14 +375,18 @@ class MotorDriver(abc.ABC, Generic[OptT]):
         return self.states(now_s)[index]
 
     def states(self, now_s: float) -> list[DriveState]:
-        """:meth:`state` of every motor, in one call (what the supervisor reads every cycle)."""
+        """:meth:`state` of every motor, in one call."""
         limits, faults, ready = self.live.limits, self._faults, self._ready_state
         return [DriveState.OFFLINE if t is None or now_s - t > limits[i]
                 else DriveState.FAULT if faults[i] else ready(i)
                 for i, t in enumerate(self._heard_s)]
 
+    def troubled(self, now_s: float) -> bool:
+        """Whether any motor is OFFLINE or FAULT at ``now_s`` (asked every cycle, cheaply)."""
+        return not self.live.all_alive(now_s) or any(self._faults)
+
     def _ready_state(self, index: int) -> DriveState:
-        """Hook of :meth:`state` for a live motor without faults: ENABLED when armed, else
+        """Hook of :meth:`state` for a live motor without faults: ENABLED if armed, else
         DISABLED (drivers with an enable sequence add ENABLING)."""
         return DriveState.ENABLED if self._armed[index] else DriveState.DISABLED
 

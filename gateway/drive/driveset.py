@@ -82,6 +82,8 @@ class DriveSet:
         self.host_speed_loop = any(drv.HOST_SPEED_LOOP for drv, _ in self.groups)
         flat = [i for _, idx in self.groups for i in idx]
         self._whole = len(self.groups) == 1 and flat == list(range(n))
+        #: That one driver when :attr:`_whole` (the per-cycle calls go straight to it).
+        self._only = self.groups[0][0] if self._whole else None
         #: Positions in the drivers' concatenated status that give model order (``None``:
         #: already in model order), so :meth:`status` needs no sort per cycle.
         self._status_order: tuple[int, ...] | None = (
@@ -114,8 +116,6 @@ class DriveSet:
     def _split(
         self, wheel_rad_s: Sequence[float], steer_rad: Sequence[float | None] | None
     ) -> list[Sequence[float]]:
-        if self._whole and len(wheel_rad_s) == len(self.config.motors):
-            return [wheel_rad_s]  # one driver for every wheel, in model order: nothing to split
         setpoints = list(wheel_rad_s)
         if self.steered_by:
             if steer_rad is None:
@@ -158,6 +158,8 @@ class DriveSet:
         :param steer_rad: every wheel's steering angle (model order, ``None`` for wheels not
             steered); needed when there are steering actuators.
         """
+        if self._only is not None:
+            return self._only.command(wheel_rad_s, now_s)
         out: list[Frame] = []
         setpoints = self._split(wheel_rad_s, steer_rad)
         for (drv, _), values in zip(self.groups, setpoints, strict=True):
@@ -177,6 +179,8 @@ class DriveSet:
 
     def poll(self, now_s: float) -> list[Frame]:
         """Housekeeping frames of every driver."""
+        if self._only is not None:
+            return self._only.poll(now_s)
         return [f for drv, _ in self.groups for f in drv.poll(now_s)]
 
     def on_frame(self, frame: Frame) -> bool:
@@ -228,9 +232,15 @@ class DriveSet:
         order = self._status_order
         return out if order is None else [out[k] for k in order]
 
+    def troubled(self, now_s: float) -> bool:
+        """Whether any motor may be OFFLINE or FAULT (:meth:`MotorDriver.troubled`)."""
+        if self._only is not None:
+            return self._only.troubled(now_s)
+        return any(drv.troubled(now_s) for drv, _ in self.groups)
+
     def states(self, now_s: float) -> list[DriveState]:
-        """Every motor's state (:meth:`MotorDriver.state`), in the order of :meth:`status`:
-        what the supervisor reads every cycle, without building a status per motor."""
+        """Every motor's state (:meth:`MotorDriver.state`), in the order of :meth:`status`,
+        without building a status per motor (the supervisor reads it when :meth:`troubled`)."""
         out: list[DriveState] = []
         for drv, _ in self.groups:
             out += drv.states(now_s)
@@ -240,6 +250,8 @@ class DriveSet:
     def motor_feedback(self) -> list[WheelFeedback | None]:
         """Every motor's latest feedback (:meth:`MotorDriver.feedback`; ``None``: none yet),
         in the order of :meth:`status`."""
+        if self._only is not None:
+            return self._only.feedbacks()
         out: list[WheelFeedback | None] = []
         for drv, _ in self.groups:
             out += drv.feedbacks()
@@ -248,9 +260,9 @@ class DriveSet:
 
     def feedback_by_wheel(self) -> list[WheelFeedback | None]:
         """The latest feedback of every wheel in model order (``None``: passive or none yet)."""
-        if self._whole:
+        if self._only is not None:
             # One driver for every wheel, in model order: its motors are the wheels.
-            return self.groups[0][0].feedbacks()
+            return self._only.feedbacks()
         out = self._slot_feedback()
         return out[: len(self.config.motors)] if self.steered_by else out
 

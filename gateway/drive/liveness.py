@@ -8,10 +8,16 @@ streams is younger than its ``liveness_s``.  Pure: the caller passes the times.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+import math
+from typing import TYPE_CHECKING, cast
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
+
+
+#: How far inside every motor's limit :meth:`Liveness.all_alive` keeps its shortcut (s): far
+#: beyond the rounding of ``now - oldest <= limit`` against ``now <= oldest + limit``.
+_MARGIN_S = 1e-6
 
 
 class Liveness:
@@ -23,7 +29,7 @@ class Liveness:
         ``liveness_s``).
     """
 
-    __slots__ = ("limits", "oldest", "streams", "times")
+    __slots__ = ("_calm_until", "limits", "oldest", "streams", "times")
 
     def __init__(self, motors: int, streams: Sequence[str], limits: Sequence[float]) -> None:
         self.streams = tuple(streams)
@@ -36,22 +42,40 @@ class Liveness:
         #: Per motor, the oldest of its streams' times (``None`` until every one was heard):
         #: what :meth:`alive` compares, kept up to date by :meth:`heard`.
         self.oldest: list[float | None] = [None] * motors
+        #: Until when every motor is surely alive (:meth:`all_alive`): at most the earliest
+        #: ``oldest + limit`` less :data:`_MARGIN_S`; lowered at once by :meth:`heard` when
+        #: a stream's time goes back, raised only by :meth:`all_alive`.
+        self._calm_until = -math.inf
 
     def heard(self, index: int, stream: int, t: float) -> None:
         """Motor ``index``'s stream ``stream`` was heard at ``t``."""
         times = self.times[index]
         times[stream] = t
-        if len(times) == 1:
-            self.oldest[index] = t
-            return
         oldest: float | None = t
-        for s in times:
-            if s is None:
-                oldest = None
-                break
-            if oldest is not None and s < oldest:
-                oldest = s
+        if len(times) > 1:
+            for s in times:
+                if s is None:
+                    oldest = None
+                    break
+                if oldest is not None and s < oldest:
+                    oldest = s
         self.oldest[index] = oldest
+        if oldest is None or oldest + self.limits[index] - _MARGIN_S < self._calm_until:
+            self._calm_until = -math.inf  # (a time that went back: recomputed when asked)
+
+    def all_alive(self, now_s: float) -> bool:
+        """Whether every motor is alive at ``now_s`` (:meth:`alive` of each, in one call that
+        mostly compares one number: what the supervisor asks every cycle)."""
+        if now_s <= self._calm_until:
+            return True
+        if None in self.oldest:
+            return False
+        heard = zip(cast("list[float]", self.oldest), self.limits, strict=True)
+        pairs = list(heard)
+        if not all(now_s - t <= limit for t, limit in pairs):
+            return False
+        self._calm_until = min(t + limit for t, limit in pairs) - _MARGIN_S
+        return True
 
     def alive(self, index: int, now_s: float) -> bool:
         """Whether every stream of motor ``index`` is younger than its ``liveness_s``."""

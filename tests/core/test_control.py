@@ -155,6 +155,21 @@ def test_enable_timeout_faults_with_the_late_motor() -> None:
     assert state_of(sup) is GatewayState.FAULT
 
 
+@pytest.mark.parametrize(("late", "says"), [
+    (DriveState.FAULT, ", and it reports a fault: phase loss"),
+    (DriveState.OFFLINE, ", and it stopped answering (no feedback yet)"),
+])
+def test_enable_timeout_says_what_the_late_motor_reports(late: DriveState, says: str) -> None:
+    """An enable sequence that failed on the way (a CiA 402 SDO that got no answer, say) leaves
+    the motor in FAULT with the cause in its detail until the enable times out: the timeout's
+    message carries that cause, not only the time."""
+    sup = Supervisor(MODEL, dataclasses.replace(LoopConfig(), enable_timeout_s=1.0))
+    sup.enable(0.0)
+    msg = sup.motors(motors(DriveState.ENABLED, late, age=None), 1.5)
+    assert msg == Fault(ErrorCode.MOTOR_FAULT,
+                        f"motor 'right' (node 2) did not enable within 1 s{says}")
+
+
 def test_disabled_and_stop() -> None:
     sup = Supervisor(MODEL, LoopConfig())
     refused = sup.twist(Twist(0.1, 0.0, 0.0), 0.0)

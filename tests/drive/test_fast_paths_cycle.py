@@ -2,8 +2,9 @@
 
 Issue 6: the drive set's status order, ``drain`` and ``to_message``, and the daemon's wait,
 which must never ask epoll (whole milliseconds, rounded up) for more time than is left.
-Issue 15: the drive set's per-cycle states and feedback (no status objects), the tracking
-check's skip while nothing changes, the supervisor's reused decisions.
+Issue 15: the drive set's per-cycle states and feedback (no status objects) and whether any
+motor is in trouble (one comparison while none can be), the tracking check's skip while nothing
+changes, the supervisor's reused decisions.
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ from gateway.core.types import (
     WheelFeedback,
 )
 from gateway.drive.driveset import DriveSet
+from gateway.drive.liveness import Liveness
 from gateway.runtime.daemon import Daemon
 from gateway.runtime.sdnotify import SystemdNotifier
 from tests.conftest import CONFIG_DIR, SIM_ODRIVE_ENDPOINTS
@@ -127,6 +129,8 @@ def test_drive_set_states_and_feedback_match_the_statuses(channel: str) -> None:
                 rig.advance(rig.period)
                 statuses = drives.status(rig.t)
                 assert drives.states(rig.t) == [s.state for s in statuses]
+                assert drives.troubled(rig.t) == any(
+                    s.state in (DriveState.FAULT, DriveState.OFFLINE) for s in statuses)
                 got = drives.motor_feedback()
                 assert all(a is b.feedback for a, b in zip(got, statuses, strict=True))
                 assert drives.feedback_by_wheel() == drives._slot_feedback()[:rig.gw.model.n]
@@ -137,6 +141,30 @@ def test_drive_set_states_and_feedback_match_the_statuses(channel: str) -> None:
     assert drives._status_order is not None
     assert drives.states(0.0) == [s.state for s in drives.status(0.0)]
     assert drives.motor_feedback() == [s.feedback for s in drives.status(0.0)]
+
+
+@pytest.mark.parametrize("streams", [("feedback",), ("heartbeat", "encoder")])
+@pytest.mark.parametrize("seed", range(4))
+def test_all_alive_matches_every_motors_alive(streams: tuple[str, ...], seed: int) -> None:
+    """``Liveness.all_alive`` (one comparison while nothing can have gone silent) says what
+    ``alive`` of every motor says, over streams heard now and then, late, never, and with
+    times that go back (a frame stamped before the one taken just before it)."""
+    rng = random.Random(seed)
+    limits = [0.05, 0.1, 0.02]
+    live = Liveness(len(limits), streams, limits)
+    t, shortcuts = 0.0, 0
+    for _ in range(20_000):
+        t += rng.choice((0.0, 0.001, 0.004, 0.05 * rng.random()))
+        if rng.random() < 0.6:
+            back = rng.choice((0.0, 0.0, 0.0, 0.003, 1e-12))
+            live.heard(rng.randrange(len(limits)), rng.randrange(len(streams)), t - back)
+        # Now and then exactly on a limit, where rounding decides.
+        now = t if rng.random() < 0.9 else (live.oldest[0] or 0.0) + limits[0]
+        calm = now <= live._calm_until
+        expected = all(live.alive(i, now) for i in range(len(limits)))
+        assert live.all_alive(now) is expected
+        shortcuts += calm
+    assert shortcuts > 200  # the shortcut was taken
 
 
 def _monitor_state(mon: TrackingMonitor) -> tuple[object, ...]:

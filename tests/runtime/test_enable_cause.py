@@ -1,0 +1,70 @@
+"""An enable that fails says why: a CiA 402 drive whose answers come later than the enable
+sequence waits for (a slow gateway-to-bus adapter, a drive busy with something else, a host
+stalled for longer than the deadline) leaves the gateway in FAULT with the step that got no
+answer in its reason, not only "did not enable within ..."; and ``response_timeout_s`` on the
+motor block lengthens that wait for such a drive."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import pytest
+import yaml
+
+from drivers.cia402.enums import State
+from gateway.config import load_config
+from gateway.core.types import GatewayState
+from gateway.sim.device import SimFault
+from tests.conftest import CONFIG_DIR
+from tests.e2e_helpers import Rig
+
+if TYPE_CHECKING:
+    from pathlib import Path
+
+    from drivers.cia402.sim import Cia402Simulator
+
+pytestmark = pytest.mark.timeout(60)
+
+#: How late the drive's every frame is (s): longer than the default wait of 0.5 s.
+LATENCY_S = 0.7
+
+
+def slow_tricycle(tmp_path: Path, channel: str, enable_timeout_s: float, **drive: object) -> Rig:
+    """The tricycle (CiA 402 drive and steering) on a virtual bus, ``drive`` added to its drive
+    motor's block, and that drive's answers ``LATENCY_S`` late."""
+    raw = yaml.safe_load((CONFIG_DIR / "tricycle.yaml").read_text())
+    raw["motors"]["front"].update(drive, liveness_s=2.0)
+    raw["gateway"] = {"rate_hz": 100.0, "enable_timeout_s": enable_timeout_s}
+    raw["bus"] = {"interface": "virtual", "channel": channel}
+    path = tmp_path / "tricycle.yaml"
+    path.write_text(yaml.safe_dump(raw))
+    rig = Rig(load_config(path))
+    sim = rig.sims[0]
+    assert not sim.motor.steering and sim.motor.node_id == 5
+    sim.latency_s = LATENCY_S
+    sim.inject(SimFault.LATE)
+    return rig
+
+
+def test_an_enable_that_times_out_names_the_step_that_got_no_answer(
+    tmp_path: Path, channel: str
+) -> None:
+    with slow_tricycle(tmp_path, channel, 3.0) as rig:
+        rig.gw.supervisor.enable(rig.t)
+        rig.advance(3.5)
+        assert rig.gw.state is GatewayState.FAULT
+        assert rig.gw.supervisor.reason == (
+            "motor 'front' (node 5) did not enable within 3 s, and it reports a fault: "
+            'node 5 ("front"): no SDO response within 0.5 s to the write of 2147484933 to '
+            "0x1403:01 (RPDO4 COB-ID, switch off), and it stopped answering (no feedback yet)")
+        drive: Cia402Simulator = rig.sims[0]  # type: ignore[assignment]
+        assert drive.state is not State.OPERATION_ENABLED
+
+
+def test_response_timeout_s_waits_longer_for_a_slow_drive(tmp_path: Path, channel: str) -> None:
+    # Some 30 SDO exchanges of 2 x 0.7 s each: the enable takes about 45 s of simulated time.
+    with slow_tricycle(tmp_path, channel, 90.0, response_timeout_s=1.5) as rig:
+        rig.enable(timeout_s=90.0)
+        assert rig.gw.state is GatewayState.RUNNING, rig.gw.supervisor.reason
+        drive: Cia402Simulator = rig.sims[0]  # type: ignore[assignment]
+        assert drive.state is State.OPERATION_ENABLED
