@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+import itertools
 import math
 
 import pytest
@@ -74,6 +76,34 @@ def test_steering_rate_limit_drives_only_along_actual_heading() -> None:
     for i in range(4):
         assert out.steer_rad[i] == pytest.approx(0.2)
         assert out.wheel_rad_s[i] == pytest.approx(10.0 * math.cos(math.pi / 2 - 0.2))
+
+
+@pytest.mark.parametrize("accel", [20.0, 60.0, 200.0])
+def test_steering_never_turns_past_the_requested_angle_on_an_interpolated_way(
+        accel: float) -> None:
+    """A synchro drive (steering range +-pi) going backwards (wheels at pi) asked to drive
+    right: the wheels end at pi/2 driving backwards.  The acceleration limit interpolates the
+    twist, whose direction starts just past pi, beyond the range: the interpolated wheel angle
+    starts near 0 (reversed) and sweeps up to pi/2.  The wheels turn from pi straight to pi/2
+    and wait there; they never swing down toward 0 and back (the actuator would overshoot on
+    the reversal)."""
+    wheels = PRESETS["synchro"].wheels(wheel_radius=0.06, wheel_distance=0.2)
+    # (The rate comes from the steering actuator's max_rpm through its gear ratio.)
+    m = RobotModel([dataclasses.replace(w, max_steer_rate=8.4) for w in wheels])
+    limits = Limits((math.inf,) * 3, max_wheel_accel_rad_s2=accel)
+    prev = m.ik(Twist(-0.4, 0.0, 0.0), (math.pi,) * 3)
+    assert prev.steer_rad == (math.pi,) * 3
+    ask = Twist(0.0, -0.4, 0.0)
+    angles = [math.pi]
+    for _ in range(300):
+        out, _report = apply_limits(m, m.ik(ask, prev.steer_rad), limits, prev, 0.01)
+        turret = [a for a in out.steer_rad if a is not None]
+        assert len(turret) == 3 and max(turret) - min(turret) < 1e-12  # one turret
+        angles.append(turret[0])
+        prev = out
+    assert all(b <= a for a, b in itertools.pairwise(angles))  # one way only
+    assert min(angles) == pytest.approx(math.pi / 2)
+    assert prev.twist == ask and prev.wheel_rad_s == pytest.approx((-0.4 / 0.06,) * 3)
 
 
 def test_limits_must_match_the_model() -> None:

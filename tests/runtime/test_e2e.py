@@ -61,6 +61,7 @@ def test_odometry_matches_ground_truth(
             if pilot is not None:
                 pilot.close()
         assert rig.gw.state is GatewayState.RUNNING, rig.gw.supervisor.reason
+        assert rig.gw.supervisor.counts.faults == 0, rig.gw.supervisor.reason
         got, want = rig.gw.odometry.state, rig.truth.state
         assert want.distance_m > 2.0
         err = math.hypot(got.pose.x_m - want.pose.x_m, got.pose.y_m - want.pose.y_m)
@@ -72,3 +73,27 @@ def test_odometry_matches_ground_truth(
             assert rig.gw.counts.can_twists > 100
         assert rig.gw.edge.counts.send_failures == 0
         assert rig.gw.supervisor.counts.infeasible == 0
+
+
+def test_synchro_corners_under_a_low_acceleration_limit(
+    channel: str, tmp_path: Path
+) -> None:
+    """The shipped synchro robot with its acceleration limit lowered to 20 rad/s^2 drives the
+    square: at the corner from driving backwards to driving right, the interpolated twist's
+    wheel angle starts beyond the steering range and sweeps back, and the steering actuator
+    (a simulated CiA 402 drive in cyclic synchronous position mode, which overshoots a target
+    that reverses at full rate) must turn once, not swing past and back until its tracking
+    check faults the robot."""
+    text = (CONFIG_DIR / "synchro.yaml").read_text()
+    assert "max_wheel_accel_rad_s2: 60.0" in text
+    path = tmp_path / "synchro.yaml"
+    path.write_text(text.replace("max_wheel_accel_rad_s2: 60.0", "max_wheel_accel_rad_s2: 20.0"))
+    with Rig(virtual_config(path, channel, rate_hz=100.0)) as rig:
+        rig.enable()
+        drive(rig, "square", None)
+        # (A fault that the automatic recovery mended would leave the robot RUNNING.)
+        assert rig.gw.supervisor.counts.faults == 0, rig.gw.supervisor.reason
+        assert rig.gw.state is GatewayState.RUNNING
+        got, want = rig.gw.odometry.state, rig.truth.state
+        err = math.hypot(got.pose.x_m - want.pose.x_m, got.pose.y_m - want.pose.y_m)
+        assert err <= 0.01 * want.distance_m, (got.pose, want.pose)

@@ -8,7 +8,13 @@
   would be infeasible (steering cones), the robot decelerates along its previous path instead.
 * **Steering rate**: a steered wheel turns at most ``max_steer_rate * dt`` per cycle, and while
   it lags behind its target it only drives the part of its target speed that lies along its
-  actual heading (cosine of the error), so it does not push sideways.
+  actual heading (cosine of the error), so it does not push sideways.  It never turns past the
+  angle of the twist asked for on its way to an interpolated twist's: where the acceleration
+  limit interpolates across the end of the steering range (a synchro drive from driving
+  backwards to driving right: the interpolated wheel direction starts on the far side and
+  sweeps back), the wheel stops turning at the requested angle and waits there for the
+  interpolation, instead of swinging past it and back (a reversal an actuator with momentum
+  overshoots).
 
 Nothing is silent: every call returns a :class:`LimitReport` with the factors applied.
 """
@@ -144,6 +150,7 @@ def apply_limits(
     s_speed = speed_scale(model, result, limits)
     if s_speed < 1.0:
         result = _scaled(result, s_speed)
+    goal = result.steer_rad  # where the steering ends for the twist asked for
     s_accel = 1.0
     steer_limited: list[str] = []
     if prev is not None and dt_s > 0.0:
@@ -169,14 +176,17 @@ def apply_limits(
                 stop = model.max_wheel_change(p.vx_m_s, p.vy_m_s, p.wz_rad_s)
                 result = model.ik(p.scaled(max(0.0, 1.0 - brake_step / stop)), prev.steer_rad)
                 s_accel = 0.0
-        result, steer_limited = _limit_steering(model, result, prev, dt_s)
+        result, steer_limited = _limit_steering(model, result, prev, dt_s, goal)
     report = LimitReport(s_speed, s_accel, tuple(steer_limited), requested)
     return result, report
 
 
 def _limit_steering(
-    model: RobotModel, result: IkResult, prev: IkResult, dt_s: float
+    model: RobotModel, result: IkResult, prev: IkResult, dt_s: float,
+    goal: tuple[float | None, ...],
 ) -> tuple[IkResult, list[str]]:
+    """Turn each rate-limited wheel from ``prev`` toward ``result``'s angle, but not past its
+    ``goal`` angle (the requested twist's) where that lies on the way (see the module)."""
     names: list[str] = []
     limited = model.rate_limited_wheels
     if not limited:
@@ -184,12 +194,15 @@ def _limit_steering(
     speeds = list(result.wheel_rad_s)
     angles = list(result.steer_rad)
     for i, w in limited:
-        target, before = result.steer_rad[i], prev.steer_rad[i]
+        target, before, end = result.steer_rad[i], prev.steer_rad[i], goal[i]
         if target is None or before is None:
             continue
+        aim = target
+        if end is not None and end != target and min(before, target) <= end <= max(before, target):
+            aim = end
         step = w.max_steer_rate * dt_s
-        if abs(target - before) > step:
-            actual = before + math.copysign(step, target - before)
+        actual = aim if abs(aim - before) <= step else before + math.copysign(step, aim - before)
+        if actual != target:
             speeds[i] *= max(0.0, math.cos(target - actual))
             angles[i] = actual
             names.append(w.name)
