@@ -18,6 +18,8 @@ import click
 from gateway.apps.init import choose, describe, generate, parse_scan, shipped
 from gateway.config import load_config
 from gateway.core.errors import ConfigError
+from gateway.core.protection import Guard
+from gateway.drive.driveset import DriveSet
 
 if TYPE_CHECKING:
     from typing import TextIO
@@ -46,15 +48,19 @@ STDOUT = "-"
               help=f"Where to write: {DEFAULT_OUTPUT} (with --unit: {shipped.UNIT}) unless "
                    f"given; '{STDOUT}': standard output.")
 @click.option("--force", is_flag=True, help="Replace files that exist.")
+@click.option("--acknowledge-no-controller-stop", "acknowledged", is_flag=True,
+              help="For controllers that cannot stop by themselves (DJI ESCs): you know, and "
+                   "their power is cut by hardware when the computer stops (README, When "
+                   "wheelgate dies).  Needed to write such a configuration.")
 @click.option("--unit", is_flag=True, help="Write the systemd unit instead of a configuration.")
 @click.option("--list", "listing", is_flag=True, help="List the shipped examples.")
 def command(example: str | None, driver: str | None, scan: TextIO | None, output: str | None,
-            force: bool, unit: bool, listing: bool) -> None:
+            force: bool, acknowledged: bool, unit: bool, listing: bool) -> None:
     """Write a commented robot configuration from a shipped example, for `check` and `run`.
 
     It says what each block means and marks what to MEASURE on the robot and FILL IN; with
     --from-scan the controllers get the node IDs that answered a scan.  It never replaces a
-    file unless --force.  Example: wheelgate init --drive mecanum -o robot.yaml
+    file unless --force.  Example: wheelgate init --drive turtlebot3_burger -o robot.yaml
     """
     if listing:
         _list()
@@ -75,7 +81,7 @@ def command(example: str | None, driver: str | None, scan: TextIO | None, output
     target = output or DEFAULT_OUTPUT
     with contextlib.ExitStack() as stack:
         written = _generate(stack, example, driver, scan, target)
-        config = _check(written, target)
+        config = _check(written, target, acknowledged)
         files = [(target, written.text.encode("utf-8"))]
         if target != STDOUT:
             beside = Path(target).parent
@@ -111,9 +117,9 @@ def _generate(stack: contextlib.ExitStack, example: str, driver: str | None,
                     "robot.yaml" if target == STDOUT else target, others, place)
 
 
-def _check(written: Written, target: str) -> GatewayConfig:
+def _check(written: Written, target: str, acknowledged: bool) -> GatewayConfig:
     """The configuration loaded as ``wheelgate check -c`` will load it, from a temporary
-    directory holding it and the files it names.
+    directory holding it and the files it names; see :func:`_acknowledge`.
 
     :raises ConfigError: what ``check`` would say, naming ``target``.
     """
@@ -124,12 +130,33 @@ def _check(written: Written, target: str) -> GatewayConfig:
         for name in written.files:
             (Path(folder) / name).write_bytes(shipped.read(name))
         try:
-            return load_config(path)
+            config = load_config(path)
         except ConfigError as err:
             raise ConfigError(
                 f"the configuration made from {written.example!r} does not pass `wheelgate "
                 f"check`, so it was not written:\n" + str(err).replace(str(path), shown)
             ) from err
+        _acknowledge(config, acknowledged)  # (the drivers may read the files named)
+        return config
+
+
+def _acknowledge(config: GatewayConfig, acknowledged: bool) -> None:
+    """The examples acknowledge for the demo that their DJI ESCs cannot stop by themselves
+    (``no_controller_stop: acknowledged``, which ``run`` requires): a file written for a robot
+    says so only when its builder does, with ``--acknowledge-no-controller-stop``.
+
+    :raises click.UsageError: for such controllers without the flag (nothing is written).
+    """
+    unguarded = [label for label, p in DriveSet(config).protections() if p.guard is Guard.NONE]
+    if unguarded and not acknowledged:
+        raise click.UsageError(
+            f"the controllers of {', '.join(unguarded)} cannot stop by themselves (no command "
+            f"timeout is known): if wheelgate dies, they keep their last current, and the "
+            f"wheels their torque, until their power goes.  Power them through a relay or "
+            f"e-stop loop that opens when the computer stops feeding a hardware watchdog "
+            f"(README, When wheelgate dies), then run init again with "
+            f"--acknowledge-no-controller-stop: the file then says `no_controller_stop: "
+            f"acknowledged`, which `wheelgate run` requires.  Nothing was written.")
 
 
 def _write(target: str, files: list[tuple[str, bytes]], force: bool) -> None:
