@@ -59,6 +59,11 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 
+def _shown(value: int) -> str:
+    """An object's value for a message: in hex too where it is a word of bits (a COB-ID)."""
+    return f"{value} (0x{value:08X})" if value >= 0x10000 else str(value)
+
+
 class Phase(enum.IntEnum):
     """Where one node's sequence stands."""
 
@@ -205,7 +210,8 @@ class NodeSequencer:
         self._awaiting = False
         where = f"0x{step.index:04X}:{step.subindex:02X} ({step.what})"
         if resp.command is ServerCommand.ABORT:
-            verb = f"write of {step.value} to" if isinstance(step, SdoWriteStep) else "read of"
+            verb = (f"write of {_shown(step.value)} to" if isinstance(step, SdoWriteStep)
+                    else "read of")
             self._step_failed(step, f"SDO {verb} {where} aborted: "
                               f"{sdo_abort_text(resp.abort_code)}", DriveFault.COMMUNICATION, now_s)
         elif isinstance(step, SdoWriteStep):
@@ -224,8 +230,8 @@ class NodeSequencer:
             if value == step.expected:
                 self._advance(now_s)
             elif isinstance(step, SdoVerifyStep):
-                self._step_failed(step, f"{where} reads {value} after the write of "
-                                  f"{step.expected}", DriveFault.CONTROLLER, now_s)
+                self._step_failed(step, f"{where} reads {_shown(value)} after the write of "
+                                  f"{_shown(step.expected)}", DriveFault.CONTROLLER, now_s)
             else:
                 self._retry_s = now_s + self.EXPECT_RETRY_S
         return True
@@ -321,7 +327,7 @@ class NodeSequencer:
                 f"{self.timeout_s:g} s", DriveFault.CONTROLLER)
         if self._awaiting:
             if now_s - self._sent_s > self.timeout_s:
-                op = (f"write of {step.value} to" if isinstance(step, SdoWriteStep)
+                op = (f"write of {_shown(step.value)} to" if isinstance(step, SdoWriteStep)
                       else "read of")
                 self._awaiting = False
                 self._step_failed(

@@ -190,7 +190,8 @@ def test_required_a_refused_write_is_a_fault_and_no_enable(bench: Callable[..., 
     assert (status.state, status.faults) == (DriveState.FAULT, DriveFault.WATCHDOG)
     assert status.detail == (
         "motor 'left' (CiA 402 node 3): controller watchdog not confirmed: SDO write of "
-        "8323272 to 0x1016:01 (heartbeat consumer time) aborted: 0x06020000 Object does not "
+        "8323272 (0x007F00C8) to 0x1016:01 (heartbeat consumer time) aborted: 0x06020000 "
+        "Object does not "
         "exist; fix: use a drive with a heartbeat consumer (CiA 301 object 0x1016) and the "
         "abort connection option code (CiA 402 object 0x6007), see its EDS file; or set a "
         "command timeout with the vendor's tool and gateway.controller_watchdog: warn")

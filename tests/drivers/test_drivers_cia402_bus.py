@@ -202,7 +202,8 @@ def test_sdo_timeout_of_a_silent_node(bench: Callable[..., Bench]) -> None:
     assert b.run(1.0, until=lambda: b.drv.phase(0) is Phase.FAILED)
     status = b.drv.status(b.t)[0]
     assert status.faults == DriveFault.COMMUNICATION
-    assert "no SDO response within 0.5 s to the write of 2147484931 to 0x1403:01" in status.detail
+    assert ("no SDO response within 0.5 s to the write of 2147484931 (0x80000503) to "
+            "0x1403:01") in status.detail
 
 
 def test_transition_timeout(bench: Callable[..., Bench], monkeypatch: pytest.MonkeyPatch) -> None:

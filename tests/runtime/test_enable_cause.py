@@ -55,8 +55,9 @@ def test_an_enable_that_times_out_names_the_step_that_got_no_answer(
         assert rig.gw.state is GatewayState.FAULT
         assert rig.gw.supervisor.reason == (
             "motor 'front' (node 5) did not enable within 3 s, and it reports a fault: "
-            'node 5 ("front"): no SDO response within 0.5 s to the write of 2147484933 to '
-            "0x1403:01 (RPDO4 COB-ID, switch off), and it stopped answering (no feedback yet)")
+            'node 5 ("front"): no SDO response within 0.5 s to the write of 2147484933 '
+            "(0x80000505) to 0x1403:01 (RPDO4 COB-ID, switch off), and it stopped answering "
+            "(no feedback yet)")
         drive: Cia402Simulator = rig.sims[0]  # type: ignore[assignment]
         assert drive.state is not State.OPERATION_ENABLED
 
