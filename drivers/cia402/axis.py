@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING
 from drivers.cia402.codec import INT32_RANGE, position_to_raw, velocity_to_raw
 from drivers.cia402.enums import NmtState, State
 from drivers.cia402.faults import describe_emcy, emcy_faults, is_error_reset
-from drivers.cia402.sequence import Phase
+from drivers.cia402.phase import Phase
 from drivers.cia402.targets import target_counts, wrap_delta
 from gateway.core.protection import ProtectionState
 from gateway.core.types import DriveFault, WheelFeedback

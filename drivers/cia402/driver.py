@@ -59,9 +59,10 @@ from drivers.cia402.codec import (
 )
 from drivers.cia402.enums import CobBase, Controlword, State
 from drivers.cia402.options import Cia402Options, check_steering
+from drivers.cia402.phase import Phase
 from drivers.cia402.protection import FIX, HostHeartbeat, describe, host_settings
 from drivers.cia402.sdo import SdoResponse
-from drivers.cia402.sequence import NodeSequencer, Phase
+from drivers.cia402.sequence import NodeSequencer
 from drivers.cia402.steps import configuration_steps
 from gateway.core.errors import DecodeError
 from gateway.core.types import DriveFault, DriveState

@@ -212,3 +212,8 @@ def parse_sdo_request(frame: Frame) -> SdoRequest:
         f"Expected an SDO initiate or abort request for node {node_id}, but got command "
         f"byte 0x{first:02X}."
     )
+
+
+def shown_value(value: int) -> str:
+    """An object's value for a message: in hex too where it is a word of bits (a COB-ID)."""
+    return f"{value} (0x{value:08X})" if value >= 0x10000 else str(value)

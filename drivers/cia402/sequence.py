@@ -4,7 +4,10 @@
 a time, then walks the CiA 402 state machine to OPERATION ENABLED with controlwords sent in the
 command RPDO, checking the statusword from the feedback TPDOs after each step.  Every wait has
 a deadline; a missed deadline or an SDO abort ends in :attr:`Phase.FAILED` with a message
-naming the node, the step and the cause.
+naming the node, the step and the cause.  Except one: a node that has not answered at all since
+the start (a drive still booting, powered with the gateway's computer) is asked again, the
+sequence starting over every deadline, until it answers (its boot-up restarts the sequence as
+well) or the gateway's own enable timeout ends the wait.
 
 The target field of the RPDOs the sequencer sends itself is 0 for a drive motor (target
 velocity).  For a steering actuator (cyclic synchronous position) it is :attr:`NodeSequencer.hold`,
@@ -27,7 +30,6 @@ Nothing here blocks or reads the clock: the driver passes ``now_s`` and sends wh
 
 from __future__ import annotations
 
-import enum
 import logging
 from typing import TYPE_CHECKING
 
@@ -42,7 +44,8 @@ from drivers.cia402.enums import (
     state_from_statusword,
 )
 from drivers.cia402.faults import sdo_abort_text
-from drivers.cia402.sdo import make_sdo_download, make_sdo_upload
+from drivers.cia402.phase import STOP_TARGET, STOPPED, Phase
+from drivers.cia402.sdo import make_sdo_download, make_sdo_upload, shown_value
 from drivers.cia402.steps import NmtStep, SdoExpectStep, SdoVerifyStep, SdoWriteStep
 from gateway.core.errors import DecodeError
 from gateway.core.protection import ProtectionState
@@ -57,39 +60,6 @@ if TYPE_CHECKING:
     from gateway.core.types import Frame
 
 log = logging.getLogger(__name__)
-
-
-def _shown(value: int) -> str:
-    """An object's value for a message: in hex too where it is a word of bits (a COB-ID)."""
-    return f"{value} (0x{value:08X})" if value >= 0x10000 else str(value)
-
-
-class Phase(enum.IntEnum):
-    """Where one node's sequence stands."""
-
-    #: Nothing under way (never enabled, or stopped).
-    IDLE = 0
-    #: NMT and SDO configuration steps.
-    CONFIGURING = 1
-    #: NMT start sent; waiting for the first statusword TPDO.
-    AWAIT_STATUS = 2
-    #: Controlword steps toward OPERATION ENABLED.
-    WALKING = 3
-    #: OPERATION ENABLED; the driver streams the command RPDO.
-    ARMED = 4
-    #: Target 0 with ENABLE OPERATION until speed 0, then SHUTDOWN.
-    STOPPING = 5
-    #: A step failed; :attr:`NodeSequencer.error` says why.  Cleared by the next start.
-    FAILED = 6
-
-
-#: States in which the power stage is off: a stop is complete.
-_STOPPED = frozenset({State.NOT_READY_TO_SWITCH_ON, State.SWITCH_ON_DISABLED,
-                      State.READY_TO_SWITCH_ON, State.FAULT_REACTION_ACTIVE, State.FAULT})
-#: Where a stop goes from each operating state.
-_STOP_TARGET = {State.OPERATION_ENABLED: State.READY_TO_SWITCH_ON,
-                State.SWITCHED_ON: State.READY_TO_SWITCH_ON,
-                State.QUICK_STOP_ACTIVE: State.SWITCH_ON_DISABLED}
 
 
 class NodeSequencer:
@@ -143,6 +113,10 @@ class NodeSequencer:
         self._step_s = 0.0
         self._retry_s = 0.0
         self._last_read: int | None = None
+        #: Whether the node has answered an SDO since the sequence started (see
+        #: :meth:`_poll_configure`), and how often the sequence started over for its silence.
+        self._answered = False
+        self.silent_restarts = 0
         self._edge: tuple[State, State] | None = None
         self._edges = 0
         self._cw_sent_s = float("-inf")
@@ -169,7 +143,7 @@ class NodeSequencer:
         if self._has_protection:
             self.protection = ProtectionState.PENDING
         self._i, self._awaiting, self._retry_s, self._step_s = 0, False, now_s, now_s
-        self._edge, self._edges = None, 0
+        self._edge, self._edges, self._answered = None, 0, False
         if self.position:
             self.hold = None  # only a position read after this start counts
         return self._issue(now_s)
@@ -202,6 +176,7 @@ class NodeSequencer:
 
     def on_sdo(self, resp: SdoResponse, now_s: float) -> bool:
         """Take an SDO response; ``False`` if none was expected (late or foreign)."""
+        self._answered = True
         step = self.steps[self._i] if self._i < len(self.steps) else None
         if (self.phase is not Phase.CONFIGURING or not self._awaiting
                 or not isinstance(step, (SdoWriteStep, SdoExpectStep, SdoVerifyStep))
@@ -210,7 +185,7 @@ class NodeSequencer:
         self._awaiting = False
         where = f"0x{step.index:04X}:{step.subindex:02X} ({step.what})"
         if resp.command is ServerCommand.ABORT:
-            verb = (f"write of {_shown(step.value)} to" if isinstance(step, SdoWriteStep)
+            verb = (f"write of {shown_value(step.value)} to" if isinstance(step, SdoWriteStep)
                     else "read of")
             self._step_failed(step, f"SDO {verb} {where} aborted: "
                               f"{sdo_abort_text(resp.abort_code)}", DriveFault.COMMUNICATION, now_s)
@@ -230,14 +205,15 @@ class NodeSequencer:
             if value == step.expected:
                 self._advance(now_s)
             elif isinstance(step, SdoVerifyStep):
-                self._step_failed(step, f"{where} reads {_shown(value)} after the write of "
-                                  f"{_shown(step.expected)}", DriveFault.CONTROLLER, now_s)
+                self._step_failed(step, f"{where} reads {shown_value(value)} after the write of "
+                                  f"{shown_value(step.expected)}", DriveFault.CONTROLLER, now_s)
             else:
                 self._retry_s = now_s + self.EXPECT_RETRY_S
         return True
 
     def on_sdo_error(self, err: DecodeError, now_s: float) -> None:
         """A malformed SDO response arrived while one was expected."""
+        self._answered = True
         if self.phase is Phase.CONFIGURING and self._awaiting:
             self._awaiting = False
             self._step_failed(self.steps[self._i], str(err), DriveFault.COMMUNICATION, now_s)
@@ -326,8 +302,17 @@ class NodeSequencer:
                 f"{self._last_read}, expected {step.expected} within "
                 f"{self.timeout_s:g} s", DriveFault.CONTROLLER)
         if self._awaiting:
+            if now_s - self._sent_s > self.timeout_s and not self._answered:
+                # Nothing from the node since the start: not booted yet (powered with the
+                # gateway's computer), or not there.  Start over until it answers; the
+                # gateway's enable_timeout_s ends the wait, saying the node is silent.
+                if not self.silent_restarts:
+                    log.info("%s: no answer to the enable sequence's first request yet; "
+                             "asking again every %g s", self.label, self.timeout_s)
+                self.silent_restarts += 1
+                return self.start(now_s)
             if now_s - self._sent_s > self.timeout_s:
-                op = (f"write of {_shown(step.value)} to" if isinstance(step, SdoWriteStep)
+                op = (f"write of {shown_value(step.value)} to" if isinstance(step, SdoWriteStep)
                       else "read of")
                 self._awaiting = False
                 self._step_failed(
@@ -378,7 +363,7 @@ class NodeSequencer:
 
     def _poll_stop(self, now_s: float) -> list[Frame]:
         state = self.state
-        if state in _STOPPED:
+        if state in STOPPED:
             self.phase = Phase.IDLE
             return []
         if now_s - self._step_s > self.STOP_TIMEOUT_S + self.timeout_s:
@@ -391,8 +376,8 @@ class NodeSequencer:
         if (state is State.OPERATION_ENABLED and moving
                 and now_s - self._step_s < self.STOP_TIMEOUT_S):
             word: int = Controlword.ENABLE_OPERATION
-        elif state is not None and state in _STOP_TARGET:
-            word = TRANSITIONS[(state, _STOP_TARGET[state])]
+        elif state is not None and state in STOP_TARGET:
+            word = TRANSITIONS[(state, STOP_TARGET[state])]
         else:
             word = Controlword.SHUTDOWN
         if word == self._last_cw and now_s - self._cw_sent_s < self.CW_RESEND_S:

@@ -23,8 +23,9 @@ from canopen.sdo import constants as sdo_constants
 from drivers.cia402 import Cia402Driver
 from drivers.cia402.codec import make_heartbeat, make_nmt, unpack_pdo
 from drivers.cia402.enums import DataType, NmtCommand, NmtState, State
+from drivers.cia402.phase import Phase
 from drivers.cia402.sdo import make_sdo_download, parse_sdo_request
-from drivers.cia402.sequence import NodeSequencer, Phase
+from drivers.cia402.sequence import NodeSequencer
 from drivers.cia402.sim import Cia402Simulator
 from gateway.config import load_config
 from gateway.core.errors import ConfigError

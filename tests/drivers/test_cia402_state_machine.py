@@ -16,8 +16,9 @@ from canopen.profiles.p402 import State402
 from drivers.cia402 import Cia402Codec, Cia402Options, PdoLayout, enums
 from drivers.cia402.codec import unpack_pdo
 from drivers.cia402.enums import NmtCommand, State, controlword_for, state_from_statusword
+from drivers.cia402.phase import Phase
 from drivers.cia402.sdo import make_sdo_download, make_sdo_download_ack, make_sdo_upload
-from drivers.cia402.sequence import NodeSequencer, Phase
+from drivers.cia402.sequence import NodeSequencer
 from drivers.cia402.sim import Cia402Simulator
 from drivers.cia402.steps import (
     NmtStep,

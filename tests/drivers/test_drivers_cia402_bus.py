@@ -10,7 +10,7 @@ import pytest
 
 from drivers.cia402.codec import make_nmt, make_sync, make_tpdo
 from drivers.cia402.enums import NmtCommand, NmtState, State
-from drivers.cia402.sequence import Phase
+from drivers.cia402.phase import Phase
 from gateway.core.types import DriveFault, DriveState, Frame
 from gateway.sim.device import SimFault
 from tests import factories
@@ -194,16 +194,35 @@ def test_slow_mode_switch_is_waited_for(bench: Callable[..., Bench]) -> None:
     assert b.drv.enable(b.t) == []  # already armed: nothing to do
 
 
-def test_sdo_timeout_of_a_silent_node(bench: Callable[..., Bench]) -> None:
+def test_a_node_silent_from_the_start_is_asked_again_until_it_answers(
+        bench: Callable[..., Bench]) -> None:
+    """A drive that has not booted yet (powered with the gateway's computer) hears nothing:
+    the sequence starts over every ``response_timeout_s`` (NMT pre-operational, the first SDO)
+    instead of failing, and goes on once the drive answers."""
     b = bench([LEFT])
     b.sims[0].inject(SimFault.SILENT)
     b.send(b.drv.enable(b.t))
     assert b.state() is DriveState.OFFLINE
+    assert not b.run(1.2, until=lambda: b.drv.phase(0) is Phase.FAILED)
+    first = [f for f in b.sent if f.arbitration_id == 0x603]
+    assert len(first) == 3 and len(set(first)) == 1  # the same first request, 3 times
+    assert sum(f.arbitration_id == 0x000 for f in b.sent) == 3  # NMT pre-operational each time
+    assert b.drv.phase(0) is Phase.CONFIGURING and b.drv.status(b.t)[0].detail == ""
+    b.sims[0].clear(SimFault.SILENT)
+    assert b.run(1.0, until=lambda: b.state() is DriveState.ENABLED)
+
+
+def test_sdo_timeout_of_a_node_that_fell_silent(bench: Callable[..., Bench]) -> None:
+    """A drive that answered and then falls silent during the sequence: it fails, naming the
+    step that got no answer."""
+    b = bench([LEFT])
+    b.send(b.drv.enable(b.t))
+    assert b.run(0.1, until=lambda: sum(f.arbitration_id == 0x583 for f in b.seen) == 2)
+    b.sims[0].inject(SimFault.SILENT)
     assert b.run(1.0, until=lambda: b.drv.phase(0) is Phase.FAILED)
     status = b.drv.status(b.t)[0]
     assert status.faults == DriveFault.COMMUNICATION
-    assert ("no SDO response within 0.5 s to the write of 2147484931 (0x80000503) to "
-            "0x1403:01") in status.detail
+    assert "no SDO response within 0.5 s to the write of 0 to 0x1603:00" in status.detail
 
 
 def test_transition_timeout(bench: Callable[..., Bench], monkeypatch: pytest.MonkeyPatch) -> None:

@@ -23,8 +23,9 @@ from hypothesis import strategies as st
 from drivers.cia402 import Cia402Codec, Cia402Driver, Cia402Options, PdoLayout
 from drivers.cia402.codec import make_rpdo, make_sync, make_tpdo, position_to_raw
 from drivers.cia402.enums import DataType, OperationMode, State, supported_mode_bit
+from drivers.cia402.phase import Phase
 from drivers.cia402.sdo import make_sdo_download
-from drivers.cia402.sequence import NodeSequencer, Phase
+from drivers.cia402.sequence import NodeSequencer
 from drivers.cia402.steps import SdoExpectStep, SdoWriteStep, configuration_steps
 from gateway.bus.can_bus import send_frames
 from gateway.core.errors import ConfigError, EncodeError

@@ -55,9 +55,8 @@ def test_an_enable_that_times_out_names_the_step_that_got_no_answer(
         assert rig.gw.state is GatewayState.FAULT
         assert rig.gw.supervisor.reason == (
             "motor 'front' (node 5) did not enable within 3 s, and it reports a fault: "
-            'node 5 ("front"): no SDO response within 0.5 s to the write of 2147484933 '
-            "(0x80000505) to 0x1403:01 (RPDO4 COB-ID, switch off), and it stopped answering "
-            "(no feedback yet)")
+            'node 5 ("front"): no SDO response within 0.5 s to the write of 0 to 0x1603:00 '
+            "(RPDO4 mapping count, clear)")
         drive: Cia402Simulator = rig.sims[0]  # type: ignore[assignment]
         assert drive.state is not State.OPERATION_ENABLED
 
@@ -69,3 +68,21 @@ def test_response_timeout_s_waits_longer_for_a_slow_drive(tmp_path: Path, channe
         assert rig.gw.state is GatewayState.RUNNING, rig.gw.supervisor.reason
         drive: Cia402Simulator = rig.sims[0]  # type: ignore[assignment]
         assert drive.state is State.OPERATION_ENABLED
+
+
+def test_a_drive_that_boots_after_the_gateway_is_waited_for(tmp_path: Path, channel: str) -> None:
+    """A drive powered with the gateway's computer may boot after the gateway sends its first
+    request: a node that has said nothing yet is asked again until it answers, within the
+    gateway's enable timeout (this raced in the socketcan tier, where ``wheelgate run`` and
+    ``wheelgate sim`` start together)."""
+    with slow_tricycle(tmp_path, channel, 10.0) as rig:
+        drive = rig.sims[0]
+        drive.clear(SimFault.LATE)
+        drive.inject(SimFault.SILENT)  # not booted yet
+        rig.gw.supervisor.enable(rig.t)
+        rig.advance(2.0)
+        assert rig.gw.state is GatewayState.ENABLING, rig.gw.supervisor.reason
+        drive.clear(SimFault.SILENT)
+        rig.advance(3.0)
+        assert rig.gw.state is GatewayState.RUNNING, rig.gw.supervisor.reason
+        assert rig.gw.supervisor.counts.faults == 0
