@@ -60,16 +60,17 @@ def tier_config(source: Path, dest: Path, rate_hz: float = 100.0,
             defaults.pop(key, None)  # the shipped protocol's own keys
         defaults["driver"] = driver
         defaults["controller_timeout_s"] = 1.0
-    # CiA 402: the enable sequence's wait for each answer, 0.5 s by default, is shorter than a
-    # stall of the VM's simulator process under load.
-    for block in (raw.get("motor_defaults"), raw.get("steering_defaults"),
-                  *(raw.get("motors") or {}).values(), *(raw.get("steering") or {}).values()):
-        if isinstance(block, dict) and block.get("driver") == "cia402":
-            block["response_timeout_s"] = 5.0
-    # A DBC file is named relative to the configuration: keep pointing at the shipped one.
-    for block in (raw.get("motor_defaults"), *(raw.get("motors") or {}).values()):
-        if isinstance(block, dict) and isinstance(block.get("dbc"), str):
-            block["dbc"] = str((source.parent / block["dbc"]).resolve())
+    every = [b for b in (raw.get("motor_defaults"), raw.get("steering_defaults"),
+                         *(raw.get("motors") or {}).values(),
+                         *(raw.get("steering") or {}).values()) if isinstance(b, dict)]
+    for keys in every:
+        # CiA 402: the enable sequence's wait for each answer, 0.5 s by default, is shorter
+        # than a stall of the VM's simulator process under load.
+        if keys.get("driver") == "cia402":
+            keys["response_timeout_s"] = 5.0
+        # A DBC file is named relative to the configuration: keep pointing at the shipped one.
+        if isinstance(keys.get("dbc"), str):
+            keys["dbc"] = str((source.parent / keys["dbc"]).resolve())
     dest.write_text(yaml.safe_dump(raw, sort_keys=False))
     return dest
 

@@ -260,7 +260,7 @@ class Supervisor:
             if now_s - self._enable_started_s > self.cfg.enable_timeout_s:
                 late = [i for i, s in enumerate(states) if s is not DriveState.ENABLED]
                 return self._fault(board, now_s, late, "did not enable within "
-                                   f"{self.cfg.enable_timeout_s:g} s", cause=True)
+                                                       f"{self.cfg.enable_timeout_s:g} s")
             return None
         if (
             state is GatewayState.FAULT
@@ -312,8 +312,8 @@ class Supervisor:
         return None
 
     def _fault(self, board: MotorBoard, now_s: float, which: Sequence[int], why: str,
-               code: ErrorCode = ErrorCode.MOTOR_FAULT, cause: bool = False) -> Fault:
-        """FAULT for the motors ``which`` of ``board``: ``why``, else what they say."""
+               code: ErrorCode = ErrorCode.MOTOR_FAULT) -> Fault:
+        """FAULT for the motors ``which`` of ``board``: ``why``, then what each one says."""
         statuses = board.status(now_s)
         motors = [statuses[i] for i in which]
         self.counts.faults += 1
@@ -322,17 +322,18 @@ class Supervisor:
         self.target = ZERO
         self.faulted = tuple(s.name for s in motors)
         parts = []
-        for s in motors:  # what it says: a fault, silence (with ``cause``, after ``why``)
+        for s in motors:  # (a tracking fault's motor says nothing: it is live, no faults)
             offline = s.state is DriveState.OFFLINE
-            age = "no feedback yet" if s.feedback_age_s is None else (
-                f"no feedback for {s.feedback_age_s:.3f} s")
-            told = [f"reports a fault: {s.detail or repr(s.faults)}"] * bool(
-                s.faults or not (offline or why))
-            told += [f"stopped answering ({age})"] * offline
-            if not why and offline:
-                code = ErrorCode.FEEDBACK_TIMEOUT
-            text = ", and it ".join(([why, *told] if cause else [why]) if why else told)
-            parts.append(f"motor {s.name!r} (node {s.node_id}) {text}")
+            told = [why] if why else []
+            if s.faults or not (offline or why):
+                told.append(f"reports a fault: {s.detail or repr(s.faults)}")
+            if offline:
+                age = "no feedback yet" if s.feedback_age_s is None else (
+                    f"no feedback for {s.feedback_age_s:.3f} s")
+                told.append(f"stopped answering ({age})")
+                if not why:
+                    code = ErrorCode.FEEDBACK_TIMEOUT
+            parts.append(f"motor {s.name!r} (node {s.node_id}) {', and it '.join(told)}")
         self.reason = "; ".join(parts)
         self.fault_code = code
         return Fault(code, self.reason)

@@ -81,9 +81,10 @@ class DriveSet:
         #: Whether any driver closes its speed loop on the host (see MotorDriver).
         self.host_speed_loop = any(drv.HOST_SPEED_LOOP for drv, _ in self.groups)
         flat = [i for _, idx in self.groups for i in idx]
-        self._whole = len(self.groups) == 1 and flat == list(range(n))
-        #: That one driver when :attr:`_whole` (the per-cycle calls go straight to it).
-        self._only = self.groups[0][0] if self._whole else None
+        #: The one driver, when it has every wheel in model order and nothing else (the
+        #: per-cycle calls go straight to it); else ``None``.
+        self._only = (self.groups[0][0] if len(self.groups) == 1 and flat == list(range(n))
+                      else None)
         #: Positions in the drivers' concatenated status that give model order (``None``:
         #: already in model order), so :meth:`status` needs no sort per cycle.
         self._status_order: tuple[int, ...] | None = (

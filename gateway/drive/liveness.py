@@ -70,8 +70,7 @@ class Liveness:
             return True
         if None in self.oldest:
             return False
-        heard = zip(cast("list[float]", self.oldest), self.limits, strict=True)
-        pairs = list(heard)
+        pairs = list(zip(cast("list[float]", self.oldest), self.limits, strict=True))
         if not all(now_s - t <= limit for t, limit in pairs):
             return False
         self._calm_until = min(t + limit for t, limit in pairs) - _MARGIN_S
