@@ -144,6 +144,11 @@ class DbcCodec:
         """
         return self._frames(self._command, values, armed)
 
+    @property
+    def command_ids(self) -> frozenset[int]:
+        """The identifiers of the command messages (which go out every cycle)."""
+        return frozenset(group.frame_id for group in self._command)
+
     def encode_enable(
         self, enable: bool, hold: Sequence[float | None] | None = None
     ) -> list[Frame]:

@@ -59,6 +59,10 @@ command instead of a velocity command, e.g. an ODrive axis through the official 
 Its position is absolute in the controller's frame (``zero_rad`` is defined there): the first
 sample is taken as it is, and counter wrap-around is undone from there on.
 
+An enable (and a mode) message is sent once per enable and is not answered: a controller that
+is silent when the gateway enables it (powered after the gateway) gets them again once it is
+heard (:meth:`DbcDriver._poll`).
+
 **When wheelgate dies** only the controller's own command timeout stops the motor, and a DBC
 file does not say which parameter sets it, so wheelgate cannot set or read it: the motor block
 states what was set with the vendor's tool, ``controller_timeout_s: 0.2``
@@ -81,6 +85,7 @@ from drivers.dbc.axis import Axis
 from drivers.dbc.binding import DatabaseCache, bind_motor
 from drivers.dbc.codec import DbcCodec, describe_fault
 from drivers.dbc.options import DbcOptions, motor_where, parse_options
+from gateway.core.errors import EncodeError
 from gateway.core.types import WheelFeedback
 from gateway.drive.claims import FrameClaim
 from gateway.drive.driver import MotorDriver
@@ -140,6 +145,8 @@ class DbcDriver(MotorDriver[DbcOptions]):
         self._rx = self.codec.rx
         #: Per motor, the command signal value of this cycle (reused).
         self._values: list[float] = [0.0] * len(self.motors)
+        #: The motors that were silent when they were enabled (see :meth:`_poll`).
+        self._unreached: set[int] = set()
         self._claims = self._declare()
         self._names = {
             (g.frame_id, g.extended): str(g.message.name)
@@ -192,11 +199,34 @@ class DbcDriver(MotorDriver[DbcOptions]):
         frames = self.codec.encode_mode(hold)
         for i in range(len(self.motors)):
             self.set_armed(i, True)
+        self._unreached = {i for i in range(len(self.motors)) if not self.live.alive(i, now_s)}
         return frames + [f for f in self._with_enable(True, hold) if f not in frames]
+
+    def _poll(self, now_s: float) -> list[Frame]:
+        """The mode and enable messages again, once a motor that was silent when it was enabled
+        is heard: a controller powered after the gateway missed them, and neither is answered.
+        (Not the command messages, which go out every cycle with the motors' own values.)"""
+        if not self._unreached:
+            return []
+        heard = {i for i in self._unreached if self.live.alive(i, now_s)}
+        if not heard:
+            return []
+        self._unreached -= heard
+        if not any(self.is_armed(i) for i in heard):
+            return []
+        hold = self._hold()
+        try:
+            frames = [*self.codec.encode_mode(hold), *self.codec.encode_enable(True, hold)]
+        except EncodeError:  # a steering actuator whose position is not known yet
+            self._unreached |= heard
+            return []
+        commands = self.codec.command_ids
+        return [f for f in frames if f.arbitration_id not in commands]
 
     def disable(self, now_s: float) -> list[Frame]:
         """A zero velocity command (drive motors) or a position command where it stands
         (steering actuators), then the disarming frames (if an enable signal is set)."""
+        self._unreached = set()
         for i in range(len(self.motors)):
             self.set_armed(i, False)
         return self._with_enable(False, self._hold())
