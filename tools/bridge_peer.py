@@ -20,6 +20,7 @@ import json
 import socket
 import subprocess
 import sys
+import threading
 import time
 from typing import TYPE_CHECKING, Any
 
@@ -82,11 +83,19 @@ def ros_node(args: argparse.Namespace) -> None:
         key = key.rsplit("/", 1)[0] + "/" + ros2.HUMBLE_TYPE_HASH
     pub = s.declare_publisher(key)
 
+    # The subscriptions' callbacks run on Zenoh's threads and may fire (the gateway publishes
+    # all the time) before this thread has printed ``ready``: they print nothing until it has,
+    # and one line at a time, so that ``ready`` is always the first line.
+    out = threading.Lock()
+    started = False
+
     def show(what: str, data: dict[str, object]) -> None:
         if args.quiet:
             return
-        sys.stdout.write(json.dumps({"topic": what, **data}) + "\n")
-        sys.stdout.flush()
+        with out:
+            if started:
+                sys.stdout.write(json.dumps({"topic": what, **data}) + "\n")
+                sys.stdout.flush()
 
     def on_odom(sample: Any) -> None:
         o = ros2.decode_odometry(sample.payload.to_bytes())
@@ -106,8 +115,10 @@ def ros_node(args: argparse.Namespace) -> None:
                                                               ros2.TF_MESSAGE), on_tf)]
     twist = ros2.Twist3D(args.vx, 0.0, 0.0, 0.0, 0.0, args.wz)
     seq = 0
-    sys.stdout.write("ready\n")
-    sys.stdout.flush()
+    with out:
+        sys.stdout.write("ready\n")
+        sys.stdout.flush()
+        started = True
     while True:
         seq += 1
         now = time.time_ns()
