@@ -24,7 +24,7 @@ from drivers.cia402.codec import INT32_RANGE, position_to_raw, velocity_to_raw
 from drivers.cia402.enums import NmtState, State
 from drivers.cia402.faults import describe_emcy, emcy_faults, is_error_reset
 from drivers.cia402.phase import Phase
-from drivers.cia402.targets import target_counts, wrap_delta
+from drivers.cia402.targets import target_counts
 from gateway.core.protection import ProtectionState
 from gateway.core.types import DriveFault, WheelFeedback
 
@@ -44,6 +44,7 @@ _TWO_PI = 2.0 * math.pi
 _RPM_PER_RAD_S = 60.0 / (2.0 * math.pi)
 _RAD_S_PER_RPM = 2.0 * math.pi / 60.0
 _I32_MIN, _I32_MAX = INT32_RANGE
+_HALF_SPAN, _SPAN = 1 << 31, 1 << 32
 
 
 @dataclass(slots=True)
@@ -134,12 +135,13 @@ class Axis:
         """A feedback TPDO: statusword and position actual value (``position``) or velocity
         actual value.  The wheel's feedback, once a position came (else ``None``)."""
         seq = self.seq
-        seq.on_status(statusword)
+        if statusword != seq.statusword:  # (the state follows from the word alone)
+            seq.on_status(statusword)
         sign, gear = self.sign, self.gear
         if position:
             last = self.last_raw
-            if last is not None:
-                self.counts += wrap_delta(last, value)
+            if last is not None:  # targets.wrap_delta written out: the int32 counter's step
+                self.counts += (value - last + _HALF_SPAN) % _SPAN - _HALF_SPAN
             elif self.steer:
                 self.counts = value  # absolute: zero_rad is in the drive's own frame
             self.last_raw = value

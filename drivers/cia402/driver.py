@@ -223,6 +223,11 @@ class Cia402Driver(MotorDriver[Cia402Options]):
         out = self.host.poll(now_s)
         for i, axis in enumerate(self._axes):
             seq = axis.seq
+            if (seq.phase is _ARMED and axis.published and seq.state is _RUNNING
+                    and axis.emcy is None and not axis.restart_pending):
+                # The steady state (Axis.running, published): the sequence has no step to
+                # take and the base nothing new to hear.
+                continue
             if axis.restart_pending:
                 axis.restart_pending = False
                 if seq.phase in ENABLING:
@@ -255,7 +260,13 @@ class Cia402Driver(MotorDriver[Cia402Options]):
         if ((kind is _POSITION or kind is _VELOCITY) and len(data) == _PDO_SIZE
                 and not frame.is_remote_frame):  # a TPDO: most of the traffic
             word, value = _PDO_UNPACK(data)
-            self._on_pdo(i, axis, kind is _POSITION, word, value, now_s)
+            fb = axis.on_pdo(kind is _POSITION, word, value, now_s)
+            if fb is None:
+                self.heard(i, 0, now_s)
+            else:
+                self.store_feedback(i, fb)
+            if not (axis.published and axis.seq.state is _RUNNING):
+                self._refresh(i)
             return True
         try:
             msg = self.codec.decode(frame)
@@ -273,16 +284,6 @@ class Cia402Driver(MotorDriver[Cia402Options]):
             self.reject("unexpected SDO response")
         self._refresh(i)
         return True
-
-    def _on_pdo(self, i: int, axis: Axis, position: bool, word: int, value: int,
-                now_s: float) -> None:
-        fb = axis.on_pdo(position, word, value, now_s)
-        if fb is None:
-            self.heard(i, 0, now_s)
-        else:
-            self.store_feedback(i, fb)
-        if not (axis.published and axis.seq.state is _RUNNING):
-            self._refresh(i)
 
     def _ready_state(self, index: int) -> DriveState:
         """ENABLING while the enable sequence runs, else ENABLED when armed or DISABLED."""

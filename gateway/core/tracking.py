@@ -225,14 +225,17 @@ class TrackingMonitor:
         bands = self.dead_bands
         outside = False
         fresh = [0.0] * n  # each wheel's peak at the start of a new period, after this check
+        n_bands = len(bands)
         for i, (command, fb) in enumerate(zip(command_rad_s, feedback, strict=True)):
-            band = bands[i] if i < len(bands) else None
-            # In a band the controller does not speed-control, it stops the motor instead.
-            in_band = band is not None and band[0] < abs(command) < band[1]
-            cmd = 0.0 if in_band else command
-            size = abs(cmd)
-            peak[i] = max(peak[i], size)
-            fresh[i] = max(0.0, size)
+            cmd, size = command, abs(command)
+            if i < n_bands and (band := bands[i]) is not None and band[0] < size < band[1]:
+                # In a band the controller does not speed-control, it stops the motor instead.
+                cmd = size = 0.0
+            # (max written out: peak[i] = max(peak[i], size), fresh[i] = max(0.0, size).)
+            if size > peak[i]:  # noqa: PLR1730 - max() is a call per wheel per cycle
+                peak[i] = size
+            if size > 0.0:
+                fresh[i] = size
             if fb is None:
                 count[i] = 0.0
                 continue
@@ -249,8 +252,8 @@ class TrackingMonitor:
                 count[i] += dt * (min(off, RUNAWAY_WEIGHT_MAX) if runaway else 1.0)
                 if fault is None and count[i] >= hold:
                     fault = TrackingFault(i, cmd, fb.velocity_rad_s, window, count[i])
-            else:
-                count[i] = max(count[i] - dt, 0.0)
+            elif (c := count[i]):  # max(c - dt, 0.0), written out (steady: c is 0)
+                count[i] = c - dt if c > dt else 0.0
         if not outside and not any(count):
             self._quiet = (tuple(command_rad_s), tuple(feedback), bands, fresh)
         return fault
@@ -344,6 +347,6 @@ class SteerMonitor:
                 count[i] += dt
                 if fault is None and count[i] >= limits.time_s:
                     fault = SteerFault(i, cmd, fb.position_rad, window, count[i])
-            else:
-                count[i] = max(count[i] - dt, 0.0)
+            elif (c := count[i]):  # max(c - dt, 0.0), written out (steady: c is 0)
+                count[i] = c - dt if c > dt else 0.0
         return fault

@@ -183,9 +183,13 @@ class DriveState(enum.IntEnum):
     FAULT = 4
 
 
-@dataclass(frozen=True, slots=True)
-class WheelFeedback:
+class WheelFeedback(NamedTuple):
     """Decoded encoder feedback of one wheel, wheel side, after unwrapping.
+
+    Immutable; a named tuple rather than a frozen dataclass for the reason :class:`Frame` is:
+    the drivers build one for every feedback frame (eight per 1 ms cycle on a CiA 402 robot),
+    and it costs about 40 % less to construct (``timeit``: 0.19 us against 0.31 us for the
+    frozen dataclass it was).
 
     :param position_rad: wheel angle in rad, unwrapped, counted from the first sample.
     :param velocity_rad_s: wheel angular speed in rad/s.

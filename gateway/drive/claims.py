@@ -119,6 +119,11 @@ class FrameRouter(Generic[T]):
                 return owner
         return None
 
+    def exact(self) -> dict[tuple[int, bool], T]:
+        """``(identifier, extended)`` -> owner of every identifier the lookup holds (a copy);
+        the identifiers of wide claims are not in it."""
+        return dict(self._exact)
+
     def filters(self) -> tuple[CanFilter, ...]:
         """The receive filters of every claim, without repeats, in declaration order."""
         return tuple(dict.fromkeys(c.as_filter() for c, _ in self._claims))

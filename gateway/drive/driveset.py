@@ -24,7 +24,7 @@ from gateway.drive.claims import FrameRouter
 from gateway.drive.registry import get_driver_class
 
 if TYPE_CHECKING:
-    from collections.abc import Sequence
+    from collections.abc import Callable, Sequence
 
     from gateway.core.protection import Protection
     from gateway.core.settings import GatewayConfig
@@ -65,6 +65,11 @@ class DriveSet:
         self._router: FrameRouter[MotorDriver[Any]] = FrameRouter(
             (drv, drv.claims()) for drv, _ in self.groups
         )
+        #: ``(identifier, extended)`` -> the owning driver's ``on_frame``, for every exactly
+        #: claimed identifier: the loop's per-frame dispatch (:meth:`on_frame` for the rest).
+        self.takers: dict[tuple[int, bool], Callable[[Frame], bool]] = {
+            key: drv.on_frame for key, drv in self._router.exact().items()
+        }
         index = config.model.index
         #: Per steering actuator, the model indices of the wheels it turns.
         self.steered_by: tuple[tuple[int, ...], ...] = tuple(

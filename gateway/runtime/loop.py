@@ -175,15 +175,18 @@ class Gateway:
         edge = self.edge
         frames = edge.receive(now_s)
         if frames:
-            drives = self.drives
             ids = self.wg.ids
             twist_id = ids.twist if self.config.loop.can_input else -1
             twist_ext = ids.extended
+            take, other = self.drives.takers.get, self.drives.on_frame
             for frame in frames:
-                if frame.arbitration_id == twist_id and frame.is_extended_id == twist_ext:
+                ident, ext = frame.arbitration_id, frame.is_extended_id
+                if ident == twist_id and ext == twist_ext:
                     self.can_twists.handle(frame, now_s, out)
+                elif (taker := take((ident, ext))) is not None:
+                    taker(frame)
                 else:
-                    drives.on_frame(frame)
+                    other(frame)
         sup = self.supervisor
         if edge.starved is not None or edge.bus_state_change is not None:
             self._bus_trouble(out)

@@ -1,14 +1,15 @@
 """The per-frame fast paths give the same results as the general code they shortcut.
 
 Issue 6: received frames built past ``Frame.__new__``, the CiA 402 statusword table and the
-ODrive error-word mapping on plain ints.  Issue 15: the bus edge's frame tallies counted in C.
-And the ODrive velocity frames against the checked builder.
+ODrive error-word mapping on plain ints.  Issue 15: the bus edge's frame tallies counted in C,
+and the loop's dispatch table.  And the ODrive velocity frames against the checked builder.
 """
 
 from __future__ import annotations
 
 import math
 import random
+from typing import TYPE_CHECKING
 
 import can
 import pytest
@@ -31,8 +32,13 @@ from gateway.core.types import (
     Frame,
     frame_of,
 )
+from gateway.drive.driveset import DriveSet
 from gateway.runtime.loop import Gateway
 from gateway.wire.busload import frame_bits
+from tests.conftest import CONFIG_DIR
+
+if TYPE_CHECKING:
+    from pathlib import Path
 
 
 def test_received_frames_equal_frame_field_for_field(channel: str) -> None:
@@ -144,3 +150,26 @@ def test_odrive_velocity_frames_match_the_checked_builder(
     assert [tuple(f) for f in fast] == [tuple(f) for f in slow]
     assert frame_of((0x123, b"\x01", True, False, 1, 2.5)) == Frame(0x123, b"\x01", True,
                                                                     timestamp_s=2.5)
+
+
+@pytest.mark.parametrize("path", [None, *sorted(CONFIG_DIR.glob("*.yaml"))],
+                         ids=lambda p: "default" if p is None else p.stem)
+def test_the_loops_dispatch_table_is_the_routers(path: Path | None) -> None:
+    """Issue 15: the loop hands a frame straight to ``DriveSet.takers[(id, extended)]``; that
+    is the ``on_frame`` of the driver the router names, for every identifier the drivers
+    claim, and the router's other identifiers (wide claims) are left to ``DriveSet.on_frame``."""
+    drives = DriveSet(load_config(path))
+    router = drives._router
+    claimed = [(ident, c.extended) for drv, _ in drives.groups for c in drv.claims()
+               if c.receive for ident in (c.identifiers() or [])]
+    assert claimed
+    assert set(drives.takers) == set(claimed)
+    for key, taker in drives.takers.items():
+        owner = router.owner(*key)
+        assert owner is not None and taker == owner.on_frame
+    rng = random.Random(5)
+    for _ in range(2000):
+        ext = rng.random() < 0.5
+        key = (rng.randrange(1 << (29 if ext else 11)), ext)
+        if key not in drives.takers:
+            assert router.owner(*key) is None or router._wide

@@ -12,6 +12,7 @@ import copy
 import dataclasses
 import math
 import random
+import re
 from typing import TYPE_CHECKING, Any
 
 import pytest
@@ -20,7 +21,7 @@ import gateway.runtime.loop
 from gateway.config import load_config
 from gateway.core.control import Accepted, Source
 from gateway.core.errors import KinematicsError
-from gateway.core.kinematics import apply_limits
+from gateway.core.kinematics import Odometry, apply_limits
 from gateway.core.kinematics.odometry import Pose, _advance, compose, se2_exp
 from gateway.core.types import (
     GatewayState,
@@ -53,13 +54,13 @@ def test_fk_fast_path_matches_numpy(path: Path | None) -> None:
             speeds[rng.randrange(model.n)] = None
         steer = model.neutral_steer
         try:
-            ref = model._fk.solve(speeds, steer)
+            ref = model.fk_solver.solve(speeds, steer)
         except KinematicsError:  # too few wheels measured: both paths refuse
             with pytest.raises(KinematicsError):
                 model.fk(speeds, steer)
             continue
         got = model.fk(speeds, steer)
-        fast += model._fk.plan(speeds) is not None
+        fast += model.fk_solver.plan(speeds) is not None
         assert _close(got.twist.vx_m_s, ref.twist.vx_m_s)
         assert _close(got.twist.vy_m_s, ref.twist.vy_m_s)
         assert _close(got.twist.wz_rad_s, ref.twist.wz_rad_s)
@@ -219,3 +220,42 @@ def test_ik_of_an_accepted_twist_is_the_loops_own_solve(channel: str) -> None:
                     assert rig.gw._solve(twist) is result.ik
                     assert result.ik == rig.gw.model.try_ik(twist, steer)
                 rig.advance(rng.choice((1, 5)) * rig.period)
+
+
+@pytest.mark.parametrize("path", CONFIGS, ids=lambda p: "default" if p is None else p.stem)
+def test_odometry_per_sample_path_is_the_general_one(path: Path | None) -> None:
+    """Issue 15: odometry's per-sample path (every wheel measured, no steering: the plan's
+    least squares of the changes) gives exactly the states of the general path, and leaves
+    every other sample (a wheel unmeasured, steering angles, a value that is not finite) to
+    it, error messages included."""
+    model = load_config(path).model
+    fast, general = Odometry(model), Odometry(model)
+    general._plan = None
+    steered = any(w.steered for w in model.wheels)
+    assert (fast._plan is None) == steered
+    rng = random.Random(4)
+    positions = [0.0] * model.n
+    taken = 0
+    for k in range(300):
+        positions = [p + rng.uniform(-0.05, 0.05) for p in positions]
+        sample: list[float | None] = list(positions)
+        if k % 17 == 5:
+            sample[rng.randrange(model.n)] = None
+        if k % 29 == 7:
+            sample[rng.randrange(model.n)] = rng.choice([math.nan, math.inf])
+        steer = None if k % 3 else [0.0 if w.steered else None for w in model.wheels]
+        if steered and k % 5 == 0:
+            steer = [rng.uniform(-0.3, 0.3) if w.steered else None for w in model.wheels]
+        t = 0.001 * k
+        try:
+            want = general.update(sample, t, steer)
+        except KinematicsError as err:
+            with pytest.raises(KinematicsError, match=re.escape(str(err))):
+                fast.update(sample, t, steer)
+            continue
+        before = fast._last
+        got = fast.update(sample, t, steer)
+        taken += fast._plan is not None and before is not None and None not in sample \
+            and None not in before
+        assert got == want
+    assert (taken > 150) == (not steered)

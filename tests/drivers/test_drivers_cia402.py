@@ -7,6 +7,7 @@ on a bus: ``test_drivers_cia402_bus``).
 from __future__ import annotations
 
 import math
+import random
 import subprocess
 import sys
 from pathlib import Path
@@ -15,10 +16,11 @@ import pytest
 
 import drivers.cia402
 from drivers.cia402 import Cia402Driver, Cia402Options
-from drivers.cia402.codec import make_heartbeat, make_rpdo, velocity_to_raw
-from drivers.cia402.enums import DataType, NmtState
+from drivers.cia402.codec import PDO_STRUCT, make_heartbeat, make_rpdo, velocity_to_raw
+from drivers.cia402.enums import DataType, NmtState, state_from_statusword
 from drivers.cia402.sdo import make_sdo_download, make_sdo_download_ack
 from drivers.cia402.sim import Cia402Simulator
+from drivers.cia402.targets import wrap_delta
 from gateway.core.errors import ConfigError, DecodeError, EncodeError
 from gateway.core.types import Frame
 from gateway.drive.registry import get_driver_class
@@ -191,3 +193,37 @@ def test_the_simulator_is_registered_apart_and_never_imported_by_the_driver() ->
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True)
     assert "drivers.cia402.driver" in production and out.stdout.strip() == "[]"
+
+
+# ===================================================================== the TPDO path's shortcuts
+
+
+def test_tpdo_counts_and_state_follow_every_frame() -> None:
+    """The TPDO path writes ``wrap_delta`` out and decodes a statusword only when it changes
+    (issue 15): the unwrapped count is the sum of every step across the int32 wrap, and the
+    state always the one of the last statusword, over random TPDO streams."""
+    rng = random.Random(15)
+    words = [0x0237, 0x0233, 0x0231, 0x0250, 0x0218, 0x021F, 0x1237]
+    for _ in range(20):
+        drv = Cia402Driver([factories.motor("cia402", 3, "left")])
+        axis = drv._axes[0]
+        raw = rng.choice([0, rng.randrange(-(1 << 31), 1 << 31), (1 << 31) - 5, -(1 << 31) + 5])
+        first, word, expected = raw, words[0], 0
+        for k in range(200):
+            if rng.random() < 0.2:
+                word = rng.choice(words)
+            position = rng.random() < 0.5
+            if position:
+                step = rng.choice([rng.randrange(-5000, 5000), rng.randrange(-(1 << 31), 1 << 31)])
+                previous, raw = raw, (raw + step + (1 << 31)) % (1 << 32) - (1 << 31)
+                if k:
+                    expected += wrap_delta(previous, raw)
+            frame = Frame(0x383 if position else 0x483,
+                          PDO_STRUCT.pack(word, raw if position else rng.randrange(-9999, 9999)),
+                          timestamp_s=0.001 * k)
+            if k == 0 and not position:
+                frame = Frame(0x383, PDO_STRUCT.pack(word, raw), timestamp_s=0.0)
+            assert drv.on_frame(frame)
+            assert axis.seq.statusword == word
+            assert axis.seq.state is state_from_statusword(word)
+            assert axis.counts == expected, (first, k)

@@ -4,7 +4,7 @@ recovery, silence, stopping, and drives that take their time."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import pytest
 
@@ -313,3 +313,45 @@ def test_a_slow_drive_is_waited_for_up_to_the_step_timeout(
                 "0x000F") in b.drv.status(b.t)[0].detail
         b.run(1.0, [0.0])  # the driver's SHUTDOWN overtook the slow transition
         assert b.sims[0].state is State.READY_TO_SWITCH_ON
+
+
+def test_the_polls_steady_state_shortcut_skips_nothing(
+        bench: Callable[..., Bench], monkeypatch: pytest.MonkeyPatch) -> None:
+    """Issue 15: the driver's poll skips a node in the steady state.  At every cycle of an
+    enable, a run, an EMCY fault, its recovery and a reboot, for every node that the poll
+    skipped, the sequence's poll has nothing to send and publishing the node to the base
+    changes nothing."""
+    b = bench([LEFT, RIGHT])
+    drv = b.drv
+    polled: list[int] = []
+    for i, axis in enumerate(drv._axes):
+        def seq_poll(now_s: float, real: Any = axis.seq.poll, i: int = i) -> list[Frame]:
+            polled.append(i)
+            return real(now_s)  # type: ignore[no-any-return]
+        monkeypatch.setattr(axis.seq, "poll", seq_poll)
+    poll = drv._poll
+    skipped = []
+
+    def checking(now_s: float) -> list[Frame]:
+        polled.clear()
+        out = poll(now_s)
+        for i, axis in enumerate(drv._axes):
+            if i not in polled:
+                before = (drv.status(now_s)[i], axis.published, drv._armed[i])
+                assert axis.seq.poll(now_s) == []
+                drv._refresh(i)
+                assert (drv.status(now_s)[i], axis.published, drv._armed[i]) == before
+                skipped.append(i)
+        return out
+
+    monkeypatch.setattr(drv, "_poll", checking)
+    assert b.enable([1.0, -1.0])
+    b.run(0.2, [1.0, -1.0])
+    b.sims[0].inject(SimFault.FAULT)
+    assert b.run(0.2, [1.0, -1.0], until=lambda: b.state() is DriveState.FAULT)
+    b.sims[0].clear(SimFault.FAULT)
+    assert b.enable([1.0, -1.0])
+    b.send([make_nmt(NmtCommand.RESET_NODE, 5)])
+    assert b.run(0.3, [1.0, -1.0], until=lambda: b.state(1) is DriveState.FAULT)
+    b.run(0.1, [1.0, -1.0])
+    assert skipped.count(0) > 300 and skipped.count(1) > 200

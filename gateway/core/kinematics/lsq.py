@@ -50,15 +50,32 @@ class FkPlan:
         :param per_wheel: whether to return the per-wheel residuals (measured minus
             predicted rim speed; ``None`` when not asked for).
         """
+        rhs = [radius * float(wheel_rad_s[i] or 0.0) for i, radius in self.measured]
+        return self._fit(n, rhs, per_wheel)
+
+    def increment(
+        self, now: Sequence[float], before: Sequence[float]
+    ) -> tuple[float, float, float, float]:
+        """:meth:`solve` of the changes ``now - before`` of every wheel's angle, as
+        ``(dx, dy, dtheta, RMS residual)``, for the plan with every wheel measured: the same
+        arithmetic without the list of changes (odometry's per-sample path).
+
+        A change that is not finite makes all three displacements non-finite (the caller's
+        check).
+        """
+        rhs = [radius * ((now[i] - before[i]) or 0.0) for i, radius in self.measured]
+        vx, vy, wz, rms, _ = self._fit(0, rhs, False)
+        return vx, vy, wz, rms
+
+    def _fit(
+        self, n: int, rhs: list[float], per_wheel: bool
+    ) -> tuple[float, float, float, float, list[float] | None]:
+        """The least squares of the right-hand sides ``rhs`` of the measured wheels' rows."""
         vx = vy = wz = 0.0
-        px, py, pw = self.pinv_x, self.pinv_y, self.pinv_w
-        rhs = []
-        for k, (i, radius) in enumerate(self.measured):
-            b = radius * float(wheel_rad_s[i] or 0.0)
-            rhs.append(b)
-            vx += px[k] * b
-            vy += py[k] * b
-            wz += pw[k] * b
+        for px, py, pw, b in zip(self.pinv_x, self.pinv_y, self.pinv_w, rhs, strict=True):
+            vx += px * b
+            vy += py * b
+            wz += pw * b
         residuals = [0.0] * n if per_wheel else None
         squares = 0.0
         for (i, _), (a0, a1, a2), b in zip(self.measured, self.rolling, rhs, strict=True):

@@ -112,7 +112,7 @@ class RobotModel:
         self.neutral_steer: tuple[float | None, ...] = tuple(
             0.0 if w.steered else None for w in wheels
         )
-        self._fk = FkSolver(self.wheels, self.neutral_steer)
+        self.fk_solver = FkSolver(self.wheels, self.neutral_steer)
         self.mobility = self._mobility()
 
     # ----------------------------------------------------------------- matrices
@@ -351,7 +351,7 @@ class RobotModel:
         if plan is not None:
             vx, vy, wz, rms, per_wheel = plan.solve(self.n, wheel_rad_s, per_wheel=True)
             return FkResult(Twist(vx, vy, wz), tuple(per_wheel or ()), rms)
-        return self._fk.solve(wheel_rad_s, st)
+        return self.fk_solver.solve(wheel_rad_s, st)
 
     def fk_twist(
         self,
@@ -367,7 +367,7 @@ class RobotModel:
         if plan is not None:
             vx, vy, wz, rms, _ = plan.solve(self.n, wheel_rad_s, per_wheel=False)
             return vx, vy, wz, rms
-        r = self._fk.solve(wheel_rad_s, st)
+        r = self.fk_solver.solve(wheel_rad_s, st)
         return r.twist.vx_m_s, r.twist.vy_m_s, r.twist.wz_rad_s, r.residual_m_s
 
     def _fk_checked(
@@ -384,7 +384,7 @@ class RobotModel:
                 )
         st = self._steer_or_neutral(steer)
         # Neutral angles (None or 0 everywhere): the rows are the precomputed ones.
-        return st, (None if any(st) else self._fk.plan(wheel_rad_s))
+        return st, (None if any(st) else self.fk_solver.plan(wheel_rad_s))
 
     def index(self, name: str) -> int:
         """Position of the wheel ``name``.

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, cast
 
 from gateway.core.errors import KinematicsError
 from gateway.core.types import Twist
@@ -109,6 +109,9 @@ class Odometry:
         self.state = OdometryState(pose or Pose(), Twist(), 0.0, 0.0, 0.0)
         self._last: list[float | None] | None = None
         self._last_steer: Sequence[float | None] | None = None
+        #: The least squares with every wheel measured, of a model without steered wheels
+        #: (``None`` otherwise): the per-sample path of :meth:`update`.
+        self._plan = model.fk_solver.plan([0.0] * model.n)
 
     def reset(self, pose: Pose | None = None) -> None:
         """Set the pose (origin by default) and zero the distance; keeps the last sample."""
@@ -129,12 +132,30 @@ class Odometry:
         :param steer_rad: steering angles at this sample (steered wheels).
         :raises KinematicsError: for wrong lengths or too few measured wheels.
         """
-        if len(positions_rad) != self.model.n:
+        n = self.model.n
+        if len(positions_rad) != n:
             raise KinematicsError(
-                f"Expected {self.model.n} wheel positions, but got {len(positions_rad)}"
+                f"Expected {n} wheel positions, but got {len(positions_rad)}"
             )
-        steer = steer_rad if steer_rad is not None else self.model.neutral_steer
         last = self._last
+        plan = self._plan
+        if (
+            plan is not None
+            and last is not None
+            and None not in positions_rad
+            and None not in last
+            and (steer_rad is None or (len(steer_rad) == n and not any(steer_rad)))
+        ):
+            # Every wheel measured now and before, no steering: the plan's least squares of
+            # the changes, as fk_twist would solve them, whose checks a finite result passes
+            # (a change that is not finite goes the general way, which names it).
+            dx, dy, dtheta, residual = plan.increment(
+                cast("Sequence[float]", positions_rad), cast("Sequence[float]", last))
+            if math.isfinite(dx + dy + dtheta):
+                self._last = list(positions_rad)
+                self._last_steer = self.model.neutral_steer if steer_rad is None else steer_rad
+                return self._step(dx, dy, dtheta, residual, timestamp_s)
+        steer = steer_rad if steer_rad is not None else self.model.neutral_steer
         self._last = list(positions_rad)
         last_steer, self._last_steer = self._last_steer, steer
         if last is None:
@@ -154,6 +175,12 @@ class Odometry:
                 for a, b in zip(steer, last_steer, strict=True)
             ]
         dx, dy, dtheta, residual = self.model.fk_twist(deltas, mid)
+        return self._step(dx, dy, dtheta, residual, timestamp_s)
+
+    def _step(
+        self, dx: float, dy: float, dtheta: float, residual: float, timestamp_s: float
+    ) -> OdometryState:
+        """Move the pose by the body displacement of one interval ending at ``timestamp_s``."""
         state = self.state
         pose = _advance(state.pose, dx, dy, dtheta)
         dt = timestamp_s - state.timestamp_s
