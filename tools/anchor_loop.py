@@ -107,11 +107,13 @@ class Robot:
         return cls.from_mapping(yaml.safe_load(path.read_text(encoding="utf-8")), str(path))
 
     @classmethod
-    def from_mapping(cls, raw: dict[str, Any], source: str = "<mapping>") -> Robot:
+    def from_mapping(cls, raw: dict[str, Any], source: str = "<mapping>",
+                     driver: str = "odrive") -> Robot:
         """The robot of a parsed configuration: ``geometry``, ``motor_defaults``, ``motors``.
 
+        :param driver: the motors' driver (``dji``: the loop of :mod:`anchor_dji`).
         :raises ValueError: for another drive, another roller angle than 45 degrees, or motors
-            that are not four ODrives on the four corners.
+            that are not four motors of ``driver`` on the four corners.
         """
         if raw.get("drive") != "mecanum":
             raise ValueError(f"{source}: drive: expected 'mecanum', got {raw.get('drive')!r}")
@@ -122,8 +124,8 @@ class Robot:
         defaults = raw.get("motor_defaults", {})
         motors = [{**defaults, **raw["motors"][name]} for name in CORNERS]
         if sorted(raw["motors"]) != sorted(CORNERS) or any(
-                m.get("driver") != "odrive" for m in motors):
-            raise ValueError(f"{source}: motors: expected four 'odrive' motors named "
+                m.get("driver") != driver for m in motors):
+            raise ValueError(f"{source}: motors: expected four {driver!r} motors named "
                              f"{', '.join(CORNERS)}, got {sorted(raw['motors'])}")
         rpms = {float(m["max_rpm"]) for m in motors}
         return cls(
@@ -146,6 +148,9 @@ def wheel_speeds(robot: Robot, vx: float, vy: float, wz: float) -> tuple[float, 
 
 class AnchorLoop:
     """The hand-written loop: one :meth:`cycle` per period on an open python-can bus."""
+
+    #: The frames one cycle sends (one Set_Input_Vel per axis).
+    FRAMES_PER_CYCLE = 4
 
     def __init__(self, robot: Robot, bus: can.BusABC) -> None:
         self.robot = robot
@@ -178,6 +183,11 @@ class AnchorLoop:
         for node in self.robot.node_ids:
             self._send(node, SET_INPUT_VEL, VEL.pack(0.0, 0.0))
             self._send(node, SET_AXIS_STATE, U32.pack(AXIS_IDLE))
+
+    def healthy(self) -> bool:
+        """Every axis error-free in CLOSED_LOOP_CONTROL."""
+        return not any(self.axis_error) and all(
+            s == AXIS_CLOSED_LOOP_CONTROL for s in self.axis_state)
 
     def set_twist(self, vx: float, vy: float, wz: float) -> None:
         """The body twist to follow (m/s, m/s, rad/s)."""

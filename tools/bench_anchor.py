@@ -33,8 +33,12 @@ exist; the median of ``--instr-runs`` runs, as a whole interpreter start-up vari
 per cent from run to run even so), and the median and best wall time of ``--runs`` runs each,
 interleaved.
 
-Run: ``.venv/bin/python tools/bench_anchor.py [--instr-cycles N] [--verify] [--runs R]
-[--instr-runs K] [--skip-cycle] [--skip-startup]``.
+``--protocol dji``: the same robot on four DJI C620 ESCs, against :mod:`anchor_dji` (the
+builder's loop with a rotor-speed PI per motor, as the ESCs take a current only): the
+feedback is the ESCs' own, every ESC at 1 kHz; the anchor sends one frame a cycle.
+
+Run: ``.venv/bin/python tools/bench_anchor.py [--protocol odrive|dji] [--instr-cycles N]
+[--verify] [--runs R] [--instr-runs K] [--skip-cycle] [--skip-startup]``.
 """
 
 from __future__ import annotations
@@ -79,16 +83,19 @@ def check_robot() -> None:
                          f"default robot {default}")
 
 
-def run_cycle(cycles: int, verify: bool) -> list[Row]:
+def run_cycle(cycles: int, verify: bool, protocol: str = "odrive") -> list[Row]:
     """Instructions per cycle of the four loops; prints the method and the table."""
     print(_doc("Per cycle") + "\n\n" + _doc("The frames") + "\n")
+    if protocol == "dji":
+        print(_doc("``--protocol dji``") + "\n")
     method = (bench_throughput.__doc__ or "").split("\n\nInstructions", 1)[1]
     print("The throughput benchmark's instruction method:\nInstructions"
           + method.split("\n\nRun:")[0].split("  ``bench_anchor.py``")[0] + "\n")
-    print(f"Python {platform.python_version()} on {platform.machine()}, N = {cycles} cycles"
+    print(f"Python {platform.python_version()} on {platform.machine()}, {protocol}, "
+          f"N = {cycles} cycles"
           f"{', --verify' if verify else ''}; measured "
           f"{time.strftime('%Y-%m-%d %H:%M:%S %Z')}\n", flush=True)
-    rows, drift = throughput_instructions.measure("odrive", cycles, verify, anchor=True)
+    rows, drift = throughput_instructions.measure(protocol, cycles, verify, anchor=True)
     print("mix        gw sent  anchor sent  recv   gw Ir/c  anchor Ir/c  pcan Ir/c  harn Ir/c"
           "  gw/anchor  gw/pcan"
           + ("  repeat gw/anchor/pcan       linearity gw/anchor/pcan" if verify else ""))
@@ -184,13 +191,15 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--runs", type=int, default=30, help="wall-time runs per command")
     parser.add_argument("--instr-runs", type=int, default=5,
                         help="start-up runs under callgrind per command (median)")
+    parser.add_argument("--protocol", choices=("odrive", "dji"), default="odrive",
+                        help="the motors of the cycle's robot and anchor (dji: anchor_dji.py)")
     parser.add_argument("--skip-cycle", action="store_true")
     parser.add_argument("--skip-startup", action="store_true")
     args = parser.parse_args(argv)
     callgrind.valgrind()
     check_robot()
     if not args.skip_cycle:
-        run_cycle(args.instr_cycles, args.verify)
+        run_cycle(args.instr_cycles, args.verify, args.protocol)
     if not args.skip_startup:
         run_startup(args.runs, args.instr_runs)
 

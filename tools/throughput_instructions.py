@@ -5,8 +5,9 @@ halves: the measuring process, which runs under callgrind (``main`` below: one p
 it sets up once and forks one child per measured loop), and :func:`run_instructions`, the
 driver that starts those processes, differences their counts and prints the table.
 
-With ``anchor=True`` (ODrive only) a fourth loop is measured on the same delivered frames: the
-hand-written loop of :mod:`anchor_loop`, on a bus pair of its own (:mod:`bench_anchor`).
+With ``anchor=True`` (ODrive and DJI) a fourth loop is measured on the same delivered frames:
+the hand-written loop of :mod:`anchor_loop` (:mod:`anchor_dji`), on a bus pair of its own
+(:mod:`bench_anchor`).
 """
 
 from __future__ import annotations
@@ -27,7 +28,8 @@ from pathlib import Path
 
 import callgrind
 import can
-from anchor_loop import AXIS_CLOSED_LOOP_CONTROL, AnchorLoop, Robot
+from anchor_dji import DjiAnchorLoop
+from anchor_loop import AnchorLoop, Robot
 from can.interfaces.virtual import VirtualBus
 from throughput_rig import PERIOD_S, PROTOCOLS, TWIST, Bench, robot_raw
 
@@ -72,11 +74,18 @@ class Anchor:
 
     @classmethod
     def open(cls, bench: Bench) -> Anchor:
-        if bench.protocol != "odrive":
-            raise SystemExit(f"--anchor: the anchor loop drives ODrives, not {bench.protocol}")
         channel = f"{bench.channel}-anchor"
-        robot = Robot.from_mapping(robot_raw(bench.protocol, channel), "<bench odrive>")
-        loop = AnchorLoop(robot, can.Bus(interface="virtual", channel=channel))
+        raw, bus = robot_raw(bench.protocol, channel), can.Bus(interface="virtual",
+                                                               channel=channel)
+        loop: AnchorLoop
+        if bench.protocol == "odrive":
+            loop = AnchorLoop(Robot.from_mapping(raw, "<bench odrive>"), bus)
+        elif bench.protocol == "dji":
+            loop = DjiAnchorLoop.from_mapping(raw, bus, "<bench dji>")
+        else:
+            bus.shutdown()
+            raise SystemExit(f"--anchor: the anchor loops drive ODrives or DJI ESCs, not "
+                             f"{bench.protocol}")
         loop.set_twist(TWIST.vx_m_s, TWIST.vy_m_s, TWIST.wz_rad_s)
         return cls(loop, can.Bus(interface="virtual", channel=channel))
 
@@ -87,10 +96,8 @@ class Anchor:
             pass
 
     def healthy(self) -> bool:
-        """Every axis in CLOSED_LOOP_CONTROL without error, and every frame taken."""
-        loop = self.loop
-        return (not any(loop.axis_error) and _queue(loop.bus).empty()
-                and all(s == AXIS_CLOSED_LOOP_CONTROL for s in loop.axis_state))
+        """The loop's own check (every axis running), and every frame taken."""
+        return self.loop.healthy() and _queue(self.loop.bus).empty()
 
     def close(self) -> None:
         self.loop.bus.shutdown()
@@ -231,7 +238,8 @@ def measure(protocol: str, cycles: int, verify: bool, anchor: bool = False
             ) -> tuple[list[Row], float]:
     """One protocol under callgrind: its rows and the parent's drift per fork.
 
-    :param anchor: also measure the hand-written loop of :mod:`anchor_loop` (ODrive only).
+    :param anchor: also measure the hand-written loop (ODrive: :mod:`anchor_loop`, DJI:
+        :mod:`anchor_dji`).
     """
     multiples = (1, 2, 1, 3) if verify else (1, 2)
     sides = (*SIDES, ANCHOR) if anchor else SIDES
@@ -276,9 +284,10 @@ def measure(protocol: str, cycles: int, verify: bool, anchor: bool = False
                              f"the gateway {gwf[0]}+{gwf[1]}")
         anchor_sent = [m["anchor_sent"] for m in metas if m["mix"] == mix
                        and m["side"] == ANCHOR and m["n"] == cycles]
-        if anchor_sent and anchor_sent[0] != 4 * cycles:
+        expected = (DjiAnchorLoop if protocol == "dji" else AnchorLoop).FRAMES_PER_CYCLE * cycles
+        if anchor_sent and anchor_sent[0] != expected:
             raise SystemExit(f"{protocol} {mix}: the anchor loop sent {anchor_sent[0]} frames "
-                             f"in {cycles} cycles, expected {4 * cycles}")
+                             f"in {cycles} cycles, expected {expected}")
         rows.append(Row(protocol, mix, gwf[0] / cycles, gwf[1] / cycles, per_cycle, checks,
                         anchor_sent[0] / cycles if anchor_sent else 0.0))
     return rows, drift

@@ -14,7 +14,6 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-import can
 import cantools
 import pytest
 
@@ -29,8 +28,7 @@ from anchor_loop import DEFAULT_CONFIG, AnchorLoop, Robot, wheel_speeds
 from throughput_rig import Sims
 
 if TYPE_CHECKING:
-    from collections.abc import Iterator
-
+    import can
     from click.testing import CliRunner
 
     from gateway.core.settings import GatewayConfig
@@ -49,16 +47,6 @@ def config() -> GatewayConfig:
 @pytest.fixture
 def robot() -> Robot:
     return Robot.from_file()
-
-
-@pytest.fixture
-def buses(channel: str) -> Iterator[tuple[can.BusABC, can.BusABC]]:
-    """The anchor's bus and another on the same virtual channel."""
-    a = can.Bus(interface="virtual", channel=channel)
-    b = can.Bus(interface="virtual", channel=channel)
-    yield a, b
-    a.shutdown()
-    b.shutdown()
 
 
 @pytest.mark.parametrize("twist", TWISTS)
