@@ -34,6 +34,23 @@ _counter = itertools.count()
 #: take them so the gateway sets the watchdog, as ``controller_watchdog: required`` demands.
 SIM_ODRIVE_ENDPOINTS = {"fw_version": "0.0.0", "enable_watchdog": 1, "watchdog_timeout": 2}
 
+#: A mecanum robot with two drivers, their motors interleaved (VESC, ODrive, VESC, ODrive):
+#: the drive set's status order differs from its drivers' order.
+MIXED_ROBOT: dict[str, object] = {
+    "name": "mixed", "drive": "mecanum",
+    "geometry": {"wheel_radius": 0.05, "wheelbase": 0.4, "track": 0.36},
+    "motor_defaults": {"gear_ratio": 10.0, "max_rpm": 3000},
+    "motors": {
+        "front_left": {"driver": "vesc", "node_id": 1, "pole_pairs": 7},
+        "front_right": {"driver": "odrive", "node_id": 2,
+                        "watchdog_endpoints": SIM_ODRIVE_ENDPOINTS},
+        "rear_left": {"driver": "vesc", "node_id": 3, "pole_pairs": 7},
+        "rear_right": {"driver": "odrive", "node_id": 4,
+                       "watchdog_endpoints": SIM_ODRIVE_ENDPOINTS},
+    },
+    "bus": {"interface": "virtual", "channel": "unused"},
+}
+
 
 @pytest.fixture
 def channel(request: pytest.FixtureRequest) -> str:

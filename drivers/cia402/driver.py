@@ -285,6 +285,14 @@ class Cia402Driver(MotorDriver[Cia402Options]):
         self._refresh(i)
         return True
 
+    def enable_failed(self) -> list[int]:
+        """The nodes whose enable sequence failed (a step without an answer, a write the drive
+        refused, a transition it did not make, the base's protection failure): the reason is
+        in their fault detail."""
+        base = super().enable_failed()
+        return [i for i, axis in enumerate(self._axes)
+                if axis.seq.phase is Phase.FAILED or i in base]
+
     def _ready_state(self, index: int) -> DriveState:
         """ENABLING while the enable sequence runs, else ENABLED when armed or DISABLED."""
         phase = self._axes[index].seq.phase

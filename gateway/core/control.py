@@ -257,6 +257,8 @@ class Supervisor:
                 self._running_since_s = now_s
                 self._last_twist_s = now_s
                 return None
+            if not self._pending_enable and (failed := board.enable_failed()):
+                return self._fault(board, now_s, failed, "failed its enable sequence")
             if now_s - self._enable_started_s > self.cfg.enable_timeout_s:
                 late = [i for i, s in enumerate(states) if s is not DriveState.ENABLED]
                 return self._fault(board, now_s, late, "did not enable within "
@@ -395,6 +397,4 @@ class Supervisor:
             return self.fault_code, f"gateway is in FAULT: {self.reason}"
         if self.state is GatewayState.ENABLING:
             return ErrorCode.NOT_ENABLED, "drives are still enabling"
-        return ErrorCode.NOT_ENABLED, (
-            f"gateway is {self.state.name}; send enable first"
-        )
+        return ErrorCode.NOT_ENABLED, f"gateway is {self.state.name}; send enable first"

@@ -117,6 +117,10 @@ class MotorBoard(Protocol):
     def status(self, now_s: float) -> Sequence[MotorStatus]:
         """Every motor's full status at ``now_s``."""
 
+    def enable_failed(self) -> Sequence[int]:
+        """The motors (positions in this order) whose enable sequence ended without arming
+        them: no use waiting for them until the next enable."""
+
 
 @dataclass(frozen=True, slots=True)
 class StatusBoard:
@@ -134,6 +138,10 @@ class StatusBoard:
     def troubled(self, now_s: float) -> bool:
         """Always ``True``: the states are at hand, read them."""
         return True
+
+    def enable_failed(self) -> list[int]:
+        """None: statuses say nothing of enable sequences."""
+        return []
 
     def motor_feedback(self) -> list[WheelFeedback | None]:
         """Every motor's feedback."""

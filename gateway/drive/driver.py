@@ -213,6 +213,11 @@ class MotorDriver(abc.ABC, Generic[OptT]):
     def _enable(self, now_s: float) -> list[Frame]:
         """Hook of :meth:`enable`: the frames that start the enable sequence."""
 
+    def enable_failed(self) -> list[int]:
+        """The motors whose enable sequence ended without arming them: waiting changes nothing
+        until the next :meth:`enable` (here: a protection failed under ``REQUIRED``)."""
+        return [i for i, why in enumerate(self._failed.why) if why]
+
     @abc.abstractmethod
     def disable(self, now_s: float) -> list[Frame]:
         """Frames that command zero speed and disarm where the protocol can (a steering
@@ -251,10 +256,9 @@ class MotorDriver(abc.ABC, Generic[OptT]):
         return tuple(dict.fromkeys(c.as_filter() for c in self.claims() if c.receive))
 
     def preview_command(self, setpoints: Sequence[float]) -> list[Frame]:
-        """The frames :meth:`command` would send for these setpoints from a freshly
-        enabled driver with no feedback (pure; for ``wheelgate frames`` and tests): a fresh
-        instance's; drivers whose frames depend on feedback override it and say what they
-        assume."""
+        """The frames :meth:`command` would send for these setpoints from a freshly enabled
+        driver with no feedback (pure; for ``wheelgate frames`` and tests): a fresh instance's;
+        drivers whose frames depend on feedback override it and say what they assume."""
         fresh = type(self)(self.motors)
         fresh.enable(0.0)
         return fresh.command(setpoints, 0.0)
@@ -263,12 +267,10 @@ class MotorDriver(abc.ABC, Generic[OptT]):
 
     def protection(self, index: int) -> Protection:
         """Motor ``index``'s controller-side protection (:mod:`gateway.core.protection`).
-
         The default is for protocols that cannot set a timeout over CAN: :attr:`Guard.STATED`
         from the motor's ``controller_timeout_s`` key (:data:`CONTROLLER_TIMEOUT_OPTION`),
         else :attr:`Guard.UNSTATED` with :attr:`TIMEOUT_FIX`.  Drivers that configure it
-        themselves, or whose controllers have none, override this.
-        """
+        themselves, or whose controllers have none, override this."""
         return stated_protection(
             self.PROTOCOL, self.TIMEOUT_ACTION, self.TIMEOUT_FIX,
             getattr(self.opts[index], "controller_timeout_s", None) or 0.0,
@@ -298,11 +300,8 @@ class MotorDriver(abc.ABC, Generic[OptT]):
     def protection_fault(self, index: int, why: str) -> None:
         """Record that motor ``index``'s protection could not be confirmed: a FAULT
         (:attr:`DriveFault.WATCHDOG`) naming the motor, the protocol and the fix under
-        :attr:`WatchdogPolicy.REQUIRED`; a warning under :attr:`WatchdogPolicy.WARN`.
-
-        The fault stays, whatever the controller reports, until
-        :meth:`clear_protection_fault` (a new enable).
-        """
+        :attr:`WatchdogPolicy.REQUIRED`, which stays whatever the controller reports until
+        :meth:`clear_protection_fault` (a new enable); a warning under ``WARN``."""
         m = self.motors[index]
         text = fault_text(m.wheel, self.PROTOCOL, m.node_id, why, self.protection(index).fix)
         if self._failed.fail(index, text, self.watchdog_policy):

@@ -253,6 +253,17 @@ class DriveSet:
         order = self._status_order
         return out if order is None else [out[k] for k in order]
 
+    def enable_failed(self) -> list[int]:
+        """The motors whose enable sequence failed (:meth:`MotorDriver.enable_failed`), as
+        positions in the order of :meth:`status`."""
+        out: list[int] = []
+        offset = 0
+        for drv, idx in self.groups:
+            out += [offset + i for i in drv.enable_failed()]
+            offset += len(idx)
+        order = self._status_order
+        return out if order is None else [j for j, k in enumerate(order) if k in out]
+
     def motor_feedback(self) -> list[WheelFeedback | None]:
         """Every motor's latest feedback (:meth:`MotorDriver.feedback`; ``None``: none yet),
         in the order of :meth:`status`."""

@@ -170,6 +170,33 @@ def test_enable_timeout_says_what_the_late_motor_reports(late: DriveState, says:
                         f"motor 'right' (node 2) did not enable within 1 s{says}")
 
 
+@dataclasses.dataclass(frozen=True)
+class _FailedBoard(StatusBoard):
+    """A board whose motors ``failed`` ended their enable sequence without arming."""
+
+    failed: tuple[int, ...] = ()
+
+    def enable_failed(self) -> list[int]:
+        return list(self.failed)
+
+
+def test_a_failed_enable_sequence_faults_at_once_with_its_cause() -> None:
+    """A motor whose enable sequence has ended without arming it (a CiA 402 step that got no
+    answer) is a fault at once, with the cause it reports, not after ``enable_timeout_s``; but
+    not in the cycle that takes the enable request, before the drives have restarted their
+    sequences (the last enable's failure would be seen)."""
+    sup = Supervisor(MODEL, dataclasses.replace(LoopConfig(), enable_timeout_s=5.0))
+    failed = _FailedBoard(motors(DriveState.ENABLED, DriveState.FAULT).statuses, (1,))
+    sup.enable(0.0)
+    assert sup.motors(failed, 0.01) is None  # the enable request not taken yet
+    assert sup.take_enable_request()
+    assert sup.motors(_FailedBoard(failed.statuses), 0.02) is None
+    msg = sup.motors(failed, 0.5)
+    assert msg == Fault(ErrorCode.MOTOR_FAULT, "motor 'right' (node 2) failed its enable "
+                                               "sequence, and it reports a fault: phase loss")
+    assert state_of(sup) is GatewayState.FAULT
+
+
 def test_disabled_and_stop() -> None:
     sup = Supervisor(MODEL, LoopConfig())
     refused = sup.twist(Twist(0.1, 0.0, 0.0), 0.0)

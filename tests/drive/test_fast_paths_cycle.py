@@ -34,12 +34,12 @@ from gateway.drive.driveset import DriveSet
 from gateway.drive.liveness import Liveness
 from gateway.runtime.daemon import Daemon
 from gateway.runtime.sdnotify import SystemdNotifier
-from tests.conftest import CONFIG_DIR, SIM_ODRIVE_ENDPOINTS
+from tests.conftest import CONFIG_DIR, MIXED_ROBOT
 from tests.e2e_helpers import Rig, virtual_config
 
 
 def test_drive_set_status_in_model_order_across_drivers() -> None:
-    cfg = parse_config(_MIXED, "<mixed>")
+    cfg = parse_config(MIXED_ROBOT, "<mixed>")
     drives = DriveSet(cfg)
     names = [s.name for s in drives.status(0.0)]
     assert names == [w.name for w in cfg.model.wheels]
@@ -136,7 +136,7 @@ def test_drive_set_states_and_feedback_match_the_statuses(channel: str) -> None:
                 assert drives.feedback_by_wheel() == drives._slot_feedback()[:rig.gw.model.n]
                 checks += sum(f is not None for f in got)
             assert checks > 0
-    cfg = parse_config(_MIXED, "<mixed>")
+    cfg = parse_config(MIXED_ROBOT, "<mixed>")
     drives = DriveSet(cfg)
     assert drives._status_order is not None
     assert drives.states(0.0) == [s.state for s in drives.status(0.0)]
@@ -242,19 +242,3 @@ def test_supervisor_decisions_are_reused_only_while_equal() -> None:
     timed_out = sup.decide(5.0)
     assert timed_out.cmd_timeout and timed_out.twist == Twist()
     assert sup.decide(5.1) is timed_out
-
-
-_MIXED: dict[str, object] = {
-    "name": "mixed", "drive": "mecanum",
-    "geometry": {"wheel_radius": 0.05, "wheelbase": 0.4, "track": 0.36},
-    "motor_defaults": {"gear_ratio": 10.0, "max_rpm": 3000},
-    "motors": {
-        "front_left": {"driver": "vesc", "node_id": 1, "pole_pairs": 7},
-        "front_right": {"driver": "odrive", "node_id": 2,
-                        "watchdog_endpoints": SIM_ODRIVE_ENDPOINTS},
-        "rear_left": {"driver": "vesc", "node_id": 3, "pole_pairs": 7},
-        "rear_right": {"driver": "odrive", "node_id": 4,
-                       "watchdog_endpoints": SIM_ODRIVE_ENDPOINTS},
-    },
-    "bus": {"interface": "virtual", "channel": "unused"},
-}

@@ -165,6 +165,10 @@ def test_another_firmware_version_gets_nothing_written(channel: str) -> None:
         (status,) = r.drv.status(r.t)
         assert "reports firmware 0.6.11" in status.detail
         assert "nothing was written" in status.detail
+        # No use waiting for it (the gateway faults at once); a new enable tries again.
+        assert r.drv.enable_failed() == [0]
+        r.send(r.drv.enable(r.t))
+        assert r.drv.enable_failed() == []
 
 
 def test_warn_policy_arms_anyway_with_a_warning(
@@ -179,6 +183,7 @@ def test_warn_policy_arms_anyway_with_a_warning(
         r.run(2.0)
         assert sim.axis_state is AxisState.CLOSED_LOOP_CONTROL
         assert r.state() is DriveState.ENABLED
+        assert r.drv.enable_failed() == []
     assert "arming it anyway (gateway.controller_watchdog: warn)" in caplog.text
 
 
@@ -199,6 +204,7 @@ def test_a_read_back_other_than_written_fails(channel: str) -> None:
         assert sim.axis_state is AxisState.IDLE
         (status,) = r.drv.status(r.t)
         assert "'enable_watchdog': False" in status.detail
+        assert r.drv.enable_failed() == [0]
 
 
 # ----------------------------------------------------------------------------- configuration
