@@ -102,7 +102,7 @@ def ros_node(args: argparse.Namespace) -> None:
         a = ros2.decode_attachment(sample.attachment.to_bytes())
         show("odom", {"frame": o.header.frame_id, "child": o.child_frame_id,
                       "vx": o.twist.linear_x, "wz": o.twist.angular_z, "x": o.position.x,
-                      "seq": a.sequence_number})
+                      "seq": a.sequence_number, "layout": a.layout.value})
 
     def on_tf(sample: Any) -> None:
         t = ros2.decode_tf_message(sample.payload.to_bytes()).transforms[0]
@@ -114,6 +114,7 @@ def ros_node(args: argparse.Namespace) -> None:
              s.declare_subscriber(ros2.topic_subscription_key(args.domain, "/tf",
                                                               ros2.TF_MESSAGE), on_tf)]
     twist = ros2.Twist3D(args.vx, 0.0, 0.0, 0.0, 0.0, args.wz)
+    layout = ros2.AttachmentFormat.LABELLED if args.labelled else ros2.AttachmentFormat.POSITIONAL
     seq = 0
     with out:
         sys.stdout.write("ready\n")
@@ -125,7 +126,7 @@ def ros_node(args: argparse.Namespace) -> None:
         payload = ros2.encode_twist_stamped(ros2.TwistStamped(
             ros2.Header(ros2.ns_to_stamp(now), "base_link"), twist)) if args.stamped \
             else ros2.encode_twist(twist)
-        pub.put(payload, attachment=ros2.encode_attachment(seq, now, gid))
+        pub.put(payload, attachment=ros2.encode_attachment(seq, now, gid, layout))
         time.sleep(0.05)
 
 
@@ -185,6 +186,8 @@ def main(argv: list[str] | None = None) -> None:
     r.add_argument("--wz", type=float, default=0.0)
     r.add_argument("--stamped", action="store_true", help="TwistStamped instead of Twist")
     r.add_argument("--humble", action="store_true", help="Humble's TypeHashNotSupported key")
+    r.add_argument("--labelled", action="store_true",
+                   help="the labelled attachment of Jazzy's rmw_zenoh 0.2.0 to 0.2.3")
     r.add_argument("--quiet", action="store_true", help="print nothing after 'ready'")
     r.add_argument("--lease", type=float, default=10.0)
     o = sub.add_parser("observe")

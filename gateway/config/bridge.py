@@ -22,6 +22,7 @@ from types import MappingProxyType
 from typing import TYPE_CHECKING
 
 from gateway.core.bridge_settings import (
+    AttachmentFormat,
     BridgeSettings,
     DeadmanAction,
     FoxgloveSettings,
@@ -64,6 +65,8 @@ ROS2_KEYS: Mapping[str, OptionSpec] = MappingProxyType({
     "odom_frame": OptionSpec(str, "odom"),
     "base_frame": OptionSpec(str, "base_link"),
     "node_name": OptionSpec(str, "wheelgate"),
+    "attachment": OptionSpec(str, "positional", choices=tuple(f.value for f in AttachmentFormat),
+                             help="labelled for the rmw_zenoh 0.2.0 to 0.2.3 of Jazzy"),
 })
 FOXGLOVE_KEYS: Mapping[str, OptionSpec] = MappingProxyType({
     "host": OptionSpec(str, "127.0.0.1", help="address of the WebSocket server"),
@@ -158,6 +161,7 @@ def parse_bridge(raw: object, source: str, robot: str) -> tuple[BridgeSettings, 
         if r["odom_frame"] == r["base_frame"]:
             raise ConfigError(f"{where}.ros2.base_frame: expected a frame other than "
                               f"odom_frame, got {r['base_frame']!r} for both")
+        r["attachment"] = choice(AttachmentFormat, r["attachment"], f"{where}.ros2.attachment")
         ros2 = Ros2Settings(**r)  # type: ignore[arg-type]
     deadman = choice(DeadmanAction, v["deadman"], f"{where}.deadman")
     return BridgeSettings(zenoh, native, ros2, deadman, namespace), warnings

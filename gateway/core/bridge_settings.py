@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from gateway.core.choice import Choice
 
 __all__ = [
+    "AttachmentFormat",
     "BridgeSettings",
     "DeadmanAction",
     "FoxgloveSettings",
@@ -39,6 +40,16 @@ class DeadmanAction(Choice):
     STOP = "stop"
     #: E-stop (latched; an explicit enable releases it).
     ESTOP = "estop"
+
+
+class AttachmentFormat(Choice):
+    """The two layouts of the attachment rmw_zenoh has put on every sample on Zenoh 1.x
+    (:mod:`gateway.wire.ros2.attachment`); the ROS side drops samples in the other one."""
+
+    #: 33 bytes, fields by position (rmw_zenoh >= 0.6.0 / Jazzy >= 0.2.4).
+    POSITIONAL = "positional"
+    #: 77 bytes, each field after its name (Jazzy 0.2.0 to 0.2.3).
+    LABELLED = "labelled"
 
 
 @dataclass(frozen=True, slots=True)
@@ -71,6 +82,9 @@ class Ros2Settings:
     :param odom_frame: the odometry's frame id.
     :param base_frame: the robot's frame id (``child_frame_id``).
     :param node_name: the ROS node name the bridge's endpoints belong to.
+    :param attachment: the attachment layout the bridge's publishers write (what the ROS
+        machines' rmw_zenoh reads: ``LABELLED`` for Jazzy's 0.2.0 to 0.2.3); incoming samples
+        may carry either.
     """
 
     domain_id: int = 0
@@ -80,6 +94,7 @@ class Ros2Settings:
     odom_frame: str = "odom"
     base_frame: str = "base_link"
     node_name: str = "wheelgate"
+    attachment: AttachmentFormat = AttachmentFormat.POSITIONAL
 
 
 @dataclass(frozen=True, slots=True)

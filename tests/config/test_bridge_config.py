@@ -11,7 +11,12 @@ import pytest
 import yaml
 
 from gateway.config import parse_config
-from gateway.core.bridge_settings import BridgeSettings, DeadmanAction, ZenohMode
+from gateway.core.bridge_settings import (
+    AttachmentFormat,
+    BridgeSettings,
+    DeadmanAction,
+    ZenohMode,
+)
 from gateway.core.errors import ConfigError
 from tests.conftest import REPO
 
@@ -62,6 +67,12 @@ def test_the_issue_example_reads_as_written() -> None:
     assert b.namespace == "robot1" and b.ros_namespace == "robot1"
     assert b.ros2.cmd_vel == "cmd_vel" and b.ros2.odom_frame == "odom"
     assert b.ros2.base_frame == "base_link" and b.ros2.tf is True
+    assert b.ros2.attachment is AttachmentFormat.POSITIONAL
+
+
+def test_the_attachment_of_jazzys_first_rmw_zenoh_releases() -> None:
+    b = bridge(bridge={"ros2": {"attachment": "labelled"}})
+    assert b.ros2 is not None and b.ros2.attachment is AttachmentFormat.LABELLED
 
 
 @pytest.mark.parametrize(("block", "message"), [
@@ -86,6 +97,8 @@ def test_the_issue_example_reads_as_written() -> None:
     ({"ros2": {"base_frame": "odom"}},
      "bridge.ros2.base_frame: expected a frame other than odom_frame, got 'odom' for both"),
     ({"ros2": {"domain_id": 300}}, "bridge.ros2.domain_id: expected at most 232, got 300"),
+    ({"ros2": {"attachment": "labeled"}},
+     "bridge.ros2.attachment: expected one of 'positional', 'labelled', got 'labeled'"),
     ({"deadman": "halt"}, "bridge.deadman: expected one of 'stop', 'estop', got 'halt'"),
     ({"ros": {}}, "bridge.ros: unknown key; did you mean 'ros2'? (known bridge keys: deadman, "
      "namespace, ros2, zenoh)"),

@@ -87,12 +87,19 @@ def ended(proc: subprocess.Popen[bytes]) -> None:
 
 
 @pytest.fixture
-def gateway(tmp_path: Path, sock_path: str) -> Iterator[tuple[subprocess.Popen[bytes], str]]:
+def ros2_block() -> dict[str, object]:
+    """The gateway's ``bridge.ros2`` block (a test parametrizes ``ros2_block`` to change it)."""
+    return {}
+
+
+@pytest.fixture
+def gateway(tmp_path: Path, sock_path: str, ros2_block: dict[str, object]
+            ) -> Iterator[tuple[subprocess.Popen[bytes], str]]:
     port = free_port()
     raw = yaml.safe_load((REPO / "gateway" / "data" / "default.yaml").read_text())
     raw["gateway"] = {"socket": sock_path, "rate_hz": 100.0, "cmd_timeout_s": 30.0}
     raw["bridge"] = {"zenoh": {"listen": [f"tcp/127.0.0.1:{port}"], "lease_s": LEASE_S},
-                     "namespace": NS, "ros2": {}}
+                     "namespace": NS, "ros2": ros2_block}
     path = tmp_path / "robot.yaml"
     path.write_text(yaml.safe_dump(raw))
     log = (tmp_path / "gateway.log").open("wb")

@@ -35,6 +35,7 @@ pytestmark = pytest.mark.timeout(90)
 # The shared fixtures (bridge_helpers.py), bound here so that pytest finds them.
 gateway = bridge_helpers.gateway
 observer = bridge_helpers.observer
+ros2_block = bridge_helpers.ros2_block
 
 CMD_VEL = "/robot1/cmd_vel"
 ODOM = "/robot1/odom"
@@ -68,8 +69,28 @@ def test_a_ros_node_drives_the_robot_and_reads_odometry_and_tf(
         assert abs(odom[-1]["vx"] - 0.3) < 0.02
         seqs = [e["seq"] for e in odom]
         assert seqs == list(range(seqs[0], seqs[0] + len(seqs))), seqs  # no gap
+        assert {e["layout"] for e in odom} == {"positional"}
         assert tf[-1]["frame"] == "odom" and tf[-1]["child"] == "base_link"
         assert tf[-1]["x"] > 0.0 and abs(tf[-1]["qw"] - 1.0) < 1e-6
+    finally:
+        ended(node)
+
+
+@pytest.mark.parametrize("ros2_block", [{"attachment": "labelled"}])
+def test_a_node_of_jazzys_first_rmw_zenoh_releases(
+        gateway: tuple[subprocess.Popen[bytes], str], observer: Observer,
+        ros2_block: dict[str, object]) -> None:
+    """``attachment: labelled``: the odometry carries the 77-byte attachment of Jazzy's
+    rmw_zenoh 0.2.0 to 0.2.3, which that node's twists carry too (read either way)."""
+    _, connect = gateway
+    node = spawn_ros_node(connect, "--cmd-vel", CMD_VEL, "--odom", ODOM, "--vx", "0.3",
+                          "--labelled")
+    try:
+        observer.wait(moving(0.3))
+        odom = [e for e in lines(node, 20) if e["topic"] == "odom"]
+        assert odom and {e["layout"] for e in odom} == {"labelled"}
+        seqs = [e["seq"] for e in odom]
+        assert seqs == list(range(seqs[0], seqs[0] + len(seqs))), seqs
     finally:
         ended(node)
 

@@ -62,7 +62,7 @@ from gateway.wire.socket import ProtocolError, TwistRequest, parse_request
 if TYPE_CHECKING:
     from collections.abc import Callable
 
-    from gateway.core.bridge_settings import Ros2Settings
+    from gateway.core.bridge_settings import AttachmentFormat, Ros2Settings
     from gateway.runtime.mailbox import Snapshot
 
 log = logging.getLogger(__name__)
@@ -95,17 +95,20 @@ def twist_request(twist: Twist3D, key: str) -> TwistRequest:
 
 
 class _Publisher:
-    """One ROS publisher: its Zenoh publisher, token, GID and sequence number."""
+    """One ROS publisher: its Zenoh publisher, token, GID, sequence number and attachment
+    layout."""
 
-    def __init__(self, session: Any, key: str, token: str) -> None:
+    def __init__(self, session: Any, key: str, token: str, layout: AttachmentFormat) -> None:
         self.zenoh = session.declare_publisher(key)
         self.token = session.liveliness().declare_token(token)
         self.gid = gid_of(token)
         self.seq = 0
+        self.layout = layout
 
     def put(self, payload: bytes) -> None:
         self.seq += 1
-        self.zenoh.put(payload, attachment=encode_attachment(self.seq, time.time_ns(), self.gid))
+        self.zenoh.put(payload, attachment=encode_attachment(self.seq, time.time_ns(), self.gid,
+                                                             self.layout))
 
 
 class Ros2Side:
@@ -141,11 +144,11 @@ class Ros2Side:
                 ros_type, QosProfile())))
         self.odom = _Publisher(session, topic_key(domain, self.odom_topic, ODOMETRY), entity_token(
             EntityKind.PUBLISHER, domain, zid, 0, next(ids), ns, name, self.odom_topic,
-            ODOMETRY, QosProfile()))
+            ODOMETRY, QosProfile()), settings.attachment)
         self.tf = None if not settings.tf else _Publisher(
             session, topic_key(domain, "/tf", TF_MESSAGE), entity_token(
                 EntityKind.PUBLISHER, domain, zid, 0, next(ids), ns, name, "/tf", TF_MESSAGE,
-                TF_QOS))
+                TF_QOS), settings.attachment)
         self._types = {TWIST.dds_name, TWIST_STAMPED.dds_name}
         self._entities.append(session.liveliness().declare_subscriber(
             f"@ros2_lv/{domain}/**", self._on_token, history=True))

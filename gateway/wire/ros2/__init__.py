@@ -21,11 +21,11 @@ Decoders raise :class:`~gateway.core.errors.DecodeError` only, encoders
 
 from __future__ import annotations
 
+from gateway.core.bridge_settings import AttachmentFormat
 from gateway.wire.ros2.attachment import (
     ATTACHMENT_SIZE,
     GID_SIZE,
     Attachment,
-    AttachmentFormat,
     decode_attachment,
     encode_attachment,
 )

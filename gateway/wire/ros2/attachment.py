@@ -25,10 +25,10 @@ reads both, the encoder writes either.  Pure: no I/O, no clock.
 
 from __future__ import annotations
 
-import enum
 import struct
 from dataclasses import dataclass
 
+from gateway.core.bridge_settings import AttachmentFormat
 from gateway.core.errors import DecodeError, EncodeError
 
 #: Size of a publisher GID (``RMW_GID_STORAGE_SIZE``), bytes.
@@ -52,15 +52,6 @@ _GID_LABEL = _label("source_gid")
 _LABELLED = struct.Struct(f"<{len(_SEQ_LABEL)}sq{len(_TIME_LABEL)}sq{len(_GID_LABEL)}sB16s")
 #: Size of a :attr:`AttachmentFormat.LABELLED` attachment, bytes.
 LABELLED_ATTACHMENT_SIZE = _LABELLED.size
-
-
-class AttachmentFormat(enum.Enum):
-    """The two layouts rmw_zenoh has used on Zenoh 1.x."""
-
-    #: 33 bytes, fields by position (rmw_zenoh >= 0.6.0 / Jazzy >= 0.2.4).
-    POSITIONAL = "positional"
-    #: 77 bytes, each field after its name (Jazzy 0.2.0 to 0.2.3).
-    LABELLED = "labelled"
 
 
 @dataclass(frozen=True, slots=True)
