@@ -87,14 +87,11 @@ def ended(proc: subprocess.Popen[bytes]) -> None:
 
 
 @pytest.fixture
-def ros2_block() -> dict[str, object]:
-    """The gateway's ``bridge.ros2`` block (a test parametrizes ``ros2_block`` to change it)."""
-    return {}
-
-
-@pytest.fixture
-def gateway(tmp_path: Path, sock_path: str, ros2_block: dict[str, object]
+def gateway(tmp_path: Path, sock_path: str, request: pytest.FixtureRequest
             ) -> Iterator[tuple[subprocess.Popen[bytes], str]]:
+    """The daemon with the bridge, on free ports; its ``bridge.ros2`` block is ``{}`` unless
+    a test parametrizes ``gateway`` indirectly with another."""
+    ros2_block = getattr(request, "param", {})
     port = free_port()
     raw = yaml.safe_load((REPO / "gateway" / "data" / "default.yaml").read_text())
     raw["gateway"] = {"socket": sock_path, "rate_hz": 100.0, "cmd_timeout_s": 30.0}

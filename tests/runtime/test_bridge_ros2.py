@@ -35,7 +35,6 @@ pytestmark = pytest.mark.timeout(90)
 # The shared fixtures (bridge_helpers.py), bound here so that pytest finds them.
 gateway = bridge_helpers.gateway
 observer = bridge_helpers.observer
-ros2_block = bridge_helpers.ros2_block
 
 CMD_VEL = "/robot1/cmd_vel"
 ODOM = "/robot1/odom"
@@ -76,10 +75,10 @@ def test_a_ros_node_drives_the_robot_and_reads_odometry_and_tf(
         ended(node)
 
 
-@pytest.mark.parametrize("ros2_block", [{"attachment": "labelled"}])
+@pytest.mark.parametrize("gateway", [{"attachment": "labelled"}], indirect=True,
+                         ids=["labelled"])
 def test_a_node_of_jazzys_first_rmw_zenoh_releases(
-        gateway: tuple[subprocess.Popen[bytes], str], observer: Observer,
-        ros2_block: dict[str, object]) -> None:
+        gateway: tuple[subprocess.Popen[bytes], str], observer: Observer) -> None:
     """``attachment: labelled``: the odometry carries the 77-byte attachment of Jazzy's
     rmw_zenoh 0.2.0 to 0.2.3, which that node's twists carry too (read either way)."""
     _, connect = gateway
