@@ -167,6 +167,12 @@ class AnchorLoop:
         self.x = self.y = self.theta = 0.0
         self.distance = 0.0
 
+    @classmethod
+    def from_mapping(cls, raw: dict[str, Any], bus: can.BusABC,
+                     source: str = "<mapping>") -> AnchorLoop:
+        """The loop of a parsed configuration (mecanum on four ``odrive`` motors)."""
+        return cls(Robot.from_mapping(raw, source), bus)
+
     def _send(self, node: int, cmd: int, data: bytes) -> None:
         self.bus.send(can.Message(arbitration_id=(node << 5) | cmd, data=data,
                                   is_extended_id=False))

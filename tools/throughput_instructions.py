@@ -29,7 +29,7 @@ from pathlib import Path
 import callgrind
 import can
 from anchor_dji import DjiAnchorLoop
-from anchor_loop import AnchorLoop, Robot
+from anchor_loop import AnchorLoop
 from can.interfaces.virtual import VirtualBus
 from throughput_rig import PERIOD_S, PROTOCOLS, TWIST, Bench, robot_raw
 
@@ -41,6 +41,8 @@ MIXES = ("1 kHz mix", "saturated")
 SIDES = ("gateway", "python-can", "harness")
 #: The hand-written loop's side (``--anchor``): its frames go out on a bus of its own.
 ANCHOR = "anchor"
+#: The hand-written loop of each protocol that has one.
+ANCHOR_LOOPS: dict[str, type[AnchorLoop]] = {"odrive": AnchorLoop, "dji": DjiAnchorLoop}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -74,18 +76,14 @@ class Anchor:
 
     @classmethod
     def open(cls, bench: Bench) -> Anchor:
+        kind = ANCHOR_LOOPS.get(bench.protocol)
+        if kind is None:
+            raise SystemExit(f"--anchor: the anchor loops drive {', '.join(ANCHOR_LOOPS)}, "
+                             f"not {bench.protocol}")
         channel = f"{bench.channel}-anchor"
-        raw, bus = robot_raw(bench.protocol, channel), can.Bus(interface="virtual",
-                                                               channel=channel)
-        loop: AnchorLoop
-        if bench.protocol == "odrive":
-            loop = AnchorLoop(Robot.from_mapping(raw, "<bench odrive>"), bus)
-        elif bench.protocol == "dji":
-            loop = DjiAnchorLoop.from_mapping(raw, bus, "<bench dji>")
-        else:
-            bus.shutdown()
-            raise SystemExit(f"--anchor: the anchor loops drive ODrives or DJI ESCs, not "
-                             f"{bench.protocol}")
+        loop = kind.from_mapping(robot_raw(bench.protocol, channel),
+                                 can.Bus(interface="virtual", channel=channel),
+                                 f"<bench {bench.protocol}>")
         loop.set_twist(TWIST.vx_m_s, TWIST.vy_m_s, TWIST.wz_rad_s)
         return cls(loop, can.Bus(interface="virtual", channel=channel))
 
@@ -284,7 +282,7 @@ def measure(protocol: str, cycles: int, verify: bool, anchor: bool = False
                              f"the gateway {gwf[0]}+{gwf[1]}")
         anchor_sent = [m["anchor_sent"] for m in metas if m["mix"] == mix
                        and m["side"] == ANCHOR and m["n"] == cycles]
-        expected = (DjiAnchorLoop if protocol == "dji" else AnchorLoop).FRAMES_PER_CYCLE * cycles
+        expected = ANCHOR_LOOPS[protocol].FRAMES_PER_CYCLE * cycles if anchor else 0
         if anchor_sent and anchor_sent[0] != expected:
             raise SystemExit(f"{protocol} {mix}: the anchor loop sent {anchor_sent[0]} frames "
                              f"in {cycles} cycles, expected {expected}")

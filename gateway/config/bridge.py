@@ -41,6 +41,7 @@ __all__ = ["BRIDGE_KEYS", "FOXGLOVE_KEYS", "parse_bridge", "parse_foxglove"]
 
 _MODES = tuple(m.value for m in ZenohMode)
 _ACTIONS = tuple(a.value for a in DeadmanAction)
+_LAYOUTS = tuple(f.value for f in AttachmentFormat)
 
 BRIDGE_KEYS: Mapping[str, OptionSpec] = MappingProxyType({
     "zenoh": OptionSpec(dict, {}, help="the Zenoh session: mode, listen, connect, ..."),
@@ -65,7 +66,7 @@ ROS2_KEYS: Mapping[str, OptionSpec] = MappingProxyType({
     "odom_frame": OptionSpec(str, "odom"),
     "base_frame": OptionSpec(str, "base_link"),
     "node_name": OptionSpec(str, "wheelgate"),
-    "attachment": OptionSpec(str, "positional", choices=tuple(f.value for f in AttachmentFormat),
+    "attachment": OptionSpec(str, "positional", choices=_LAYOUTS,
                              help="labelled for the rmw_zenoh 0.2.0 to 0.2.3 of Jazzy"),
 })
 FOXGLOVE_KEYS: Mapping[str, OptionSpec] = MappingProxyType({

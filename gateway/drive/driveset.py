@@ -16,7 +16,7 @@ which the odometry uses in place of the commanded one (:meth:`DriveSet.measured_
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypeVar
 
 from gateway.core.errors import GatewayError
 from gateway.core.linkage import virtual_angle, wheel_angle
@@ -31,6 +31,8 @@ if TYPE_CHECKING:
     from gateway.core.types import DriveState, Frame, MotorConfig, MotorStatus, WheelFeedback
     from gateway.drive.driver import MotorDriver
     from gateway.drive.filters import CanFilter
+
+_T = TypeVar("_T")
 
 
 class DriveSet:
@@ -235,8 +237,7 @@ class DriveSet:
                     f"expected {len(idx)}"
                 )
             out.extend(statuses)
-        order = self._status_order
-        return out if order is None else [out[k] for k in order]
+        return self._in_status_order(out)
 
     def troubled(self, now_s: float) -> bool:
         """Whether any motor may be OFFLINE or FAULT (:meth:`MotorDriver.troubled`)."""
@@ -250,19 +251,21 @@ class DriveSet:
         out: list[DriveState] = []
         for drv, _ in self.groups:
             out += drv.states(now_s)
-        order = self._status_order
-        return out if order is None else [out[k] for k in order]
+        return self._in_status_order(out)
 
     def enable_failed(self) -> list[int]:
         """The motors whose enable sequence failed (:meth:`MotorDriver.enable_failed`), as
         positions in the order of :meth:`status`."""
-        out: list[int] = []
-        offset = 0
+        failed: list[bool] = []
         for drv, idx in self.groups:
-            out += [offset + i for i in drv.enable_failed()]
-            offset += len(idx)
+            mine = drv.enable_failed()
+            failed += [i in mine for i in range(len(idx))]
+        return [j for j, f in enumerate(self._in_status_order(failed)) if f]
+
+    def _in_status_order(self, per_driver: list[_T]) -> list[_T]:
+        """Values of every motor, driver by driver, in the order of :meth:`status`."""
         order = self._status_order
-        return out if order is None else [j for j, k in enumerate(order) if k in out]
+        return per_driver if order is None else [per_driver[k] for k in order]
 
     def motor_feedback(self) -> list[WheelFeedback | None]:
         """Every motor's latest feedback (:meth:`MotorDriver.feedback`; ``None``: none yet),
@@ -272,8 +275,7 @@ class DriveSet:
         out: list[WheelFeedback | None] = []
         for drv, _ in self.groups:
             out += drv.feedbacks()
-        order = self._status_order
-        return out if order is None else [out[k] for k in order]
+        return self._in_status_order(out)
 
     def feedback_by_wheel(self) -> list[WheelFeedback | None]:
         """The latest feedback of every wheel in model order (``None``: passive or none yet)."""

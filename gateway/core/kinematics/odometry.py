@@ -137,32 +137,24 @@ class Odometry:
             raise KinematicsError(
                 f"Expected {n} wheel positions, but got {len(positions_rad)}"
             )
-        last = self._last
-        plan = self._plan
-        if (
-            plan is not None
-            and last is not None
-            and None not in positions_rad
-            and None not in last
-            and (steer_rad is None or (len(steer_rad) == n and not any(steer_rad)))
-        ):
-            # Every wheel measured now and before, no steering: the plan's least squares of
-            # the changes, as fk_twist would solve them, whose checks a finite result passes
-            # (a change that is not finite goes the general way, which names it).
-            dx, dy, dtheta, residual = plan.increment(
-                cast("Sequence[float]", positions_rad), cast("Sequence[float]", last))
-            if math.isfinite(dx + dy + dtheta):
-                self._last = list(positions_rad)
-                self._last_steer = self.model.neutral_steer if steer_rad is None else steer_rad
-                return self._step(dx, dy, dtheta, residual, timestamp_s)
         steer = steer_rad if steer_rad is not None else self.model.neutral_steer
-        self._last = list(positions_rad)
+        last, self._last = self._last, list(positions_rad)
         last_steer, self._last_steer = self._last_steer, steer
         if last is None:
             self.state = OdometryState(
                 self.state.pose, Twist(), 0.0, self.state.distance_m, timestamp_s
             )
             return self.state
+        plan = self._plan
+        if (plan is not None and None not in positions_rad and None not in last
+                and len(steer) == n and not any(steer)):
+            # Every wheel measured now and before, no steering: the plan's least squares of
+            # the changes, as fk_twist would solve them, whose checks a finite result passes
+            # (a change that is not finite goes the general way, which names it).
+            dx, dy, dtheta, residual = plan.increment(
+                cast("Sequence[float]", positions_rad), cast("Sequence[float]", last))
+            if math.isfinite(dx + dy + dtheta):
+                return self._step(dx, dy, dtheta, residual, timestamp_s)
         deltas = [
             None if p is None or q is None else p - q
             for p, q in zip(positions_rad, last, strict=True)
