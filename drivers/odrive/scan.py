@@ -94,6 +94,12 @@ class OdriveProbe(ScanProbe):
         if version is None and any(a.request.key == GET_VERSION for a in answers):
             notes.append("no answer to Get_Version: firmware 0.5 (which has none), or an axis "
                          "that is not an ODrive")
+            if hb is not None and hb.axis_state == AxisState.UNDEFINED:
+                # 0 is a value one requests ("fall through to idle"), never a state an axis
+                # reports: with no version either, another protocol's frame is likelier.
+                notes.append("doubtful: its heartbeat says axis state UNDEFINED (0), which an "
+                             "ODrive never reports; probably another controller's frame (give "
+                             "the robot's configuration, -c, to name its frames)")
         state = errors = None
         if hb is not None:
             state = hb.axis_state.name if isinstance(hb.axis_state, AxisState) else str(

@@ -29,8 +29,10 @@ if TYPE_CHECKING:
     from gateway.core.settings import GatewayConfig
 
 __all__ = [
+    "CUT",
     "Level",
     "Line",
+    "cut",
     "fit",
     "pack",
     "paint",
@@ -69,9 +71,18 @@ def wants_colour(isatty: bool, environ: Mapping[str, str]) -> bool:
     return isatty and not environ.get("NO_COLOR")
 
 
+#: Ends a text cut short (a name too long for its column, a line too long for the screen).
+CUT = "~"
+
+
+def cut(text: str, width: int) -> str:
+    """``text`` in at most ``width`` columns, its last one :data:`CUT` when it is cut."""
+    return text if len(text) <= width else text[:max(width - 1, 0)] + CUT[:width]
+
+
 def paint(line: Line, width: int, colour: bool) -> str:
-    """``line`` cut to ``width`` columns, then coloured (when ``colour``)."""
-    text = line.text[:width]
+    """``line`` :func:`cut` to ``width`` columns, then coloured (when ``colour``)."""
+    text = cut(line.text, width)
     if not colour or line.level is Level.PLAIN or line.start >= len(text):
         return text
     return f"{text[:line.start]}\x1b[{line.level.value}m{text[line.start:]}\x1b[0m"

@@ -6,6 +6,7 @@ and wraps python-can errors into :class:`~gateway.core.errors.BusError`.
 
 from __future__ import annotations
 
+import errno
 import inspect
 import logging
 import time
@@ -107,7 +108,22 @@ def open_bus(interface: str, channel: str, **kwargs: Any) -> can.BusABC:
     try:
         return can.Bus(interface=interface, channel=channel, **kwargs)
     except (can.CanError, OSError, ValueError, ImportError) as err:
-        raise BusError(f"Cannot open CAN bus {interface}:{channel}: {err}") from err
+        hint = _socketcan_hint(err, channel) if interface == "socketcan" else ""
+        raise BusError(f"Cannot open CAN bus {interface}:{channel}: {err}{hint}") from err
+
+
+def _socketcan_hint(err: BaseException, channel: str) -> str:
+    """What to do about the two errors a first SocketCAN bus meets (errno from the socket or
+    its cause): no CAN in the kernel, no such interface."""
+    codes = {getattr(e, "errno", None) for e in (err, err.__cause__, err.__context__)}
+    if errno.EAFNOSUPPORT in codes:
+        return ("; this kernel has no SocketCAN: load it (modprobe can_raw, and the adapter's "
+                "driver); to try wheelgate without hardware: wheelgate run --sim")
+    if errno.ENODEV in codes:
+        return (f"; there is no network interface {channel!r} (ip -details link show lists "
+                f"them; a test bus: modprobe vcan; ip link add dev vcan0 type vcan; ip link set "
+                f"vcan0 up)")
+    return ""
 
 
 def send_frames(bus: can.BusABC, frames: Iterable[Frame]) -> int:

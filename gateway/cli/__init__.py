@@ -56,6 +56,13 @@ class ConfigExit(click.ClickException):
     exit_code = EXIT_USAGE
 
 
+class UsageExit(click.ClickException):
+    """Bad input that is not a typing error (a refusal): its message on stderr, exit code 2,
+    and no "Usage: ... Try --help" lines (the command line was well formed)."""
+
+    exit_code = EXIT_USAGE
+
+
 class JournalFormatter(logging.Formatter):
     """Log lines for journald: a ``<N>`` syslog priority prefix (sd-daemon(3)) and no time
     stamp (the journal adds its own)."""

@@ -52,7 +52,13 @@ from gateway.config.motors import (
     radius_multipliers,
     steering_blocks,
 )
-from gateway.config.wheels import MAX_WHEELS, generic_wheels, preset_wheels
+from gateway.config.wheels import (
+    MAX_WHEELS,
+    a_drive,
+    generic_wheels,
+    preset_wheels,
+    stand_in_wheels,
+)
 from gateway.config.yaml_text import MAX_BYTES, load_yaml, read_text
 from gateway.core.errors import ConfigError, KinematicsError
 from gateway.core.kinematics import PRESETS, Limits, RobotModel
@@ -226,6 +232,7 @@ def _robot(raw: dict[str, object], source: str, found: Problems) -> _Robot | Non
     kin = found.check(lambda: validate_block(raw.get("kinematics", {}), KINEMATICS_KEYS,
                                              f"{source}: kinematics", "kinematics keys"))
     geometry: dict[str, object] = {}
+    stand_in = False  # the wheels are stand-ins for a broken geometry: no model
     if drive == "generic":
         for key in ("geometry", "motors"):
             if key in raw:
@@ -237,14 +244,18 @@ def _robot(raw: dict[str, object], source: str, found: Problems) -> _Robot | Non
         wheels, motor_raw = parsed
     else:
         if "wheels" in raw:
-            found.add(f"{source}: wheels: only used with drive: generic; a {drive} drive takes "
-                      f"geometry: and motors:")
+            found.add(f"{source}: wheels: only used with drive: generic; "
+                      f"{a_drive(str(drive))} takes geometry: and motors:")
         separation = 1.0 if kin is None else float(kin["wheel_separation_multiplier"])  # type: ignore[arg-type]
         preset = found.check(lambda: preset_wheels(str(drive), raw.get("geometry"), source,
                                                     separation))
-        if preset is None:
-            return None
-        geometry, wheels = preset
+        if preset is None:  # the blocks that name wheels are still checked, on stand-ins
+            stand_ins = stand_in_wheels(str(drive), raw.get("geometry"))
+            if stand_ins is None:
+                return None
+            wheels, stand_in = stand_ins, True
+        else:
+            geometry, wheels = preset
         blocks = found.check(lambda: preset_motors(raw.get("motors"), wheels, source))
         if blocks is None:
             return None
@@ -275,6 +286,8 @@ def _robot(raw: dict[str, object], source: str, found: Problems) -> _Robot | Non
     ):
         return None
     found.check(lambda: check_nodes((*motors, *steering), source))
+    if stand_in:
+        return None
     wheels = limit_steer_rates(wheels, steering)
     try:
         model = RobotModel(wheels, slip_tolerance_m_s=float(kin["slip_tolerance_m_s"]))  # type: ignore[arg-type]
@@ -297,8 +310,11 @@ def _warnings(raw: dict[str, object], source: str, bus: BusConfig, loop: LoopCon
     limits = raw.get("limits")
     if not isinstance(limits, dict) or "max_wheel_accel_rad_s2" not in limits:
         what = "no limits: block" if limits is None else "limits: no max_wheel_accel_rad_s2"
+        steps = ("speeds every wheel up in one cycle (max_wheel_decel_rad_s2 bounds only "
+                 "slowing down)" if isinstance(limits, dict) and "max_wheel_decel_rad_s2" in limits
+                 else "steps every wheel to its new speed in one cycle")
         warnings.append(
-            f"{source}: {what}: a twist steps every wheel to its new speed in one cycle "
+            f"{source}: {what}: a twist {steps} "
             f"(wheel slip, a jolt, a tipping robot) and only each motor's max_rpm bounds the "
             f"speed; set e.g. limits: {{max_wheel_accel_rad_s2: 30.0}} (rad/s^2 at the wheel), "
             f"and max_linear_m_s, max_angular_rad_s for the body"

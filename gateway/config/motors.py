@@ -14,8 +14,9 @@ from __future__ import annotations
 import dataclasses
 import math
 from types import MappingProxyType
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
+from gateway.config.gather import Problems
 from gateway.config.keys import (
     LINKAGE_KEYS,
     MAX_MULTIPLIER,
@@ -36,6 +37,7 @@ if TYPE_CHECKING:
     from collections.abc import Mapping
 
     from gateway.core.kinematics import Wheel
+    from gateway.drive.driver import MotorDriver
 
 __all__ = [
     "STEER_RATE_SHARE",
@@ -61,10 +63,14 @@ def preset_motors(
     :raises ConfigError: for an unknown wheel, a driven wheel without a block, a passive wheel
         with one, or a block that is not a mapping.
     """
+    names = [w.name for w in wheels]
+    if raw is None:
+        driven = ", ".join(w.name for w in wheels if w.driven)
+        raise ConfigError(f"{source}: motors: required key is missing (a motor block for each "
+                          f"driven wheel: {driven})")
     if not isinstance(raw, dict):
         raise ConfigError(f"{source}: motors: expected a mapping of wheel name to motor block, "
                           f"got {raw!r}")
-    names = [w.name for w in wheels]
     for key in raw:
         if key not in names:
             raise ConfigError(
@@ -252,37 +258,37 @@ def motor_block(
     keys = STEERING_KEYS if steers else MOTOR_KEYS
     merged = {**defaults, **raw}
     common = {k: merged[k] for k in keys if k in merged}
-    v = validate_block(common, keys, where, "steering keys" if steers else "motor keys")
-    driver = str(v["driver"])
-    try:
-        cls = get_driver_class(driver)
-    except DriverNotFoundError as err:
-        raise ConfigError(f"{where}.driver: {err}") from err
-    if steers and not cls.STEERING:
-        able = sorted(n for n in valid_drivers() if _steers(n))
-        raise ConfigError(
-            f"{where}.driver: the {driver} driver does not command steering actuators "
-            f"(drivers that do: {', '.join(able) or 'none'})"
-        )
-    node_id = int(v["node_id"])  # type: ignore[call-overload]
+    found = Problems()  # the general keys' problems and the protocol's, together
+    v = found.check(lambda: validate_block(common, keys, where,
+                                           "steering keys" if steers else "motor keys"))
+    driver = merged.get("driver")
+    cls = found.check(lambda: _driver_class(driver, steers, where)) if isinstance(
+        driver, str) else None
+    if cls is None:
+        found.raise_any()
+        raise AssertionError("a motor block without a driver passed validate_block")
     protocol = {k: x for k, x in merged.items() if k not in keys}
-    unknown = [str(unknown_key(f"{where}.{key}", key, {
-        "steering keys" if steers else "motor keys": keys, f"{driver} keys": cls.OPTIONS,
-    })) for key in protocol if key not in cls.OPTIONS and key != "config_dir"]
+    for key in protocol:
+        if key not in cls.OPTIONS and key != "config_dir":
+            found.add(str(unknown_key(f"{where}.{key}", key, {
+                "steering keys" if steers else "motor keys": keys,
+                f"{driver} keys": [k for k in cls.OPTIONS if k != "config_dir"],
+            })))
     protocol = {k: x for k, x in protocol.items() if k in cls.OPTIONS or k == "config_dir"}
     if "config_dir" in cls.OPTIONS and "config_dir" not in protocol:
         # Relative paths in protocol keys (a DBC file) are relative to the config file.
         protocol["config_dir"] = config_dir
-    try:
-        options = cls.validate_options(protocol, where)
-    except ConfigError as err:  # the unknown keys and the protocol's own problems, together
-        raise ConfigError.of([*unknown, *err.problems]) from err
-    if unknown:
-        raise ConfigError.of(unknown)
-    cls.validate_node_id(node_id, f"{where}.node_id", options)
+    options = found.check(lambda: cls.validate_options(protocol, where))
+    node = merged.get("node_id")
+    if options is not None and isinstance(node, int) and not isinstance(node, bool):
+        # its range may depend on the protocol's keys (ODrive's 29-bit identifiers)
+        found.check(lambda: cls.validate_node_id(node, f"{where}.node_id", options))
+    found.raise_any()
+    assert v is not None and options is not None
+    node_id = int(v["node_id"])  # type: ignore[call-overload]
     return MotorConfig(
         wheel=wheel,
-        driver=driver,
+        driver=str(driver),
         node_id=node_id,
         gear_ratio=float(v["gear_ratio"]),  # type: ignore[arg-type]
         invert=bool(v["invert"]),
@@ -294,6 +300,24 @@ def motor_block(
         steer_range_rad=travel,
         linkage=linkage,
     )
+
+
+def _driver_class(driver: str, steers: tuple[str, ...], where: str) -> type[MotorDriver[Any]]:
+    """The driver class named in a block; a steering actuator's must command steering.
+
+    :raises ConfigError: for an unknown driver, or one that cannot steer in a steering block.
+    """
+    try:
+        cls = get_driver_class(driver)
+    except DriverNotFoundError as err:
+        raise ConfigError(f"{where}.driver: {err}") from err
+    if steers and not cls.STEERING:
+        able = sorted(n for n in valid_drivers() if _steers(n))
+        raise ConfigError(
+            f"{where}.driver: the {driver} driver does not command steering actuators "
+            f"(drivers that do: {', '.join(able) or 'none'})"
+        )
+    return cls
 
 
 def _steers(name: str) -> bool:

@@ -3,6 +3,8 @@ generic``'s ``wheels:`` list (read by :func:`gateway.config.load.parse_config`).
 
 from __future__ import annotations
 
+import difflib
+
 from gateway.config.keys import WHEEL_KEYS
 from gateway.core.errors import ConfigError, KinematicsError
 from gateway.core.kinematics import PRESETS, Wheel, WheelType
@@ -13,11 +15,8 @@ from gateway.core.options import OptionSpec, validate_block
 MAX_WHEELS = 64
 
 
-def preset_wheels(
-    drive: str, raw: object, source: str, separation: float = 1.0
-) -> tuple[dict[str, object], list[Wheel]]:
-    """The preset's geometry as written, and its wheels built with the track times
-    ``separation`` (kinematics.wheel_separation_multiplier)."""
+def _geometry_specs(drive: str) -> dict[str, OptionSpec]:
+    """The ``geometry:`` keys of a preset drive, with their specs."""
     preset = PRESETS[drive]
     specs = {
         key: OptionSpec(
@@ -28,13 +27,33 @@ def preset_wheels(
         )
         for key, default in preset.params.items()
     }
-    for key in ("wheel_count",):
-        if key in specs:
-            specs[key] = OptionSpec(int, specs[key].default, minimum=3 if drive == "omni" else 2,
-                                    maximum=MAX_WHEELS)
-    params = validate_block(
-        raw if raw is not None else {}, specs, f"{source}: geometry", f"{drive} geometry keys"
-    )
+    if "wheel_count" in specs:
+        specs["wheel_count"] = OptionSpec(int, specs["wheel_count"].default,
+                                          minimum=3 if drive == "omni" else 2,
+                                          maximum=MAX_WHEELS)
+    return specs
+
+
+def preset_wheels(
+    drive: str, raw: object, source: str, separation: float = 1.0
+) -> tuple[dict[str, object], list[Wheel]]:
+    """The preset's geometry as written, and its wheels built with the track times
+    ``separation`` (kinematics.wheel_separation_multiplier)."""
+    preset = PRESETS[drive]
+    specs = _geometry_specs(drive)
+    if isinstance(raw, dict):
+        others = {key: _other_drives_key(f"{source}: geometry.{key}", key, drive, specs)
+                  for key in raw if key not in specs}
+        known = [str(err) for err in others.values() if err is not None]
+        if known:  # another drive's key: say so, with this drive's keys
+            try:
+                validate_block({k: x for k, x in raw.items() if others.get(k) is None}, specs,
+                               f"{source}: geometry", f"{drive} geometry keys")
+            except ConfigError as err:
+                raise ConfigError.of([*known, *err.problems]) from err
+            raise ConfigError.of(known)
+    params = validate_block(raw if raw is not None else {}, specs,
+                            f"{source}: geometry", f"{drive} geometry keys")
     for key, value in params.items():
         if key in ("wheel_radius", "track", "wheelbase", "wheel_distance") and value == 0.0:
             raise ConfigError(f"{source}: geometry.{key}: expected a length > 0 m, got 0")
@@ -43,11 +62,55 @@ def preset_wheels(
     if "track" not in params:
         raise ConfigError(
             f"{source}: kinematics.wheel_separation_multiplier: expected a drive with a track "
-            f"({', '.join(sorted(k for k, p in PRESETS.items() if 'track' in p.params))}); a "
-            f"{drive} drive has none: correct its geometry instead")
+            f"({', '.join(sorted(k for k, p in PRESETS.items() if 'track' in p.params))}); "
+            f"{a_drive(drive)} has none: correct its geometry instead")
     scaled = {k: v * separation if k in ("track", "effective_track") else v  # type: ignore[operator]
               for k, v in params.items()}
     return params, preset.build(scaled)  # type: ignore[arg-type]
+
+
+def _other_drives_key(
+    where: str, key: object, drive: str, specs: dict[str, OptionSpec]
+) -> ConfigError | None:
+    """The error for a ``geometry:`` key that is (nearly) another preset drive's key and not
+    this one's (``wheelbase`` on a differential drive); ``None`` for any other unknown key."""
+    theirs = sorted({k for p in PRESETS.values() for k in p.params} - set(specs))
+    close = difflib.get_close_matches(str(key), [*theirs, *specs], n=1, cutoff=0.7)
+    if not close or close[0] not in theirs:
+        return None
+    users = sorted(name for name, p in PRESETS.items() if close[0] in p.params)
+    said = "" if close[0] == key else f" ({key!r}: did you mean {close[0]!r}?)"
+    return ConfigError(
+        f"{where}: {a_drive(drive)} has no {close[0]!r}{said}; it is a key of "
+        f"{', '.join(users)} drives (known {drive} geometry keys: {', '.join(sorted(specs))})")
+
+
+def stand_in_wheels(drive: str, raw: object) -> list[Wheel] | None:
+    """The wheels of a preset drive whose ``geometry:`` has problems, for checking the blocks
+    that name its wheels (motors, steering, radius multipliers) in the same run: every key
+    written with a valid value is taken, a missing or bad one is its default or 1.0 m.  The
+    wheels' names, roles and count are right whenever the keys that decide them
+    (``wheel_count``, ``drive``) are; their positions are not measurements.  ``None`` when
+    even that cannot be built.
+    """
+    given = raw if isinstance(raw, dict) else {}
+    params: dict[str, object] = {}
+    for key, spec in _geometry_specs(drive).items():
+        try:
+            params[key] = spec.validate(given[key], key)
+            if params[key] == 0.0:
+                raise ConfigError("zero")
+        except (KeyError, ConfigError):
+            params[key] = spec.default if spec.default is not None else 1.0
+    try:
+        return PRESETS[drive].build(params)  # type: ignore[arg-type]
+    except (KinematicsError, ValueError, TypeError):
+        return None
+
+
+def a_drive(drive: str) -> str:
+    """``"a mecanum drive"``, ``"an omni drive"``: for messages."""
+    return f"{'an' if drive[:1] in 'aeiou' else 'a'} {drive} drive"
 
 
 def generic_wheels(

@@ -17,6 +17,7 @@ The file itself is bounded too (:data:`MAX_BYTES`).
 
 from __future__ import annotations
 
+import re
 from typing import TYPE_CHECKING, Any
 
 import yaml
@@ -145,9 +146,15 @@ if yaml.__with_libyaml__:
     _Loader = _CLoader
 
 _LOADERS: tuple[type[_Strict], ...] = (_PyLoader,) if _Loader is _PyLoader else (_PyLoader, _Loader)
+#: A number with an exponent that PyYAML's YAML 1.1 rules read as text (``1e-3``, ``1.5e3``:
+#: YAML 1.1 wants a dot and a signed exponent); YAML 1.2's core schema (section 10.3.2) reads
+#: it as a float, and so does this loader.
+_EXPONENT_FLOAT = re.compile(r"^[-+]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)[eE][-+]?[0-9]+$")
 for _cls in _LOADERS:
     _cls.add_constructor("tag:yaml.org,2002:int", _Strict.construct_yaml_int)
     _cls.add_constructor("tag:yaml.org,2002:float", _Strict.construct_yaml_float)
+    _cls.add_implicit_resolver("tag:yaml.org,2002:float", _EXPONENT_FLOAT,
+                               list("-+0123456789."))
 
 
 def read_text(data: bytes, source: str) -> str:

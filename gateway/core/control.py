@@ -44,6 +44,7 @@ from gateway.core.supervision import (
     Rejection,
     Source,
     StatusBoard,
+    motor_fault_text,
 )
 from gateway.core.tracking import SteerMonitor, TrackingMonitor
 from gateway.core.transitions import Event, next_state
@@ -323,20 +324,9 @@ class Supervisor:
         self._go(Event.FAULT)
         self.target = ZERO
         self.faulted = tuple(s.name for s in motors)
-        parts = []
-        for s in motors:  # (a tracking fault's motor says nothing: it is live, no faults)
-            offline = s.state is DriveState.OFFLINE
-            told = [why] if why else []
-            if s.faults or not (offline or why):
-                told.append(f"reports a fault: {s.detail or repr(s.faults)}")
-            if offline:
-                age = "no feedback yet" if s.feedback_age_s is None else (
-                    f"no feedback for {s.feedback_age_s:.3f} s")
-                told.append(f"stopped answering ({age})")
-                if not why:
-                    code = ErrorCode.FEEDBACK_TIMEOUT
-            parts.append(f"motor {s.name!r} (node {s.node_id}) {', and it '.join(told)}")
-        self.reason = "; ".join(parts)
+        if not why and any(s.state is DriveState.OFFLINE for s in motors):
+            code = ErrorCode.FEEDBACK_TIMEOUT
+        self.reason = "; ".join(motor_fault_text(s, why) for s in motors)
         self.fault_code = code
         return Fault(code, self.reason)
 

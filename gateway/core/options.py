@@ -45,6 +45,8 @@ class OptionSpec:
         else:
             ok = isinstance(value, self.kind)
         if not ok:
+            if self.kind is float and isinstance(value, float):  # .nan, .inf
+                raise ConfigError(f"{where}: expected a finite number, got {value!r}")
             raise ConfigError(f"{where}: expected {self.kind.__name__}, got {value!r}")
         if self.choices and value not in self.choices:
             allowed = ", ".join(repr(c) for c in self.choices)

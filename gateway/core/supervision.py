@@ -13,20 +13,22 @@ import enum
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Protocol
 
+from gateway.core.types import DriveState
+
 if TYPE_CHECKING:
     from collections.abc import Sequence
 
     from gateway.core.errors import InfeasibleTwistError
     from gateway.core.kinematics import IkResult
     from gateway.core.types import (
-        DriveState,
         ErrorCode,
         MotorStatus,
         Twist,
         WheelFeedback,
     )
 
-__all__ = ["Accepted", "Decision", "Fault", "MotorBoard", "Rejection", "Source", "StatusBoard"]
+__all__ = ["Accepted", "Decision", "Fault", "MotorBoard", "Rejection", "Source", "StatusBoard",
+           "motor_fault_text"]
 
 
 class Source(enum.Enum):
@@ -150,3 +152,26 @@ class StatusBoard:
     def status(self, now_s: float) -> Sequence[MotorStatus]:
         """The statuses."""
         return self.statuses
+
+
+def motor_fault_text(s: MotorStatus, why: str) -> str:
+    """One motor's part of a fault's message: its name, ``why``, then what it says (a tracking
+    fault's motor says nothing more: it is live, without fault flags).
+
+    >>> from gateway.core.types import DriveFault, MotorStatus
+    >>> print(motor_fault_text(MotorStatus("left", 1, DriveState.OFFLINE, DriveFault.NONE, "",
+    ...                                    None, None), "did not enable within 5 s"))
+    motor 'left' (node 1) did not enable within 5 s, and it has not answered (no feedback yet)
+    """
+    offline = s.state is DriveState.OFFLINE
+    told = [why] if why else []
+    if s.faults or not (offline or why):
+        detail = s.detail or repr(s.faults)
+        own = f"motor {s.name!r} ("  # a driver's detail may name the motor again
+        if detail.startswith(own) and "): " in detail:
+            detail = detail.split("): ", 1)[1]
+        told.append(f"reports a fault: {detail}")
+    if offline:
+        told.append("has not answered (no feedback yet)" if s.feedback_age_s is None
+                    else f"stopped answering (no feedback for {s.feedback_age_s:.3f} s)")
+    return f"motor {s.name!r} (node {s.node_id}) {', and it '.join(told)}"

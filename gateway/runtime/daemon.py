@@ -239,7 +239,7 @@ class Daemon:
                 self._wait()
         finally:
             if self.stop_signal:
-                log.warning("%s: stopping (zero and disarm for every motor)", self.stop_signal)
+                log.info("%s: stopping (zero and disarm for every motor)", self.stop_signal)
             self.shutdown()
             for s, handler in old.items():
                 signal.signal(s, handler)
@@ -272,8 +272,7 @@ class Daemon:
             log.info("state %s", text)
             if self.announce is not None:
                 line = announcement(self.config, before, gw.state, self._announced_running,
-                                    gw.supervisor.reason, self.sim is not None,
-                                    self.socket_path)
+                                    self.sim is not None, self.socket_path)
                 self._announced_running |= gw.state is GatewayState.RUNNING
                 if line:
                     self.announce(line)

@@ -167,19 +167,25 @@ def build_status(
     )
 
 
+def motors_text(config: GatewayConfig) -> str:
+    """``"4 motors"``, ``"4 motors and 4 steering actuators"``: what the daemon enables."""
+    drives = sum(m is not None for m in config.motors)
+    steer = len(config.steering)
+    return (f"{drives} motor{'s' * (drives != 1)}"
+            + (f" and {steer} steering actuator{'s' * (steer != 1)}" if steer else ""))
+
+
 def announcement(config: GatewayConfig, before: GatewayState, now: GatewayState,
-                 announced_running: bool, reason: str, simulated: bool, socket_path: str) -> str:
+                 announced_running: bool, simulated: bool, socket_path: str) -> str:
     """The line for the person who started the daemon on a state change ('' for none): the
-    first time the motors run, and a start that failed (with why, on a virtual bus with no
-    simulator)."""
+    first time the motors run, and a start that failed (the fault's own log line says why;
+    this one adds what to do on a virtual bus with no simulator)."""
     where = f"{config.bus.interface} {config.bus.channel}"
     if now is GatewayState.RUNNING and not announced_running:
-        drives = sum(m is not None for m in config.motors)
-        steer = f" and {len(config.steering)} steering actuators" if config.steering else ""
-        return (f"wheelgate: running on {where}: {drives} motors{steer} enabled; control "
+        return (f"wheelgate: running on {where}: {motors_text(config)} enabled; control "
                 f"socket {socket_path}")
     if now is GatewayState.FAULT and before is GatewayState.ENABLING:
-        line = f"wheelgate: the motors did not enable: {reason}"
+        line = "wheelgate: the motors did not enable (the fault logged above says why)"
         if config.bus.interface == "virtual" and not simulated:
             line += (f". This is python-can's virtual bus {config.bus.channel!r}, where only "
                      f"simulated controllers answer: run `wheelgate run --sim`, or give the "

@@ -123,7 +123,7 @@ def test_mecanum_moves_deadman_stops_holonomic_and_ctrl_c(
     term.hold(b"i", 0.3)
     term.send(CTRL_C)
     assert term.wait_exit() == 0, term.text[-2000:]
-    assert "jog: Ctrl-C: stop sent to" in term.text
+    assert "\njog: Ctrl-C: stop sent to" in term.text  # on a line of its own
     last = sent(log)[-1]
     assert last["request"] == {"op": "stop"}
     assert last["reply"]["ok"] is True  # type: ignore[index]
@@ -145,7 +145,7 @@ def test_differential_refuses_holonomic_keys_and_esc_quits(
     assert [e["request"] for e in sent(log)] == [{"op": "stop"}]
     term.send(ESC)
     assert term.wait_exit() == 0, term.text[-2000:]
-    assert "jog: Esc: stop sent to" in term.text
+    assert "\njog: Esc: stop sent to" in term.text  # on a line of its own
     assert sent(log)[-1]["request"] == {"op": "stop"}
 
 
@@ -159,7 +159,7 @@ def test_hangup_sends_stop_and_restores(spawn: Spawn,
     term.wait_for("the move", lambda s: line(s, "command:").startswith("command: MOVING"))
     term.proc.send_signal(signal.SIGHUP)
     assert term.wait_exit() == 0, term.text[-2000:]
-    assert "jog: SIGHUP: stop sent to" in term.text
+    assert "\njog: SIGHUP: stop sent to" in term.text  # on a line of its own
     assert sent(log)[-1]["request"] == {"op": "stop"}
     assert sent(log)[0]["request"]["op"] == "twist"  # type: ignore[index]
 

@@ -34,8 +34,9 @@ def test_colour_only_on_a_terminal_without_no_color(isatty: bool, environ: dict[
 
 def test_paint_cuts_before_it_colours() -> None:
     line = Line("  left   fault   over_temperature", Level.ERROR, 9)
-    assert paint(line, 20, colour=False) == "  left   fault   ove"
-    assert paint(line, 20, colour=True) == "  left   \x1b[31mfault   ove\x1b[0m"
+    assert paint(line, 20, colour=False) == "  left   fault   ov~"  # the cut shows
+    assert paint(line, 20, colour=True) == "  left   \x1b[31mfault   ov~\x1b[0m"
+    assert paint(Line("exactly ten"), 11, False) == "exactly ten"  # nothing cut, no mark
     assert paint(Line("note: x", Level.WARNING), 80, True) == "\x1b[33mnote: x\x1b[0m"
     assert paint(Line("plain"), 80, True) == "plain"
     assert paint(Line("ab", Level.ERROR, 5), 80, True) == "ab"  # nothing to colour

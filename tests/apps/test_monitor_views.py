@@ -217,14 +217,18 @@ def test_status_monitor_shows_the_bus_errors_and_the_faults() -> None:
     snap = mon.snapshot()
     assert snap.notes == ("CAN controller bus-off: bus-off", "gateway: motor 'right' faulted")
     errors = dict(snap.errors)
-    assert (errors["error frames"], errors["error frames: no ack"],
-            errors["error frames: bus off"]) == (2, 2, 0)
-    assert "error frames: tx timeout" not in errors  # zero counts are left out
+    assert (errors["bus error frames"], errors["bus error frames: no ack"],
+            errors["bus error frames: bus off"]) == (2, 2, 0)
+    assert "bus error frames: tx timeout" not in errors  # zero counts are left out
+    # On the screen each is said once: the total, its classes in parentheses.
+    text = render(snap, 200)
+    assert "bus error frames 2 (no ack 2, bus off 0)" in text
+    assert "error frames:" not in text and text.count("error frames") == 1
     right = snap.motors[1]
     assert (right.state, right.faults, right.detail) == (
         "fault", ("over_temperature", "encoder"), "MOTOR_OVERTEMP")
     mon.update(dataclasses.replace(status, bus=dataclasses.replace(status.bus, health=None)))
-    assert not any(name.startswith("error frames") for name, _ in mon.snapshot().errors)
+    assert not any("error frames" in name for name, _ in mon.snapshot().errors)
 
 
 def test_status_monitor_needs_a_reply_first() -> None:

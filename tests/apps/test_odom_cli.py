@@ -226,13 +226,21 @@ def test_cli_plot_writes_a_png(sessions: Callable[[str], Session], runner: CliRu
     assert f"plot: {png}" in result.stdout
 
 
-def test_cli_wrong_config_exits_1(sessions: Callable[[str], Session],
-                                  runner: CliRunner) -> None:
+def test_cli_wrong_config_exits_2_with_the_error_alone(sessions: Callable[[str], Session],
+                                                      runner: CliRunner) -> None:
+    """A log that does not fit the configuration is bad input: the error, and no summary of
+    a replay that did not happen (no zero pose, no warning about it) before it."""
     s = sessions("turtlebot3_burger")
     result = run(runner, "-c", str(CONFIG_DIR / "mecanum.yaml"), str(s.log))
-    assert result.exit_code == 1
+    assert result.exit_code == 2
     assert "no odometry: 0 of" in result.stderr
     assert "is it the right config?" in result.stderr
+    assert result.stdout == ""
+    assert "warning:" not in result.stderr and "Usage:" not in result.stderr
+    doc = json.loads(run(runner, "-c", str(CONFIG_DIR / "mecanum.yaml"), str(s.log),
+                         "--json").stdout)
+    assert doc["ok"] is False and doc["error"]["code"] == "no_odometry"
+    assert "no odometry: 0 of" in doc["error"]["message"]
 
 
 def test_a_log_of_another_robot_is_warned_about(

@@ -198,22 +198,22 @@ def chunk_crc_at(data: bytes, n: int) -> int:
         i += 9 + length
 
 
-def test_a_recording_cut_before_any_message_exits_1(runner: CliRunner, tmp_path: Path) -> None:
-    """As a candump log with nothing of the robot's: no odometry is exit 1."""
+def test_a_recording_cut_before_any_message_exits_2(runner: CliRunner, tmp_path: Path) -> None:
+    """As a candump log with nothing of the robot's: no odometry is bad input, exit 2."""
     path = record(tmp_path / "drive.mcap", MECANUM, drive(MECANUM, n=5))
     cut = tmp_path / "cut.mcap"
     cut.write_bytes(path.read_bytes()[:200])
     result = odom(runner, cut)
-    assert result.exit_code == 1
+    assert result.exit_code == 2
     assert (f"Error: {cut}: no odometry: 0 /wheels messages in 0; truncated or damaged after 0 "
             "messages of a file of 200 bytes") in result.stderr
 
 
-def test_a_file_that_is_not_mcap_exits_1(runner: CliRunner, tmp_path: Path) -> None:
+def test_a_file_that_is_not_mcap_exits_2(runner: CliRunner, tmp_path: Path) -> None:
     bad = tmp_path / "bad.mcap"
     bad.write_bytes(b"(1700000000.000000) vcan0 123#00\n")
     result = odom(runner, bad)
-    assert result.exit_code == 1
+    assert result.exit_code == 2
     assert "not an MCAP file: expected the magic bytes" in result.stderr
 
 
@@ -227,10 +227,10 @@ def test_without_the_mcap_package_exits_2(runner: CliRunner, tmp_path: Path,
     assert INSTALL_HINT in result.stderr
 
 
-def test_the_wrong_config_exits_1(runner: CliRunner, tmp_path: Path) -> None:
+def test_the_wrong_config_exits_2(runner: CliRunner, tmp_path: Path) -> None:
     path = record(tmp_path / "drive.mcap", MECANUM, drive(MECANUM, n=5))
     result = odom(runner, path, "-c", str(CONFIG_DIR / "turtlebot3_burger.yaml"))
-    assert result.exit_code == 1
+    assert result.exit_code == 2
     assert "none with an angle of" in result.stderr
     assert "is it the right config?" in result.stderr
     assert "the recording is of robot 'demo_mecanum'" in result.stderr

@@ -189,6 +189,12 @@ def test_the_odrive_description_reads_the_heartbeat_estimates_and_version() -> N
     assert (d.errors, d.firmware) == ("0x00000800", None)
     assert d.notes == ("no answer to Get_Version: firmware 0.5 (which has none), or an axis "
                        "that is not an ODrive",)
+    # A "heartbeat" in state UNDEFINED, which no ODrive reports, with no version: doubtful.
+    undefined = [heard(0x061, "0000000000000100")]
+    d = odrive.describe(f, undefined, [Answer(ask, None)])
+    assert d.state == "UNDEFINED" and len(d.notes) == 2
+    assert d.notes[1].startswith("doubtful: its heartbeat says axis state UNDEFINED (0)")
+    assert len(odrive.describe(f, undefined, [Answer(ask, version)]).notes) == 0
 
 
 def test_the_canopen_description_reads_the_sdo_answers() -> None:

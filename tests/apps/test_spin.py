@@ -62,14 +62,24 @@ def test_speeds_a_controller_does_not_control_are_commanded_as_zero() -> None:
     assert plan.setpoint(0.1) == 0.0 and plan.setpoint(0.2) == 2.0  # ramp: 2.5 rad/s in 0.25 s
 
 
+def test_half_the_limit_is_the_fastest_spin() -> None:
+    assert drive_plan(RIGHT, -5.0, 3.0, 10.0, 9.0, None).speed_rad_s == -5.0
+    assert steer_plan(STEER, 0.5, 3.0, 1.0).speed_rad_s == 0.5
+    with pytest.raises(SpinUsageError, match=r"expected 0.1 to 0.5 rad/s of steering angle"):
+        steer_plan(STEER, 0.6, 3.0, 1.0)
+
+
 @pytest.mark.parametrize(("speed", "duration", "band", "option", "text"), [
-    (11.0, 3.0, None, "--speed", "front_right: expected 0.1 to 10 rad/s at the wheel either way"),
+    # At most half the limit (10 rad/s), as the help says: 5.5 is refused, 5 (below) is not.
+    (5.5, 3.0, None, "--speed", "front_right: expected 0.1 to 5 rad/s at the wheel either way "
+                                "(a spin goes at most half the limit, 10, of max_rpm"),
+    (-5.5, 3.0, None, "--speed", "got -5.5"),
     (-0.05, 3.0, None, "--speed", "got -0.05"),
     (1.0, 3.0, (0.0, 2.0), "--speed", "at least 2 rad/s"),
     (1.0, 0.9, None, "--duration", "expected 1 to 30 s, got 0.9"),
     (1.0, 31.0, None, "--duration", "got 31"),
-    (9.0, 1.0, None, "--duration",
-     "takes 1 s each way to ramp up and down, got 1 s; at least 2.7 s"),
+    (4.5, 1.0, None, "--duration",
+     "takes 0.5 s each way to ramp up and down, got 1 s; at least 1.7 s"),
 ])
 def test_a_plan_out_of_bounds_names_the_option(speed: float, duration: float,
                                                band: tuple[float, float] | None, option: str,

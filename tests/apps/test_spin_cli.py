@@ -103,7 +103,7 @@ def test_a_right_configuration_agrees(runner: CliRunner, channel: str, tmp_path:
         result.stderr)
 
 
-def test_without_an_answer_only_the_controller_is_judged(runner: CliRunner, channel: str,
+def test_no_ask_judges_the_controller_alone_and_says_so(runner: CliRunner, channel: str,
                                                          tmp_path: Path) -> None:
     true = robot_config(tmp_path / "true.yaml", channel)
     wrong = robot_config(tmp_path / "wrong.yaml", channel, motors={"right": {"invert": False}})
@@ -112,7 +112,33 @@ def test_without_an_answer_only_the_controller_is_judged(runner: CliRunner, chan
         result = spin(runner, wrong, "right", *SHORT, "--no-ask", stdin=operator)
     assert result.exit_code == 0, result.output
     assert not operator.asked.is_set()
+    assert result.stdout.splitlines()[0] == (
+        "right: the controller agrees: measured +1.00 rad/s for +1.00 rad/s; invert and "
+        "gear_ratio were not checked by a person (--no-ask)")
     assert "note: invert and gear_ratio were not checked" in result.stdout
+
+
+@pytest.mark.parametrize("json_out", [False, True])
+def test_no_answer_without_no_ask_does_not_pass(runner: CliRunner, channel: str,
+                                                tmp_path: Path, json_out: bool) -> None:
+    """Standard input at its end (a script, a pipe): the question goes unanswered, so invert
+    and gear_ratio went unchecked: exit 1, saying so, not a silent 0."""
+    config = robot_config(tmp_path / "robot.yaml", channel)
+    with Shaft(config, "right"):
+        result = spin(runner, config, "right", *SHORT, *(["--json"] if json_out else []),
+                      stdin="")
+    assert result.exit_code == 1, result.output
+    assert ("spin: not checked: invert and gear_ratio of right (no answer: standard input "
+            "ended); run spin where you can watch the wheel and answer, or give --no-ask") in (
+        " ".join(result.stderr.split()))
+    if json_out:
+        doc = verdict(result)
+        assert doc["ok"] and not doc["config_checked"]
+        assert doc["unchecked"] == "no answer: standard input ended"
+    else:
+        assert "right: the controller agrees: measured +1.00 rad/s for +1.00 rad/s; invert " \
+               "and gear_ratio were not checked by a person (no answer: standard input " \
+               "ended)" in result.stdout
 
 
 def test_a_stalled_wheel_did_not_turn(runner: CliRunner, channel: str, tmp_path: Path) -> None:
@@ -142,6 +168,14 @@ def test_a_motor_that_does_not_answer_did_not_enable(runner: CliRunner, channel:
     assert result.exit_code == 1, result.output
     assert ("Error: left (odrive node 1) did not enable within 0.5 s "
             "(gateway.enable_timeout_s): no feedback from it") in result.stderr
+    # After the error, that the stop went out.
+    error = result.stderr.index("Error: left (odrive node 1) did not enable")
+    assert result.stderr.index("spin: stop sent (zero and disarm) after the error") > error
+    result = spin(runner, config, "left", *SHORT, "--json")
+    assert result.exit_code == 1, result.output
+    doc = json.loads(result.stdout)
+    assert doc["ok"] is False and doc["error"]["code"] == "not_enabled"
+    assert doc["error"]["message"].endswith("; stop sent (zero and disarm) after the error")
     # The stop went out all the same: the ODrive's Set_Axis_State IDLE (cmd 0x07, state 1).
     assert any(f.arbitration_id == (1 << 5 | 0x07) and f.data[:4] == bytes([1, 0, 0, 0])
                for f in sent), [f.to_cansend() for f in sent]
@@ -150,8 +184,10 @@ def test_a_motor_that_does_not_answer_did_not_enable(runner: CliRunner, channel:
 @pytest.mark.parametrize(("args", "hint", "text"), [
     (["lfet"], "MOTOR", "did you mean 'left'? expected a motor of turtlebot3_burger: "
                         "'left', 'right'; got 'lfet'"),
-    (["left", "--speed", "7"], "--speed", "expected 0.1 to 6.39 rad/s at the wheel"),
-    (["left", "--speed", "0.05"], "--speed", "expected 0.1 to 6.39"),
+    # At most half the limit (6.39 rad/s), as --help says.
+    (["left", "--speed", "4"], "--speed", "expected 0.1 to 3.19 rad/s at the wheel either way "
+                                          "(a spin goes at most half the limit, 6.39, of"),
+    (["left", "--speed", "0.05"], "--speed", "expected 0.1 to 3.19"),
     (["left", "--duration", "0.5"], "--duration", "expected 1 to 30 s, got 0.5"),
     (["left", "--duration", "nan"], "--duration", "expected a finite number"),
 ])

@@ -4,6 +4,7 @@ simulated wheel, not in what spin says it did."""
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import termios
@@ -72,7 +73,7 @@ def test_ctrl_c_stops_the_wheel(runner: CliRunner, channel: str, tmp_path: Path)
         result = runner.invoke(main, ["spin", "-c", str(config), "left", "--duration", "10"])
         assert_stopped(shaft, bus.frames())
         assert shaft.turned() < 1.0  # far from the 9.8 rad of the whole spin
-    assert result.exit_code == 1, result.output
+    assert result.exit_code == 130, result.output  # 128 + SIGINT, after the stop
     assert "stopped by Ctrl-C" in result.stderr
     assert "left: nothing judged: stopped early by Ctrl-C; the motion was not measured" in (
         result.stdout)
@@ -152,6 +153,13 @@ def test_refused_while_a_daemon_answers_on_the_socket(runner: CliRunner, daemon:
     assert (f"Error: a wheelgate daemon answers on {sock_path} (robot 'turtlebot3_burger', state "
             f"running): it drives the bus, and spin arms the motor itself; stop it first "
             f"(systemctl stop wheelgate)") in result.stderr
+    assert "Ctrl-C stops" not in result.stderr  # no spin announced
+    result = runner.invoke(main, ["spin", "-c", str(config), "left", "--json"])
+    assert result.exit_code == 1, result.output
+    error = json.loads(result.stdout)["error"]
+    assert error["code"] == "bus_in_use" and error["message"].endswith("; nothing was sent")
+    assert error["message"].startswith(f"a wheelgate daemon answers on {sock_path} (robot ")
+    assert json.loads(result.stdout)["ok"] is False
     assert "another robot's bus" not in result.stderr  # the same robot
     other = robot_config(tmp_path / "other.yaml", f"{channel}-spin", name="tub",
                          gateway={"socket": sock_path})
@@ -176,8 +184,15 @@ def test_refused_while_another_gateway_is_heard_on_the_bus(
     assert sent == []
     assert result.exit_code == 1, result.output
     assert "another gateway or tool drives left; refusing to spin it" in result.stderr
+    assert "Ctrl-C stops" not in result.stderr  # announced only once the bus is free
+    assert "spin: nothing was sent" in result.stderr
     assert ("(a command to left's odrive node 1 from another sender)" in result.stderr
             or "of a running wheelgate)" in result.stderr)
+    result = runner.invoke(main, ["spin", "-c", str(config), "left", "--json"])
+    assert sent == [] and result.exit_code == 1, result.output
+    error = json.loads(result.stdout)["error"]
+    assert error["code"] == "bus_in_use" and error["message"].endswith("; nothing was sent")
+    assert "another gateway or tool drives left; refusing to spin it" in error["message"]
     # The daemon's motors are armed as before.
     assert daemon.gateway.state is GatewayState.RUNNING
     assert set(daemon.gateway.drives.states(time.monotonic())) == {DriveState.ENABLED}

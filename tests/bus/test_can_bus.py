@@ -3,11 +3,15 @@ and never one message twice in a burst or in the hands of a recorder."""
 
 from __future__ import annotations
 
+import errno
+
 import can
+import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from gateway.bus.can_bus import MessagePool, to_message
+from gateway.bus.can_bus import MessagePool, open_bus, to_message
+from gateway.core.errors import BusError
 from gateway.core.types import Frame
 
 frames = st.builds(
@@ -51,3 +55,24 @@ def test_a_virtual_bus_delivers_what_was_sent_though_the_message_is_refilled() -
                 tx.send(msg)
         got = [rx.recv(1.0) for _ in range(3)]
     assert [bytes(m.data) for m in got if m is not None] == [b"\x01", b"\x02\x03", b"\x04"]
+
+
+@pytest.mark.parametrize(("code", "says"), [
+    (errno.EAFNOSUPPORT, "this kernel has no SocketCAN: load it (modprobe can_raw"),
+    (errno.ENODEV, "there is no network interface 'can7' (ip -details link show"),
+    (errno.EPERM, None),
+])
+def test_a_socketcan_bus_that_cannot_open_says_what_to_do(
+    monkeypatch: pytest.MonkeyPatch, code: int, says: str | None
+) -> None:
+    # The two errors a first SocketCAN bus meets, as python-can raises them (an OSError, or
+    # its CanInitializationError caused by one); any other error is passed on as it is.
+    def refuse(**_: object) -> can.BusABC:
+        raise can.CanInitializationError("cannot open") from OSError(code, "refused")
+
+    monkeypatch.setattr(can, "Bus", refuse)
+    with pytest.raises(BusError) as info:
+        open_bus("socketcan", "can7")
+    text = str(info.value)
+    assert text.startswith("Cannot open CAN bus socketcan:can7: cannot open")
+    assert (says in text) if says else text.endswith("cannot open"), text

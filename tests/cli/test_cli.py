@@ -144,7 +144,10 @@ def test_bad_config_exits_2(runner: CliRunner, tmp_path: Path) -> None:
     bad.write_text("drive: differential\ngeometry: {wheel_radius: 0.1}\n")
     result = runner.invoke(main, ["check", "-c", str(bad)])
     assert result.exit_code == 2
-    assert result.stderr == f"Error: {bad}: geometry.track: required key is missing\n"
+    # every problem at once: the motors: block is checked on the wheels the geometry names
+    assert result.stderr == (f"Error: {bad}: geometry.track: required key is missing\n"
+                             f"{bad}: motors: required key is missing (a motor block for each "
+                             f"driven wheel: left, right)\n")
 
 
 def test_debug_shows_traceback(runner: CliRunner) -> None:

@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING
 
 import yaml
 
+import gateway.cli.commands.init as init_command
 from gateway.apps.init import Written
 from gateway.cli import main
 from tests.conftest import CONFIG_DIR
@@ -122,7 +123,8 @@ def test_node_ids_come_from_a_saved_scan_or_standard_input(runner: CliRunner,
     result = runner.invoke(main, ["init", "--drive", "differential_tub", "--from-scan",
                                   str(scan), "-o", str(out)])
     assert result.exit_code == 0, result.output
-    assert (f"node IDs from the scan {scan}, in order (jog each wheel to check it):\n"
+    assert (f"node IDs from the scan {scan}, in order (check each wheel: wheelgate spin -c "
+            f"{out} WHEEL):\n"
             "  motors.left   vesc node 30\n  motors.right  vesc node 31\n") in result.stdout
     assert yaml.safe_load(out.read_text())["motors"] == {
         "left": {"node_id": 30}, "right": {"node_id": 31, "invert": True}}
@@ -167,9 +169,11 @@ def test_drive_is_needed_and_must_name_an_example(runner: CliRunner, tmp_path: P
     assert result.exit_code == 2
     assert "Missing option '--drive': the example to start from, one of ackermann, " \
            "differential_castor" in result.output
-    result = runner.invoke(main, ["init", "--drive", "omni"])
+    result = runner.invoke(main, ["init", "--drive", "hexapod"])
     assert result.exit_code == 2
-    assert "2 shipped examples have drive: omni (omni3, omni_delta)" in result.output
+    assert "--drive hexapod: no shipped example of that name or drive; expected one of " \
+           "ackermann, differential_castor" in result.output
+    assert "or a drive: ackermann, differential, generic, mecanum, omni," in result.output
     result = runner.invoke(main, ["init", "--drive", "mecanum", "--driver", "canopen"])
     assert result.exit_code == 2 and "Unknown driver 'canopen'" in result.output
     assert list(tmp_path.iterdir()) == []
@@ -187,6 +191,8 @@ def test_list_names_every_example_with_its_drive_and_drivers(runner: CliRunner) 
 
 def test_unit_writes_the_systemd_unit(runner: CliRunner, tmp_path: Path,
                                      monkeypatch: pytest.MonkeyPatch) -> None:
+    # ExecStart= names the wheelgate that runs (tests/apps/test_init_unit.py); here: none known
+    monkeypatch.setattr(init_command, "running_wheelgate", lambda: None)
     unit = (CONFIG_DIR / "wheelgate.service").read_bytes()
     monkeypatch.chdir(tmp_path)
     result = runner.invoke(main, ["init", "--unit"])

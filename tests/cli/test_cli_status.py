@@ -58,7 +58,8 @@ def test_the_text_of_a_quiet_steering_robot() -> None:
     assert lines[0] == "robot: tb3  state: running (e-stop requested)"
     assert lines[4] == ("  front steering node 5    enabled   age    1.0 ms  "
                         + " " * 30 + " no faults ")
-    assert lines[5].endswith("0.5 s); steering 0.50 of 0.2 rad")
+    # steer_worst_ratio is the worst angle error over the tolerance: 0.5 * 0.2 rad.
+    assert lines[5].endswith("0.5 s); steering off by up to 0.10 rad (tolerance 0.2 rad)")
     assert lines[6].endswith("cost p50/p99/max 150/400/700 us")
     assert not any(line.startswith("last error") for line in lines)
 

@@ -93,7 +93,7 @@ def test_log_live_replay_fast_prints_the_end(runner: CliRunner, log_file: Path) 
     result = monitor(runner, "--log", str(log_file), "--fast", "--refresh", "100")
     assert result.exit_code == 0, result.output
     assert result.stdout.count("wheelgate monitor: log") >= 1
-    assert "(+2.995 s)" in result.stdout.split("wheelgate monitor: log")[-1]
+    assert "  2.995 s into the log\n" in result.stdout.split("wheelgate monitor: log")[-1]
 
 
 def test_log_replay_at_recorded_speed_and_ctrl_c(runner: CliRunner, log_file: Path,

@@ -93,9 +93,17 @@ def with_(path: str, value: object) -> dict[str, object]:
         ("geometry.track", "wide", "robot.yaml: geometry.track: expected float, got 'wide'"),
         ("geometry.track", -0.3, "robot.yaml: geometry.track: expected at least 0, got -0.3"),
         ("geometry.track", 0.0, "robot.yaml: geometry.track: expected a length > 0 m, got 0"),
+        ("geometry.track", math.inf, "robot.yaml: geometry.track: expected a finite number, "
+                                     "got inf"),
         ("geometry.track", ..., "robot.yaml: geometry.track: required key is missing"),
-        ("geometry.wheelbase", 0.3, "robot.yaml: geometry.wheelbase: unknown key (known "
-                                    "differential geometry keys: track, wheel_radius)"),
+        ("geometry.wheelbase", 0.3, "robot.yaml: geometry.wheelbase: a differential drive has "
+                                    "no 'wheelbase'; it is a key of ackermann, mecanum, "
+                                    "skid_steer, swerve, tricycle drives (known differential "
+                                    "geometry keys: track, wheel_radius)"),
+        ("geometry.wheelbas", 0.3, "robot.yaml: geometry.wheelbas: a differential drive has no "
+                                   "'wheelbase' ('wheelbas': did you mean 'wheelbase'?)"),
+        ("geometry.whelradius", 0.3, "robot.yaml: geometry.whelradius: unknown key; did you "
+                                     "mean 'wheel_radius'? (known differential geometry keys"),
         ("motors.left.node_id", "x", "robot.yaml: motors.left.node_id: expected int, got 'x'"),
         ("motors.left.node_id", 99, "robot.yaml: motors.left.node_id: expected int 0..62, got 99"),
         ("motors.left.node_id", 2, "share odrive node_id 2; expected unique node IDs"),
@@ -106,8 +114,8 @@ def with_(path: str, value: object) -> dict[str, object]:
                                            "'tesla'; expected one of: "),
         ("motor_defaults.max_rpm", ..., "robot.yaml: motors.left.max_rpm: required key is missing"),
         ("motors.left.colour", "red", "robot.yaml: motors.left.colour: unknown key"),
-        ("motors.left.gear_ratio", math.nan, "robot.yaml: motors.left.gear_ratio: expected float, "
-                                             "got nan"),
+        ("motors.left.gear_ratio", math.nan, "robot.yaml: motors.left.gear_ratio: expected a "
+                                             "finite number, got nan"),
         ("bus.bitrate", 3, "robot.yaml: bus.bitrate: expected at least 10000, got 3"),
         ("limits.max_linear_m_s", -1, "robot.yaml: limits.max_linear_m_s: expected at least 0"),
         ("wheels", [], "robot.yaml: wheels: only used with drive: generic"),

@@ -117,11 +117,16 @@ def test_a_file_without_an_acceleration_limit_is_warned_about(tmp_path: Path) ->
     end = next(i for i in range(start + 1, len(lines)) if not lines[i].startswith("  "))
     without = "\n".join(lines[:start] + lines[end:])
     only_speed = "\n".join([*lines[:start], "limits: {max_linear_m_s: 1.0}", *lines[end:]])
+    only_decel = "\n".join([*lines[:start], "limits: {max_wheel_decel_rad_s2: 40.0}",
+                            *lines[end:]])
     for text, what in ((without, "no limits: block"),
-                       (only_speed, "limits: no max_wheel_accel_rad_s2")):
+                       (only_speed, "limits: no max_wheel_accel_rad_s2"),
+                       (only_decel, "speeds every wheel up in one cycle (max_wheel_decel_rad_s2 "
+                                    "bounds only slowing down)")):
         warned = [w for w in load_config(write(tmp_path, text)).warnings
                   if "max_wheel_accel_rad_s2" in w]
         assert len(warned) == 1 and what in warned[0], warned
+        assert ("new speed" in warned[0]) == (text != only_decel)
     for path in (None, *sorted(CONFIG_DIR.glob("*.yaml"))):
         assert not any("max_wheel_accel_rad_s2" in w for w in load_config(path).warnings), path
 
@@ -154,6 +159,33 @@ gateway: {rate_hz: 5}
     assert all(p.startswith(f"{path}: ") for p in problems)
     assert "did you mean 'invert'?" in problems[1]
     assert str(info.value).splitlines() == list(problems)
+
+
+def test_a_broken_geometry_or_general_key_hides_no_other_problem(tmp_path: Path) -> None:
+    # The geometry fails (a misspelt key), yet the motor blocks, which only need the wheels'
+    # names, are checked on stand-in wheels; in each block a missing general key, an unknown
+    # key and an out-of-range node ID are all reported; the swerve's steering block too.
+    path = write(tmp_path, """\
+drive: swerve
+geometry: {wheel_radius: 0.05, wheelbas: 0.4, track: 0.36}
+motor_defaults: {driver: odrive, gear_ratio: 10}
+motors:
+  front_left: {node_id: 99, inverted: true}
+  front_right: {node_id: 2, max_rpm: 3000}
+  rear_left: {node_id: 3, max_rpm: 3000}
+  rear_right: {node_id: 4, max_rpm: 3000}
+steering:
+  front_left: {driver: odrive, node_id: 5, gear_ratio: 10, max_rpm: 3000, zero: 1}
+limits: {max_linear_m_s: -1}
+""")
+    with pytest.raises(ConfigError) as info:
+        load_config(path)
+    where = [p.split(": ")[1] for p in info.value.problems]
+    assert where == ["geometry.wheelbas", "geometry.wheelbase", "motors.front_left.max_rpm",
+                     "motors.front_left.inverted", "motors.front_left.node_id",
+                     "steering.front_left.zero", "limits.max_linear_m_s"], info.value.problems
+    assert "a swerve drive" not in info.value.problems[0]  # swerve has a wheelbase
+    assert "did you mean 'wheelbase'?" in info.value.problems[0]
 
 
 def test_a_block_that_needs_a_broken_one_is_not_checked(tmp_path: Path) -> None:

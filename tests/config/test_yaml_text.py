@@ -71,3 +71,15 @@ def test_a_syntax_error_names_the_file_and_line_and_shows_it() -> None:
     text = str(err.value)
     assert text.startswith("robot.yaml: not valid YAML: while parsing a flow sequence")
     assert 'line 3, column 15:\n        radius_m: [0.1, 0.2\n                  ^' in text, text
+
+
+@pytest.mark.parametrize("loader", LOADERS, ids=lambda c: c.__name__)
+def test_a_number_with_an_exponent_is_a_number_as_in_yaml_1_2(
+    loader: type[yaml_text._Strict],
+) -> None:
+    # YAML 1.1 (PyYAML's rules) reads 1e-3 and 1.5e3 as text, and a motor block's
+    # `max_rpm: 3e3` would be refused as "expected float, got '3e3'".
+    got = parse(loader, "a: 1e-3\nb: 1.5e3\nc: -2E+2\nd: .5e1\ne: 12\nf: e3\ng: 1e\nh: v1e3\n")
+    assert got == {"a": 0.001, "b": 1500.0, "c": -200.0, "d": 5.0, "e": 12, "f": "e3",
+                   "g": "1e", "h": "v1e3"}
+    assert isinstance(got, dict) and type(got["e"]) is int

@@ -24,6 +24,7 @@ from gateway.core.control import (
 from gateway.core.errors import IllegalTransitionError
 from gateway.core.kinematics import PRESETS, RobotModel
 from gateway.core.settings import LoopConfig
+from gateway.core.supervision import motor_fault_text
 from gateway.core.transitions import IGNORED, TRANSITIONS, Event, next_state
 from gateway.core.types import (
     DriveFault,
@@ -157,7 +158,7 @@ def test_enable_timeout_faults_with_the_late_motor() -> None:
 
 @pytest.mark.parametrize(("late", "says"), [
     (DriveState.FAULT, ", and it reports a fault: phase loss"),
-    (DriveState.OFFLINE, ", and it stopped answering (no feedback yet)"),
+    (DriveState.OFFLINE, ", and it has not answered (no feedback yet)"),
 ])
 def test_enable_timeout_says_what_the_late_motor_reports(late: DriveState, says: str) -> None:
     """An enable sequence that failed on the way (a CiA 402 SDO that got no answer, say) leaves
@@ -363,3 +364,22 @@ def test_the_state_changes_in_one_place() -> None:
     for path in Path(gateway.__file__).parent.rglob("*.py"):
         text = path.read_text()
         assert "supervisor.state =" not in text and "sup.state =" not in text, path
+
+
+@pytest.mark.parametrize(("detail", "age", "says"), [
+    ("motor 'right' (ODrive node 2): controller watchdog not confirmed", None,
+     "reports a fault: controller watchdog not confirmed, and it has not answered "
+     "(no feedback yet)"),
+    ("phase loss", 0.25, "reports a fault: phase loss, and it stopped answering (no feedback "
+                         "for 0.250 s)"),
+    ("motor 'left' (ODrive node 1): someone else's", 0.25,
+     "reports a fault: motor 'left' (ODrive node 1): someone else's, and it stopped answering"),
+])
+def test_a_fault_message_names_each_motor_once_and_tells_silent_from_stopped(
+    detail: str, age: float | None, says: str
+) -> None:
+    """The motor's name comes first, once (a driver's detail that names it again is cut), and
+    a motor never heard from 'has not answered' rather than 'stopped answering'."""
+    status = MotorStatus("right", 2, DriveState.OFFLINE, DriveFault.MOTOR, detail, age, None)
+    text = motor_fault_text(status, "failed its enable sequence")
+    assert text.startswith("motor 'right' (node 2) failed its enable sequence, and it " + says)

@@ -9,17 +9,21 @@ import struct
 import subprocess
 import sys
 import time
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 import can
 import pytest
 
+import gateway
+from gateway.config import load_config
 from gateway.runtime.client import ControlClient
+from gateway.runtime.latch import EstopLatch
+from gateway.runtime.report import motors_text
 from tests.conftest import CONFIG_DIR
 
 if TYPE_CHECKING:
     from collections.abc import Iterator
-    from pathlib import Path
 
 
 #: Longer than the 10 s default: each starts the daemon as a process.
@@ -117,7 +121,7 @@ def test_signal_sends_zero_and_disarm_then_exits_0(
         assert idle and idle[-1] > last_moving, f"node {node} was not disarmed at the end"
     assert not os.path.exists(sock_path), "the socket file was left behind"
     if signum not in (signal.SIGTERM, signal.SIGINT):
-        assert f"{signal.Signals(signum).name}: stopping" in err.decode()
+        assert f"stopped ({signal.Signals(signum).name}); every motor" in err.decode()
 
 
 @pytest.mark.timeout(60)
@@ -179,3 +183,17 @@ def test_run_says_when_the_motors_run_and_why_they_do_not(sock_path: str, tmp_pa
     failed = [line for line in lines if "did not enable" in line]
     assert len(failed) == 1 and "where only simulated controllers answer" in failed[0], lines
     assert "`wheelgate run --sim`" in failed[0]
+    # A daemon that starts e-stopped (a latch from before) does not say it is enabling.
+    latched = tmp_path / "latched.yaml"
+    EstopLatch(tmp_path / "estop").set("e-stop requested on the socket")
+    latched.write_text(f"gateway: {{state_file: {tmp_path / 'estop'}}}\n"
+                       + (Path(gateway.__file__).parent / "data" / "default.yaml").read_text())
+    lines = run("--sim", "-c", str(latched))
+    assert lines[0].endswith("; 4 motors held e-stopped until an enable"), lines
+    assert not any("running on" in line or "enabling" in line for line in lines), lines
+
+
+def test_the_start_and_running_lines_count_motors_and_steering_actuators_alike() -> None:
+    swerve = load_config(CONFIG_DIR / "swerve.yaml")
+    assert motors_text(swerve) == "4 motors and 4 steering actuators"
+    assert motors_text(load_config(None)) == "4 motors"

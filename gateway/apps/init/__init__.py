@@ -17,6 +17,7 @@ The edge, which reads the scan, checks and writes the files, is
 from __future__ import annotations
 
 from gateway.apps.init.nodes import Assignment, FoundNode, parse_scan
-from gateway.apps.init.plan import Written, choose, describe, generate
+from gateway.apps.init.plan import Chosen, Written, choose, describe, generate
 
-__all__ = ["Assignment", "FoundNode", "Written", "choose", "describe", "generate", "parse_scan"]
+__all__ = ["Assignment", "Chosen", "FoundNode", "Written", "choose", "describe", "generate",
+           "parse_scan"]

@@ -9,7 +9,7 @@ fields.  A row without ``driver`` is taken as ``protocol`` naming the driver.
 The controllers are the drive motors in the order of the file (``motors:``, or the driven
 wheels of ``wheels:``), then the steering actuators (``steering:``); those of one driver take
 that driver's nodes in rising order, so the lowest node ID goes to the first wheel.  A scan
-cannot tell which wheel a controller turns: the assignment is a start, to be checked by jogging
+cannot tell which wheel a controller turns: the assignment is a start, to be checked by spinning
 each wheel.
 """
 

@@ -86,8 +86,8 @@ def blocks(drive: str) -> Mapping[str, tuple[str, ...]]:
             "(`wheelgate scan` lists those that answer); invert: true where the motor turns "
             "its wheel backwards (a mirrored motor, as on the right side); a gear_ratio or "
             "max_rpm here is that motor's own.",
-            f"{FILL_IN} the node IDs, then jog each wheel (`wheelgate jog`): forward must roll "
-            "forward.",
+            f"{FILL_IN} the node IDs, then spin each wheel, lifted (`wheelgate spin -c FILE "
+            "WHEEL`): it says whether invert and gear_ratio are right.",
         ),
         "steering_defaults": ("Merged into every steering actuator's block.",),
         "steering": (
@@ -163,7 +163,8 @@ def header(example: str, drive: str, changes: tuple[str, ...], file: str,
         f"  {MEASURE}  the geometry (wheel radius, separations) and, where steered, zero_rad;",
         f"  {FILL_IN}  gear_ratio, max_rpm, the node IDs, invert: true where a wheel turns",
         "           backwards, and the limits;",
-        f"  then     wheelgate check -c {file}, and jog each wheel (wheelgate jog).",
+        f"  then     wheelgate check -c {file}, and spin each wheel (wheelgate spin -c {file}",
+        "           WHEEL, the wheel lifted).",
         "Units: metres, radians, seconds; max_rpm at the motor.",
     ]
     if example_header:

@@ -11,6 +11,7 @@ as text, the configuration goes out as text.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -40,6 +41,8 @@ class Written:
     :param files: shipped files it names, by name, that belong beside it (a DBC file).
     :param assignments: the node IDs a scan gave, per controller.
     :param unused: the scanned nodes of protocols no controller uses.
+    :param bus: the ``bus:`` keys given (``--interface``, ``--channel``).
+    :param bus_was: the example's ``bus:`` block, in words, when ``bus`` changed it.
     """
 
     example: str
@@ -49,25 +52,47 @@ class Written:
     files: tuple[str, ...] = ()
     assignments: tuple[Assignment, ...] = ()
     unused: tuple[FoundNode, ...] = ()
+    bus: Mapping[str, str] = dataclasses.field(default_factory=dict)
+    bus_was: str = ""
 
 
-def choose(examples: Mapping[str, str], wanted: str) -> str:
-    """The example ``--drive wanted`` names: the one of that name, else the only one with
-    ``drive: wanted``.
+@dataclass(frozen=True, slots=True)
+class Chosen:
+    """The example ``--drive`` chose.
+
+    :param example: its name.
+    :param drive: the drive it was chosen for (``None``: chosen by its name).
+    :param others: the other examples of that drive, by name.
+    """
+
+    example: str
+    drive: str | None = None
+    others: tuple[str, ...] = ()
+
+
+def choose(examples: Mapping[str, str], wanted: str,
+           by_drive: Mapping[str, str] | None = None) -> Chosen:
+    """The example ``--drive wanted`` names: the one of that name, else, for a drive, its
+    example in ``by_drive`` (:data:`gateway.apps.init.shipped.BY_DRIVE`), else the only one
+    with ``drive: wanted``.
 
     :raises ConfigError: naming the examples to choose from.
     """
     if wanted in examples:
-        return wanted
+        return Chosen(wanted)
     same = sorted(n for n, text in examples.items()
                   if read(text, f"{n}.yaml").data.get("drive") == wanted)
-    if len(same) == 1:
-        return same[0]
+    first = (by_drive or {}).get(wanted)
+    if first not in same:
+        first = same[0] if len(same) == 1 else None
+    if first is not None:
+        return Chosen(first, wanted, tuple(n for n in same if n != first))
     if same:
         raise ConfigError(f"--drive {wanted}: {len(same)} shipped examples have drive: {wanted} "
-                          f"({', '.join(same)}); expected the name of one")
+                          f"({', '.join(same)}) and none is its first; expected the name of one")
+    kinds = sorted({str(read(t, f"{n}.yaml").data.get("drive")) for n, t in examples.items()})
     raise ConfigError(f"--drive {wanted}: no shipped example of that name or drive; expected "
-                      f"one of {', '.join(sorted(examples))}")
+                      f"one of {', '.join(sorted(examples))}, or a drive: {', '.join(kinds)}")
 
 
 def generate(
@@ -79,6 +104,7 @@ def generate(
     file: str = "robot.yaml",
     shipped: Collection[str] = (),
     place: Mapping[str, str] | None = None,
+    bus: Mapping[str, str] | None = None,
 ) -> Written:
     """A commented configuration from the example ``name``.
 
@@ -90,6 +116,7 @@ def generate(
     :param shipped: the names of the shipped files other than the examples (DBC files).
     :param place: how to name a shipped file the configuration uses (default: by its name,
         beside the configuration).
+    :param bus: ``bus:`` keys to set (``interface``, ``channel``: the root options).
     :raises ConfigError: for an unknown driver, or a scan that does not fit.
     """
     doc = read(examples[name], f"{name}.yaml")
@@ -109,10 +136,27 @@ def generate(
     if found is not None:
         assignments, unused = assign(doc, found, scan_source)
         changes.append(f"Node IDs from the scan {scan_source}, in order: check each wheel's.")
+    bus_was = _set_bus(doc, bus or {})
+    if bus:
+        changes.append(f"Its bus: {', '.join(f'{k} {v}' for k, v in bus.items())}, as given "
+                       f"to init (the example's: {bus_was}).")
     files = _shipped_files(doc, shipped, place or {})
     _annotate(doc, drive)
     doc.header = notes.header(name, drive, tuple(changes), file, doc.header)
-    return Written(name, drive, _motor_drivers(doc), render(doc), files, assignments, unused)
+    return Written(name, drive, _motor_drivers(doc), render(doc), files, assignments, unused,
+                   dict(bus or {}), bus_was if bus else "")
+
+
+def _set_bus(doc: Document, bus: Mapping[str, str]) -> str:
+    """Set the ``bus:`` keys ``bus`` gives; the example's block before, in words."""
+    block = doc.get(("bus",))
+    was = (", ".join(f"{k} {v}" for k, v in block.items()) if isinstance(block, dict) and block
+           else "none")
+    if bus:
+        if not isinstance(block, dict):
+            doc.insert(("bus",), {})
+        doc.data["bus"].update(bus)
+    return was
 
 
 def describe(examples: Mapping[str, str]) -> list[tuple[str, str, str]]:

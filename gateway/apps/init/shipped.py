@@ -11,13 +11,13 @@ from __future__ import annotations
 import importlib.util
 import pkgutil
 from importlib import resources
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 from gateway.core.errors import GatewayError
 
 if TYPE_CHECKING:
     from contextlib import AbstractContextManager
-    from pathlib import Path
 
 #: The package the build makes of the repository's ``config/``.
 PACKAGE = "gateway.examples"
@@ -25,6 +25,21 @@ PACKAGE = "gateway.examples"
 UNIT = "wheelgate.service"
 #: How an example configuration's file name ends.
 SUFFIX = ".yaml"
+#: The example ``wheelgate init --drive DRIVE`` starts from, per drive (``--drive NAME``
+#: names any example): the simplest of those with that ``drive:``: the fewest motors, on
+#: controllers that stop by themselves when wheelgate dies (not DJI ESCs, which need
+#: ``--acknowledge-no-controller-stop``), with no DBC file to replace.
+BY_DRIVE: dict[str, str] = {
+    "ackermann": "ackermann",
+    "differential": "turtlebot3_burger",  # not differential_tub (VESC), example_dbc (DBC file)
+    "generic": "differential_castor",  # not omni3_swedish (three Swedish wheels)
+    "mecanum": "mecanum",
+    "omni": "omni3",  # not omni_delta (DJI ESCs)
+    "skid_steer": "skid_steer",
+    "swerve": "swerve",
+    "synchro": "synchro",
+    "tricycle": "tricycle",
+}
 
 _MISSING = (
     f"the shipped examples are not installed with this wheelgate (no package {PACKAGE}); "
@@ -84,3 +99,17 @@ def path_of(name: str) -> AbstractContextManager[Path]:
     """A context manager giving a file-system path of a shipped file (a temporary copy while
     it lasts, if the package is not on the file system)."""
     return resources.as_file(resources.files(PACKAGE) / name)
+
+
+def example_file(wanted: str) -> Path | None:
+    """The file of the shipped example ``wanted`` names (``NAME`` or ``NAME.yaml``), where it
+    is installed; ``None`` when there is no such example, or the package is not on the file
+    system (a zip: its examples have no path to load, or to find their DBC files beside)."""
+    name = wanted.removesuffix(SUFFIX)
+    try:
+        if name not in example_names():
+            return None
+        path = resources.files(PACKAGE) / (name + SUFFIX)
+    except GatewayError:
+        return None
+    return path if isinstance(path, Path) and path.is_file() else None

@@ -23,7 +23,14 @@ from collections import deque
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from gateway.apps.monitor.view import BusLoad, IdView, MonitorSnapshot, MotorView
+from gateway.apps.monitor.view import (
+    ERROR_FRAMES,
+    BusLoad,
+    IdView,
+    MonitorSnapshot,
+    MotorView,
+    error_class_counter,
+)
 from gateway.core.errors import DecodeError, GatewayError
 from gateway.core.status import BusErrorState, fault_names, state_name
 from gateway.core.types import DriveState
@@ -286,8 +293,7 @@ class StatusMonitor:
         out += [(name.replace("_", " "), events.get(name, 0)) for name in _DAEMON_ERRORS]
         health = status.bus.health
         bus_errors = {} if health is None else health.error_frames
-        out += [(f"error frames: {name.replace('_', ' ')}" if name != "error_frames"
-                 else "error frames", n)
+        out += [(ERROR_FRAMES if name == "error_frames" else error_class_counter(name), n)
                 for name, n in bus_errors.items() if n or name in ("error_frames", "bus_off")]
         return tuple(out)
 

@@ -16,8 +16,8 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING
 
-from gateway.apps.layout import Level, Line, fit, pack, paint, pair_steering, wrap
-from gateway.apps.monitor.view import hex_id
+from gateway.apps.layout import Level, Line, cut, fit, pack, paint, pair_steering, wrap
+from gateway.apps.monitor.view import error_class_of, hex_id
 from gateway.core.numfmt import fixed
 
 if TYPE_CHECKING:
@@ -34,6 +34,31 @@ WIDE = 100
 MIN_ID_ROWS = 8
 #: Stands for the frame IDs while the other sections are fitted.
 _IDS = Line("\0frame IDs")
+
+
+def _error_items(errors: Sequence[tuple[str, int]], nonzero: bool) -> list[str]:
+    """The error counters as ``name count`` items (``nonzero``: only those that are not 0),
+    the error frames by class in parentheses after their total: ``bus error frames 3 (no ack
+    2, bus off 1)``."""
+    items: list[str] = []
+    classes: dict[int, list[str]] = {}
+    for name, n in errors:
+        if nonzero and not n:
+            continue
+        kind = error_class_of(name)
+        if kind is not None and items:
+            classes.setdefault(len(items) - 1, []).append(f"{kind} {n}")
+        else:
+            items.append(f"{name} {n}")
+    return [item + (f" ({', '.join(classes[i])})" if i in classes else "")
+            for i, item in enumerate(items)]
+
+
+def _clock(snap: MonitorSnapshot) -> str:
+    """Where the snapshot is in time, for a person: into the log, or since watching began."""
+    if snap.source.startswith("log "):
+        return f"{fixed(snap.elapsed_s, 3)} s into the log"
+    return f"watching for {fixed(snap.elapsed_s, 1)} s"
 
 
 def _num(value: float | None, places: int, scale: float = 1.0) -> str:
@@ -66,10 +91,11 @@ class _Table:
         n = self.name_w
         steer = f"{c['steer']:>11}" if self.steered else ""
         if self.wide:
-            text = (f"{c['name']:<{n}.{n - 1}}{c['driver']:<8.8}{c['node']:>4}  {c['state']:<9}"
+            text = (f"{cut(c['name'], n - 1):<{n}}{cut(c['driver'], 8):<8}{c['node']:>4}  "
+                    f"{c['state']:<9}"
                     f"{c['rad_s']:>9}{c['rpm']:>9}{c['pos']:>11}{steer}{c['age']:>9}  ")
             return Line(text + c["faults"], level, n + 14)
-        text = (f"{c['name']:<{n}.{n - 1}}{c['node']:>5}  {c['state']:<9}{c['rad_s']:>9}"
+        text = (f"{cut(c['name'], n - 1):<{n}}{c['node']:>5}  {c['state']:<9}{c['rad_s']:>9}"
                 f"{c['rpm']:>8}{steer}{c['age']:>8}  ")
         return Line(text + c["faults"], level, n + 7)
 
@@ -156,15 +182,15 @@ def render(snap: MonitorSnapshot, width: int = WIDE, height: int | None = None, 
     load = snap.load
     worst = "n/a" if load.worst_percent is None else f"{fixed(load.worst_percent, 1)} %"
     head = [f"wheelgate monitor: {snap.source}",
-            f"t = {fixed(snap.time_s, 3)} s (+{fixed(snap.elapsed_s, 3)} s)",
+            _clock(snap),
             *([f"gateway {snap.state}"] if snap.state else []), *(["q: quit"] if keys else [])]
     bad = Level.ERROR if snap.state in ("fault", "estop") else Level.PLAIN
     bus = [f"bus {load.bitrate / 1000:g} kbit/s",
            f"load {fixed(load.nominal_percent, 1)} % nominal, {worst} worst case",
            f"{fixed(load.frames_per_s, 0)} frames/s over {fixed(snap.window_s, 2)} s",
            f"{snap.frames} frames"]
-    counts = [f"{name} {n}" for name, n in snap.errors]
-    nonzero = [f"{name} {n}" for name, n in snap.errors if n]
+    counts = _error_items(snap.errors, nonzero=False)
+    nonzero = _error_items(snap.errors, nonzero=True)
     if len(nonzero) < len(counts):
         nonzero = [*nonzero, "others 0"] if nonzero else ["none"]
     warn = Level.WARNING if nonzero and nonzero != ["none"] else Level.PLAIN

@@ -95,6 +95,24 @@ class MonitorSnapshot:
     notes: tuple[str, ...] = ()
 
 
+#: The error counter of every bus error frame, and the prefix of those by error class
+#: (``"bus error frames: bus off"``), which the screen shows in parentheses after it.
+ERROR_FRAMES = "bus error frames"
+_CLASS_PREFIX = f"{ERROR_FRAMES}: "
+
+
+def error_class_counter(name: str) -> str:
+    """The error counter of one class of error frames (``"bus_off"``: ``"bus error frames:
+    bus off"``)."""
+    return _CLASS_PREFIX + name.replace("_", " ")
+
+
+def error_class_of(counter: str) -> str | None:
+    """The class of an error counter from :func:`error_class_counter` (``"bus off"``), else
+    ``None``."""
+    return counter.removeprefix(_CLASS_PREFIX) if counter.startswith(_CLASS_PREFIX) else None
+
+
 def hex_id(can_id: int, extended: bool) -> str:
     """A CAN ID as the monitor writes it: 3 hex digits, or 8 for an extended one."""
     return f"0x{can_id:08X}" if extended else f"0x{can_id:03X}"

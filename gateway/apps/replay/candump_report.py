@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from gateway.apps.replay.mcap_report import pose_text
-from gateway.core.numfmt import fixed
+from gateway.core.numfmt import fixed, short
 from gateway.core.steer_log import SteeringSource
 
 if TYPE_CHECKING:
@@ -53,8 +53,8 @@ def summary_lines(cfg: GatewayConfig, log_path: str, s: ReplaySummary, wall_s: f
         f"sent), {s.motor_frames:,} of the motors; {s.corrupt_lines:,} unreadable lines skipped",
         f"time: {s.duration_s:.3f} s of log replayed in {wall_s:.3f} s"
         + (f" ({factor:.1f}x real time)" if factor is not None else ""),
-        f"odometry: {s.updates:,} updates, at most one per {min_interval_s * 1e3:g} ms of log "
-        f"time",
+        f"odometry: {s.updates:,} updates, at most one per {short(min_interval_s * 1e3, 3)} ms "
+        f"of log time",
         f"final pose: {pose_text(s.pose)}",
         f"distance: {fixed(s.distance_m, 3)} m",
         f"steering: {s.steering.value}",

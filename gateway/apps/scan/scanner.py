@@ -36,6 +36,7 @@ from gateway.core.errors import BusError
 if TYPE_CHECKING:
     from collections.abc import Callable, Mapping, Sequence
 
+    from gateway.apps.scan.own import MotorClaims
     from gateway.apps.scan.report import ScanReport
     from gateway.core.types import MotorConfig
     from gateway.drive.scan import ScanProbe
@@ -47,18 +48,21 @@ def scan_bus(bus: can.BusABC, timing: ScanTiming, bus_name: str,
              probes: Sequence[ScanProbe] | None = None,
              own_ids: Mapping[tuple[int, bool], str] | None = None,
              known: Sequence[MotorConfig] = (),
-             clock: Callable[[], float] = time.monotonic) -> ScanReport:
+             clock: Callable[[], float] = time.monotonic,
+             claimed: Sequence[MotorClaims] = ()) -> ScanReport:
     """Scan an open bus for ``timing.timeout_s`` seconds (the bus stays open).
 
     :param bus_name: ``interface:channel``, for the report.
     :param probes: the protocols' probes (default: every registered one).
     :param own_ids: the gateway's own messages, ``(identifier, extended)`` -> name.
     :param known: the configuration's motors, to name the controllers found.
+    :param claimed: the configured motors' declared identifiers, theirs whatever they look
+        like (:mod:`gateway.apps.scan.classify`).
     :raises BusError: if receiving fails.
     """
     start = clock()
     session = ScanSession(load_probes() if probes is None else probes, timing, start, own_ids,
-                          known)
+                          known, claimed)
     failed: list[str] = []
     try:
         while not session.finished(now := clock()):
@@ -84,7 +88,8 @@ def scan_bus(bus: can.BusABC, timing: ScanTiming, bus_name: str,
 
 def scan(interface: str, channel: str, timeout_s: float,
          own_ids: Mapping[tuple[int, bool], str] | None = None,
-         known: Sequence[MotorConfig] = ()) -> ScanReport:
+         known: Sequence[MotorConfig] = (),
+         claimed: Sequence[MotorClaims] = ()) -> ScanReport:
     """Open the bus, scan it for ``timeout_s`` seconds, close it.
 
     :raises BusError: if the bus cannot be opened or receiving fails.
@@ -95,6 +100,6 @@ def scan(interface: str, channel: str, timeout_s: float,
     log.info("scan: listening on %s:%s for %g s", interface, channel, timeout_s)
     try:
         return scan_bus(bus, ScanTiming.for_timeout(timeout_s), f"{interface}:{channel}",
-                        probes, own_ids, known)
+                        probes, own_ids, known, claimed=claimed)
     finally:
         bus.shutdown()

@@ -14,10 +14,12 @@ for the frames to send (:meth:`~ScanSession.poll`), both with the time, by the t
    is 4 % of a 1 Mbit/s bus, 15 % of a 250 kbit/s one), interviews before discovery.  A
    request whose identifier belongs to a controller of another protocol that was found, or to
    the gateway's own messages, or that another protocol's controllers all take (a DJI command,
-   a CANopen NMT), is not sent; the report says so.
+   a CANopen NMT), or to a configured motor of another driver (its driver's declared frames,
+   :func:`~gateway.apps.scan.own.motor_claims`), is not sent; the report says so.
 3. **Report** at the timeout: the identifiers heard sorted into controllers
    (:func:`~gateway.apps.scan.classify.classify`), each described by its probe from what it
-   sent and answered, then the gateway's own messages and the unknown identifiers.
+   sent and answered, the configured motors heard only on their declared identifiers (found
+   by ``config``), then the gateway's own messages and the unknown identifiers.
 
 Answers to the scan's requests are not counted as traffic (nor are late ones).
 """
@@ -29,13 +31,15 @@ import dataclasses
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from gateway.apps.scan.classify import Classified, Sighting, classify
+from gateway.apps.scan.classify import Classified, Configured, Sighting, classify
 from gateway.apps.scan.report import UNKNOWN, WHEELGATE, ScannedDevice, ScanReport, hex_id
-from gateway.drive.scan import Answer, Heard
+from gateway.drive.labels import DRIVER_TITLES
+from gateway.drive.scan import Answer, Description, Heard
 
 if TYPE_CHECKING:
     from collections.abc import Mapping, Sequence
 
+    from gateway.apps.scan.own import MotorClaims
     from gateway.core.types import Frame, MotorConfig
     from gateway.drive.scan import Request, ScanProbe
 
@@ -43,6 +47,8 @@ if TYPE_CHECKING:
 SPACING_S = 0.002
 #: The shortest wait for an answer (s).
 MIN_ANSWER_S = 0.25
+#: What found a configured motor heard only on its declared identifiers.
+CONFIGURED = "config"
 
 
 @dataclass(frozen=True, slots=True)
@@ -109,16 +115,19 @@ class ScanSession:
     :param known: the configuration's motors: a controller found with a motor's driver and
         node ID is reported with its wheel; a motor whose controller was not found is named in
         the report's notes.
+    :param claimed: the configured motors' declared identifiers (see the module).
     """
 
     def __init__(self, probes: Sequence[ScanProbe], timing: ScanTiming, start_s: float,
                  own_ids: Mapping[tuple[int, bool], str] | None = None,
-                 known: Sequence[MotorConfig] = ()) -> None:
+                 known: Sequence[MotorConfig] = (),
+                 claimed: Sequence[MotorClaims] = ()) -> None:
         self.probes = tuple(probes)
         self.timing = timing
         self.start_s = start_s
         self.own_ids = dict(own_ids or {})
         self.known = {(m.driver, m.node_id): m.wheel for m in known}
+        self.claimed = tuple(claimed)
         #: Frames sent.
         self.requests_sent = 0
         self._tally: dict[tuple[int, bool], _Tally] = {}
@@ -199,7 +208,7 @@ class ScanSession:
             found = self.probes[i].found_by(answer)
             if found is not None:
                 answered.append((self.probes[i], found))
-        return classify(self.probes, self.heard(now_s), self.own_ids, answered)
+        return classify(self.probes, self.heard(now_s), self.own_ids, answered, self.claimed)
 
     def _plan(self, now_s: float) -> None:
         """Classify what was heard; start an interview for every controller new to it."""
@@ -238,6 +247,10 @@ class ScanSession:
         if name is not None:
             return f"{where} is wheelgate's {name}"
         mine = self.probes[probe]
+        for c in self.claimed:
+            if c.motor.driver != mine.DRIVER and c.owns(*key):
+                m = c.motor
+                return f"{where} is {m.wheel!r}'s ({m.driver} node {m.node_id}, configured)"
         others = [s for s in self._classified.devices if s.probe is not mine]
         for s in others:
             if s.probe.owns(s.found, *key):
@@ -289,7 +302,8 @@ class ScanSession:
                 self._answered(out, None)
         self._outstanding.clear()
         final = self._classify(now_s)
-        rows = sorted((self._row(s) for s in final.devices),
+        rows = sorted([*(self._row(s) for s in final.devices),
+                       *(_configured_row(c) for c in final.configured)],
                       key=lambda r: (r.protocol, r.node_id or 0, r.extended))
         rows += [ScannedDevice(WHEELGATE, WHEELGATE, None, None, h.is_extended_id, None, (h,),
                                message=name) for name, h in final.own]
@@ -343,3 +357,13 @@ class ScanSession:
             notes.append(f"{self.probes[i].TITLE} {key} not sent to {len(nodes)} node(s): "
                          f"{first}{more}")
         return notes
+
+
+def _configured_row(c: Configured) -> ScannedDevice:
+    """A configured motor heard only on the identifiers its driver declares."""
+    m = c.claimed.motor
+    note = (f"heard on the identifiers the configuration's {m.driver} driver declares as "
+            f"{m.wheel!r}'s; nothing asked")
+    return ScannedDevice(m.driver, DRIVER_TITLES.get(m.driver, m.driver), m.driver, m.node_id,
+                         c.heard[0].is_extended_id, CONFIGURED, c.heard,
+                         Description(notes=(note,)), m.wheel)

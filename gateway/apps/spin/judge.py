@@ -104,6 +104,8 @@ class Verdict:
     :param findings: what to fix (none: the motor agrees).
     :param notes: what the findings do not say (what was not checked, an early stop).
     :param stopped_by: what stopped the spin early, if anything did.
+    :param unchecked: why no one said what the wheel did (``--no-ask``, no answer), when the
+        controller agrees: ``invert`` and ``gear_ratio`` were not checked.
     """
 
     plan: SpinPlan
@@ -112,6 +114,7 @@ class Verdict:
     findings: tuple[Finding, ...]
     notes: tuple[str, ...] = ()
     stopped_by: str = ""
+    unchecked: str = ""
 
     @property
     def ok(self) -> bool:
@@ -133,9 +136,13 @@ class Verdict:
         m = self.measured
         if m is None:  # pragma: no cover - judged without findings has a measurement
             raise ValueError("a verdict without findings needs a measurement")
-        seen = "" if self.seen is None else ", and the wheel did as described"
-        return [f"{name}: agrees: measured {_amount(self.plan, m.value)} for "
-                f"{_amount(self.plan, self.plan.commanded)}{seen}"]
+        said = (f"measured {_amount(self.plan, m.value)} for "
+                f"{_amount(self.plan, self.plan.commanded)}")
+        if self.seen is None:
+            why = f" ({self.unchecked})" if self.unchecked else ""
+            return [f"{name}: the controller agrees: {said}; invert and gear_ratio were not "
+                    f"checked by a person{why}"]
+        return [f"{name}: agrees: {said}, and the wheel did as described"]
 
     def as_json(self) -> dict[str, Any]:
         """The verdict as a JSON object (``wheelgate spin --json``)."""
@@ -150,6 +157,8 @@ class Verdict:
             "seen_ratio": self.seen, "ok": self.ok, "judged": self.judged,
             "findings": [{"check": f.check.value, "advice": f.advice} for f in self.findings],
             "notes": list(self.notes), "stopped_by": self.stopped_by or None,
+            "config_checked": self.seen is not None,
+            "unchecked": (self.unchecked or None) if self.seen is None else None,
         }
 
 
@@ -216,13 +225,14 @@ def parse_seen(text: str, amount: float) -> float | None:
 
 
 def judge(plan: SpinPlan, measured: Measured | None, seen: float | None, fault: str = "",
-          stopped_by: str = "") -> Verdict:
+          stopped_by: str = "", unchecked: str = "") -> Verdict:
     """The verdict (the rules are in the module's doc).
 
     :param measured: :func:`measure` of the spin.
     :param seen: :func:`parse_seen` of the operator's answer (``None``: none).
     :param fault: the controller's fault, or its silence, that ended the spin early.
     :param stopped_by: the key or signal that stopped the spin early.
+    :param unchecked: why there is no answer (``seen`` is ``None``), for the verdict's words.
     """
     m = plan.motor
     node = f"the {m.driver} controller of {m.wheel} (node {m.node_id})"
@@ -238,7 +248,7 @@ def judge(plan: SpinPlan, measured: Measured | None, seen: float | None, fault: 
                 f"rate and the bus (wiring, bitrate, termination)")))
         elif stopped_by:
             notes.append("the motion was not measured")
-        return Verdict(plan, None, seen, tuple(findings), tuple(notes), stopped_by)
+        return Verdict(plan, None, seen, tuple(findings), tuple(notes), stopped_by, unchecked)
     k = measured.ratio
     said = (f"measured {_amount(plan, measured.value)} for "
             f"{_amount(plan, plan.commanded)}")
@@ -263,7 +273,7 @@ def judge(plan: SpinPlan, measured: Measured | None, seen: float | None, fault: 
     elif seen is None and not findings:
         notes.append("invert and gear_ratio were not checked: the encoder sees the motor "
                      "through them; watch the wheel and answer the question to check them")
-    return Verdict(plan, measured, seen, tuple(findings), tuple(notes), stopped_by)
+    return Verdict(plan, measured, seen, tuple(findings), tuple(notes), stopped_by, unchecked)
 
 
 def _seen_findings(plan: SpinPlan, measured: Measured, seen: float) -> list[Finding]:

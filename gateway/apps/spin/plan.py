@@ -2,7 +2,9 @@
 steering actuator, their bounds, the words that tell the operator what to watch, and the bus
 traffic that means someone else drives the motor.
 
-A drive motor ramps to ``speed`` (rad/s at the wheel) in ``ramp_s``, holds it and ramps back to
+A spin turns a motor at most at half its limit (:data:`SPEED_SHARE`): slowly, a lifted wheel
+whose ``gear_ratio`` or ``invert`` may still be wrong.  A drive motor ramps to ``speed`` (rad/s
+at the wheel) in ``ramp_s``, holds it and ramps back to
 zero by ``duration_s``; the encoder is judged over the hold, from :data:`SETTLE_S` after the
 ramp.  A steering actuator turns its wheels from where they stand by ``amplitude`` (15 degrees,
 less where its travel ends sooner) at ``speed`` (rad/s of steering angle), holds, and turns
@@ -25,6 +27,8 @@ if TYPE_CHECKING:
     from gateway.core.kinematics import Wheel
     from gateway.core.types import Frame, MotorConfig
 
+#: The largest share of a motor's speed limit a spin asks for (given or default).
+SPEED_SHARE = 0.5
 #: A drive motor's speed when none is given (rad/s at the wheel; at most half its limit).
 DEFAULT_SPEED_RAD_S = 1.0
 #: A steering actuator's rate when none is given (rad/s of steering angle).
@@ -154,14 +158,14 @@ def drive_plan(motor: MotorConfig, speed: float | None, duration_s: float, limit
     :param limit_rad_s: the wheel's speed limit (its ``max_rpm`` and the robot's limit).
     :param accel_rad_s2: the wheels' acceleration limit (``inf``: none).
     :param band: the speeds the controller does not speed-control (``low < |v| < high``).
-    :raises SpinUsageError: for a speed beyond the limit, below :data:`MIN_SPEED_RAD_S` or in
-        the band, or a duration too short to ramp and measure.
+    :raises SpinUsageError: for a speed beyond half the limit, below :data:`MIN_SPEED_RAD_S` or
+        in the band, or a duration too short to ramp and measure.
     """
     _check_duration(duration_s)
     if speed is None:
-        speed = min(DEFAULT_SPEED_RAD_S, 0.5 * limit_rad_s)
+        speed = min(DEFAULT_SPEED_RAD_S, SPEED_SHARE * limit_rad_s)
         if band is not None and band[0] < speed < band[1]:
-            speed = min(1.25 * band[1], limit_rad_s)
+            speed = min(1.25 * band[1], SPEED_SHARE * limit_rad_s)
     _check_speed(motor, speed, limit_rad_s, "rad/s at the wheel", "the robot's wheel speeds")
     if band is not None and band[0] < abs(speed) < band[1]:
         raise SpinUsageError(
@@ -181,11 +185,11 @@ def steer_plan(motor: MotorConfig, rate: float | None, duration_s: float,
 
     :param rate: the steering rate asked for (rad/s, > 0); ``None``: the default.
     :param limit_rad_s: the steering rate limit (its wheels' and its ``max_rpm``).
-    :raises SpinUsageError: for a rate beyond the limit or a duration too short.
+    :raises SpinUsageError: for a rate beyond half the limit or a duration too short.
     """
     _check_duration(duration_s)
     if rate is None:
-        rate = min(DEFAULT_STEER_RATE_RAD_S, 0.5 * limit_rad_s)
+        rate = min(DEFAULT_STEER_RATE_RAD_S, SPEED_SHARE * limit_rad_s)
     _check_speed(motor, rate, limit_rad_s, "rad/s of steering angle",
                  "its wheels' max_steer_rate")
     if rate < 0:
@@ -203,11 +207,15 @@ def _check_duration(duration_s: float) -> None:
 
 
 def _check_speed(motor: MotorConfig, speed: float, limit: float, unit: str, whose: str) -> None:
-    if not MIN_SPEED_RAD_S <= abs(speed) <= limit:
+    """At least :data:`MIN_SPEED_RAD_S`, at most :data:`SPEED_SHARE` of ``limit`` (a hair
+    over it passes: the limit as printed, rounded, is accepted)."""
+    most = SPEED_SHARE * limit
+    if abs(speed) < MIN_SPEED_RAD_S or (abs(speed) > most
+                                        and f"{abs(speed):.3g}" != f"{most:.3g}"):
         raise SpinUsageError(
-            f"{motor.wheel}: expected {MIN_SPEED_RAD_S:g} to {limit:.3g} {unit} either way "
-            f"(the limit of max_rpm {motor.max_rpm:g} through gear_ratio {motor.gear_ratio:g} "
-            f"and {whose}), got {speed:g}", "--speed")
+            f"{motor.wheel}: expected {MIN_SPEED_RAD_S:g} to {most:.3g} {unit} either way "
+            f"(a spin goes at most half the limit, {limit:.3g}, of max_rpm {motor.max_rpm:g} "
+            f"through gear_ratio {motor.gear_ratio:g} and {whose}), got {speed:g}", "--speed")
 
 
 def _check_window(plan: SpinPlan) -> None:

@@ -11,7 +11,8 @@ The motor gets a driver instance of its own (from the registry, as the drive set
 so no other motor of the robot is armed.  The :class:`Deadman` ends the spin at any key on a
 terminal (cbreak mode, restored after) and at SIGINT, SIGTERM or SIGHUP, whose handlers only
 take note: the stop goes out from the loop, never from a signal handler.  Should this process
-die without sending it, the controller's own timeout is the second stop.
+die without sending it, the controller's own timeout is the second stop.  An error once
+something was sent comes out as :class:`SpinFailedError`, which says the stop went out.
 """
 
 from __future__ import annotations
@@ -29,9 +30,9 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from gateway.apps.spin.judge import Sample
-from gateway.apps.spin.plan import command_ids, someone_else
+from gateway.apps.spin.plan import SpinUsageError, command_ids, someone_else
 from gateway.bus.can_bus import drain, send_frames
-from gateway.core.errors import BusError, DriveFaultError, GatewayTimeoutError
+from gateway.core.errors import BusError, DriveFaultError, GatewayError, GatewayTimeoutError
 from gateway.core.lifecycle import Closing
 from gateway.core.types import DriveState
 from gateway.drive.registry import get_driver_class
@@ -55,10 +56,23 @@ LISTEN_S = 0.5
 #: How long the wheel is watched coasting down after the stop (s).
 COAST_S = 0.5
 _SIGNALS = {signal.SIGINT: "Ctrl-C", signal.SIGTERM: "SIGTERM", signal.SIGHUP: "SIGHUP"}
+#: The exit status after a signal stopped the spin: 128 + its number, as a shell reports a
+#: process the signal killed (Ctrl-C: 130).
+SIGNAL_EXIT = {name: 128 + int(signum) for signum, name in _SIGNALS.items()}
 
 
 class BusInUseError(BusError):
     """Someone else drives the bus (a daemon, another commander): nothing was sent."""
+
+
+class SpinFailedError(GatewayError):
+    """The spin failed once frames were sent (:attr:`cause`); its stop (:attr:`stop`, zero
+    and disarm) was sent after the failure.  Its message is the cause's."""
+
+    def __init__(self, cause: GatewayError, stop: tuple[Frame, ...]) -> None:
+        super().__init__(str(cause))
+        self.cause = cause
+        self.stop = stop
 
 
 class Deadman(Closing):
@@ -141,7 +155,7 @@ class SpinRecord:
 def run_spin(bus: can.BusABC, plan: SpinPlan, deadman: Deadman, *, rate_hz: float,
              enable_timeout_s: float, watchdog: WatchdogPolicy, can_ids: CanIds,
              listen_s: float = LISTEN_S, probe: Callable[[], float] | None = None,
-             announce: Callable[[str], None] | None = None) -> SpinRecord:
+             announce: Callable[[str], None] | None = None, header: str = "") -> SpinRecord:
     """Spin ``plan.motor`` on ``bus`` (see the module's doc).
 
     :param rate_hz: the command rate (the configuration's loop rate).
@@ -150,12 +164,16 @@ def run_spin(bus: can.BusABC, plan: SpinPlan, deadman: Deadman, *, rate_hz: floa
     :param can_ids: the configuration's own CAN IDs (a running wheelgate sends them).
     :param probe: an outside measurement of the wheel's position (rad), read every cycle.
     :param announce: called with a line of progress.
+    :param header: announced once the bus is found free, before anything is sent (what the
+        spin will do).
     :return: the record (no samples and no stop frames when the deadman stopped it before
         anything was sent).
     :raises BusInUseError: when someone else drives the bus (nothing was sent).
-    :raises DriveFaultError: when the controller faults while enabling (the stop was sent).
-    :raises GatewayTimeoutError: when it does not enable in time (the stop was sent).
-    :raises BusError: when a frame cannot be sent.
+    :raises SpinFailedError: once something was sent, for an error whose stop was sent: the
+        controller faults while enabling (:class:`DriveFaultError`), it does not enable in
+        time (:class:`GatewayTimeoutError`), a frame cannot be sent (:class:`BusError`).
+    :raises SpinUsageError: when a steering actuator has no room to sweep (the stop was sent).
+    :raises BusError: when the stop itself cannot be sent.
     """
     motor = plan.motor
     driver: MotorDriver[Any] = get_driver_class(motor.driver)([motor])
@@ -175,11 +193,14 @@ def run_spin(bus: can.BusABC, plan: SpinPlan, deadman: Deadman, *, rate_hz: floa
     if who is not None:
         raise BusInUseError(f"{who}: another gateway or tool drives {motor.wheel}; refusing to "
                             f"spin it (stop that one first, e.g. systemctl stop wheelgate)")
+    if header:
+        say(header)
     samples: list[Sample] = []
     truth: list[Sample] = []
     t0 = start = time.monotonic()
     fault = ""
     ended = enable_s = 0.0
+    failed: GatewayError | None = None
     try:
         send_frames(bus, driver.enable(start))
         stopped_by = _enabled(bus, driver, deadman, period, enable_timeout_s)
@@ -192,6 +213,10 @@ def run_spin(bus: can.BusABC, plan: SpinPlan, deadman: Deadman, *, rate_hz: floa
             fault, stopped_by = _command(bus, driver, plan, deadman, period, t0, samples,
                                          truth, probe)
             ended = min(time.monotonic() - t0, plan.duration_s)
+    except SpinUsageError:
+        raise
+    except GatewayError as err:
+        failed = err
     finally:
         stop = driver.disable(time.monotonic())
         try:
@@ -201,6 +226,8 @@ def run_spin(bus: can.BusABC, plan: SpinPlan, deadman: Deadman, *, rate_hz: floa
             log.error("spin: the stop to %s failed: %s; its controller's own timeout must "
                       "stop it", motor.wheel, err)
             raise
+    if failed is not None:
+        raise SpinFailedError(failed, tuple(stop)) from failed
     end = time.monotonic() + COAST_S
     while time.monotonic() < end:  # the wheel coasts down; its encoder still counts
         _receive(bus, driver, samples, t0)

@@ -4,10 +4,13 @@ from __future__ import annotations
 
 import json
 import math
+import os
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import click
 
+from gateway.cli import UsageExit
 from gateway.config import client_socket_path, load_config
 from gateway.core.types import MAX_TWIST_COMPONENT
 
@@ -27,9 +30,33 @@ VIRTUAL_HINT = (
 
 
 def load(ctx: click.Context, path: str | None) -> GatewayConfig:
-    """The configuration at ``path`` with the root group's bus overrides."""
+    """The configuration at ``path`` (or the shipped example it names,
+    :func:`config_file`) with the root group's bus overrides."""
     obj = ctx.find_root().obj or {}
-    return load_config(path, {"interface": obj.get("interface"), "channel": obj.get("channel")})
+    return load_config(config_file(ctx, path),
+                       {"interface": obj.get("interface"), "channel": obj.get("channel")})
+
+
+def config_file(ctx: click.Context, path: str | None) -> str | None:
+    """``-c path`` as a file to read: ``path`` itself, unless no such file is here and it is a
+    bare name (no directory) of a shipped example, ``NAME`` or ``NAME.yaml`` (``wheelgate init
+    --list``): then that example where it is installed, said once on stderr.  A file that
+    exists always wins."""
+    if path is None or os.sep in path or (os.altsep and os.altsep in path) or Path(path).exists():
+        return path
+    # Imported here: only a missing file pays for it (the commands' start-up does not).
+    from gateway.apps.init.shipped import example_file  # noqa: PLC0415
+
+    found = example_file(path)
+    if found is None:
+        return path
+    root = ctx.find_root()
+    said = root.meta.setdefault("wheelgate.shipped_said", set())
+    if path not in said:
+        said.add(path)
+        click.echo(f"-c {path}: no such file here; using the shipped example "
+                   f"{found.stem!r} ({found})", err=True)
+    return str(found)
 
 
 def socket_for(ctx: click.Context, config_path: str | None, socket_path: str | None) -> str:
@@ -63,7 +90,7 @@ def refuse_other_robot(ctx: click.Context, config_path: str | None, client: Any)
         return
     why = other_robot(ctx, config_path, client.request({"op": "status"}).get("robot"))
     if why is not None:
-        raise click.UsageError(f"{why}: refusing to drive it (drop -c, or use its socket)")
+        raise UsageExit(f"{why}: refusing to drive it (drop -c, or use its socket)")
 
 
 def twist_options(func: Any) -> Any:

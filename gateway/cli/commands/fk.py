@@ -1,16 +1,31 @@
-"""``wheelgate fk``: body twist from wheel speeds (and steering angles)."""
+"""``wheelgate fk``: body twist from wheel speeds (and steering angles).
+
+Every number is bounded (exit 2 naming the wheel, what was expected and what came): a driven
+wheel's speed by its motor's ``max_rpm`` at the wheel (through the gear ratio), a passive
+wheel's by a rim speed of ``MAX_TWIST_COMPONENT`` m/s (the bound of a twist's component); a
+steering angle by the wheel's range, ``steer_min`` to ``steer_max`` (not wrapped: an angle
+outside it is no angle the wheel can have).  A wheel not given, when the others fix the twist,
+and a steered wheel given without ``--steer`` (taken at 0 rad) are noted on stderr and, with
+``--json``, in ``not_given`` and ``steer_taken_as_zero``.
+"""
 
 from __future__ import annotations
 
 import json
 import math
+from typing import TYPE_CHECKING
 
 import click
 
 from gateway.cli import config_option, json_option
 from gateway.cli.commands._common import load, twist_json
 from gateway.core.errors import KinematicsError
+from gateway.core.kinematics.feasibility import LIMIT_SLACK
 from gateway.core.numfmt import fixed, short
+from gateway.core.types import MAX_TWIST_COMPONENT
+
+if TYPE_CHECKING:
+    from gateway.core.settings import GatewayConfig
 
 
 def _pairs(values: tuple[str, ...], option: str) -> dict[str, float]:
@@ -29,6 +44,38 @@ def _pairs(values: tuple[str, ...], option: str) -> dict[str, float]:
             raise click.BadParameter(f"wheel {name!r} given twice", param_hint=option)
         out[name] = value
     return out
+
+
+def _check_speed(cfg: GatewayConfig, i: int, value: float) -> None:
+    """A wheel speed within the wheel's bound (see the module docstring).
+
+    :raises click.BadParameter: naming the wheel, the bound and the value.
+    """
+    w, motor = cfg.model.wheels[i], cfg.motors[i]
+    if motor is not None:
+        cap = motor.max_wheel_rad_s
+        why = (f"its motor's max_rpm {short(motor.max_rpm, 3)} through gear ratio "
+               f"{short(motor.gear_ratio, 4)}")
+    else:
+        cap = MAX_TWIST_COMPONENT / w.radius
+        why = f"a rim speed of {MAX_TWIST_COMPONENT:g} m/s, the bound of a twist"
+    if abs(value) > cap * (1.0 + 1e-9):
+        raise click.BadParameter(
+            f"wheel {w.name!r}: expected a speed of at most {short(cap, 4)} rad/s either way "
+            f"({why}), got {value:g}", param_hint="--wheel")
+
+
+def _check_steer(cfg: GatewayConfig, i: int, value: float) -> None:
+    """A steering angle within the wheel's range (see the module docstring).
+
+    :raises click.BadParameter: naming the wheel, the range and the value.
+    """
+    w = cfg.model.wheels[i]
+    if not w.steer_min - LIMIT_SLACK <= value <= w.steer_max + LIMIT_SLACK:
+        raise click.BadParameter(
+            f"wheel {w.name!r}: expected a steering angle from {short(w.steer_min, 4)} to "
+            f"{short(w.steer_max, 4)} rad (its steer_min to steer_max), got {value:g}",
+            param_hint="--steer")
 
 
 @click.command()
@@ -52,10 +99,13 @@ def command(
     speeds: list[float | None] = [None] * model.n
     for name, value in _pairs(wheels, "--wheel").items():
         try:
-            speeds[model.index(name)] = value
+            i = model.index(name)
         except ValueError as err:
             raise click.BadParameter(str(err), param_hint="--wheel") from err
+        _check_speed(cfg, i, value)
+        speeds[i] = value
     steer = list(model.neutral_steer)
+    given_steer: set[int] = set()
     for name, value in _pairs(steers, "--steer").items():
         try:
             i = model.index(name)
@@ -63,16 +113,27 @@ def command(
             raise click.BadParameter(str(err), param_hint="--steer") from err
         if steer[i] is None:
             raise click.BadParameter(f"wheel {name!r} is not steered", param_hint="--steer")
+        _check_steer(cfg, i, value)
         steer[i] = value
+        given_steer.add(i)
     if all(s is None for s in speeds):
         raise click.BadParameter("give at least one wheel speed", param_hint="--wheel")
+    missing = [w.name for w, s in zip(model.wheels, speeds, strict=True) if s is None]
     try:
         result = model.fk(speeds, steer)
     except KinematicsError as err:
         # Too few wheels to fix the twist: a usage error that names what is missing.
-        missing = [w.name for w, s in zip(model.wheels, speeds, strict=True) if s is None]
-        raise click.BadParameter(f"{err}; not given: {', '.join(missing)}",
-                                 param_hint="--wheel") from err
+        text = str(err)
+        raise click.BadParameter(f"{text[:1].lower()}{text[1:]}; not given: "
+                                 f"{', '.join(missing)}", param_hint="--wheel") from err
+    zeroed = [w.name for i, w in enumerate(model.wheels)
+              if steer[i] is not None and speeds[i] is not None and i not in given_steer]
+    if missing:
+        click.echo(f"note: not given: {', '.join(missing)} (the twist is from the other "
+                   f"wheels, which fix it)", err=True)
+    if zeroed:
+        click.echo(f"note: no --steer for {', '.join(zeroed)}: steering angle taken as 0 rad",
+                   err=True)
     if as_json:
         click.echo(json.dumps({
             "twist": twist_json(result.twist),
@@ -82,6 +143,8 @@ def command(
                 for w, r, s in zip(model.wheels, result.wheel_residual_m_s, speeds, strict=True)
                 if s is not None
             ],
+            "not_given": missing,
+            "steer_taken_as_zero": zeroed,
         }))
         return
     click.echo(f"twist: {result.twist}")

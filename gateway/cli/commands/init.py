@@ -4,11 +4,18 @@ The text comes from :mod:`gateway.apps.init`; this edge reads the shipped files 
 loads the result from a temporary directory exactly as ``wheelgate check -c FILE`` will (so a
 configuration ``check`` refuses is never written), and writes it, with the DBC file it names if
 it names one, never over an existing file without ``--force``.
+
+``--drive`` takes an example's name or a drive (``differential``: the example
+:data:`gateway.apps.init.shipped.BY_DRIVE` gives for it, the others named).  The root options
+``--interface``/``--channel`` go into the written ``bus:`` block.  ``--unit`` writes the
+shipped unit with ``ExecStart=`` naming the ``wheelgate`` that runs (:func:`running_wheelgate`).
 """
 
 from __future__ import annotations
 
 import contextlib
+import shutil
+import sys
 import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -16,6 +23,7 @@ from typing import TYPE_CHECKING
 import click
 
 from gateway.apps.init import choose, describe, generate, parse_scan, shipped
+from gateway.apps.init.unit import unit_text
 from gateway.config import load_config
 from gateway.core.errors import ConfigError
 from gateway.core.protection import Guard
@@ -24,7 +32,7 @@ from gateway.drive.driveset import DriveSet
 if TYPE_CHECKING:
     from typing import TextIO
 
-    from gateway.apps.init import Written
+    from gateway.apps.init import Chosen, Written
     from gateway.core.settings import GatewayConfig
 
 #: The configuration's file when no ``-o`` is given (the systemd unit reads
@@ -35,9 +43,9 @@ STDOUT = "-"
 
 
 @click.command()
-@click.option("--drive", "example", metavar="EXAMPLE",
-              help="The shipped example to start from: a name of --list, or a drive only one "
-                   "example has.")
+@click.option("--drive", "example", metavar="EXAMPLE|DRIVE",
+              help="The shipped example to start from: a name of --list, or a drive "
+                   "(differential, omni, generic, ...: its simplest example, the others named).")
 @click.option("--driver", metavar="NAME",
               help="Put the drive motors on this driver instead of the example's (its keys come "
                    "from a shipped example that uses it).")
@@ -54,13 +62,16 @@ STDOUT = "-"
                    "wheelgate dies).  Needed to write such a configuration.")
 @click.option("--unit", is_flag=True, help="Write the systemd unit instead of a configuration.")
 @click.option("--list", "listing", is_flag=True, help="List the shipped examples.")
-def command(example: str | None, driver: str | None, scan: TextIO | None, output: str | None,
-            force: bool, acknowledged: bool, unit: bool, listing: bool) -> None:
+@click.pass_context
+def command(ctx: click.Context, example: str | None, driver: str | None, scan: TextIO | None,
+            output: str | None, force: bool, acknowledged: bool, unit: bool,
+            listing: bool) -> None:
     """Write a commented robot configuration from a shipped example, for `check` and `run`.
 
     It says what each block means and marks what to MEASURE on the robot and FILL IN; with
-    --from-scan the controllers get the node IDs that answered a scan.  It never replaces a
-    file unless --force.  Example: wheelgate init --drive turtlebot3_burger -o robot.yaml
+    --from-scan the controllers get the node IDs that answered a scan; the root options
+    --interface/--channel go into its bus: block.  It never replaces a file unless --force.
+    Example: wheelgate init --drive differential -o robot.yaml
     """
     if listing:
         _list()
@@ -70,24 +81,43 @@ def command(example: str | None, driver: str | None, scan: TextIO | None, output
             raise click.UsageError("--unit writes the systemd unit only; expected no --drive, "
                                    "--driver or --from-scan with it")
         target = output or shipped.UNIT
-        _write(target, [(target, shipped.read(shipped.UNIT))], force)
+        program = running_wheelgate()
+        text = unit_text(shipped.read_text(shipped.UNIT), program)
+        _write(target, [(target, text.encode("utf-8"))], force)
         if target != STDOUT:
-            click.echo(f"wrote {target}: the systemd unit; install it as "
+            starts = (f"it starts {program}" if program is not None else
+                      "wheelgate was not found beside this Python nor on PATH: check its "
+                      "ExecStart=")
+            click.echo(f"wrote {target}: the systemd unit ({starts}); install it as "
                        f"/etc/systemd/system/{shipped.UNIT} (README, Running under systemd)")
         return
     if example is None:
         raise click.UsageError(f"Missing option '--drive': the example to start from, one of "
-                               f"{', '.join(shipped.example_names())} (see --list)")
+                               f"{', '.join(shipped.example_names())} (see --list), or a "
+                               f"drive: {', '.join(sorted(shipped.BY_DRIVE))}")
     target = output or DEFAULT_OUTPUT
+    obj = ctx.find_root().obj or {}
+    bus = {k: str(obj[k]) for k in ("interface", "channel") if obj.get(k) is not None}
     with contextlib.ExitStack() as stack:
-        written = _generate(stack, example, driver, scan, target)
+        chosen = choose(_examples(), example, shipped.BY_DRIVE)
+        written = _generate(stack, chosen.example, driver, scan, target, bus)
         config = _check(written, target, acknowledged)
         files = [(target, written.text.encode("utf-8"))]
         if target != STDOUT:
             beside = Path(target).parent
             files += [(str(beside / f), shipped.read(f)) for f in written.files]
         _write(target, files, force)
-    _summary(written, files[1:], config, target, scan.name if scan else "")
+    _summary(written, files[1:], config, target, scan.name if scan else "", chosen)
+
+
+def running_wheelgate() -> str | None:
+    """The absolute path of the ``wheelgate`` console script that runs: beside this Python
+    (a virtual environment's ``bin/``), else the one on ``PATH``; ``None`` when neither."""
+    beside = Path(sys.executable).absolute().parent / "wheelgate"
+    if beside.is_file():
+        return str(beside)
+    found = shutil.which("wheelgate")
+    return str(Path(found).absolute()) if found else None
 
 
 def _list() -> None:
@@ -102,19 +132,18 @@ def _examples() -> dict[str, str]:
     return {name: shipped.read_text(name + shipped.SUFFIX) for name in shipped.example_names()}
 
 
-def _generate(stack: contextlib.ExitStack, example: str, driver: str | None,
-              scan: TextIO | None, target: str) -> Written:
+def _generate(stack: contextlib.ExitStack, name: str, driver: str | None,
+              scan: TextIO | None, target: str, bus: dict[str, str]) -> Written:
     """The configuration's text; on standard output, the shipped files it names are named
     where they are installed (there is no directory to put them beside it)."""
     examples = _examples()
-    name = choose(examples, example)
     others = [n for n in shipped.names() if not n.endswith(shipped.SUFFIX)]
     place = {}
     if target == STDOUT:
         place = {n: str(stack.enter_context(shipped.path_of(n))) for n in others}
     found = parse_scan(scan.read(), scan.name) if scan is not None else None
     return generate(examples, name, driver, found, scan.name if scan else "",
-                    "robot.yaml" if target == STDOUT else target, others, place)
+                    "robot.yaml" if target == STDOUT else target, others, place, bus)
 
 
 def _check(written: Written, target: str, acknowledged: bool) -> GatewayConfig:
@@ -179,7 +208,7 @@ def _write(target: str, files: list[tuple[str, bytes]], force: bool) -> None:
 
 
 def _summary(written: Written, beside: list[tuple[str, bytes]], config: GatewayConfig,
-             target: str, scan: str) -> None:
+             target: str, scan: str, chosen: Chosen) -> None:
     """What was written and what to do next: on stdout, or on stderr when the configuration
     went there."""
     err = target == STDOUT
@@ -188,13 +217,22 @@ def _summary(written: Written, beside: list[tuple[str, bytes]], config: GatewayC
     where = "to standard output" if err else target
     say(f"wrote {where}: drive {written.drive}, from the example {written.example!r}, drive "
         f"motors on {', '.join(written.drivers)}")
+    if chosen.drive is not None:
+        others = (f"; the other examples of that drive: {', '.join(chosen.others)} (--drive "
+                  f"NAME starts from one)" if chosen.others else "")
+        say(f"--drive {chosen.drive}: {chosen.example!r} is the shipped example for drive: "
+            f"{chosen.drive}{others}")
+    if written.bus:
+        say(f"bus: {', '.join(f'{k} {v}' for k, v in written.bus.items())} (from the root "
+            f"options; the example's: {written.bus_was})")
     for name, _ in beside:
         say(f"wrote {name}: the file its motor blocks name (the example's; use your own)")
     if err and written.files:
         say(f"note: it names {', '.join(written.files)} where wheelgate is installed; copy "
             f"the file beside it and name it there")
     if written.assignments:
-        say(f"node IDs from the scan {scan}, in order (jog each wheel to check it):")
+        say(f"node IDs from the scan {scan}, in order (check each wheel: wheelgate spin -c "
+            f"{'FILE' if err else target} WHEEL):")
         width = max(len(a.block) for a in written.assignments) + 2
         for a in written.assignments:
             say(f"  {a.block:<{width}}{a.driver} node {a.node_id}")

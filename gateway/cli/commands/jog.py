@@ -3,9 +3,8 @@
 The terminal edge around :mod:`gateway.apps.jog.keys` and :mod:`gateway.apps.jog.screen`: raw
 mode (so Ctrl-C arrives as a key), one screen redrawn in place with ANSI escapes (alternate
 screen; no curses) and fitted to the terminal's size at every draw, faults in colour unless
-``NO_COLOR`` is set, ``select`` on stdin with the deadman's deadlines as timeouts, the
-daemon's status polled at 5 Hz.  With ``--standalone`` a
-:class:`~gateway.runtime.daemon.Daemon` runs in a thread of this process on a private socket.
+``NO_COLOR`` is set, ``select`` on stdin with the deadman's deadlines as timeouts, status
+polled at 5 Hz.  ``--standalone`` runs a daemon in a thread of this process, privately.
 
 Whatever ends the session -- Ctrl-C, Ctrl-D, Esc, end of input, a closed terminal, SIGHUP,
 SIGTERM or SIGINT -- sends stop before the terminal mode is restored.  Should this program die
@@ -21,7 +20,6 @@ import logging
 import os
 import select
 import shutil
-import signal
 import sys
 import tempfile
 import termios
@@ -38,6 +36,7 @@ from gateway.apps.jog.screen import Screen, read_status, render, reply_error
 from gateway.apps.layout import steering_of, wants_colour
 from gateway.cli import config_option
 from gateway.cli.commands._common import check_finite, load, refuse_other_robot, socket_for
+from gateway.cli.commands._guards import caught_signals
 from gateway.runtime.client import ClientError, ControlClient
 from gateway.runtime.daemon import Daemon
 from gateway.runtime.sdnotify import SystemdNotifier
@@ -61,8 +60,7 @@ LOG_LINES = 3
 _MAX_SOCKET_DIR = 90
 
 _ENTER = "\x1b[?1049h\x1b[?25l\x1b[2J"  # alternate screen, hide the cursor, clear
-_LEAVE = "\x1b[?25h\x1b[?1049l"
-_SIGNALS = (signal.SIGHUP, signal.SIGTERM, signal.SIGINT)
+_LEAVE = "\r\n\x1b[?25h\x1b[?1049l"  # a fresh line where no alternate screen is restored
 
 
 class _Link:
@@ -174,25 +172,6 @@ def _standalone(cfg: GatewayConfig, sim: bool) -> Iterator[str]:
         if daemon is not None:
             daemon.close()
         shutil.rmtree(folder, ignore_errors=True)
-
-
-@contextlib.contextmanager
-def _signals_wake(fd_write: int) -> Iterator[list[str]]:
-    """SIGHUP, SIGTERM and SIGINT end the session: their names are collected and the select
-    loop wakes through ``fd_write`` instead of the program dying without a stop."""
-    caught: list[str] = []
-
-    def handler(signum: int, frame: object) -> None:
-        caught.append(signal.Signals(signum).name)
-
-    old_fd = signal.set_wakeup_fd(fd_write)
-    old = {s: signal.signal(s, handler) for s in _SIGNALS}
-    try:
-        yield caught
-    finally:
-        for s, h in old.items():
-            signal.signal(s, h)
-        signal.set_wakeup_fd(old_fd)
 
 
 @contextlib.contextmanager
@@ -386,7 +365,7 @@ def command(
         for fd in (wake_r, wake_w):
             os.set_blocking(fd, False)
             stack.callback(os.close, fd)
-        caught = stack.enter_context(_signals_wake(wake_w))
+        caught = stack.enter_context(caught_signals(wake_w))
         stack.enter_context(_raw_terminal(fd_in))
         term.write(_ENTER)
         stack.callback(term.write, _LEAVE)

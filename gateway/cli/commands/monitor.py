@@ -20,8 +20,10 @@ is a terminal, fitted to its size (:mod:`gateway.apps.monitor.screen`: no line w
 lines than it has rows; the frame IDs paged) with faults in colour unless ``NO_COLOR`` is set;
 else printed whole, one snapshot after the other.  ``--once`` prints one snapshot (of a log: at
 its end, read as fast as possible; of a bus or the daemon: after ``--window`` seconds) and
-``--json`` prints it as JSON.  ``q`` (when stdin is a terminal too) or Ctrl-C ends the
-monitor with exit code 0; space and ``b`` (or Page Down and Page Up) page the frame IDs.
+``--json`` prints it as JSON (and a failure as ``{"ok": false, "error": {"code", "message"}}``
+on stdout, exit code 1, or 2 for a bad configuration).  ``q`` (when stdin is a terminal too)
+or Ctrl-C ends the monitor with exit code 0; space and ``b`` (or Page Down and Page Up) page
+the frame IDs.
 """
 
 from __future__ import annotations
@@ -44,11 +46,14 @@ import click
 from gateway.apps.jog.keys import split_keys
 from gateway.apps.layout import wants_colour
 from gateway.apps.monitor import WINDOW_S, BusMonitor, StatusMonitor, render, snapshot_json
+from gateway.apps.monitor.view import ERROR_FRAMES, error_class_counter
 from gateway.bus.can_bus import open_bus, to_frame
 from gateway.bus.edge import bus_options
 from gateway.bus.health import CLASS_COUNTERS, ErrorFrame
 from gateway.cli import config_option, json_option
 from gateway.cli.commands._common import load, socket_for
+from gateway.cli.commands._guards import error_code, fail_json
+from gateway.core.errors import GatewayError
 from gateway.runtime.client import ClientError, ControlClient
 from gateway.wire.candump import CandumpError, parse_line
 from gateway.wire.socket.status import status_from_json
@@ -214,10 +219,10 @@ def command(
         raise click.UsageError(f"expected one source, got {' and '.join(sources)}")
     if fast and log_path is None:
         raise click.UsageError("--fast applies to --log only")
-    cfg = load(ctx, config_path)
     screen = Screen(as_json, once)
     period = 1.0 / refresh
     try:
+        cfg = load(ctx, config_path)
         with contextlib.nullcontext() if once else screen.reading_keys():
             if log_path is not None:
                 watch_log(cfg, log_path, screen, period, window, fast=fast or once, once=once)
@@ -228,6 +233,12 @@ def command(
                     watch_daemon(cfg, client, screen, period, window, once)
     except KeyboardInterrupt:  # Ctrl-C, or q (Quit)
         return
+    except (click.ClickException, GatewayError) as err:
+        if not as_json:  # with --json (and --once) a failure too is JSON, as status's
+            raise
+        code, exit_code = error_code(err)
+        message = err.format_message() if isinstance(err, click.ClickException) else str(err)
+        fail_json(ctx, code, exit_code, message=message)
 
 
 def _client(ctx: click.Context, config_path: str | None, socket_path: str | None
@@ -258,7 +269,7 @@ def watch_log(cfg: GatewayConfig, path: str, screen: Screen, period: float, wind
               fast: bool, once: bool) -> None:
     """Replay a candump log through a :class:`BusMonitor` on the log's clock."""
     mon = BusMonitor(cfg, window, source=f"log {path}")
-    mon.count("bus error frames", 0)
+    mon.count(ERROR_FRAMES, 0)
     mon.count("unreadable lines", 0)
     t: float | None = None
     offset: float | None = None  # wall clock - log clock, at recorded speed
@@ -271,7 +282,7 @@ def watch_log(cfg: GatewayConfig, path: str, screen: Screen, period: float, wind
                 entry = parse_line(line, number)
             except CandumpError as err:
                 if _is_error_frame(line):
-                    mon.count("bus error frames")
+                    mon.count(ERROR_FRAMES)
                 else:
                     mon.count("unreadable lines")
                     click.echo(f"{path}: {err} (skipped)", err=True)
@@ -321,7 +332,7 @@ def watch_bus(cfg: GatewayConfig, screen: Screen, period: float, window: float,
         start = time.monotonic()
         mon = BusMonitor(cfg, window, source=f"bus {cfg.bus.interface}:{cfg.bus.channel}",
                          start_s=start)
-        mon.count("bus error frames", 0)
+        mon.count(ERROR_FRAMES, 0)
         mon.count("receive errors", 0)
         end = start + window if once else math.inf
         next_draw = start + period
@@ -342,11 +353,11 @@ def watch_bus(cfg: GatewayConfig, screen: Screen, period: float, window: float,
                 continue
             t = time.monotonic()
             if msg.is_error_frame:
-                mon.count("bus error frames")
+                mon.count(ERROR_FRAMES)
                 error = ErrorFrame.decode(msg.arbitration_id, bytes(msg.data))
                 for flag, name in CLASS_COUNTERS.items():
                     if error.classes & flag:
-                        mon.count(f"error frames: {name.replace('_', ' ')}")
+                        mon.count(error_class_counter(name))
             elif msg.is_fd:
                 mon.count("CAN FD frames (ignored)")
             else:

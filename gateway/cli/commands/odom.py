@@ -19,7 +19,6 @@ import contextlib
 import csv
 import importlib
 import json
-import math
 import os
 import sys
 import time
@@ -31,27 +30,26 @@ from gateway.apps.replay import candump_report, mcap_report
 from gateway.apps.replay.candump_report import MAX_REPORTED
 from gateway.apps.replay.mcap_source import McapMissingError, McapReplay, RecordingError, is_mcap
 from gateway.apps.replay.replay import Replay
-from gateway.cli import config_option, json_option
-from gateway.cli.commands._common import load
+from gateway.cli import UsageExit, config_option, json_option
+from gateway.cli.commands._common import check_finite, load
+from gateway.cli.commands._guards import fail_json
 
 if TYPE_CHECKING:
     from collections.abc import Iterable, Iterator
     from types import ModuleType
 
     from gateway.apps.replay.mcap_source import McapSummary
-    from gateway.apps.replay.replay import Sample
+    from gateway.apps.replay.replay import ReplaySummary, Sample
     from gateway.core.settings import GatewayConfig
 
 #: Lines between two progress bar updates.
 PROGRESS_EVERY = 4096
 #: CSV columns before the wheels' speeds.
 CSV_COLUMNS = ("time_s", "x_m", "y_m", "theta_rad", "vx_m_s", "vy_m_s", "wz_rad_s", "slip_m_s")
-
-
-class UsageExit(click.ClickException):
-    """An error of the command line that is not one option's value: exit code 2."""
-
-    exit_code = 2
+#: The largest --every, --robots and --min-interval-ms (ms: a minute of log time).
+MAX_EVERY = 1_000_000
+MAX_ROBOTS = 100
+MAX_INTERVAL_MS = 60_000.0
 
 
 def _plotting() -> tuple[ModuleType | None, str | None]:
@@ -130,9 +128,10 @@ def _row(sample: Sample) -> list[str]:
     p, t = sample.pose, sample.twist
     values = [sample.time_s, p.x_m, p.y_m, p.theta_rad, t.vx_m_s, t.vy_m_s, t.wz_rad_s,
               sample.slip_m_s]
-    out = [f"{v:.9g}" for v in values]
-    out[0] = f"{sample.time_s:.6f}"
-    out.extend("" if w is None else f"{w:.6g}" for w in sample.wheel_rad_s)
+    # ``+ 0.0`` makes a negative zero a zero (IEEE 754: -0.0 + 0.0 is +0.0), nothing else.
+    out = [f"{v + 0.0:.9g}" for v in values]
+    out[0] = f"{sample.time_s + 0.0:.6f}"
+    out.extend("" if w is None else f"{w + 0.0:.6g}" for w in sample.wheel_rad_s)
     return out
 
 
@@ -144,13 +143,16 @@ def _row(sample: Sample) -> list[str]:
               help="Write the trajectory: time_s (the log's time stamp), x_m, y_m, "
                    "theta_rad, vx_m_s, vy_m_s, wz_rad_s, slip_m_s, then every wheel's speed "
                    "(rad/s).")
-@click.option("--every", type=click.IntRange(min=1), default=1, show_default=True,
+@click.option("--every", type=click.IntRange(min=1, max=MAX_EVERY), default=1,
+              show_default=True,
               help="Keep every Nth odometry update (and the last) for --csv and --plot.")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None,
               help="Draw the trajectory to this image (PNG); needs wheelgate[plot].")
-@click.option("--robots", type=click.IntRange(min=0), default=8, show_default=True,
+@click.option("--robots", type=click.IntRange(min=0, max=MAX_ROBOTS), default=8,
+              show_default=True,
               help="Robot outlines drawn along the path in --plot.")
-@click.option("--min-interval-ms", type=click.FloatRange(min=0.0), default=None,
+@click.option("--min-interval-ms", type=click.FloatRange(min=0.0, max=MAX_INTERVAL_MS),
+              default=None,
               help="Least log time between odometry updates, ms (default: the config's "
                    "control period, the gateway's own cadence).")
 @click.option("--progress", is_flag=True,
@@ -182,12 +184,11 @@ def command(
     A LOG.mcap (wheelgate run --record-mcap) is replayed from its /wheels angles (and
     /steering) and compared with its own /odom; --min-interval-ms and --progress do not apply
     to it."""
-    if min_interval_ms is not None and not math.isfinite(min_interval_ms):
-        raise click.BadParameter(f"expected a finite number, got {min_interval_ms!r}",
-                                 param_hint="--min-interval-ms")
+    if min_interval_ms is not None:
+        check_finite(**{"min-interval-ms": min_interval_ms})
     plotting, no_plot = _plotting() if plot_path is not None else (None, None)
     if no_plot is not None:  # the rest is still done: the CSV, the summary
-        click.echo(f"warning: --plot: {no_plot}", err=True)
+        click.echo(f"warning: --plot: {no_plot}; the replay goes on without the plot", err=True)
     if plot_path is not None:
         _writable(plot_path, "--plot")
     if csv_path is not None:
@@ -223,8 +224,8 @@ def command(
                 sink.take(sample)
         except McapMissingError as err:
             raise UsageExit(str(err)) from err
-        except RecordingError as err:
-            raise click.ClickException(str(err)) from err
+        except RecordingError as err:  # not a recording at all: bad input
+            raise UsageExit(str(err)) from err
         sink.finish()
         wall = time.perf_counter() - started
     plotted = None
@@ -243,6 +244,11 @@ def command(
     summary = replay.summary()
     _report_errors(replay, quiet)
     foreign = candump_report.foreign_controllers(cfg, replay, summary.motor_frames)
+    if summary.updates == 0:  # a log that does not fit the configuration: bad input
+        why = _no_odometry(cfg, log_path, summary, foreign)
+        if as_json:
+            fail_json(ctx, "no_odometry", UsageExit.exit_code, message=why)
+        raise UsageExit(why)
     if as_json:
         click.echo(json.dumps({
             **candump_report.summary_json(cfg, log_path, summary, wall, replay),
@@ -261,22 +267,32 @@ def command(
             click.echo(f"plot: {plotted}")
     for warning in candump_report.warnings(cfg, summary, foreign):
         click.echo(f"warning: {warning}", err=True)
-    if no_plot is not None:
-        raise UsageExit(f"--plot {plot_path}: not drawn: {no_plot}")
-    if summary.updates == 0:
-        raise click.ClickException(
-            f"{log_path}: no odometry: {summary.motor_frames:,} of {summary.entries:,} "
-            f"frames belong to {cfg.name}'s motors"
-            + (f", none from {', '.join(summary.silent_wheels)}"
-               if summary.silent_wheels else "")
-            + " (is it the right config?)"
-        )
+    if no_plot is not None:  # why was said up front
+        raise UsageExit(f"--plot {plot_path}: not drawn (see the warning above)")
+
+
+def _no_odometry(cfg: GatewayConfig, log_path: str, summary: ReplaySummary,
+                 foreign: candump_report.Foreign | None) -> str:
+    """Why a log gave no odometry, with the controllers it holds that ``cfg`` does not name."""
+    if summary.entries == 0:
+        return (f"{log_path}: no odometry: no readable frames in the log "
+                f"({summary.corrupt_lines:,} unreadable lines); expected a candump log "
+                f"(candump -l, wheelgate run --record)")
+    why = (f"{log_path}: no odometry: {summary.motor_frames:,} of {summary.entries:,} frames "
+           f"belong to {cfg.name}'s motors"
+           + (f", none from {', '.join(summary.silent_wheels)}"
+              if summary.silent_wheels else ""))
+    if foreign is not None:
+        named = ", ".join(f"{title} node {node}" for title, node, _ in foreign.devices[:8])
+        why += f"; the log's controllers are ones {cfg.name}'s configuration does not name " \
+               f"({named}{', ...' if len(foreign.devices) > 8 else ''})"
+    return why + " (is it the right config?)"
 
 
 def _finish_mcap(cfg: GatewayConfig, path: str, s: McapSummary, wall: float, as_json: bool,
                  csv_path: str | None, rows: int, plotted: str | None) -> None:
-    """Print a recording's replay (:mod:`gateway.apps.replay.mcap_report`); exit 1 when it
-    gave no odometry."""
+    """Print a recording's replay (:mod:`gateway.apps.replay.mcap_report`); exit 2 when it
+    gave no odometry (a recording that does not fit the configuration, or holds nothing)."""
     if as_json:
         click.echo(json.dumps({**mcap_report.summary_json(cfg, path, s, wall),
                                "csv": {"path": csv_path, "rows": rows} if csv_path else None,
@@ -292,7 +308,7 @@ def _finish_mcap(cfg: GatewayConfig, path: str, s: McapSummary, wall: float, as_
         click.echo(f"warning: {warning}", err=True)
     why = mcap_report.failure(cfg, path, s)
     if why is not None:
-        raise click.ClickException(why)
+        raise UsageExit(why)
 
 
 class _Sink:

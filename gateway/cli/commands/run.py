@@ -8,9 +8,11 @@ import threading
 import click
 
 from gateway.cli import config_option
-from gateway.cli.commands._common import load
+from gateway.cli.commands._common import check_finite, load
+from gateway.cli.commands._guards import MAX_DURATION_S
 from gateway.drive.driveset import DriveSet
 from gateway.runtime.daemon import Daemon
+from gateway.runtime.report import motors_text
 
 log = logging.getLogger("gateway.run")
 
@@ -26,8 +28,10 @@ log = logging.getLogger("gateway.run")
 @click.option("--record-mcap", type=click.Path(dir_okay=False, writable=True), default=None,
               help="Record odometry, transforms, wheel speeds, state and errors to an MCAP "
                    "file (needs wheelgate[foxglove]; `wheelgate odom FILE.mcap` replays it).")
-@click.option("--duration", type=click.FloatRange(min=0.0, min_open=True), default=None,
-              help="Stop after this many seconds, as on SIGTERM (default: run until stopped).")
+@click.option("--duration", type=click.FloatRange(min=0.0, min_open=True, max=MAX_DURATION_S),
+              default=None,
+              help=f"Stop after this many seconds (above 0, at most {MAX_DURATION_S:g}), as on "
+                   f"SIGTERM (default: run until stopped).")
 @click.pass_context
 def command(
     ctx: click.Context,
@@ -40,6 +44,8 @@ def command(
 ) -> None:
     """Run the gateway: twists in, wheel frames out, odometry back (SIGTERM or Ctrl-C stops
     it, leaving every motor at zero and disarmed)."""
+    if duration is not None:
+        check_finite(duration=duration)
     cfg = load(ctx, config_path)
     for warning in cfg.warnings:
         log.warning("%s", warning)
@@ -48,11 +54,17 @@ def command(
     daemon = Daemon(cfg, sim=sim, record=record, socket_path=socket_path,
                     record_mcap=record_mcap or "")
     bus = daemon.config.bus  # --sim moves the robot onto the virtual bus
-    motors = sum(m is not None for m in cfg.motors) + len(cfg.steering)
+    motors = motors_text(cfg)
+    if daemon.latch.read() is not None:  # the daemon starts e-stopped (it logs the latch)
+        plan = f"{motors} held e-stopped until an enable"
+    elif not cfg.loop.enable_on_start:
+        plan = f"{motors} disabled until an enable (gateway.enable_on_start: false)"
+    else:
+        plan = f"enabling {motors}"
     click.echo(
         f"wheelgate: {cfg.name} ({cfg.drive}, {cfg.model.n} wheels) at {cfg.loop.rate_hz:g} "
         f"Hz: bus {bus.interface} {bus.channel} open"
-        f"{' with simulated controllers' if sim else ''}; enabling {motors} motors",
+        f"{' with simulated controllers' if sim else ''}; {plan}",
         err=True,
     )
     daemon.announce = lambda line: click.echo(line, err=True)

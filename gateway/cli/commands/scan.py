@@ -10,13 +10,19 @@ messages (``gateway.can_ids``) are named, and every other identifier is listed w
 With ``-c``, a controller that a motor block names (driver and node ID) is shown with its
 wheel, a motor block whose controller was not found is named at the end, and the frames the
 configured drivers send to all their controllers (CANopen SYNC and the gateway's own
-heartbeat, DJI commands) are named as the gateway's (:mod:`gateway.apps.scan.own`).  It may
-run beside a running gateway.
+heartbeat, DJI commands) are named as the gateway's (:mod:`gateway.apps.scan.own`).  The
+identifiers each configured motor's driver declares as that motor's are the motor's: only its
+own protocol's probe looks at them, no other protocol's request is sent there, and a motor
+heard there that no probe recognises (a DBC controller) is listed as found by ``config``
+(a DBC controller's feedback at 0x281 is not taken for the heartbeat of ODrive node 20).  It
+may run beside a running gateway.
 
 Output: a table sorted by protocol and node ID (80 columns), then a summary line; ``--json``:
 a list of objects, one per row, each with ``protocol`` and ``node_id`` (``null`` for the
 gateway's messages and the unknown identifiers) and everything learned.  Exit 0 when the scan
-ran, whether or not anything answered (then it says so, with what to check); 2 for bad usage.
+ran, whether or not anything answered (then it says so, with what to check: the empty list is
+the scan's result, as ``[]`` with ``--json``, not a failure of the tool); 1 when the bus
+cannot be opened or read; 2 for bad usage.
 """
 
 from __future__ import annotations
@@ -27,9 +33,11 @@ import math
 import click
 
 from gateway.apps.scan import render, report_json, scan, summary, wrap
-from gateway.apps.scan.own import own_messages
+from gateway.apps.scan.own import motor_claims, own_messages
 from gateway.cli import check_interface, config_option, json_option
 from gateway.cli.commands._common import VIRTUAL_HINT, load
+from gateway.cli.commands._guards import error_code, fail_json
+from gateway.core.errors import GatewayError
 
 #: The longest --timeout (s).
 MAX_TIMEOUT_S = 3600.0
@@ -68,12 +76,18 @@ def command(ctx: click.Context, config_path: str | None, timeout_s: float,
             as_json: bool) -> None:
     """List the controllers on the bus by protocol (ODrive, VESC, CANopen, DJI) and the other
     IDs with their rates, sending only protocol-defined read-only requests."""
-    cfg = load(ctx, config_path)
-    bus = cfg.bus
-    check_interface(bus.interface, f"{cfg.source}: bus.interface")
-    own = own_messages(cfg, drivers=config_path is not None)
-    known = [*(m for m in cfg.motors if m is not None), *cfg.steering] if config_path else []
-    report = scan(bus.interface, bus.channel, timeout_s, own, known)
+    try:
+        cfg = load(ctx, config_path)
+        bus = cfg.bus
+        check_interface(bus.interface, f"{cfg.source}: bus.interface")
+        own = own_messages(cfg, drivers=config_path is not None)
+        known = [*(m for m in cfg.motors if m is not None), *cfg.steering] if config_path else []
+        claimed = motor_claims(cfg) if config_path else ()
+        report = scan(bus.interface, bus.channel, timeout_s, own, known, claimed)
+    except (GatewayError, click.ClickException) as err:
+        if not as_json:
+            raise
+        fail_json(ctx, *error_code(err), message=getattr(err, "message", None) or str(err))
     hint = None if report.controllers else nothing_found_hint(bus.interface, bus.channel)
     if as_json:
         click.echo(json.dumps(report_json(report)))

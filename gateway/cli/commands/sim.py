@@ -40,7 +40,8 @@ from typing import TYPE_CHECKING, Any
 import click
 
 from gateway.cli import config_option
-from gateway.cli.commands._common import VIRTUAL_HINT, load
+from gateway.cli.commands._common import VIRTUAL_HINT, check_finite, load
+from gateway.cli.commands._guards import MAX_DURATION_S
 from gateway.core.errors import BusError, GatewayError
 from gateway.drive.driveset import DriveSet
 from gateway.sim.bus import SimulatedControllers
@@ -118,13 +119,15 @@ def open_controllers(cfg: GatewayConfig, sims: Sequence[DeviceSimulator],
               show_default=True,
               help="Simulator steps per second (DJI ESCs need 1 kHz: they report a 13-bit "
                    "rotor angle that must be sampled twice per rotor turn).")
-@click.option("--every", "every_s", type=click.FloatRange(min=0.0), default=5.0,
-              show_default=True, help="Seconds between state lines (0: only on request).")
+@click.option("--every", "every_s", type=click.FloatRange(min=0.0, max=MAX_DURATION_S),
+              default=5.0, show_default=True,
+              help="Seconds between state lines (0: only on request).")
 @click.option("--json", "as_json", is_flag=True, help="One JSON object per line.")
 @click.pass_context
 def command(ctx: click.Context, config_path: str | None, rate_hz: float, every_s: float,
             as_json: bool) -> None:
     """Run the configuration's simulated controllers on its bus, as separate devices."""
+    check_finite(rate=rate_hz, every=every_s)
     cfg = load(ctx, config_path)
     drives = DriveSet(cfg)
     sims = simulators_for(drives.all_motors())

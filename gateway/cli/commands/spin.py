@@ -5,9 +5,15 @@ the configuration's control socket, opens the bus (or, with ``--sim``, a virtual
 motor's simulated controller), runs the spin behind the deadman, asks the operator what the
 wheel did and prints the verdict.
 
-Exit status: 0 the motor agrees; 4 (:data:`EXIT_FIX`) something to fix, with the advice;
-1 an error (the motor did not enable, a daemon or another sender drives the bus, nothing was
-measured); 2 bad usage (an unknown motor, a speed or duration out of bounds).
+Exit status: 0 the motor agrees (with ``--no-ask``: the controller agrees, and the verdict
+says invert and gear_ratio were not checked by a person); 4 (:data:`EXIT_FIX`) something to
+fix, with the advice; 1 an error (the motor did not enable, a daemon or another sender drives
+the bus, nothing was measured) or no answer to the question without ``--no-ask`` (standard
+input ended, or ``s``: not seen), since then invert and gear_ratio were not checked; 2 bad
+usage (an unknown motor, a speed or duration out of bounds); 130 stopped by Ctrl-C (143
+SIGTERM, 129 SIGHUP), after the stop was sent.  With ``--json`` an error is a JSON object on
+stdout (``{"ok": false, "error": {"code", "message"}}``, as ``status --json``; the message
+ends saying whether the stop was sent).
 """
 
 from __future__ import annotations
@@ -16,17 +22,25 @@ import contextlib
 import difflib
 import json
 import sys
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NoReturn
 
 import click
 
 from gateway.apps.spin.judge import NO_MOTION_RATIO, described, judge, measure, parse_seen
 from gateway.apps.spin.plan import SpinUsageError, describe, drive_plan, steer_plan, way
-from gateway.apps.spin.runner import BusInUseError, Deadman, run_spin
+from gateway.apps.spin.runner import (
+    SIGNAL_EXIT,
+    BusInUseError,
+    Deadman,
+    SpinFailedError,
+    run_spin,
+)
 from gateway.bus.can_bus import open_bus
 from gateway.bus.edge import bus_options
 from gateway.cli import config_option, json_option
 from gateway.cli.commands._common import VIRTUAL_HINT, check_finite, load, socket_for
+from gateway.cli.commands._guards import fail_json
+from gateway.core.errors import DriveFaultError, GatewayError, GatewayTimeoutError
 from gateway.drive.registry import get_driver_class
 from gateway.runtime.client import ClientError, ControlClient
 from gateway.sim.bus import SimulatedControllers
@@ -151,8 +165,9 @@ def _tty_fd() -> int | None:
         return None
 
 
-def _ask(plan: SpinPlan, measured: Measured, wheel: Wheel | None) -> float | None:
-    """The operator's answer: what the wheel did over what the encoder measured."""
+def _ask(plan: SpinPlan, measured: Measured, wheel: Wheel | None) -> tuple[float | None, str]:
+    """The operator's answer: what the wheel did over what the encoder measured, and, with
+    none, why (``"Ctrl-C"`` when interrupted)."""
     amount = described(plan, measured)
     turned = way(plan, wheel, measured.travel_rad)
     if plan.steering:
@@ -172,10 +187,12 @@ def _ask(plan: SpinPlan, measured: Measured, wheel: Wheel | None) -> float | Non
     try:
         answer: float | None = click.prompt(question, default="", show_default=False,
                                             value_proc=proc, err=True)
-    except click.Abort:  # end of input, or Ctrl-C at the question: not seen
+    except click.Abort as err:  # end of input, or Ctrl-C at the question
         click.echo("", err=True)
-        return None
-    return answer
+        if isinstance(err.__context__, KeyboardInterrupt):
+            return None, "Ctrl-C"
+        return None, "no answer: standard input ended"
+    return answer, "" if answer is not None else "answered: not seen"
 
 
 def _truth_seen(record: SpinRecord, measured: Measured | None) -> float | None:
@@ -195,8 +212,8 @@ def _truth_seen(record: SpinRecord, measured: Measured | None) -> float | None:
 @config_option
 @click.argument("motor_name", metavar="MOTOR")
 @click.option("--speed", type=float, default=None,
-              help="Wheel speed, rad/s at the wheel (default 1.0, at most half the motor's "
-                   "limit); for a steering actuator, its steering rate (default 0.3).")
+              help="Wheel speed, rad/s at the wheel (default 1.0); for a steering actuator, "
+                   "its steering rate (default 0.3).  At most half the motor's limit.")
 @click.option("--duration", type=float, default=3.0, show_default=True,
               help="How long the command lasts, ramps included (s, 1 to 30).")
 @click.option("--sim", is_flag=True,
@@ -205,7 +222,9 @@ def _truth_seen(record: SpinRecord, measured: Measured | None) -> float | None:
 @click.option("--socket", "socket_path", type=click.Path(dir_okay=False), default=None,
               help="The daemon's control socket to check (default: the configuration's).")
 @click.option("--ask/--no-ask", default=True, show_default=True,
-              help="Ask what the wheel did (the only check of invert and gear_ratio).")
+              help="Ask what the wheel did (the only check of invert and gear_ratio).  "
+                   "--no-ask judges the controller alone (exit 0 when it agrees); without it, "
+                   "no answer (end of input) exits 1.")
 @json_option
 @click.pass_context
 def command(ctx: click.Context, config_path: str | None, motor_name: str, speed: float | None,
@@ -215,7 +234,8 @@ def command(ctx: click.Context, config_path: str | None, motor_name: str, speed:
     the command, and say what to fix (invert, gear_ratio, the controller).
 
     Lift the wheel off the ground.  Any key or Ctrl-C stops; the stop (zero and disarm) is
-    always sent.  Exit 0: it agrees; 4: something to fix; 1: an error; 2: bad usage.
+    always sent.  Exit 0: it agrees; 4: something to fix; 1: an error, or no answer to the
+    question without --no-ask; 2: bad usage; 130: Ctrl-C.
     """
     check_finite(duration=duration, **({} if speed is None else {"speed": speed}))
     cfg = load(ctx, config_path)
@@ -224,40 +244,21 @@ def command(ctx: click.Context, config_path: str | None, motor_name: str, speed:
         plan = make_plan(cfg, motor, speed, duration)
     except SpinUsageError as err:
         raise click.BadParameter(str(err), param_hint=err.option) from err
-    if not sim:
-        refuse_daemon(socket_for(ctx, config_path, socket_path), cfg.name)
-        if cfg.bus.interface == "virtual":
-            click.echo(f"spin: note: python-can's virtual bus exists only inside this process, "
-                       f"so only simulators in it answer (--sim); {VIRTUAL_HINT}", err=True)
     wheel = next((w for w in cfg.wheels if w.name == motor.wheel), None)
-    tty_fd = _tty_fd()
-    with _bus(cfg, motor, sim) as (bus, probe, where):
-        click.echo(f"spin: {motor.wheel} ({motor.driver} node {motor.node_id}) on {where}: "
-                   f"{describe(plan, wheel)}.  {'Any key or ' if tty_fd is not None else ''}"
-                   f"Ctrl-C stops; the stop is always sent.", err=True)
-        with Deadman(tty_fd) as deadman:
-            try:
-                record = run_spin(bus, plan, deadman, rate_hz=cfg.loop.rate_hz,
-                                  enable_timeout_s=cfg.loop.enable_timeout_s,
-                                  watchdog=cfg.loop.controller_watchdog,
-                                  can_ids=cfg.loop.can_ids, probe=probe,
-                                  announce=lambda line: click.echo(f"spin: {line}", err=True))
-            except SpinUsageError as err:
-                raise click.BadParameter(str(err), param_hint=err.option) from err
-    if record.stop:
-        click.echo(f"spin: stop sent (zero and disarm) after {record.ended_s:.1f} s"
-                   f"{f', stopped by {record.stopped_by}' if record.stopped_by else ''}",
-                   err=True)
-    else:
-        click.echo(f"spin: stopped by {record.stopped_by} before anything was sent", err=True)
+    try:
+        record = _spin(ctx, cfg, motor, plan, wheel, sim, config_path, socket_path)
+    except SpinUsageError as err:
+        raise click.BadParameter(str(err), param_hint=err.option) from err
+    except GatewayError as err:
+        _failed(ctx, err, as_json)
     measured = measure(record.plan, record.samples, record.ended_s)
-    seen = None
+    seen, unchecked = None, ""
     if sim:
         seen = _truth_seen(record, measured)
-    elif (ask and measured is not None and not record.fault
-          and abs(measured.ratio) >= NO_MOTION_RATIO):
-        seen = _ask(record.plan, measured, wheel)
-    verdict = judge(record.plan, measured, seen, record.fault, record.stopped_by)
+        unchecked = "" if seen is not None else "the simulator did not say"
+    elif measured is not None and not record.fault and abs(measured.ratio) >= NO_MOTION_RATIO:
+        seen, unchecked = _ask(record.plan, measured, wheel) if ask else (None, "--no-ask")
+    verdict = judge(record.plan, measured, seen, record.fault, record.stopped_by, unchecked)
     if as_json:
         click.echo(json.dumps(verdict.as_json()))
     else:
@@ -265,8 +266,64 @@ def command(ctx: click.Context, config_path: str | None, motor_name: str, speed:
             click.echo(line)
         for note in verdict.notes if verdict.judged else ():
             click.echo(f"note: {note}")
+    signalled = SIGNAL_EXIT.get(record.stopped_by) or SIGNAL_EXIT.get(unchecked)
+    if signalled:
+        ctx.exit(signalled)
     if not verdict.judged:
+        ctx.exit(1)
+    if verdict.ok and seen is None and unchecked != "--no-ask":
+        click.echo(f"spin: not checked: invert and gear_ratio of {motor.wheel} ({unchecked}); "
+                   f"run spin where you can watch the wheel and answer, or give --no-ask to "
+                   f"judge the controller alone", err=True)
         ctx.exit(1)
     ctx.exit(0 if verdict.ok else EXIT_FIX)
 
 
+def _spin(ctx: click.Context, cfg: GatewayConfig, motor: MotorConfig, plan: SpinPlan,
+          wheel: Wheel | None, sim: bool, config_path: str | None,
+          socket_path: str | None) -> SpinRecord:
+    """Refuse while a daemon answers, then spin on the bus; the stop line once it is sent."""
+    if not sim:
+        refuse_daemon(socket_for(ctx, config_path, socket_path), cfg.name)
+        if cfg.bus.interface == "virtual":
+            click.echo(f"spin: note: python-can's virtual bus exists only inside this process, "
+                       f"so only simulators in it answer (--sim); {VIRTUAL_HINT}", err=True)
+    tty_fd = _tty_fd()
+    with _bus(cfg, motor, sim) as (bus, probe, where):
+        header = (f"{motor.wheel} ({motor.driver} node {motor.node_id}) on {where}: "
+                  f"{describe(plan, wheel)}.  {'Any key or ' if tty_fd is not None else ''}"
+                  f"Ctrl-C stops; the stop is always sent.")
+        with Deadman(tty_fd) as deadman:
+            record = run_spin(bus, plan, deadman, rate_hz=cfg.loop.rate_hz,
+                              enable_timeout_s=cfg.loop.enable_timeout_s,
+                              watchdog=cfg.loop.controller_watchdog,
+                              can_ids=cfg.loop.can_ids, probe=probe, header=header,
+                              announce=lambda line: click.echo(f"spin: {line}", err=True))
+    if record.stop:
+        click.echo(f"spin: stop sent (zero and disarm) after {record.ended_s:.1f} s"
+                   f"{f', stopped by {record.stopped_by}' if record.stopped_by else ''}",
+                   err=True)
+    else:
+        click.echo(f"spin: stopped by {record.stopped_by} before anything was sent", err=True)
+    return record
+
+
+def _failed(ctx: click.Context, err: GatewayError, as_json: bool) -> NoReturn:
+    """An error of the spin, then whether the stop was sent (a refusal sent nothing); with
+    ``--json`` a JSON error object on stdout (``status --json``'s, whose message says the
+    same).  Exit 1."""
+    cause = err.cause if isinstance(err, SpinFailedError) else err
+    after = ("spin: stop sent (zero and disarm) after the error"
+             if isinstance(err, SpinFailedError) else
+             "spin: nothing was sent" if isinstance(cause, BusInUseError) else "")
+    if not as_json:
+        click.echo(f"Error: {err}", err=True)
+    if after:
+        click.echo(after, err=True)
+    if as_json:
+        code = ("bus_in_use" if isinstance(cause, BusInUseError) else
+                "fault" if isinstance(cause, DriveFaultError) else
+                "not_enabled" if isinstance(cause, GatewayTimeoutError) else "error")
+        said = f"; {after.removeprefix('spin: ')}" if after else ""
+        fail_json(ctx, code, message=f"{err}{said}")
+    ctx.exit(1)

@@ -10,8 +10,9 @@ import click
 
 from gateway.cli import config_option, json_option
 from gateway.cli.commands._common import other_robot, socket_for
+from gateway.cli.commands._guards import error_code, fail_json
 from gateway.core.errors import GatewayError
-from gateway.core.numfmt import fixed
+from gateway.core.numfmt import fixed, short
 from gateway.core.protection import ProtectionState
 from gateway.core.status import fault_names, state_name
 from gateway.runtime.client import ControlClient
@@ -31,14 +32,15 @@ def command(
     ctx: click.Context, config_path: str | None, socket_path: str | None, as_json: bool
 ) -> None:
     """Print the running gateway's state, motors, odometry, counters and timing (with --json,
-    a failure too is a JSON object on stdout: ``{"ok": false, "error": {...}}``)."""
+    a failure too is a JSON object on stdout: ``{"ok": false, "error": {...}}``; a warning,
+    such as a daemon running another robot than -c names, is also in its "warnings" list)."""
     try:
         with ControlClient(socket_for(ctx, config_path, socket_path)) as client:
             reply = client.request({"op": "status"})
     except GatewayError as err:
         if not as_json:
             raise
-        reply = {"ok": False, "error": {"code": "no_gateway", "message": str(err)}}
+        fail_json(ctx, *error_code(err), message=str(err))
     if not reply.get("ok"):
         if as_json:
             click.echo(json.dumps({"ok": False, "error": reply.get("error")}))
@@ -49,7 +51,8 @@ def command(
         click.echo(f"warning: {why}", err=True)
     status = status_from_json(reply)
     if as_json:
-        click.echo(json.dumps(status_to_json(status)))
+        doc = status_to_json(status)
+        click.echo(json.dumps(doc if why is None else {**doc, "warnings": [why]}))
         return
     for line in status_lines(status):
         click.echo(line)
@@ -88,12 +91,17 @@ def status_lines(status: GatewayStatus) -> list[str]:
     tr = s.tracking
     if tr is not None:  # daemons before the tracking check do not send it
         lim = tr.limits
+        # steer_worst_ratio: the largest steering-angle error seen, over the tolerance.
+        steer = ""
+        if _finite_nonzero(tr.steer_worst_ratio) and lim.steer_tolerance_rad > 0.0:
+            steer = (f"; steering off by up to "
+                     f"{fixed(tr.steer_worst_ratio * lim.steer_tolerance_rad, 2)} rad "
+                     f"(tolerance {short(lim.steer_tolerance_rad, 3)} rad)")
         lines.append(
             f"tracking: worst error {tr.worst_ratio:.2f} of the window "
             f"({lim.tolerance_rad_s:g} rad/s + {100 * lim.tolerance_ratio:g} % of the "
             f"command, {lim.time_s:g} s)"
-            + (f"; steering {tr.steer_worst_ratio:.2f} of {lim.steer_tolerance_rad:g} rad"
-               if _finite_nonzero(tr.steer_worst_ratio) else ""))
+            + steer)
     t = s.timing
     causes = [(t.late_on_cpu, "on CPU"), (t.late_runnable, "runnable"),
               (t.late_asleep, "asleep")]
