@@ -131,10 +131,6 @@ class DjiDriver(MotorDriver[DjiOptions]):
             for i, (m, o, scale) in enumerate(zip(self.motors, self.opts, self.motor_scale,
                                                   strict=True))
         )
-        for ax, m in zip(self._axes, self.motors, strict=True):
-            if m.gear_ratio == 1.0:
-                log.warning("motor %r: gear_ratio is 1.0; an %s needs %.6g",
-                            m.wheel, ax.esc.motor, ax.esc.gear_ratio)
         #: Feedback identifier -> its motor's record: the dispatch of :meth:`_on_frame`.
         self._by_feedback_id = {feedback_id(m.node_id): ax
                                 for m, ax in zip(self.motors, self._axes, strict=True)}
@@ -263,6 +259,13 @@ class DjiDriver(MotorDriver[DjiOptions]):
         if fields[3] > ax.max_temp_c or ax.hot:
             self._temperature(ax, fields[3])
         return True
+
+    def doubts(self) -> tuple[str, ...]:
+        """A ``gear_ratio`` of 1.0: the ESCs' motors have gearboxes (3591/187, 36)."""
+        return tuple(f"motor {m.wheel!r}: gear_ratio is 1.0; an {ax.esc.motor} needs "
+                     f"{ax.esc.gear_ratio:.6g} (its gearbox)"
+                     for ax, m in zip(self._axes, self.motors, strict=True)
+                     if m.gear_ratio == 1.0)
 
     def claims(self) -> tuple[FrameClaim, ...]:
         """The feedback of every configured ESC (``0x200 + ESC ID``, 11-bit, its motor's),

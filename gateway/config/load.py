@@ -208,7 +208,7 @@ def parse_config(
 
     drives = DriveSet(config)
     _check_own_ids(config, drives)
-    more = _check_protection(config, drives)
+    more = _check_protection(config, drives) + [f"{source}: {d}" for d in drives.doubts()]
     return dataclasses.replace(config, warnings=(*config.warnings, *more)) if more else config
 
 

@@ -11,9 +11,8 @@ malformed-frame counting, liveness, fault flags, the controller-side protection 
 small hooks a protocol implements (:meth:`~MotorDriver._command`, :meth:`~MotorDriver._on_frame`,
 :meth:`~MotorDriver._enable`, :meth:`~MotorDriver._poll`, :meth:`~MotorDriver._ready_state`).
 :meth:`~MotorDriver.claims` declares the protocol's frames: dispatch, receive filters and labels
-come from it (:mod:`gateway.drive.claims`).  Protocol keys are a
-:class:`~gateway.drive.options.DriverOptions` dataclass.  Simulators are registered apart
-(:mod:`gateway.sim.registry`), so a driver may ship none.
+come from it (:mod:`gateway.drive.claims`).  Protocol keys are a :class:`~gateway.drive.options.
+DriverOptions`.  Simulators are registered apart (:mod:`gateway.sim.registry`).
 """
 
 from __future__ import annotations
@@ -267,14 +266,15 @@ class MotorDriver(abc.ABC, Generic[OptT]):
 
     def protection(self, index: int) -> Protection:
         """Motor ``index``'s controller-side protection (:mod:`gateway.core.protection`).
-        The default is for protocols that cannot set a timeout over CAN: :attr:`Guard.STATED`
-        from the motor's ``controller_timeout_s`` key (:data:`CONTROLLER_TIMEOUT_OPTION`),
-        else :attr:`Guard.UNSTATED` with :attr:`TIMEOUT_FIX`.  Drivers that configure it
-        themselves, or whose controllers have none, override this."""
-        return stated_protection(
-            self.PROTOCOL, self.TIMEOUT_ACTION, self.TIMEOUT_FIX,
-            getattr(self.opts[index], "controller_timeout_s", None) or 0.0,
-        )
+        The default, for protocols that cannot set a timeout over CAN: :attr:`Guard.STATED`
+        from ``controller_timeout_s`` (:data:`CONTROLLER_TIMEOUT_OPTION`), else
+        :attr:`Guard.UNSTATED` with :attr:`TIMEOUT_FIX`; other drivers override this."""
+        return stated_protection(self.PROTOCOL, self.TIMEOUT_ACTION, self.TIMEOUT_FIX, getattr(
+            self.opts[index], "controller_timeout_s", None) or 0.0)
+
+    def doubts(self) -> tuple[str, ...]:
+        """What the driver doubts in a valid configuration (``check`` and ``run`` warn)."""
+        return ()
 
     def uncontrolled_band(self, index: int) -> tuple[float, float] | None:
         """The wheel speeds (rad/s, ``(low, high)``: every ``low < |speed| < high``) that motor

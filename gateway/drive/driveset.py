@@ -214,6 +214,10 @@ class DriveSet:
             for i, m in enumerate(drv.motors)
         ]
 
+    def doubts(self) -> list[str]:
+        """What the drivers doubt in the configuration (:meth:`MotorDriver.doubts`)."""
+        return [d for drv, _ in self.groups for d in drv.doubts()]
+
     def uncontrolled_bands(self) -> list[tuple[float, float] | None]:
         """Per wheel (model order; ``None`` for a passive wheel or none), the speeds its
         controller does not speed-control (:meth:`MotorDriver.uncontrolled_band`)."""

@@ -62,10 +62,11 @@ def test_a_file_that_exists_wins(runner: CliRunner, empty: Path) -> None:
     text = (CONFIG_DIR / "turtlebot3_burger.yaml").read_text("utf-8")
     (empty / "turtlebot3_burger.yaml").write_text(
         text.replace("name: turtlebot3_burger", "name: mine"), "utf-8")
-    result = runner.invoke(main, ["check", "-c", "turtlebot3_burger.yaml"])
-    assert result.exit_code == 0, result.output
-    assert "robot:    mine" in result.stdout
-    assert "shipped example" not in result.stderr
+    for given in ("turtlebot3_burger.yaml", "turtlebot3_burger"):  # with or without .yaml
+        result = runner.invoke(main, ["check", "-c", given])
+        assert result.exit_code == 0, result.output
+        assert "robot:    mine" in result.stdout
+        assert "shipped example" not in result.stderr
 
 
 @pytest.mark.parametrize("given", ["./turtlebot3_burger.yaml", "sub/turtlebot3_burger.yaml",

@@ -338,6 +338,8 @@ def test_usage_errors(runner: CliRunner, jog_registered: None, args: list[str],
     result = runner.invoke(main, ["jog", *args])
     assert result.exit_code == 2, result.output
     assert message in result.stderr
+    if not args:  # well formed, only no terminal: no usage lines
+        assert "Usage:" not in result.stderr
 
 
 @pytest.mark.parametrize(("args", "message"), [

@@ -197,6 +197,10 @@ def test_usage_errors(runner: CliRunner, channel: str, tmp_path: Path, args: lis
     result = spin(runner, config, *args)
     assert result.exit_code == 2, result.output
     assert hint in result.stderr and text in " ".join(result.stderr.split())
+    # with --json, the same error as a JSON object on stdout
+    doc = json.loads(spin(runner, config, *args, "--json").stdout)
+    assert doc["ok"] is False and doc["error"]["code"] == "bad_usage"
+    assert hint in doc["error"]["message"] and text in " ".join(doc["error"]["message"].split())
 
 
 def test_a_passive_wheel_has_no_motor(runner: CliRunner, channel: str, tmp_path: Path) -> None:

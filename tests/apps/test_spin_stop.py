@@ -40,13 +40,15 @@ SET_AXIS_STATE = 1 << 5 | 0x07
 IDLE = bytes([1, 0, 0, 0])
 
 
-def when_turning(shaft: Shaft, act: Callable[[], object]) -> None:
-    """Call ``act`` once, from the simulator's thread, as soon as the wheel turns."""
+def when_turning(shaft: Shaft, act: Callable[[], object], after_rad: float = 0.0) -> None:
+    """Call ``act`` once, from the simulator's thread, as soon as the wheel turns (and has
+    turned ``after_rad``)."""
     done: list[float] = []
 
     def step(now_s: float) -> None:
         shaft._track(now_s)
-        if not done and shaft.sim.model.armed and shaft.sim.model.velocity_rad_s > 0.05:
+        if (not done and shaft.sim.model.armed and shaft.sim.model.velocity_rad_s > 0.05
+                and shaft.position() - shaft.start_rad >= after_rad):  # (on its thread)
             done.append(now_s)
             act()
 
@@ -77,6 +79,20 @@ def test_ctrl_c_stops_the_wheel(runner: CliRunner, channel: str, tmp_path: Path)
     assert "stopped by Ctrl-C" in result.stderr
     assert "left: nothing judged: stopped early by Ctrl-C; the motion was not measured" in (
         result.stdout)
+
+
+def test_ctrl_c_late_in_the_spin_asks_nothing(runner: CliRunner, channel: str,
+                                              tmp_path: Path) -> None:
+    # Stopped by Ctrl-C once the wheel has turned for a while: the motion is measured, but the
+    # operator, who asked to stop, is not asked what the wheel did; 130 at once.
+    config = robot_config(tmp_path / "robot.yaml", channel)
+    with Shaft(config, "left") as shaft, Listener(channel) as bus:
+        when_turning(shaft, lambda: os.kill(os.getpid(), signal.SIGINT), after_rad=2.0)
+        result = runner.invoke(main, ["spin", "-c", str(config), "left", "--duration", "6"],
+                               input="\n")
+        assert_stopped(shaft, bus.frames())
+    assert result.exit_code == 130, result.output
+    assert "stopped by Ctrl-C" in result.stderr and "What did left do?" not in result.stderr
 
 
 def test_an_exception_stops_the_wheel(runner: CliRunner, channel: str, tmp_path: Path,

@@ -176,6 +176,13 @@ def test_shell_completion_offers_every_command_and_option() -> None:
 
     assert set(complete("wheelgate ")) == set(COMMANDS)
     assert {"--sim", "--socket"} <= set(complete("wheelgate run --s"))
+    # values: init's examples and drives, its drivers, spin's motors of the -c robot
+    assert complete("wheelgate init --drive om") == ["omni", "omni3", "omni3_swedish",
+                                                     "omni_delta"]
+    assert set(complete("wheelgate init --driver ")) == {"cia402", "dbc", "dji", "odrive",
+                                                         "vesc"}
+    assert complete(f"wheelgate spin -c {CONFIG_DIR / 'swerve.yaml'} front_l") == [
+        "front_left", "front_left_steering"]
     source = subprocess.run(
         [sys.executable, "-c", "import sys; from gateway.cli import main; "
          "sys.exit(main(prog_name='wheelgate'))"],

@@ -14,6 +14,7 @@ import can
 import pytest
 import yaml
 
+import gateway.cli.commands.scan as scan_command
 from gateway.cli import main
 from gateway.config import load_config
 from gateway.core.types import Frame, GatewayState
@@ -132,6 +133,13 @@ def test_the_text_table_fits_80_columns_and_names_what_it_found(
     text = " ".join(result.stdout.split())
     assert "3 controllers (1 DJI, 1 ODrive, 1 VESC) on virtual:" in text
     assert "note: configured but not found: 'rear_left' (cia402 node 5)" in text
+    assert "note: a CANopen node that booted before the scan and sends no heartbeat" in text
+
+
+def test_the_empty_bus_hint_names_ip_link_only_for_socketcan() -> None:
+    assert "ip -details link show can0" in scan_command.nothing_found_hint("socketcan", "can0")
+    multicast = scan_command.nothing_found_hint("udp_multicast", "239.74.163.2")
+    assert "ip -details" not in multicast and "udp_multicast:239.74.163.2" in multicast
 
 
 def test_beside_a_running_gateway(runner: CliRunner, daemon: Daemon, channel: str) -> None:

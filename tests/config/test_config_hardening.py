@@ -7,6 +7,7 @@ import time
 from typing import TYPE_CHECKING
 
 import pytest
+import yaml
 
 from gateway.cli import main
 from gateway.config import load_config
@@ -218,3 +219,17 @@ bus: {interface: socketcan, channel: can0}
         load_config(path)
     assert [p.split(": ")[1] for p in info.value.problems] == [
         "motors.left.inverted", "motors.left.pole_pairs", "motors.right.pole_pairs"]
+
+
+def test_a_driver_s_doubt_is_a_warning_of_the_file(tmp_path: Path) -> None:
+    # DJI motors have gearboxes: a gear_ratio of 1.0 (left from another driver's example) is
+    # said once per motor among the file's warnings, which check counts and run logs.
+    raw = yaml.safe_load((CONFIG_DIR / "mecanum.yaml").read_text())
+    raw["motor_defaults"]["gear_ratio"] = 1.0
+    cfg = load_config(write(tmp_path, yaml.safe_dump(raw)))
+    doubts = [w for w in cfg.warnings if "gear_ratio is 1.0" in w]
+    assert len(doubts) == 4, cfg.warnings
+    assert doubts[0].endswith("motor 'front_left': gear_ratio is 1.0; an M3508 needs 19.2032 "
+                              "(its gearbox)"), doubts
+    assert not any("gear_ratio is 1.0" in w for w in load_config(CONFIG_DIR / "mecanum.yaml")
+                   .warnings)

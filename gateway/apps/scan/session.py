@@ -315,6 +315,11 @@ class ScanSession:
         notes = self._scan_notes()
         if missing:
             notes.append(f"configured but not found: {', '.join(missing)}")
+            if any(driver == "cia402" for driver, node in self.known
+                   if (driver, node) not in seen):
+                notes.append("a CANopen node that booted before the scan and sends no "
+                             "heartbeat (0x1017 = 0, its factory setting) stays silent: power "
+                             "it up, or reset it (NMT), while the scan listens")
         return ScanReport(bus, now_s - self.start_s, tuple(rows), self.requests_sent,
                           tuple(notes))
 
@@ -363,7 +368,7 @@ def _configured_row(c: Configured) -> ScannedDevice:
     """A configured motor heard only on the identifiers its driver declares."""
     m = c.claimed.motor
     note = (f"heard on the identifiers the configuration's {m.driver} driver declares as "
-            f"{m.wheel!r}'s; nothing asked")
+            f"those of the motor of {m.wheel!r}; nothing asked")
     return ScannedDevice(m.driver, DRIVER_TITLES.get(m.driver, m.driver), m.driver, m.node_id,
                          c.heard[0].is_extended_id, CONFIGURED, c.heard,
                          Description(notes=(note,)), m.wheel)

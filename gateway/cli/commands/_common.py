@@ -44,6 +44,8 @@ def config_file(ctx: click.Context, path: str | None) -> str | None:
     exists always wins."""
     if path is None or os.sep in path or (os.altsep and os.altsep in path) or Path(path).exists():
         return path
+    if Path(path + ".yaml").is_file():  # a file here wins, with or without its suffix too
+        return path + ".yaml"
     # Imported here: only a missing file pays for it (the commands' start-up does not).
     from gateway.apps.init.shipped import example_file  # noqa: PLC0415
 
@@ -52,7 +54,7 @@ def config_file(ctx: click.Context, path: str | None) -> str | None:
         return path
     root = ctx.find_root()
     said = root.meta.setdefault("wheelgate.shipped_said", set())
-    if path not in said:
+    if path not in said and not ctx.resilient_parsing:  # (not while completing a command)
         said.add(path)
         click.echo(f"-c {path}: no such file here; using the shipped example "
                    f"{found.stem!r} ({found})", err=True)

@@ -28,6 +28,7 @@ from gateway.config import load_config
 from gateway.core.errors import ConfigError
 from gateway.core.protection import Guard
 from gateway.drive.driveset import DriveSet
+from gateway.drive.registry import valid_drivers
 
 if TYPE_CHECKING:
     from typing import TextIO
@@ -44,9 +45,14 @@ STDOUT = "-"
 
 @click.command()
 @click.option("--drive", "example", metavar="EXAMPLE|DRIVE",
+              shell_complete=lambda ctx, param, incomplete: [
+                  n for n in sorted({*shipped.example_names(), *shipped.BY_DRIVE})
+                  if n.startswith(incomplete)],
               help="The shipped example to start from: a name of --list, or a drive "
                    "(differential, omni, generic, ...: its simplest example, the others named).")
 @click.option("--driver", metavar="NAME",
+              shell_complete=lambda ctx, param, incomplete: [
+                  n for n in valid_drivers() if n.startswith(incomplete)],
               help="Put the drive motors on this driver instead of the example's (its keys come "
                    "from a shipped example that uses it).")
 @click.option("--from-scan", "scan", type=click.File("r"), metavar="FILE",

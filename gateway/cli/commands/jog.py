@@ -34,7 +34,7 @@ from gateway.apps.jog import keys
 from gateway.apps.jog.keys import STOP, JogState, Request, jog_limits, split_keys, steps_errors
 from gateway.apps.jog.screen import Screen, read_status, render, reply_error
 from gateway.apps.layout import steering_of, wants_colour
-from gateway.cli import config_option
+from gateway.cli import UsageExit, config_option
 from gateway.cli.commands._common import check_finite, load, refuse_other_robot, socket_for
 from gateway.cli.commands._guards import caught_signals
 from gateway.runtime.client import ClientError, ControlClient
@@ -336,7 +336,7 @@ def command(
     for option, why in steps_errors(limits, speed, turn):
         raise click.BadParameter(why, param_hint=option)
     if not sys.stdin.isatty():
-        raise click.UsageError("jog reads keys from a terminal, but stdin is not a terminal")
+        raise UsageExit("jog reads keys from a terminal, but stdin is not a terminal")
     with contextlib.ExitStack() as stack:
         log_file = None
         if log_path is not None:

@@ -58,9 +58,10 @@ def nothing_found_hint(interface: str, channel: str) -> str:
     if interface == "virtual":
         return (f"python-can's virtual bus (channel {channel!r}) exists only inside this "
                 f"process, so no controller elsewhere is on it; {VIRTUAL_HINT}")
+    link = (f"that the link is up at the controllers' bitrate (ip -details link show "
+            f"{channel}), " if interface == "socketcan" else "")
     return (f"check the bus: --interface/--channel (or the configuration's bus: block; here "
-            f"{interface}:{channel}), that the link is up at the controllers' bitrate "
-            f"(ip -details link show {channel}), the wiring, the termination and the "
+            f"{interface}:{channel}), {link}the wiring, the termination and the "
             f"controllers' power; a CANopen node that booted before the scan and has no "
             f"heartbeat (0x1017 = 0) stays silent")
 

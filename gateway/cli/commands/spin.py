@@ -39,7 +39,7 @@ from gateway.bus.can_bus import open_bus
 from gateway.bus.edge import bus_options
 from gateway.cli import config_option, json_option
 from gateway.cli.commands._common import VIRTUAL_HINT, check_finite, load, socket_for
-from gateway.cli.commands._guards import fail_json
+from gateway.cli.commands._guards import error_code, fail_json
 from gateway.core.errors import DriveFaultError, GatewayError, GatewayTimeoutError
 from gateway.drive.registry import get_driver_class
 from gateway.runtime.client import ClientError, ControlClient
@@ -73,6 +73,17 @@ def motors_by_name(cfg: GatewayConfig) -> dict[str, MotorConfig]:
         out.setdefault(m.wheel.replace(" ", "_"), m)
         out.setdefault(m.wheel.replace(" ", "."), m)
     return out
+
+
+def complete_motor(ctx: click.Context, incomplete: str) -> list[str]:
+    """Shell completion of MOTOR: the names of the ``-c`` robot's motors (the
+    underscore spelling of a steering actuator's); none when it does not load."""
+    try:
+        cfg = load(ctx, ctx.params.get("config_path"))
+    except (GatewayError, click.ClickException):
+        return []
+    return [n for n in motors_by_name(cfg) if " " not in n and "." not in n
+            and n.startswith(incomplete)]
 
 
 def find_motor(cfg: GatewayConfig, name: str) -> MotorConfig:
@@ -210,7 +221,8 @@ def _truth_seen(record: SpinRecord, measured: Measured | None) -> float | None:
 
 @click.command()
 @config_option
-@click.argument("motor_name", metavar="MOTOR")
+@click.argument("motor_name", metavar="MOTOR", shell_complete=lambda ctx, param, incomplete:
+                complete_motor(ctx, incomplete))
 @click.option("--speed", type=float, default=None,
               help="Wheel speed, rad/s at the wheel (default 1.0); for a steering actuator, "
                    "its steering rate (default 0.3).  At most half the motor's limit.")
@@ -237,13 +249,19 @@ def command(ctx: click.Context, config_path: str | None, motor_name: str, speed:
     always sent.  Exit 0: it agrees; 4: something to fix; 1: an error, or no answer to the
     question without --no-ask; 2: bad usage; 130: Ctrl-C.
     """
-    check_finite(duration=duration, **({} if speed is None else {"speed": speed}))
-    cfg = load(ctx, config_path)
-    motor = find_motor(cfg, motor_name)
     try:
-        plan = make_plan(cfg, motor, speed, duration)
-    except SpinUsageError as err:
-        raise click.BadParameter(str(err), param_hint=err.option) from err
+        check_finite(duration=duration, **({} if speed is None else {"speed": speed}))
+        cfg = load(ctx, config_path)
+        motor = find_motor(cfg, motor_name)
+        try:
+            plan = make_plan(cfg, motor, speed, duration)
+        except SpinUsageError as err:
+            raise click.BadParameter(str(err), param_hint=err.option) from err
+    except (click.ClickException, GatewayError) as err:
+        if not as_json:
+            raise
+        text = err.format_message() if isinstance(err, click.ClickException) else str(err)
+        fail_json(ctx, *error_code(err), message=text)
     wheel = next((w for w in cfg.wheels if w.name == motor.wheel), None)
     try:
         record = _spin(ctx, cfg, motor, plan, wheel, sim, config_path, socket_path)
@@ -256,6 +274,8 @@ def command(ctx: click.Context, config_path: str | None, motor_name: str, speed:
     if sim:
         seen = _truth_seen(record, measured)
         unchecked = "" if seen is not None else "the simulator did not say"
+    elif record.stopped_by in SIGNAL_EXIT:  # ended by a signal: no question, exit at once
+        unchecked = record.stopped_by
     elif measured is not None and not record.fault and abs(measured.ratio) >= NO_MOTION_RATIO:
         seen, unchecked = _ask(record.plan, measured, wheel) if ask else (None, "--no-ask")
     verdict = judge(record.plan, measured, seen, record.fault, record.stopped_by, unchecked)
