@@ -14,13 +14,21 @@ from gateway.core.options import validate_block
 from gateway.core.settings import LOOP_CHOICES, BusConfig, LoopConfig
 
 if TYPE_CHECKING:
-    from collections.abc import Mapping
+    from collections.abc import Collection, Mapping
 
 
-def parse_bus(raw: object, source: str, overrides: Mapping[str, object]) -> BusConfig:
+def parse_bus(raw: object, source: str, overrides: Mapping[str, object],
+              interfaces: Collection[str] | None = None) -> BusConfig:
     """The ``bus:`` block, then the environment's ``GATEWAY_*`` variables, then the command
-    line's ``overrides`` (that precedence)."""
+    line's ``overrides`` (that precedence).
+
+    :param interfaces: python-can's interfaces, to check the one given against (``None``: not
+        checked; the loader does not import python-can, a command that opens a bus does).
+    """
     v = validate_block(raw, BUS_KEYS, f"{source}: bus", "bus keys")
+    said = f"{source}: bus.interface"
+    if os.environ.get("GATEWAY_INTERFACE") is not None:
+        said = "GATEWAY_INTERFACE"
     for key, spec in BUS_KEYS.items():
         env = os.environ.get(f"GATEWAY_{key.upper()}")
         if env is not None:
@@ -35,6 +43,11 @@ def parse_bus(raw: object, source: str, overrides: Mapping[str, object]) -> BusC
             v[key] = spec.validate(value, f"GATEWAY_{key.upper()}")
         if overrides.get(key) is not None:
             v[key] = spec.validate(overrides[key], f"--{key}")
+    if overrides.get("interface") is not None:
+        said = "--interface"
+    if interfaces is not None and v["interface"] not in interfaces:
+        raise ConfigError(f"{said}: expected a python-can interface, one of "
+                          f"{', '.join(sorted(interfaces))}; got {v['interface']!r}")
     return BusConfig(str(v["interface"]), str(v["channel"]), int(v["bitrate"]))  # type: ignore[call-overload]
 
 

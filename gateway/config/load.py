@@ -69,7 +69,7 @@ from gateway.core.types import MotorConfig
 from gateway.drive.ownership import own_id_collisions
 
 if TYPE_CHECKING:
-    from collections.abc import Mapping
+    from collections.abc import Collection, Mapping
 
     from gateway.drive.driveset import DriveSet
 
@@ -125,13 +125,16 @@ def client_socket_path() -> str:
 
 
 def load_config(
-    path: str | Path | None = None, overrides: Mapping[str, object] | None = None
+    path: str | Path | None = None, overrides: Mapping[str, object] | None = None,
+    interfaces: Collection[str] | None = None,
 ) -> GatewayConfig:
     """Read and validate a configuration file.
 
     :param path: the YAML file; the embedded default when ``None``.
     :param overrides: bus keys from the command line (``interface``, ``channel``, ``bitrate``),
         ``None`` values ignored.
+    :param interfaces: python-can's interfaces, to check ``bus.interface`` against with the
+        file's other problems (``None``: not checked here).
     :raises ConfigError: naming the file and key path of the first problem.
     """
     if path is None:
@@ -152,17 +155,21 @@ def load_config(
             raise ConfigError(f"{source}: cannot read the file: {err.strerror}") from err
         text = read_text(data, source)
     raw = load_yaml(text, source)
-    return parse_config(raw, source, overrides)
+    return parse_config(raw, source, overrides, interfaces)
 
 
 def parse_config(
-    raw: object, source: str, overrides: Mapping[str, object] | None = None
+    raw: object, source: str, overrides: Mapping[str, object] | None = None,
+    interfaces: Collection[str] | None = None,
 ) -> GatewayConfig:
     """Validate an already-loaded YAML document (see :func:`load_config`).
 
     :raises ConfigError: with every problem of the file, one line each (block by block; a
         block that needs a broken one is not checked).
     """
+    if raw is None:
+        raise ConfigError(f"{source}: the file is empty; expected a robot's configuration "
+                          f"(wheelgate init writes a commented one)")
     if not isinstance(raw, dict):
         raise ConfigError(f"{source}: expected a mapping at the top level, got {raw!r}")
     found = Problems()
@@ -172,7 +179,8 @@ def parse_config(
     robot = _robot(raw, source, found)
     lim = found.check(lambda: validate_block(raw.get("limits", {}), LIMIT_KEYS,
                                              f"{source}: limits"))
-    bus = found.check(lambda: parse_bus(raw.get("bus", {}), source, overrides or {}))
+    bus = found.check(lambda: parse_bus(raw.get("bus", {}), source, overrides or {},
+                                        interfaces))
     loop = found.check(lambda: parse_loop(raw.get("gateway", {}), source))
     name = raw.get("name", Path(source).stem if source != DEFAULT_NAME else "default")
     if not isinstance(name, str):

@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any
 
 from gateway.config.gather import Problems
 from gateway.config.keys import (
+    GATEWAY_KEYS,
     LINKAGE_KEYS,
     MAX_MULTIPLIER,
     MIN_MULTIPLIER,
@@ -270,10 +271,13 @@ def motor_block(
     protocol = {k: x for k, x in merged.items() if k not in keys}
     for key in protocol:
         if key not in cls.OPTIONS and key != "config_dir":
+            given = "motor_defaults" if key in defaults and key not in raw else "its block"
+            elsewhere = (f" ({key!r}, given in {given}, is a gateway: key)"
+                         if key in GATEWAY_KEYS else "")
             found.add(str(unknown_key(f"{where}.{key}", key, {
                 "steering keys" if steers else "motor keys": keys,
                 f"{driver} keys": [k for k in cls.OPTIONS if k != "config_dir"],
-            })))
+            })) + elsewhere)
     protocol = {k: x for k, x in protocol.items() if k in cls.OPTIONS or k == "config_dir"}
     if "config_dir" in cls.OPTIONS and "config_dir" not in protocol:
         # Relative paths in protocol keys (a DBC file) are relative to the config file.

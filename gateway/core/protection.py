@@ -89,8 +89,9 @@ class Protection:
         """One line for ``check`` and the start-up log."""
         if self.guard is Guard.NONE:
             return f"NONE: {self.how}"
-        when = "?" if self.timeout_s is None else f"{self.timeout_s:g} s"
-        head = f"{self.guard.value}: stops {when} after wheelgate falls silent ({self.action}); "
+        when = ("after a time not known" if self.timeout_s is None
+                else f"{self.timeout_s:g} s after")
+        head = f"{self.guard.value}: stops {when} wheelgate falls silent ({self.action}); "
         return head + self.how
 
 

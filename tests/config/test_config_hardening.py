@@ -233,3 +233,19 @@ def test_a_driver_s_doubt_is_a_warning_of_the_file(tmp_path: Path) -> None:
                               "(its gearbox)"), doubts
     assert not any("gear_ratio is 1.0" in w for w in load_config(CONFIG_DIR / "mecanum.yaml")
                    .warnings)
+
+
+def test_an_empty_file_and_a_gateway_key_among_the_motors_say_what_they_are(
+        tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match="the file is empty; expected a robot's config"):
+        load_config(write(tmp_path, ""))
+    with pytest.raises(ConfigError) as info:
+        load_config(write(tmp_path, """\
+drive: differential
+geometry: {wheel_radius: 0.033, track: 0.16}
+motor_defaults: {driver: odrive, max_rpm: 100, controller_watchdog: warn}
+motors: {left: {node_id: 1}, right: {node_id: 2}}
+"""))
+    assert len(info.value.problems) == 2
+    assert info.value.problems[0].endswith(
+        "('controller_watchdog', given in motor_defaults, is a gateway: key)")

@@ -15,6 +15,8 @@ from gateway.config import client_socket_path, load_config
 from gateway.core.types import MAX_TWIST_COMPONENT
 
 if TYPE_CHECKING:
+    from collections.abc import Collection
+
     from gateway.core.errors import InfeasibleTwistError
     from gateway.core.settings import GatewayConfig
     from gateway.core.types import Twist
@@ -29,12 +31,15 @@ VIRTUAL_HINT = (
 )
 
 
-def load(ctx: click.Context, path: str | None) -> GatewayConfig:
+def load(ctx: click.Context, path: str | None,
+         interfaces: Collection[str] | None = None) -> GatewayConfig:
     """The configuration at ``path`` (or the shipped example it names,
-    :func:`config_file`) with the root group's bus overrides."""
+    :func:`config_file`) with the root group's bus overrides; ``bus.interface`` checked
+    against ``interfaces`` with the file's other problems when given."""
     obj = ctx.find_root().obj or {}
     return load_config(config_file(ctx, path),
-                       {"interface": obj.get("interface"), "channel": obj.get("channel")})
+                       {"interface": obj.get("interface"), "channel": obj.get("channel")},
+                       interfaces)
 
 
 def config_file(ctx: click.Context, path: str | None) -> str | None:
