@@ -41,19 +41,19 @@ def preset_wheels(
     ``separation`` (kinematics.wheel_separation_multiplier)."""
     preset = PRESETS[drive]
     specs = _geometry_specs(drive)
-    if isinstance(raw, dict):
-        others = {key: _other_drives_key(f"{source}: geometry.{key}", key, drive, specs)
-                  for key in raw if key not in specs}
-        known = [str(err) for err in others.values() if err is not None]
-        if known:  # another drive's key: say so, with this drive's keys
-            try:
-                validate_block({k: x for k, x in raw.items() if others.get(k) is None}, specs,
-                               f"{source}: geometry", f"{drive} geometry keys")
-            except ConfigError as err:
-                raise ConfigError.of([*known, *err.problems]) from err
-            raise ConfigError.of(known)
-    params = validate_block(raw if raw is not None else {}, specs,
-                            f"{source}: geometry", f"{drive} geometry keys")
+    given = {} if raw is None else raw
+    theirs: dict[object, ConfigError] = {}  # another drive's keys: said as such, first
+    if isinstance(given, dict):
+        theirs = {key: err for key in given if key not in specs
+                  if (err := _other_drives_key(f"{source}: geometry.{key}", key, drive, specs))}
+        given = {k: x for k, x in given.items() if k not in theirs}
+    said = [str(err) for err in theirs.values()]
+    try:
+        params = validate_block(given, specs, f"{source}: geometry", f"{drive} geometry keys")
+    except ConfigError as err:
+        raise ConfigError.of([*said, *err.problems]) from err
+    if said:
+        raise ConfigError.of(said)
     for key, value in params.items():
         if key in ("wheel_radius", "track", "wheelbase", "wheel_distance") and value == 0.0:
             raise ConfigError(f"{source}: geometry.{key}: expected a length > 0 m, got 0")
@@ -97,11 +97,11 @@ def stand_in_wheels(drive: str, raw: object) -> list[Wheel] | None:
     params: dict[str, object] = {}
     for key, spec in _geometry_specs(drive).items():
         try:
-            params[key] = spec.validate(given[key], key)
-            if params[key] == 0.0:
-                raise ConfigError("zero")
+            value = spec.validate(given[key], key)
         except (KeyError, ConfigError):
-            params[key] = spec.default if spec.default is not None else 1.0
+            value = None
+        params[key] = value if value not in (None, 0.0) else (
+            1.0 if spec.default is None else spec.default)
     try:
         return PRESETS[drive].build(params)  # type: ignore[arg-type]
     except (KinematicsError, ValueError, TypeError):

@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, NoReturn
 import click
 
 from gateway.cli import EXIT_ERROR, EXIT_USAGE
-from gateway.core.errors import BusError, ConfigError
+from gateway.core.errors import BusError, ConfigError, GatewayError
 from gateway.runtime.client import ClientError
 
 if TYPE_CHECKING:
@@ -55,6 +55,13 @@ def fail_json(ctx: click.Context, code: str, exit_code: int = EXIT_ERROR, *, mes
         doc["warnings"] = list(warnings)
     click.echo(json.dumps(doc))
     ctx.exit(exit_code)
+
+
+def fail_json_of(ctx: click.Context, err: click.ClickException | GatewayError) -> NoReturn:
+    """:func:`fail_json` for a command's failure ``err``: its code, exit code and message
+    (:func:`error_code`; a click exception's message as click would print it)."""
+    message = err.format_message() if isinstance(err, click.ClickException) else str(err)
+    fail_json(ctx, *error_code(err), message=message)
 
 
 #: The signals that end a command which must send stop first (``twist --duration``, ``jog``).

@@ -105,8 +105,9 @@ def command(ctx: click.Context, example: str | None, driver: str | None, scan: T
     obj = ctx.find_root().obj or {}
     bus = {k: str(obj[k]) for k in ("interface", "channel") if obj.get(k) is not None}
     with contextlib.ExitStack() as stack:
-        chosen = choose(_examples(), example, shipped.BY_DRIVE)
-        written = _generate(stack, chosen.example, driver, scan, target, bus)
+        examples = _examples()
+        chosen = choose(examples, example, shipped.BY_DRIVE)
+        written = _generate(stack, examples, chosen.example, driver, scan, target, bus)
         config = _check(written, target, acknowledged)
         files = [(target, written.text.encode("utf-8"))]
         if target != STDOUT:
@@ -138,11 +139,11 @@ def _examples() -> dict[str, str]:
     return {name: shipped.read_text(name + shipped.SUFFIX) for name in shipped.example_names()}
 
 
-def _generate(stack: contextlib.ExitStack, name: str, driver: str | None,
-              scan: TextIO | None, target: str, bus: dict[str, str]) -> Written:
+def _generate(stack: contextlib.ExitStack, examples: dict[str, str], name: str,
+              driver: str | None, scan: TextIO | None, target: str,
+              bus: dict[str, str]) -> Written:
     """The configuration's text; on standard output, the shipped files it names are named
     where they are installed (there is no directory to put them beside it)."""
-    examples = _examples()
     others = [n for n in shipped.names() if not n.endswith(shipped.SUFFIX)]
     place = {}
     if target == STDOUT:

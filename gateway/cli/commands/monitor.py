@@ -52,7 +52,7 @@ from gateway.bus.edge import bus_options
 from gateway.bus.health import CLASS_COUNTERS, ErrorFrame
 from gateway.cli import config_option, json_option
 from gateway.cli.commands._common import load, socket_for
-from gateway.cli.commands._guards import error_code, fail_json
+from gateway.cli.commands._guards import fail_json_of
 from gateway.core.errors import GatewayError
 from gateway.runtime.client import ClientError, ControlClient
 from gateway.wire.candump import CandumpError, parse_line
@@ -236,9 +236,7 @@ def command(
     except (click.ClickException, GatewayError) as err:
         if not as_json:  # with --json (and --once) a failure too is JSON, as status's
             raise
-        code, exit_code = error_code(err)
-        message = err.format_message() if isinstance(err, click.ClickException) else str(err)
-        fail_json(ctx, code, exit_code, message=message)
+        fail_json_of(ctx, err)
 
 
 def _client(ctx: click.Context, config_path: str | None, socket_path: str | None

@@ -36,7 +36,7 @@ from gateway.apps.scan import render, report_json, scan, summary, wrap
 from gateway.apps.scan.own import motor_claims, own_messages
 from gateway.cli import config_option, json_option
 from gateway.cli.commands._common import VIRTUAL_HINT, load
-from gateway.cli.commands._guards import error_code, fail_json
+from gateway.cli.commands._guards import fail_json_of
 from gateway.core.errors import GatewayError
 
 #: The longest --timeout (s).
@@ -89,7 +89,7 @@ def command(ctx: click.Context, config_path: str | None, timeout_s: float,
     except (GatewayError, click.ClickException) as err:
         if not as_json:
             raise
-        fail_json(ctx, *error_code(err), message=getattr(err, "message", None) or str(err))
+        fail_json_of(ctx, err)
     hint = None if report.controllers else nothing_found_hint(bus.interface, bus.channel)
     if as_json:
         click.echo(json.dumps(report_json(report)))

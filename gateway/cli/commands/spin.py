@@ -39,7 +39,7 @@ from gateway.bus.can_bus import open_bus
 from gateway.bus.edge import bus_options
 from gateway.cli import config_option, json_option
 from gateway.cli.commands._common import VIRTUAL_HINT, check_finite, load, socket_for
-from gateway.cli.commands._guards import error_code, fail_json
+from gateway.cli.commands._guards import fail_json, fail_json_of
 from gateway.core.errors import DriveFaultError, GatewayError, GatewayTimeoutError
 from gateway.drive.registry import get_driver_class
 from gateway.runtime.client import ClientError, ControlClient
@@ -260,8 +260,7 @@ def command(ctx: click.Context, config_path: str | None, motor_name: str, speed:
     except (click.ClickException, GatewayError) as err:
         if not as_json:
             raise
-        text = err.format_message() if isinstance(err, click.ClickException) else str(err)
-        fail_json(ctx, *error_code(err), message=text)
+        fail_json_of(ctx, err)
     wheel = next((w for w in cfg.wheels if w.name == motor.wheel), None)
     try:
         record = _spin(ctx, cfg, motor, plan, wheel, sim, config_path, socket_path)

@@ -10,7 +10,7 @@ import click
 
 from gateway.cli import config_option, json_option
 from gateway.cli.commands._common import other_robot, socket_for
-from gateway.cli.commands._guards import error_code, fail_json
+from gateway.cli.commands._guards import fail_json_of
 from gateway.core.errors import GatewayError
 from gateway.core.numfmt import fixed, short
 from gateway.core.protection import ProtectionState
@@ -40,7 +40,7 @@ def command(
     except GatewayError as err:
         if not as_json:
             raise
-        fail_json(ctx, *error_code(err), message=str(err))
+        fail_json_of(ctx, err)
     if not reply.get("ok"):
         if as_json:
             click.echo(json.dumps({"ok": False, "error": reply.get("error")}))
