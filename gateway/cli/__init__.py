@@ -90,9 +90,26 @@ class LazyGroup(click.Group):
         command: click.Command = importlib.import_module(f"gateway.cli.commands.{module}").command
         return command
 
+    def resolve_command(
+        self, ctx: click.Context, args: list[str]
+    ) -> tuple[str | None, click.Command | None, list[str]]:
+        name, cmd, rest = super().resolve_command(ctx, args)
+        # For invoke: a command line error of a command asked for JSON is answered in JSON.
+        ctx.meta["wheelgate.json"] = cmd is not None and "--json" in rest and any(
+            p.name == "as_json" for p in cmd.params)
+        return name, cmd, rest
+
     def invoke(self, ctx: click.Context) -> Any:
         try:
             return super().invoke(ctx)
+        except click.UsageError as err:
+            # click's own parse errors (``scan --json --timeout -1``) come before the command
+            # runs, so the command cannot answer them in JSON itself.
+            if not ctx.meta.get("wheelgate.json"):
+                raise
+            from gateway.cli.commands._guards import fail_json_of  # noqa: PLC0415 - rare path
+
+            fail_json_of(ctx, err)
         except GatewayError as err:
             if ctx.obj and ctx.obj.get("debug"):
                 raise

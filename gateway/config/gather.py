@@ -40,7 +40,8 @@ class Problems:
     def raise_any(self) -> None:
         """Raise one :class:`ConfigError` with every problem found, if there is one.
 
-        :raises ConfigError: one line per problem, in the file's order of blocks.
+        :raises ConfigError: one line per problem, in the file's order of blocks (a problem
+            of a block that several inherit, ``motor_defaults:``, once).
         """
         if self.found:
-            raise ConfigError.of(self.found)
+            raise ConfigError.of(list(dict.fromkeys(self.found)))

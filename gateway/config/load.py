@@ -271,7 +271,8 @@ def _robot(raw: dict[str, object], source: str, found: Problems) -> _Robot | Non
     motors = tuple(
         None if block is None
         else found.check(lambda w=w, i=i, block=block: motor_block(  # type: ignore[misc]
-            block, defaults, w.name, f"{source}: {motor_path(drive, i, w.name)}", config_dir))
+            block, defaults, w.name, f"{source}: {motor_path(drive, i, w.name)}", config_dir,
+            defaults_where=f"{source}: motor_defaults"))
         for i, (w, block) in enumerate(zip(wheels, motor_raw, strict=True))
     )
     steering = found.check(lambda: steering_blocks(

@@ -142,7 +142,8 @@ def steering_blocks(
             travel = (min(by_name[n].steer_min for n in members),
                       max(by_name[n].steer_max for n in members))
         out.append(motor_block(keys, defaults, f"{key} steering", where, config_dir,
-                               tuple(members), travel, linkage))
+                               tuple(members), travel, linkage,
+                               f"{source}: steering_defaults"))
     return tuple(out)
 
 
@@ -244,6 +245,7 @@ def motor_block(
     steers: tuple[str, ...] = (),
     travel: tuple[float, float] = (-math.pi, math.pi),
     linkage: Linkage = Linkage.DIRECT,
+    defaults_where: str = "",
 ) -> MotorConfig:
     """A motor block, or with ``steers`` a steering actuator's block.
 
@@ -253,6 +255,8 @@ def motor_block(
     :param steers: the wheels a steering actuator turns (empty for a drive motor).
     :param travel: the actuator's steering range, rad.
     :param linkage: how the actuator's angle turns its wheels.
+    :param defaults_where: the file and key path of ``defaults`` (``motor_defaults``): an
+        unknown key given there is named there (one line however many blocks inherit it).
     :raises ConfigError: naming the key of each problem (the general keys first; the
         protocol's keys when the general ones are right).
     """
@@ -271,10 +275,12 @@ def motor_block(
     protocol = {k: x for k, x in merged.items() if k not in keys}
     for key in protocol:
         if key not in cls.OPTIONS and key != "config_dir":
-            given = "motor_defaults" if key in defaults and key not in raw else "its block"
+            inherited = key in defaults and key not in raw
+            given = "motor_defaults" if inherited else "its block"
             elsewhere = (f" ({key!r}, given in {given}, is a gateway: key)"
                          if key in GATEWAY_KEYS else "")
-            found.add(str(unknown_key(f"{where}.{key}", key, {
+            at = defaults_where if inherited and defaults_where else where
+            found.add(str(unknown_key(f"{at}.{key}", key, {
                 "steering keys" if steers else "motor keys": keys,
                 f"{driver} keys": [k for k in cls.OPTIONS if k != "config_dir"],
             })) + elsewhere)

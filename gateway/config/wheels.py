@@ -15,6 +15,11 @@ from gateway.core.options import OptionSpec, validate_block
 MAX_WHEELS = 64
 
 
+#: The geometry keys that are lengths a robot cannot have as 0 (or less).
+LENGTHS = frozenset(("wheel_radius", "track", "wheelbase", "wheel_distance"))
+_ANGLES = frozenset(("first_wheel_angle",))
+
+
 def _geometry_specs(drive: str) -> dict[str, OptionSpec]:
     """The ``geometry:`` keys of a preset drive, with their specs."""
     preset = PRESETS[drive]
@@ -23,7 +28,9 @@ def _geometry_specs(drive: str) -> dict[str, OptionSpec]:
             str if key in preset.choices else type(default) if default is not None else float,
             default,
             choices=tuple(preset.choices.get(key, ())),
-            minimum=None if key in preset.choices or key == "first_wheel_angle" else 0.0,
+            minimum=None if key in preset.choices or key in _ANGLES or key in LENGTHS else 0.0,
+            above=0.0 if key in LENGTHS else None,
+            unit=" m" if key in LENGTHS else "",
         )
         for key, default in preset.params.items()
     }
@@ -54,9 +61,6 @@ def preset_wheels(
         raise ConfigError.of([*said, *err.problems]) from err
     if said:
         raise ConfigError.of(said)
-    for key, value in params.items():
-        if key in ("wheel_radius", "track", "wheelbase", "wheel_distance") and value == 0.0:
-            raise ConfigError(f"{source}: geometry.{key}: expected a length > 0 m, got 0")
     if separation == 1.0:
         return params, preset.build(params)  # type: ignore[arg-type]
     if "track" not in params:

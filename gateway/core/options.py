@@ -20,6 +20,8 @@ class OptionSpec:
     :param minimum: smallest allowed number, if bounded.
     :param maximum: largest allowed number, if bounded.
     :param help: one line for docs and error messages.
+    :param above: a number it must exceed, if bounded so (a length that must not be 0).
+    :param unit: the unit of the bounds in messages (``" m"``), if any.
     """
 
     kind: type
@@ -28,6 +30,8 @@ class OptionSpec:
     minimum: float | None = None
     maximum: float | None = None
     help: str = ""
+    above: float | None = None
+    unit: str = ""
 
     def validate(self, value: object, where: str) -> object:
         """Check one value and return it normalised (ints accepted for floats).
@@ -52,10 +56,16 @@ class OptionSpec:
             allowed = ", ".join(repr(c) for c in self.choices)
             raise ConfigError(f"{where}: expected one of {allowed}, got {value!r}")
         if isinstance(value, (int, float)) and not isinstance(value, bool):
+            unit = self.unit
+            if self.above is not None and not value > self.above:
+                raise ConfigError(f"{where}: expected more than {self.above:g}{unit}, "
+                                  f"got {value!r}")
             if self.minimum is not None and value < self.minimum:
-                raise ConfigError(f"{where}: expected at least {self.minimum:g}, got {value!r}")
+                raise ConfigError(f"{where}: expected at least {self.minimum:g}{unit}, "
+                                  f"got {value!r}")
             if self.maximum is not None and value > self.maximum:
-                raise ConfigError(f"{where}: expected at most {self.maximum:g}, got {value!r}")
+                raise ConfigError(f"{where}: expected at most {self.maximum:g}{unit}, "
+                                  f"got {value!r}")
         return value
 
 

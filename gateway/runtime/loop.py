@@ -276,7 +276,7 @@ class Gateway:
         if got is None:
             return
         try:
-            self.odometry.update(got[1], got[0], self.drives.measured_steer(self.prev.steer_rad))
+            self.odometry.take(got[1], got[0], self.drives.measured_steer(self.prev.steer_rad))
         except KinematicsError as err:
             self.counts.odometry_errors += 1
             log.warning("odometry update skipped: %s", err)

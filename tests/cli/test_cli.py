@@ -139,6 +139,31 @@ def test_bad_usage_exits_2(runner: CliRunner, args: list[str], message: str) -> 
     assert message in result.stderr
 
 
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["scan", "--json", "--timeout", "-1"], "Invalid value for '--timeout': expected "
+                                                "seconds above 0"),
+        (["status", "--json", "--bogus"], "No such option '--bogus'"),
+        (["spin", "--speed", "x", "--json", "left"], "Invalid value for '--speed'"),
+    ],
+)
+def test_command_line_errors_of_a_json_command_are_json(
+        runner: CliRunner, args: list[str], message: str) -> None:
+    """click's own parse errors come before the command runs; with --json they are still
+    one JSON document on stdout (exit 2), without usage lines; without --json, as click
+    prints them."""
+    result = runner.invoke(main, args)
+    assert result.exit_code == 2, result.output
+    doc = json.loads(result.stdout)
+    assert doc["ok"] is False and doc["error"]["code"] == "bad_usage"
+    assert message in doc["error"]["message"] and not result.stderr
+    plain = runner.invoke(main, [a for a in args if a != "--json"])
+    assert plain.exit_code == 2 and message in plain.stderr and "Usage:" in plain.stderr
+    # A command without --json keeps click's answer to the flag itself.
+    assert "No such option '--json'" in runner.invoke(main, ["check", "--json"]).stderr
+
+
 def test_bad_config_exits_2(runner: CliRunner, tmp_path: Path) -> None:
     bad = tmp_path / "robot.yaml"
     bad.write_text("drive: differential\ngeometry: {wheel_radius: 0.1}\n")

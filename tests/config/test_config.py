@@ -91,8 +91,8 @@ def with_(path: str, value: object) -> dict[str, object]:
                           "drive, foxglove, gateway, "),
         ("drive", "hovercraft", "robot.yaml: drive: expected one of ackermann, differential, "),
         ("geometry.track", "wide", "robot.yaml: geometry.track: expected float, got 'wide'"),
-        ("geometry.track", -0.3, "robot.yaml: geometry.track: expected at least 0, got -0.3"),
-        ("geometry.track", 0.0, "robot.yaml: geometry.track: expected a length > 0 m, got 0"),
+        ("geometry.track", -0.3, "robot.yaml: geometry.track: expected more than 0 m, got -0.3"),
+        ("geometry.track", 0.0, "robot.yaml: geometry.track: expected more than 0 m, got 0.0"),
         ("geometry.track", math.inf, "robot.yaml: geometry.track: expected a finite number, "
                                      "got inf"),
         ("geometry.track", ..., "robot.yaml: geometry.track: required key is missing"),

@@ -244,8 +244,13 @@ def test_an_empty_file_and_a_gateway_key_among_the_motors_say_what_they_are(
 drive: differential
 geometry: {wheel_radius: 0.033, track: 0.16}
 motor_defaults: {driver: odrive, max_rpm: 100, controller_watchdog: warn}
-motors: {left: {node_id: 1}, right: {node_id: 2}}
+motors: {left: {node_id: 1}, right: {node_id: 2, kpp: 1}}
 """))
-    assert len(info.value.problems) == 2
-    assert info.value.problems[0].endswith(
+    # An unknown key of motor_defaults is named there, once for the blocks that inherit it;
+    # one of a motor block in that block.
+    problems = info.value.problems
+    assert len(problems) == 2, problems
+    assert ": motor_defaults.controller_watchdog: unknown key" in problems[0]
+    assert problems[0].endswith(
         "('controller_watchdog', given in motor_defaults, is a gateway: key)")
+    assert ": motors.right.kpp: unknown key" in problems[1]

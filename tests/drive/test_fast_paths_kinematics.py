@@ -22,7 +22,7 @@ from gateway.config import load_config
 from gateway.core.control import Accepted, Source
 from gateway.core.errors import KinematicsError
 from gateway.core.kinematics import Odometry, apply_limits
-from gateway.core.kinematics.odometry import Pose, _advance, compose, se2_exp
+from gateway.core.kinematics.odometry import OdometryState, Pose, compose, se2_exp
 from gateway.core.types import (
     GatewayState,
     Twist,
@@ -74,13 +74,26 @@ def test_fk_fast_path_matches_numpy(path: Path | None) -> None:
     assert (fast == 0) == steered  # the fast path is taken exactly for unsteered robots
 
 
-def test_advance_is_compose_of_exp() -> None:
+def test_odometry_step_is_compose_of_exp() -> None:
+    """The odometry's step on plain numbers is ``compose(pose, se2_exp(...))`` to the bit
+    (the Taylor branch, the exact one and a zero turn), and its twist, slip and distance are
+    the interval's."""
     rng = random.Random(2)
-    for _ in range(500):
+    odo = Odometry(load_config(None).model)
+    for k in range(500):
         pose = Pose(rng.uniform(-5, 5), rng.uniform(-5, 5), rng.uniform(-math.pi, math.pi))
         d = (rng.uniform(-0.1, 0.1), rng.uniform(-0.1, 0.1),
              rng.choice([0.0, 1e-6, rng.uniform(-0.5, 0.5)]))
-        assert _advance(pose, *d) == compose(pose, se2_exp(*d))
+        odo.state = OdometryState(pose, Twist(), 0.0, 1.0, 2.0)
+        dt = (2.0 + rng.choice([0.0, 0.001 * (k % 7 + 1)])) - 2.0  # the interval as stamped
+        odo._step(*d, 0.25, 2.0 + dt)
+        inv = 1.0 / dt if dt else 0.0
+        got = odo.state
+        assert got.pose == compose(pose, se2_exp(*d))
+        assert got.twist == Twist(d[0] * inv, d[1] * inv, d[2] * inv)
+        assert got.slip_m_s == (0.25 / dt if dt else 0.0)
+        assert got.distance_m == 1.0 + math.hypot(d[0], d[1])
+        assert got.timestamp_s == 2.0 + dt
 
 
 def test_ik_memo_follows_the_target_object(channel: str) -> None:

@@ -21,8 +21,8 @@ lines than it has rows; the frame IDs paged) with faults in colour unless ``NO_C
 else printed whole, one snapshot after the other.  ``--once`` prints one snapshot (of a log: at
 its end, read as fast as possible; of a bus or the daemon: after ``--window`` seconds) and
 ``--json`` prints it as JSON (and a failure as ``{"ok": false, "error": {"code", "message"}}``
-on stdout, exit code 1, or 2 for a bad configuration).  ``q`` (when stdin is a terminal too)
-or Ctrl-C ends the monitor with exit code 0; space and ``b`` (or Page Down and Page Up) page
+on stdout, exit code 1, or 2 for a bad configuration).  ``q`` or Esc (when stdin is a terminal
+too) or Ctrl-C ends the monitor with exit code 0; space and ``b`` (or Page Down and Page Up) page
 the frame IDs.
 """
 
@@ -75,7 +75,7 @@ CLEAR = "\x1b[H\x1b[2J"
 #: CAN_ERR_FLAG of SocketCAN, which candump and python-can write into an error frame's ID.
 CAN_ERR_FLAG = 0x20000000
 #: Keys of the live view: quit, next and previous page of frame IDs (Page Down, Page Up).
-QUIT_KEYS = frozenset("qQ")
+QUIT_KEYS = frozenset({"q", "Q", "\x1b"})  # Esc alone (an escape sequence is one key)
 NEXT_KEYS = frozenset({" ", "n", "\x1b[6~"})
 BACK_KEYS = frozenset({"b", "p", "\x1b[5~"})
 #: Longest wait for a frame while keys are read (s): how late ``q`` may be on a bus.
@@ -83,7 +83,7 @@ KEY_POLL_S = 0.1
 
 
 class Quit(KeyboardInterrupt):
-    """``q`` was pressed: the monitor ends as on Ctrl-C (exit code 0)."""
+    """``q`` or Esc was pressed: the monitor ends as on Ctrl-C (exit code 0)."""
 
 
 def _positive(limit: float, unit: str) -> Callable[[click.Context, click.Parameter, float], float]:
@@ -152,7 +152,7 @@ class Screen:
     def wait(self, seconds: float) -> None:
         """Sleep ``seconds`` (none without keys when 0), taking the keys meanwhile.
 
-        :raises Quit: on ``q``.
+        :raises Quit: on ``q`` or Esc.
         """
         if self.keys is None:
             if seconds > 0.0:

@@ -58,6 +58,9 @@ def se2_exp(dx: float, dy: float, dtheta: float) -> Pose:
     return Pose(a * dx - b * dy, b * dx + a * dy, dtheta)
 
 
+_TWO_PI = 2 * math.pi
+
+
 def _exp_coefficients(dtheta: float) -> tuple[float, float]:
     """``(sin(t)/t, (1 - cos(t))/t)``, by Taylor series near ``t = 0``."""
     t2 = dtheta * dtheta
@@ -100,24 +103,49 @@ class Odometry:
 
     Pure: it keeps the previous sample but reads no clock; callers pass sample times.
 
+    The state is kept as plain numbers and :attr:`state` builds its object when read, so a
+    loop that takes a sample per cycle and reads the state at its publishing rate builds one
+    object per read, not three per sample.
+
     :param model: the robot.
     :param pose: the starting pose.
     """
 
     def __init__(self, model: RobotModel, pose: Pose | None = None) -> None:
         self.model = model
-        self.state = OdometryState(pose or Pose(), Twist(), 0.0, 0.0, 0.0)
         self._last: list[float | None] | None = None
         self._last_steer: Sequence[float | None] | None = None
         #: The least squares with every wheel measured, of a model without steered wheels
-        #: (``None`` otherwise): the per-sample path of :meth:`update`.
+        #: (``None`` otherwise): the per-sample path of :meth:`take`.
         self._plan = model.fk_solver.plan([0.0] * model.n)
+        # The state as numbers (see the class docstring); _state is its object once built.
+        self._x = self._y = self._theta = self._vx = self._vy = self._wz = 0.0
+        self._slip = self._distance = self._stamp = 0.0
+        self._state: OdometryState | None = None
+        self.state = OdometryState(pose or Pose(), Twist(), 0.0, 0.0, 0.0)
+
+    @property
+    def state(self) -> OdometryState:
+        """The odometry after the last sample (built on the first read after a change)."""
+        st = self._state
+        if st is None:
+            st = self._state = OdometryState(
+                Pose(self._x, self._y, self._theta), Twist(self._vx, self._vy, self._wz),
+                self._slip, self._distance, self._stamp)
+        return st
+
+    @state.setter
+    def state(self, value: OdometryState) -> None:
+        pose, twist = value.pose, value.twist
+        self._x, self._y, self._theta = pose.x_m, pose.y_m, pose.theta_rad
+        self._vx, self._vy, self._wz = twist.vx_m_s, twist.vy_m_s, twist.wz_rad_s
+        self._slip, self._distance, self._stamp = value.slip_m_s, value.distance_m, \
+            value.timestamp_s
+        self._state = value
 
     def reset(self, pose: Pose | None = None) -> None:
         """Set the pose (origin by default) and zero the distance; keeps the last sample."""
-        self.state = OdometryState(
-            pose or Pose(), Twist(), 0.0, 0.0, self.state.timestamp_s
-        )
+        self.state = OdometryState(pose or Pose(), Twist(), 0.0, 0.0, self._stamp)
 
     def update(
         self,
@@ -125,6 +153,19 @@ class Odometry:
         timestamp_s: float,
         steer_rad: Sequence[float | None] | None = None,
     ) -> OdometryState:
+        """:meth:`take` one sample and return the new :attr:`state`.
+
+        :raises KinematicsError: as :meth:`take`.
+        """
+        self.take(positions_rad, timestamp_s, steer_rad)
+        return self.state
+
+    def take(
+        self,
+        positions_rad: Sequence[float | None],
+        timestamp_s: float,
+        steer_rad: Sequence[float | None] | None = None,
+    ) -> None:
         """Take one sample of every wheel's unwrapped angle.
 
         :param positions_rad: wheel angles (model order), ``None`` for wheels not measured.
@@ -141,10 +182,9 @@ class Odometry:
         last, self._last = self._last, list(positions_rad)
         last_steer, self._last_steer = self._last_steer, steer
         if last is None:
-            self.state = OdometryState(
-                self.state.pose, Twist(), 0.0, self.state.distance_m, timestamp_s
-            )
-            return self.state
+            self._vx = self._vy = self._wz = self._slip = 0.0
+            self._stamp, self._state = timestamp_s, None
+            return
         plan = self._plan
         if (plan is not None and None not in positions_rad and None not in last
                 and len(steer) == n and not any(steer)):
@@ -154,7 +194,8 @@ class Odometry:
             dx, dy, dtheta, residual = plan.increment(
                 cast("Sequence[float]", positions_rad), cast("Sequence[float]", last))
             if math.isfinite(dx + dy + dtheta):
-                return self._step(dx, dy, dtheta, residual, timestamp_s)
+                self._step(dx, dy, dtheta, residual, timestamp_s)
+                return
         deltas = [
             None if p is None or q is None else p - q
             for p, q in zip(positions_rad, last, strict=True)
@@ -167,36 +208,28 @@ class Odometry:
                 for a, b in zip(steer, last_steer, strict=True)
             ]
         dx, dy, dtheta, residual = self.model.fk_twist(deltas, mid)
-        return self._step(dx, dy, dtheta, residual, timestamp_s)
+        self._step(dx, dy, dtheta, residual, timestamp_s)
 
     def _step(
         self, dx: float, dy: float, dtheta: float, residual: float, timestamp_s: float
-    ) -> OdometryState:
-        """Move the pose by the body displacement of one interval ending at ``timestamp_s``."""
-        state = self.state
-        pose = _advance(state.pose, dx, dy, dtheta)
-        dt = timestamp_s - state.timestamp_s
+    ) -> None:
+        """Move the pose by the body displacement of one interval ending at ``timestamp_s``:
+        ``compose(pose, se2_exp(dx, dy, dtheta))``, the same arithmetic on plain numbers."""
+        a, b = _exp_coefficients(dtheta)
+        ex, ey = a * dx - b * dy, b * dx + a * dy
+        theta0 = self._theta
+        c, s = math.cos(theta0), math.sin(theta0)
+        self._x = self._x + c * ex - s * ey  # (not +=: the same rounding as compose)
+        self._y = self._y + s * ex + c * ey
+        self._theta = (theta0 + dtheta + math.pi) % _TWO_PI - math.pi
+        dt = timestamp_s - self._stamp
         if dt > 0:
             inv = 1.0 / dt
-            twist = Twist(dx * inv, dy * inv, dtheta * inv)
-            slip = residual / dt
+            self._vx, self._vy, self._wz = dx * inv, dy * inv, dtheta * inv
+            self._slip = residual / dt
         else:
-            twist, slip = Twist(), 0.0
+            self._vx = self._vy = self._wz = self._slip = 0.0
         # The displacement is the twist times the interval, so the norm of its linear part
         # is the arc length, not the chord.
-        dist = state.distance_m + math.hypot(dx, dy)
-        self.state = OdometryState(pose, twist, slip, dist, timestamp_s)
-        return self.state
-
-
-def _advance(pose: Pose, dx: float, dy: float, dtheta: float) -> Pose:
-    """``compose(pose, se2_exp(dx, dy, dtheta))`` with one allocation (same arithmetic)."""
-    a, b = _exp_coefficients(dtheta)
-    ex, ey = a * dx - b * dy, b * dx + a * dy
-    theta0 = pose.theta_rad
-    c, s = math.cos(theta0), math.sin(theta0)
-    return Pose(
-        pose.x_m + c * ex - s * ey,
-        pose.y_m + s * ex + c * ey,
-        (theta0 + dtheta + math.pi) % (2 * math.pi) - math.pi,
-    )
+        self._distance += math.hypot(dx, dy)
+        self._stamp, self._state = timestamp_s, None
