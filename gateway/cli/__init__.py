@@ -95,8 +95,7 @@ class LazyGroup(click.Group):
     ) -> tuple[str | None, click.Command | None, list[str]]:
         name, cmd, rest = super().resolve_command(ctx, args)
         # For invoke: a command line error of a command asked for JSON is answered in JSON.
-        ctx.meta["wheelgate.json"] = cmd is not None and "--json" in rest and any(
-            p.name == "as_json" for p in cmd.params)
+        ctx.meta["wheelgate.json"] = cmd is not None and _asks_json(cmd, rest)
         return name, cmd, rest
 
     def invoke(self, ctx: click.Context) -> Any:
@@ -118,6 +117,26 @@ class LazyGroup(click.Group):
             if isinstance(err, ConfigError):
                 raise ConfigExit(str(err)) from err
             raise click.ClickException(str(err)) from err
+
+
+def _asks_json(cmd: click.Command, args: list[str]) -> bool:
+    """Whether ``args`` give ``cmd`` its ``--json`` flag: as an option, not as the value of
+    another option (``--socket --json``) nor after ``--``."""
+    if not any(p.name == "as_json" for p in cmd.params):
+        return False
+    takes_value = {name for p in cmd.params if isinstance(p, click.Option)
+                   and not p.is_flag and not p.count for name in p.opts}
+    skip = False
+    for arg in args:
+        if skip:
+            skip = False
+        elif arg == "--":
+            return False
+        elif arg == "--json":
+            return True
+        else:
+            skip = arg in takes_value
+    return False
 
 
 @click.group(cls=LazyGroup, context_settings={"help_option_names": ["-h", "--help"]})

@@ -28,6 +28,7 @@ module's public names.
 
 from __future__ import annotations
 
+import binascii
 import dataclasses
 import math
 import os
@@ -155,14 +156,18 @@ def load_config(
             raise ConfigError(f"{source}: cannot read the file: {err.strerror}") from err
         text = read_text(data, source)
     raw = load_yaml(text, source)
-    return parse_config(raw, source, overrides, interfaces)
+    # (binascii: already imported by the libraries, so free at start-up, unlike hashlib)
+    config = parse_config(raw, source, overrides, interfaces, f"{binascii.crc32(data):08x}")
+    return config if path is None else dataclasses.replace(config, path=os.path.abspath(path))
 
 
 def parse_config(
     raw: object, source: str, overrides: Mapping[str, object] | None = None,
-    interfaces: Collection[str] | None = None,
+    interfaces: Collection[str] | None = None, fingerprint: str = "",
 ) -> GatewayConfig:
     """Validate an already-loaded YAML document (see :func:`load_config`).
+
+    :param fingerprint: :attr:`GatewayConfig.fingerprint` (the file's bytes' CRC-32).
 
     :raises ConfigError: with every problem of the file, one line each (block by block; a
         block that needs a broken one is not checked).
@@ -210,7 +215,7 @@ def parse_config(
     warnings = _warnings(raw, source, bus, loop) + bridge_said
     config = GatewayConfig(
         source, str(name), drive, MappingProxyType(geometry), model, motors, limits, bus, loop,
-        steering, tuple(warnings), bridge, foxglove, MappingProxyType(calibration),
+        steering, tuple(warnings), bridge, foxglove, MappingProxyType(calibration), fingerprint,
     )
     from gateway.drive.driveset import DriveSet  # noqa: PLC0415 - the drivers load after the config
 

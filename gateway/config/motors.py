@@ -275,11 +275,15 @@ def motor_block(
     protocol = {k: x for k, x in merged.items() if k not in keys}
     for key in protocol:
         if key not in cls.OPTIONS and key != "config_dir":
+            # Named where it is written: in the defaults when the block takes both the key and
+            # the driver from them (a block with a driver of its own is the block's problem).
             inherited = key in defaults and key not in raw
-            given = "motor_defaults" if inherited else "its block"
+            given = ("steering_defaults" if steers else "motor_defaults") if inherited \
+                else "its block"
             elsewhere = (f" ({key!r}, given in {given}, is a gateway: key)"
                          if key in GATEWAY_KEYS else "")
-            at = defaults_where if inherited and defaults_where else where
+            at = defaults_where if (inherited and defaults_where and "driver" not in raw) \
+                else where
             found.add(str(unknown_key(f"{at}.{key}", key, {
                 "steering keys" if steers else "motor keys": keys,
                 f"{driver} keys": [k for k in cls.OPTIONS if k != "config_dir"],

@@ -205,6 +205,10 @@ class GatewayConfig:
     :param calibration: the calibration multipliers that are not 1 (``kinematics:``:
         ``wheel_separation_multiplier``, and ``radius NAME`` per wheel); the model's geometry
         has them applied, ``geometry`` is as written.
+    :param fingerprint: the CRC-32 of the file's bytes as 8 hex digits (``""``: not read from
+        a file), so that a daemon's robot can be told from an edited copy of its file.
+    :param path: the file as an absolute path (``""``: the embedded default or no file), for
+        other processes (``source`` is as given, for messages).
     """
 
     source: str
@@ -221,6 +225,8 @@ class GatewayConfig:
     bridge: BridgeSettings | None = None
     foxglove: FoxgloveSettings | None = None
     calibration: Mapping[str, float] = field(default_factory=dict)
+    fingerprint: str = ""
+    path: str = ""
 
     @property
     def wheels(self) -> tuple[Wheel, ...]:

@@ -33,6 +33,7 @@ __all__ = [
     "BusHealth",
     "BusReport",
     "CommandReport",
+    "ConfigReport",
     "ControllerStop",
     "Counters",
     "Direction",
@@ -206,6 +207,19 @@ class ServerCounters:
 
 
 @dataclass(frozen=True, slots=True)
+class ConfigReport:
+    """The configuration the daemon runs.
+
+    :param path: its file (or the embedded default's name).
+    :param fingerprint: the CRC-32 of the file's bytes when the daemon read it
+        (:attr:`gateway.core.settings.GatewayConfig.fingerprint`).
+    """
+
+    path: str
+    fingerprint: str
+
+
+@dataclass(frozen=True, slots=True)
 class SocketReport:
     """The control socket.
 
@@ -362,6 +376,7 @@ class GatewayStatus:
     :param last_error: the last error reported; ``None``: none yet.
     :param realtime: what the real-time set-up did, a line each.
     :param bus: the CAN bus.
+    :param config: the configuration it runs (``None``: a daemon that does not say).
     """
 
     robot: str
@@ -377,3 +392,4 @@ class GatewayStatus:
     last_error: LastError | None
     realtime: tuple[str, ...]
     bus: BusReport
+    config: ConfigReport | None = None

@@ -18,6 +18,7 @@ from gateway.core.status import (
     BusHealth,
     BusReport,
     CommandReport,
+    ConfigReport,
     ControllerStop,
     Counters,
     Direction,
@@ -164,6 +165,7 @@ def build_status(
                 for (can_id, ext, sent), n in sorted(gw.edge.id_counts.items())
             ),
         ),
+        config=ConfigReport(cfg.path or cfg.source, cfg.fingerprint),
     )
 
 

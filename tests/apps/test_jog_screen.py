@@ -3,6 +3,7 @@ to the terminal's size -- the swerve robot on 80 x 24, colour, no floating-point
 
 from __future__ import annotations
 
+import dataclasses
 import re
 from typing import TYPE_CHECKING
 
@@ -114,6 +115,12 @@ def test_render_warns_when_the_daemon_drives_another_robot() -> None:
                     STATUS)
     assert ("warning: the daemon drives 'turtlebot3_burger', but the key limits are those of "
             "'default' (pass its configuration with -c)") in render(screen, width=200)
+    # The same robot from another text: the note of jog -c (refuse_other_robot's warning).
+    note = "warning: the daemon runs /r.yaml as it was when the daemon started; ..."
+    same = dataclasses.replace(screen, robot="turtlebot3_burger", note=note)
+    assert note in render(same, width=200)
+    assert not any(ln.startswith("warning:") for ln in render(
+        dataclasses.replace(same, note=""), width=200))
 
 
 def test_render_stopped_without_status() -> None:

@@ -160,8 +160,12 @@ def test_command_line_errors_of_a_json_command_are_json(
     assert message in doc["error"]["message"] and not result.stderr
     plain = runner.invoke(main, [a for a in args if a != "--json"])
     assert plain.exit_code == 2 and message in plain.stderr and "Usage:" in plain.stderr
-    # A command without --json keeps click's answer to the flag itself.
+    # A command without --json keeps click's answer to the flag itself; "--json" as another
+    # option's value or after "--" is not the flag.
     assert "No such option '--json'" in runner.invoke(main, ["check", "--json"]).stderr
+    for not_asked in (["status", "--socket", "--json", "--bogus"], ["odom", "--", "--json"]):
+        other = runner.invoke(main, not_asked)
+        assert other.exit_code == 2 and not other.stdout and "Usage:" in other.stderr, not_asked
 
 
 def test_bad_config_exits_2(runner: CliRunner, tmp_path: Path) -> None:

@@ -2,13 +2,16 @@
 
 from __future__ import annotations
 
+import binascii
 import json
+import os
 from typing import TYPE_CHECKING
 
 from gateway.cli import main
 from tests.conftest import CONFIG_DIR
 
 if TYPE_CHECKING:
+    from pathlib import Path
 
     from click.testing import CliRunner
 
@@ -69,3 +72,28 @@ def test_another_robots_config_is_refused_for_motion_and_warned_for_status(
     same = runner.invoke(main, ["twist", "-c", str(CONFIG_DIR / "turtlebot3_burger.yaml"),
                                 "--socket", sock_path, "--vx", "0.1"])
     assert same.exit_code == 0, same.output
+
+
+def test_the_daemon_names_its_file_and_a_copy_with_another_text_is_said(
+        runner: CliRunner, daemon: Daemon, sock_path: str, tmp_path: Path) -> None:
+    """The status names the file the daemon runs and its text's CRC-32; with -c, the same
+    robot from another text is a warning (a tuned copy, an edit the daemon has not read), not
+    a refusal."""
+    shipped = CONFIG_DIR / "turtlebot3_burger.yaml"
+    theirs = f"{binascii.crc32(shipped.read_bytes()):08x}"
+    doc = json.loads(runner.invoke(main, ["status", "--socket", sock_path, "--json"]).stdout)
+    assert doc["config"] == {"path": os.path.abspath(shipped), "fingerprint": theirs}
+    same = runner.invoke(main, ["status", "-c", str(shipped), "--socket", sock_path])
+    assert same.exit_code == 0 and "warning" not in same.stderr, same.output
+    assert f"config: {os.path.abspath(shipped)}" in same.stdout.splitlines()[0]
+    copy = tmp_path / "tb.yaml"
+    copy.write_bytes(shipped.read_bytes() + b"# tuned on the robot\n")
+    ours = f"{binascii.crc32(copy.read_bytes()):08x}"
+    said = (f"the daemon runs the robot 'turtlebot3_burger' from {os.path.abspath(shipped)}, "
+            f"whose text differs from {copy}'s (CRC-32 {theirs} and {ours})")
+    status = runner.invoke(main, ["status", "-c", str(copy), "--socket", sock_path, "--json"])
+    assert status.exit_code == 0, status.output
+    assert json.loads(status.stdout)["warnings"] == [said]
+    twist = runner.invoke(main, ["twist", "-c", str(copy), "--socket", sock_path, "--vx", "0.05"])
+    assert twist.exit_code == 0, twist.output
+    assert f"warning: {said}" in twist.stderr and "ok: following" in twist.stdout

@@ -5,18 +5,23 @@ carries the warning."""
 
 from __future__ import annotations
 
+import binascii
 import json
 import os
 import signal
 from typing import TYPE_CHECKING, Any, ClassVar
 
+import click
 import pytest
 
+import gateway.cli.commands.jog as jog_command
 import gateway.cli.commands.monitor as monitor_command
 import gateway.cli.commands.scan as scan_command
 import gateway.cli.commands.status as status_command
 import gateway.cli.commands.twist as twist_command
+from gateway.apps.jog.keys import jog_limits
 from gateway.cli import main
+from gateway.config import load_config
 from gateway.core.errors import BusError
 from tests.conftest import CONFIG_DIR
 from tests.wire.test_status_format import SAMPLE_JSON
@@ -160,3 +165,33 @@ def test_scan_json_fails_in_json_for_a_bus_or_a_configuration(
     assert doc["error"]["code"] == "bad_config" and str(missing) in doc["error"]["message"]
     plain = runner.invoke(main, ["scan", "--timeout", "0.1"])
     assert plain.exit_code == 1 and plain.stdout == "" and "Error: Cannot open" in plain.stderr
+
+
+def test_an_edited_file_is_said_and_jog_takes_the_daemons_file_while_it_is_the_same(
+        runner: CliRunner, fake: type[FakeDaemon], tmp_path: Path,
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """The daemon ('tb3') runs ``robot.yaml``: status -c of that file says when it has been
+    edited since; jog without -c takes the daemon's file for its key limits while the file is
+    the text the daemon read, and the embedded default's otherwise."""
+    robot = tmp_path / "robot.yaml"
+    text = (CONFIG_DIR / "turtlebot3_burger.yaml").read_text().replace(
+        "name: turtlebot3_burger", "name: tb3")
+    robot.write_text(text)
+    monkeypatch.setitem(SAMPLE_JSON, "config", {
+        "path": str(robot), "fingerprint": f"{binascii.crc32(robot.read_bytes()):08x}"})
+    ctx = click.Context(main)
+    default = load_config(None)
+    cfg, limits = jog_command._daemons_robot(ctx, FakeDaemon("/s"), default, None, None)
+    assert cfg.name == "tb3" and limits == jog_limits(load_config(robot))
+    assert limits.max_linear_m_s < 0.5 < jog_limits(default).max_linear_m_s
+    with pytest.raises(click.BadParameter, match=r"at most 0\.21 m/s .*the daemon's robot 'tb3'"):
+        jog_command._daemons_robot(ctx, FakeDaemon("/s"), default, 0.5, None)
+    quiet = runner.invoke(main, ["status", "-c", str(robot), "--socket", "/s"])
+    assert quiet.exit_code == 0 and "warning" not in quiet.stderr, quiet.output
+    robot.write_text(text + "# edited after the daemon started\n")
+    edited = runner.invoke(main, ["status", "-c", str(robot), "--socket", "/s"])
+    assert edited.exit_code == 0, edited.output
+    assert (f"warning: the daemon runs {robot} as it was when the daemon started; the file has "
+            "changed since (restart the daemon to use the change)") in edited.stderr
+    cfg, limits = jog_command._daemons_robot(ctx, FakeDaemon("/s"), default, None, None)
+    assert cfg is default and limits == jog_limits(default)

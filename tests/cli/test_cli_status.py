@@ -22,7 +22,7 @@ if TYPE_CHECKING:
     from click.testing import CliRunner
 
 SAMPLE_LINES = [
-    "robot: tb3  state: running",
+    "robot: tb3  state: running  config: /etc/wheelgate/robot.yaml",
     "odometry: x=1.0000 m y=-0.5000 m theta=0.2500 rad v=(0.100, 0.000, 0.250) slip=0.0010 m/s "
     "distance=2.500 m",
     "  left         node 1    enabled   age    2.0 ms  stop configured 0.25 s (confirmed) "
@@ -45,7 +45,7 @@ def test_the_text_is_read_from_the_model() -> None:
 
 
 def test_the_text_of_a_quiet_steering_robot() -> None:
-    status = sample_status(reason="e-stop requested", last_error=None)
+    status = sample_status(reason="e-stop requested", last_error=None, config=None)
     tracking = status.tracking
     assert tracking is not None
     actuator = MotorReport("front steering", 5, DriveState.ENABLED, DriveFault.NONE, "", 0.001,
@@ -55,7 +55,7 @@ def test_the_text_of_a_quiet_steering_robot() -> None:
             status.timing, late_on_cpu=0, burst_gap_max_ms=None),
         tracking=dataclasses.replace(tracking, steer_worst_ratio=0.5))
     lines = status_lines(status)
-    assert lines[0] == "robot: tb3  state: running (e-stop requested)"
+    assert lines[0] == "robot: tb3  state: running (e-stop requested)"  # no config: not said
     assert lines[4] == ("  front steering node 5    enabled   age    1.0 ms  "
                         + " " * 30 + " no faults ")
     # steer_worst_ratio is the worst angle error over the tolerance: 0.5 * 0.2 rad.

@@ -254,3 +254,19 @@ motors: {left: {node_id: 1}, right: {node_id: 2, kpp: 1}}
     assert problems[0].endswith(
         "('controller_watchdog', given in motor_defaults, is a gateway: key)")
     assert ": motors.right.kpp: unknown key" in problems[1]
+    # A key of the defaults that only a block's own driver does not take is that block's; a
+    # gateway key in steering_defaults says so.
+    raw = yaml.safe_load((CONFIG_DIR / "swerve.yaml").read_text())
+    raw["motors"]["front_left"] = {**raw["motors"]["front_left"], "driver": "vesc",
+                                   "pole_pairs": 7}
+    raw["steering_defaults"] = {**raw.get("steering_defaults", {}), "controller_watchdog": "warn"}
+    with pytest.raises(ConfigError) as info:
+        load_config(write(tmp_path, yaml.safe_dump(raw)))
+    problems = info.value.problems
+    inherited = [p for p in problems if "watchdog_endpoints: unknown key" in p]
+    assert len(inherited) == 1 and ": motors.front_left.watchdog_endpoints:" in inherited[0], \
+        problems
+    steering = [p for p in problems if "controller_watchdog" in p]
+    assert len(steering) == 1 and ": steering_defaults.controller_watchdog: unknown key" in \
+        steering[0] and steering[0].endswith(
+        "('controller_watchdog', given in steering_defaults, is a gateway: key)"), problems

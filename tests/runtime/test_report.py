@@ -138,6 +138,8 @@ def legacy_status(daemon: Daemon, now_s: float) -> dict[str, object]:
                 for (can_id, ext, sent), n in sorted(gw.edge.id_counts.items())
             ],
         },
+        # The one key added since: the file the daemon runs (absolute) and its text's CRC-32.
+        "config": {"path": gw.config.path, "fingerprint": gw.config.fingerprint},
     }
 
 

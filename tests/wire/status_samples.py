@@ -17,6 +17,7 @@ from gateway.core.status import (
     BusHealth,
     BusReport,
     CommandReport,
+    ConfigReport,
     ControllerStop,
     Counters,
     Direction,
@@ -87,6 +88,7 @@ def sample_status(**changes: object) -> GatewayStatus:
                       (FrameCount(0x21, False, Direction.RX, 10),
                        FrameCount(0x21, False, Direction.TX, 11),
                        FrameCount(0x18FF0013, True, Direction.TX, 3))),
+        config=ConfigReport("/etc/wheelgate/robot.yaml", "1c291ca3"),
     )
     return dataclasses.replace(status, **changes)  # type: ignore[arg-type]
 
@@ -152,4 +154,5 @@ def statuses() -> st.SearchStrategy[GatewayStatus]:
         realtime=st.lists(_names, max_size=2).map(tuple),
         bus=st.builds(BusReport, _names, _names, st.integers(0, 10**7), _health, _counts_st,
                       _numbers, _frames),
+        config=st.none() | st.builds(ConfigReport, _names, _names),
     )

@@ -73,6 +73,7 @@ SAMPLE_JSON: dict[str, Any] = {
                    {"id": 0x21, "extended": False, "direction": "tx", "count": 11},
                    {"id": 0x18FF0013, "extended": True, "direction": "tx", "count": 3}],
     },
+    "config": {"path": "/etc/wheelgate/robot.yaml", "fingerprint": "1c291ca3"},
 }
 
 

@@ -78,6 +78,8 @@ class Screen:
     :param connected: whether the daemon answers (``connection`` is shown as an error if not).
     :param steering: per steering actuator (its status name), the wheels it turns
         (:func:`gateway.apps.layout.steering_of` of the configuration).
+    :param note: a warning about the daemon's configuration (the same robot from an edited
+        file, :func:`gateway.cli.commands._common.other_text`), ``""``: none.
     """
 
     robot: str
@@ -89,6 +91,7 @@ class Screen:
     log: tuple[str, ...] = ()
     connected: bool = True
     steering: Mapping[str, tuple[str, ...]] = field(default_factory=dict)
+    note: str = ""
 
 
 def _twist(t: Twist) -> str:
@@ -220,7 +223,7 @@ def _daemon(screen: Screen, width: int) -> list[list[Line]]:
     state = [f"daemon: state {state_name(d.state)}{f' ({d.reason})' if d.reason else ''}",
              f"applied {_twist(cmd.applied)}",
              f"speed x{cmd.speed_scale:.2f} accel x{cmd.accel_scale:.2f}"]
-    warning = "" if d.robot == screen.robot else (
+    warning = screen.note if d.robot == screen.robot else (
         f"warning: the daemon drives {d.robot!r}, but the key limits are those of "
         f"{screen.robot!r} (pass its configuration with -c)")
     odometry = (f"odometry: x={fixed(pose.x_m, 3, sign=True)} m y={fixed(pose.y_m, 3, sign=True)} "

@@ -12,6 +12,7 @@ import click
 
 from gateway.cli import UsageExit
 from gateway.config import client_socket_path, load_config
+from gateway.core.errors import GatewayError
 from gateway.core.types import MAX_TWIST_COMPONENT
 
 if TYPE_CHECKING:
@@ -90,14 +91,65 @@ def other_robot(ctx: click.Context, config_path: str | None, running: object) ->
             f"{config_path}")
 
 
-def refuse_other_robot(ctx: click.Context, config_path: str | None, client: Any) -> None:
+def other_text(ctx: click.Context, config_path: str | None, running: object) -> str | None:
+    """With ``-c``, when the daemon runs the same robot (by name) from a text other than the
+    file's (``running``: its status's ``config``, path and fingerprint): what to know, e.g.
+    the file was edited after the daemon read it; ``None`` when the texts are the same, or
+    when there is nothing to compare (an earlier daemon, a configuration not from a file)."""
+    if config_path is None or not isinstance(running, dict):
+        return None
+    path, theirs = running.get("path"), running.get("fingerprint")
+    ours = load(ctx, config_path)
+    if not isinstance(path, str) or not isinstance(theirs, str) or not theirs \
+            or not ours.fingerprint or theirs == ours.fingerprint:
+        return None
+    if _same_file(path, ours.source):
+        return (f"the daemon runs {path} as it was when the daemon started; the file has "
+                f"changed since (restart the daemon to use the change)")
+    return (f"the daemon runs the robot {ours.name!r} from {path}, whose text differs from "
+            f"{config_path}'s (CRC-32 {theirs} and {ours.fingerprint})")
+
+
+def _same_file(a: str, b: str) -> bool:
+    try:
+        return Path(a).resolve() == Path(b).resolve()
+    except OSError:
+        return False
+
+
+def daemon_config(ctx: click.Context, reply: dict[str, Any]) -> GatewayConfig | None:
+    """Without ``-c``: the configuration the daemon runs (its status ``reply``), read from its
+    file when this process can read it and it is still the text the daemon read; ``None``
+    otherwise (then the caller keeps the embedded default's and says so)."""
+    running = reply.get("config")
+    if not isinstance(running, dict):
+        return None
+    path, theirs = running.get("path"), running.get("fingerprint")
+    if not isinstance(path, str) or not isinstance(theirs, str) or not theirs \
+            or not Path(path).is_file():
+        return None
+    try:
+        cfg = load(ctx, path)
+    except GatewayError:
+        return None
+    return cfg if cfg.fingerprint == theirs else None
+
+
+def refuse_other_robot(ctx: click.Context, config_path: str | None, client: Any) -> str:
     """Before driving with ``-c``: a usage error (exit 2) when the daemon runs another robot
-    (a TurtleBot's twist must not drive the mecanum)."""
+    (a TurtleBot's twist must not drive the mecanum).
+
+    :return: a warning when it runs this one from another text (:func:`other_text`), else
+        ``""``.
+    """
     if config_path is None:
-        return
-    why = other_robot(ctx, config_path, client.request({"op": "status"}).get("robot"))
+        return ""
+    reply = client.request({"op": "status"})
+    why = other_robot(ctx, config_path, reply.get("robot"))
     if why is not None:
         raise UsageExit(f"{why}: refusing to drive it (drop -c, or use its socket)")
+    note = other_text(ctx, config_path, reply.get("config"))
+    return "" if note is None else f"warning: {note}"
 
 
 def twist_options(func: Any) -> Any:

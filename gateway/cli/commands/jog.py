@@ -33,9 +33,10 @@ import click
 from gateway.apps.jog import keys
 from gateway.apps.jog.keys import STOP, JogState, Request, jog_limits, split_keys, steps_errors
 from gateway.apps.jog.screen import Screen, read_status, render, reply_error
+from gateway.apps.keyboard import read_keys
 from gateway.apps.layout import steering_of, wants_colour
 from gateway.cli import UsageExit, config_option
-from gateway.cli.commands._common import check_finite, load, refuse_other_robot, socket_for
+from gateway.cli.commands import _common as common
 from gateway.cli.commands._guards import caught_signals
 from gateway.runtime.client import ClientError, ControlClient
 from gateway.runtime.daemon import Daemon
@@ -44,6 +45,7 @@ from gateway.runtime.sdnotify import SystemdNotifier
 if TYPE_CHECKING:
     from collections.abc import Iterator
 
+    from gateway.apps.jog.keys import JogLimits
     from gateway.core.settings import GatewayConfig
     from gateway.core.status import GatewayStatus
 
@@ -212,9 +214,25 @@ class _Terminal:
             self.write("\x1b[H" + "\x1b[K\r\n".join(lines) + "\x1b[K\x1b[J")
 
 
+def _daemons_robot(ctx: click.Context, client: Any, cfg: GatewayConfig, speed: float | None,
+                   turn: float | None) -> tuple[GatewayConfig, JogLimits]:
+    """Without ``-c``: the daemon's configuration when it can be read here, its limits checked
+    against ``--speed`` and ``--turn``; else ``cfg`` (the embedded default)."""
+    found = common.daemon_config(ctx, client.request({"op": "status"}))
+    if found is None:
+        return cfg, jog_limits(cfg)
+    limits = jog_limits(found)
+    for option, why in steps_errors(limits, speed, turn):
+        raise click.BadParameter(f"{why} (the daemon's robot {found.name!r})",
+                                 param_hint=option)
+    return found, limits
+
+
 def _session(fd_in: int, wake_fd: int, caught: list[str], term: _Terminal, link: _Link,
-             state: JogState, cfg: GatewayConfig, title: str, logs: _LogCapture) -> JogState:
-    """The select loop; returns the final state (stop has been sent)."""
+             state: JogState, cfg: GatewayConfig, title: str, logs: _LogCapture,
+             note: str) -> JogState:
+    """The select loop; returns the final state (stop has been sent); ``note``: a warning
+    about the daemon's configuration, on the screen."""
     last_error = ""
     view: GatewayStatus | None = None
     next_status = 0.0
@@ -246,7 +264,7 @@ def _session(fd_in: int, wake_fd: int, caught: list[str], term: _Terminal, link:
             connection = (f"connected: {link.path}" if link.client is not None else
                           f"DISCONNECTED: {link.error} (retrying)")
             term.draw(Screen(cfg.name, title, connection, state, view, last_error,
-                             tuple(logs.lines), link.client is not None, steering))
+                             tuple(logs.lines), link.client is not None, steering, note))
             deadline = min(state.next_deadline_s(), next_status)
             ready, _, _ = select.select([fd_in, wake_fd], [], [], max(0.0, deadline - now))
             now = time.monotonic()
@@ -259,7 +277,7 @@ def _session(fd_in: int, wake_fd: int, caught: list[str], term: _Terminal, link:
                 break
             if fd_in in ready:
                 try:
-                    data = os.read(fd_in, 1024)
+                    data = read_keys(fd_in, 1024)
                 except OSError:  # EIO: the terminal is gone
                     data = b""
                 if not data:
@@ -326,12 +344,12 @@ def command(
     always sends stop.  Should this program die, the daemon's cmd_timeout_s stops the robot.
     The screen fits the terminal; faults are red unless NO_COLOR is set.
     """
-    check_finite(deadman=deadman)
+    common.check_finite(deadman=deadman)
     if sim and not standalone:
         raise click.UsageError("--sim needs --standalone (a running daemon has its own bus)")
     if standalone and socket_path:
         raise click.UsageError("--standalone uses a private socket; drop --socket")
-    cfg = load(ctx, config_path)
+    cfg = common.load(ctx, config_path)
     limits = jog_limits(cfg)
     for option, why in steps_errors(limits, speed, turn):
         raise click.BadParameter(why, param_hint=option)
@@ -349,14 +367,17 @@ def command(
         if standalone:
             path = stack.enter_context(_standalone(cfg, sim))
         else:
-            path = socket_for(ctx, config_path, socket_path)
+            path = common.socket_for(ctx, config_path, socket_path)
         try:
             link = _Link(path, log_file)
         except ClientError as err:
             raise click.ClickException(str(err)) from err
         stack.callback(link.close)
+        note = ""
         if not standalone and link.client is not None:
-            refuse_other_robot(ctx, config_path, link.client)
+            if config_path is None:
+                cfg, limits = _daemons_robot(ctx, link.client, cfg, speed, turn)
+            note = common.refuse_other_robot(ctx, config_path, link.client)
         state = JogState.start(limits, speed, turn, deadman)
         title = (f"{cfg.name} ({cfg.drive})"
                  + (f", standalone{', simulated' if sim else ''}" if standalone else ""))
@@ -369,7 +390,7 @@ def command(
         stack.enter_context(_raw_terminal(fd_in))
         term.write(_ENTER)
         stack.callback(term.write, _LEAVE)
-        state = _session(fd_in, wake_r, caught, term, link, state, cfg, title, logs)
+        state = _session(fd_in, wake_r, caught, term, link, state, cfg, title, logs, note)
     if link.last_op != "stop":
         raise click.ClickException(
             f"could not send stop to {path}: {link.error or 'refused'}; the daemon's "

@@ -44,6 +44,7 @@ import can
 import click
 
 from gateway.apps.jog.keys import split_keys
+from gateway.apps.keyboard import read_keys
 from gateway.apps.layout import wants_colour
 from gateway.apps.monitor import WINDOW_S, BusMonitor, StatusMonitor, render, snapshot_json
 from gateway.apps.monitor.view import ERROR_FRAMES, error_class_counter
@@ -161,7 +162,7 @@ class Screen:
         end = time.monotonic() + seconds
         while True:
             ready, _, _ = select.select([self.keys], [], [], max(end - time.monotonic(), 0.0))
-            data = os.read(self.keys, 64) if ready else b""
+            data = read_keys(self.keys, 64) if ready else b""
             if ready and not data:  # end of input: no more keys, only the time
                 self.keys = None
                 self.wait(max(end - time.monotonic(), 0.0))

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 import click
 
 from gateway.cli import config_option, json_option
-from gateway.cli.commands._common import other_robot, socket_for
+from gateway.cli.commands._common import other_robot, other_text, socket_for
 from gateway.cli.commands._guards import fail_json_of
 from gateway.core.errors import GatewayError
 from gateway.core.numfmt import fixed, short
@@ -33,7 +33,8 @@ def command(
 ) -> None:
     """Print the running gateway's state, motors, odometry, counters and timing (with --json,
     a failure too is a JSON object on stdout: ``{"ok": false, "error": {...}}``; a warning,
-    such as a daemon running another robot than -c names, is also in its "warnings" list)."""
+    such as a daemon running another robot than -c names, or this robot from a text other
+    than the file's, is also in its "warnings" list)."""
     try:
         with ControlClient(socket_for(ctx, config_path, socket_path)) as client:
             reply = client.request({"op": "status"})
@@ -47,6 +48,8 @@ def command(
             ctx.exit(1)
         raise click.ClickException(str((reply.get("error") or {}).get("message", reply)))
     why = other_robot(ctx, config_path, reply.get("robot"))
+    if why is None:
+        why = other_text(ctx, config_path, reply.get("config"))
     if why is not None:
         click.echo(f"warning: {why}", err=True)
     status = status_from_json(reply)
@@ -66,7 +69,8 @@ def status_lines(status: GatewayStatus) -> list[str]:
     """What ``wheelgate status`` prints, a line each."""
     s = status
     lines = [f"robot: {s.robot}  state: {state_name(s.state)}"
-             + (f" ({s.reason})" if s.reason else "")]
+             + (f" ({s.reason})" if s.reason else "")
+             + (f"  config: {s.config.path}" if s.config is not None else "")]
     odo = s.odometry
     pose, vel = odo.pose, odo.twist
     lines.append(

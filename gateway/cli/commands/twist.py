@@ -55,7 +55,9 @@ def command(
     check_finite(vx=vx, vy=vy, wz=wz, duration=duration, rate=rate)
     path = socket_for(ctx, config_path, socket_path)
     with ControlClient(path) as client:
-        refuse_other_robot(ctx, config_path, client)
+        note = refuse_other_robot(ctx, config_path, client)
+        if note:
+            click.echo(note, err=True)
         end = time.monotonic() + duration
         period = 1.0 / rate
         with caught_signals(active=duration > 0) as caught:

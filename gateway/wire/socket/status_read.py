@@ -20,6 +20,7 @@ from gateway.core.status import (
     BusHealth,
     BusReport,
     CommandReport,
+    ConfigReport,
     ControllerStop,
     Counters,
     Direction,
@@ -272,5 +273,10 @@ def status_from_json(value: object) -> GatewayStatus:
         if not isinstance(line, str):
             _fail(f"status.realtime[{k}]", "a string", line)
         realtime.append(line)
+    config = None
+    if obj.has("config"):  # (optional: a daemon of an earlier release does not say)
+        c = obj.obj("config")
+        config = ConfigReport(c.text("path"), c.text("fingerprint"))
     return GatewayStatus(robot, state, reason, command, motors, tracking, odometry, counters,
-                         socket, timing, last_error, tuple(realtime), _read_bus(obj.obj("bus")))
+                         socket, timing, last_error, tuple(realtime), _read_bus(obj.obj("bus")),
+                         config)

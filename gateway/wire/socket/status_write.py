@@ -109,4 +109,6 @@ def status_to_json(status: GatewayStatus) -> dict[str, object]:
         "realtime": list(s.realtime),
         "bus": _bus(s.bus),
     })
+    if s.config is not None:
+        out["config"] = {"path": s.config.path, "fingerprint": s.config.fingerprint}
     return out
