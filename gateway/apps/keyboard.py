@@ -13,12 +13,16 @@ from __future__ import annotations
 
 import os
 import select
+import time
 
 __all__ = ["ESC_WAIT_S", "read_keys", "unfinished_escape"]
 
 #: How long the rest of an escape sequence may take to follow its ESC (s).
 ESC_WAIT_S = 0.05
 _ESC = 0x1B
+#: The end of what was read that is searched for an unfinished sequence (bytes): longer than
+#: any key's sequence.
+_TAIL = 64
 
 
 def unfinished_escape(data: bytes) -> bool:
@@ -44,14 +48,21 @@ def unfinished_escape(data: bytes) -> bool:
 
 def read_keys(fd: int, size: int, wait_s: float = ESC_WAIT_S) -> bytes:
     """One ``os.read`` of ``fd`` (up to ``size`` bytes; ``b""`` at the end of input), and
-    while it ends inside an escape sequence, what follows within ``wait_s``.
+    while it ends inside an escape sequence, what follows within ``wait_s`` of the call (one
+    deadline: a stream of escape bytes, a held Alt+[ or a paste, holds the caller that long
+    at most, and is then cut into keys as it came).
 
     :raises OSError: as ``os.read`` (EIO: the terminal is gone).
     """
     data = os.read(fd, size)
-    while data and unfinished_escape(data) and select.select([fd], [], [], wait_s)[0]:
+    if not data or not unfinished_escape(data):
+        return data
+    buf, end = bytearray(data), time.monotonic() + wait_s
+    while (left := end - time.monotonic()) > 0.0 and select.select([fd], [], [], left)[0]:
         more = os.read(fd, size)
         if not more:
             break
-        data += more
-    return data
+        buf += more
+        if not unfinished_escape(bytes(buf[-_TAIL:])):
+            break
+    return bytes(buf)

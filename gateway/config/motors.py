@@ -282,8 +282,10 @@ def motor_block(
                 else "its block"
             elsewhere = (f" ({key!r}, given in {given}, is a gateway: key)"
                          if key in GATEWAY_KEYS else "")
-            at = defaults_where if (inherited and defaults_where and "driver" not in raw) \
-                else where
+            own = raw.get("driver", defaults.get("driver")) == defaults.get("driver")
+            at = defaults_where if (inherited and defaults_where and own) else where
+            if inherited and at == where and not elsewhere:
+                elsewhere = f" (given in {given}, which the {driver} driver does not take)"
             found.add(str(unknown_key(f"{at}.{key}", key, {
                 "steering keys" if steers else "motor keys": keys,
                 f"{driver} keys": [k for k in cls.OPTIONS if k != "config_dir"],

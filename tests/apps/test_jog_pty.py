@@ -29,6 +29,8 @@ if TYPE_CHECKING:
     from collections.abc import Iterator
     from pathlib import Path
 
+    from gateway.runtime.daemon import Daemon
+
 #: ``python -m gateway jog`` once ``jog`` is registered in ``gateway.cli.COMMANDS``; until
 #: then the command module is run on its own, with the same arguments.
 JOG = ([sys.executable, "-m", "gateway", "jog"] if "jog" in COMMANDS else
@@ -225,5 +227,22 @@ def test_errors_in_colour_unless_no_color(spawn: Spawn, no_color: str | None) ->
         assert coloured and coloured[0].startswith("last error: \x1b[31mTwist (vx=0 m/s")
     else:
         assert not re.search(r"\x1b\[[0-9;]*m", term.raw.decode("utf-8", "replace"))
+    term.send(ESC)
+    assert term.wait_exit() == 0, term.text[-2000:]
+
+
+def test_without_c_the_keys_take_the_daemons_own_robot(
+        spawn: Spawn, daemon: Daemon, sock_path: str) -> None:
+    """The daemon runs the TurtleBot (its file readable here, unchanged): jog without -c takes
+    that file's limits, not the embedded demo's, and checks --speed against them."""
+    too_fast = spawn(["--socket", sock_path, "--speed", "0.3"])  # the demo's keys allow it
+    assert too_fast.wait_exit() == 2, too_fast.text[-2000:]
+    assert "at most 0.21 m/s (motor max_rpm), got 0.3 (robot 'turtlebot3_burger')" in \
+        too_fast.text.replace("\r\n", " ").replace("\n", " ")
+    term = spawn(["--socket", sock_path])
+    screen = term.wait_for("the daemon's robot", running)
+    assert "turtlebot3_burger (differential)" in screen
+    assert "linear 0.211 m/s (max 0.211, motor max_rpm)" in line(screen, "speeds:")
+    assert "warning:" not in screen
     term.send(ESC)
     assert term.wait_exit() == 0, term.text[-2000:]

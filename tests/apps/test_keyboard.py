@@ -3,6 +3,7 @@ a Page Down or an arrow split by a short read is one key, not an Esc that quits.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import threading
 import time
@@ -54,3 +55,32 @@ def test_the_rest_of_a_sequence_that_comes_late_is_waited_for_and_a_lone_esc_is_
         os.close(r)
         if w >= 0:
             os.close(w)
+
+
+def test_a_stream_of_escape_bytes_holds_the_reader_one_wait_at_most() -> None:
+    """A held Alt+[ (ESC [ again and again) or a paste of ESC bytes: one deadline for the
+    whole read, so the loop that called it (jog's deadman, monitor's screen) goes on."""
+    r, w = os.pipe()
+    stop = threading.Event()
+
+    def feed() -> None:
+        while not stop.is_set():
+            with contextlib.suppress(BlockingIOError):  # (a full pipe: the reader is done)
+                os.write(w, b"\x1b[")
+            time.sleep(0.002)
+
+    os.set_blocking(w, False)
+    feeder = threading.Thread(target=feed, daemon=True)
+    try:
+        feeder.start()
+        time.sleep(0.01)
+        started = time.monotonic()
+        data = read_keys(r, 64, wait_s=0.2)
+        took = time.monotonic() - started
+        assert data.startswith(b"\x1b[") and unfinished_escape(data)
+        assert took < 2.0, took  # bounded by the one deadline (0.2 s), not by the stream
+    finally:
+        stop.set()
+        feeder.join()
+        os.close(r)
+        os.close(w)

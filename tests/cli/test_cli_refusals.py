@@ -21,6 +21,7 @@ import gateway.cli.commands.status as status_command
 import gateway.cli.commands.twist as twist_command
 from gateway.apps.jog.keys import jog_limits
 from gateway.cli import main
+from gateway.cli.commands._common import daemon_config
 from gateway.config import load_config
 from gateway.core.errors import BusError
 from tests.conftest import CONFIG_DIR
@@ -167,31 +168,36 @@ def test_scan_json_fails_in_json_for_a_bus_or_a_configuration(
     assert plain.exit_code == 1 and plain.stdout == "" and "Error: Cannot open" in plain.stderr
 
 
-def test_an_edited_file_is_said_and_jog_takes_the_daemons_file_while_it_is_the_same(
+def test_an_edited_file_is_said_and_jog_takes_the_daemons_file(
         runner: CliRunner, fake: type[FakeDaemon], tmp_path: Path,
         monkeypatch: pytest.MonkeyPatch) -> None:
     """The daemon ('tb3') runs ``robot.yaml``: status -c of that file says when it has been
-    edited since; jog without -c takes the daemon's file for its key limits while the file is
-    the text the daemon read, and the embedded default's otherwise."""
+    edited since; jog without -c takes the daemon's file for its key limits (saying so when it
+    has changed since), and the embedded default's when it cannot read a file of that robot."""
     robot = tmp_path / "robot.yaml"
     text = (CONFIG_DIR / "turtlebot3_burger.yaml").read_text().replace(
         "name: turtlebot3_burger", "name: tb3")
     robot.write_text(text)
-    monkeypatch.setitem(SAMPLE_JSON, "config", {
-        "path": str(robot), "fingerprint": f"{binascii.crc32(robot.read_bytes()):08x}"})
+    running = {"path": str(robot), "fingerprint": f"{binascii.crc32(robot.read_bytes()):08x}"}
+    monkeypatch.setitem(SAMPLE_JSON, "config", running)
     ctx = click.Context(main)
-    default = load_config(None)
-    cfg, limits = jog_command._daemons_robot(ctx, FakeDaemon("/s"), default, None, None)
-    assert cfg.name == "tb3" and limits == jog_limits(load_config(robot))
-    assert limits.max_linear_m_s < 0.5 < jog_limits(default).max_linear_m_s
-    with pytest.raises(click.BadParameter, match=r"at most 0\.21 m/s .*the daemon's robot 'tb3'"):
-        jog_command._daemons_robot(ctx, FakeDaemon("/s"), default, 0.5, None)
+    reply = FakeDaemon("/s").request({"op": "status"})
+    cfg, note = daemon_config(ctx, reply)
+    assert cfg is not None and cfg.name == "tb3" and note == ""
+    limits = jog_command._checked(cfg, None, None)
+    assert limits.max_linear_m_s < 0.5 < jog_limits(load_config(None)).max_linear_m_s
+    with pytest.raises(click.BadParameter, match=r"at most 0\.21 m/s .*\(robot 'tb3'\)"):
+        jog_command._checked(cfg, 0.5, None)
     quiet = runner.invoke(main, ["status", "-c", str(robot), "--socket", "/s"])
     assert quiet.exit_code == 0 and "warning" not in quiet.stderr, quiet.output
     robot.write_text(text + "# edited after the daemon started\n")
+    said = (f"the daemon runs {robot} as it was when the daemon started; the file has "
+            "changed since (restart the daemon to use the change)")
     edited = runner.invoke(main, ["status", "-c", str(robot), "--socket", "/s"])
-    assert edited.exit_code == 0, edited.output
-    assert (f"warning: the daemon runs {robot} as it was when the daemon started; the file has "
-            "changed since (restart the daemon to use the change)") in edited.stderr
-    cfg, limits = jog_command._daemons_robot(ctx, FakeDaemon("/s"), default, None, None)
-    assert cfg is default and limits == jog_limits(default)
+    assert edited.exit_code == 0 and f"warning: {said}" in edited.stderr, edited.output
+    cfg, note = daemon_config(ctx, reply)
+    assert cfg is not None and cfg.name == "tb3" and note == f"warning: {said}"
+    # Not this robot's file, no such file, a path no file can have: the default's limits.
+    robot.write_text(text.replace("name: tb3", "name: other"))
+    for path in (str(robot), str(tmp_path / "gone.yaml"), "bad\0path", str(tmp_path)):
+        assert daemon_config(ctx, {**reply, "config": {**running, "path": path}}) == (None, "")

@@ -244,10 +244,10 @@ def test_an_empty_file_and_a_gateway_key_among_the_motors_say_what_they_are(
 drive: differential
 geometry: {wheel_radius: 0.033, track: 0.16}
 motor_defaults: {driver: odrive, max_rpm: 100, controller_watchdog: warn}
-motors: {left: {node_id: 1}, right: {node_id: 2, kpp: 1}}
+motors: {left: {node_id: 1, driver: odrive}, right: {node_id: 2, kpp: 1}}
 """))
-    # An unknown key of motor_defaults is named there, once for the blocks that inherit it;
-    # one of a motor block in that block.
+    # An unknown key of motor_defaults is named there, once for the blocks that inherit it
+    # (a block that names the defaults' driver again too); one of a motor block in that block.
     problems = info.value.problems
     assert len(problems) == 2, problems
     assert ": motor_defaults.controller_watchdog: unknown key" in problems[0]
@@ -266,6 +266,7 @@ motors: {left: {node_id: 1}, right: {node_id: 2, kpp: 1}}
     inherited = [p for p in problems if "watchdog_endpoints: unknown key" in p]
     assert len(inherited) == 1 and ": motors.front_left.watchdog_endpoints:" in inherited[0], \
         problems
+    assert inherited[0].endswith("(given in motor_defaults, which the vesc driver does not take)")
     steering = [p for p in problems if "controller_watchdog" in p]
     assert len(steering) == 1 and ": steering_defaults.controller_watchdog: unknown key" in \
         steering[0] and steering[0].endswith(

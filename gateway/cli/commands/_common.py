@@ -113,26 +113,27 @@ def other_text(ctx: click.Context, config_path: str | None, running: object) -> 
 def _same_file(a: str, b: str) -> bool:
     try:
         return Path(a).resolve() == Path(b).resolve()
-    except OSError:
+    except (OSError, ValueError):  # (a path the reply made up: too long, a NUL in it)
         return False
 
 
-def daemon_config(ctx: click.Context, reply: dict[str, Any]) -> GatewayConfig | None:
-    """Without ``-c``: the configuration the daemon runs (its status ``reply``), read from its
-    file when this process can read it and it is still the text the daemon read; ``None``
-    otherwise (then the caller keeps the embedded default's and says so)."""
+def daemon_config(ctx: click.Context, reply: dict[str, Any]) -> tuple[GatewayConfig | None, str]:
+    """Without ``-c``: the configuration the daemon runs (its status ``reply``) read from its
+    file, when this process can read it and it is that robot's, with a warning when the file
+    has changed since the daemon read it (:func:`other_text`); ``(None, "")`` otherwise (the
+    caller keeps the embedded default's, and says so when the daemon runs another robot)."""
     running = reply.get("config")
-    if not isinstance(running, dict):
-        return None
-    path, theirs = running.get("path"), running.get("fingerprint")
-    if not isinstance(path, str) or not isinstance(theirs, str) or not theirs \
-            or not Path(path).is_file():
-        return None
+    path = running.get("path") if isinstance(running, dict) else None
+    if not isinstance(path, str):
+        return None, ""
     try:
-        cfg = load(ctx, path)
-    except GatewayError:
-        return None
-    return cfg if cfg.fingerprint == theirs else None
+        cfg = load(ctx, path) if Path(path).is_file() else None
+    except (GatewayError, OSError, ValueError):  # unreadable here (a 0700 directory), invalid
+        return None, ""
+    if cfg is None or cfg.name != reply.get("robot"):
+        return None, ""
+    note = other_text(ctx, path, running)
+    return cfg, "" if note is None else f"warning: {note}"
 
 
 def refuse_other_robot(ctx: click.Context, config_path: str | None, client: Any) -> str:

@@ -214,18 +214,12 @@ class _Terminal:
             self.write("\x1b[H" + "\x1b[K\r\n".join(lines) + "\x1b[K\x1b[J")
 
 
-def _daemons_robot(ctx: click.Context, client: Any, cfg: GatewayConfig, speed: float | None,
-                   turn: float | None) -> tuple[GatewayConfig, JogLimits]:
-    """Without ``-c``: the daemon's configuration when it can be read here, its limits checked
-    against ``--speed`` and ``--turn``; else ``cfg`` (the embedded default)."""
-    found = common.daemon_config(ctx, client.request({"op": "status"}))
-    if found is None:
-        return cfg, jog_limits(cfg)
-    limits = jog_limits(found)
+def _checked(cfg: GatewayConfig, speed: float | None, turn: float | None) -> JogLimits:
+    """The jog limits of ``cfg``; ``--speed`` and ``--turn`` refused beyond them (exit 2)."""
+    limits = jog_limits(cfg)
     for option, why in steps_errors(limits, speed, turn):
-        raise click.BadParameter(f"{why} (the daemon's robot {found.name!r})",
-                                 param_hint=option)
-    return found, limits
+        raise click.BadParameter(f"{why} (robot {cfg.name!r})", param_hint=option)
+    return limits
 
 
 def _session(fd_in: int, wake_fd: int, caught: list[str], term: _Terminal, link: _Link,
@@ -350,9 +344,8 @@ def command(
     if standalone and socket_path:
         raise click.UsageError("--standalone uses a private socket; drop --socket")
     cfg = common.load(ctx, config_path)
-    limits = jog_limits(cfg)
-    for option, why in steps_errors(limits, speed, turn):
-        raise click.BadParameter(why, param_hint=option)
+    daemons = config_path is None and not standalone  # the daemon's robot: known once asked
+    limits = jog_limits(cfg) if daemons else _checked(cfg, speed, turn)
     if not sys.stdin.isatty():
         raise UsageExit("jog reads keys from a terminal, but stdin is not a terminal")
     with contextlib.ExitStack() as stack:
@@ -374,9 +367,12 @@ def command(
             raise click.ClickException(str(err)) from err
         stack.callback(link.close)
         note = ""
-        if not standalone and link.client is not None:
-            if config_path is None:
-                cfg, limits = _daemons_robot(ctx, link.client, cfg, speed, turn)
+        if daemons:  # its own file when it can be read here, else the embedded default
+            found, note = (common.daemon_config(ctx, link.client.request({"op": "status"}))
+                           if link.client is not None else (None, ""))
+            cfg = found or cfg
+            limits = _checked(cfg, speed, turn)
+        elif not standalone and link.client is not None:
             note = common.refuse_other_robot(ctx, config_path, link.client)
         state = JogState.start(limits, speed, turn, deadman)
         title = (f"{cfg.name} ({cfg.drive})"
