@@ -122,6 +122,16 @@ class TrackingFault:
         )
 
 
+def _inside(feedback: Sequence[WheelFeedback | None],
+            windows: Sequence[tuple[float, float]]) -> bool:
+    """Whether every wheel with feedback is inside its window (``not <=``: NaN is outside),
+    ``windows`` each wheel's (checked command, window)."""
+    for fb, (command, window) in zip(feedback, windows):  # noqa: B905 - lengths checked
+        if fb is not None and not abs(fb.velocity_rad_s - command) <= window:
+            return False
+    return True
+
+
 class TrackingMonitor:
     """Watches every driven wheel's speed against its command.
 
@@ -146,10 +156,11 @@ class TrackingMonitor:
         #: there is checked as zero, which is what the controller does with it.
         self.dead_bands: Sequence[tuple[float, float] | None] = ()
         # The last full check, when it left every wheel inside its window with a zero count
-        # (``None`` otherwise): its commands, feedback, dead bands and each wheel's peak after
-        # a new runaway period (see ``check``).
+        # (``None`` otherwise): its commands, feedback, dead bands, each wheel's peak after
+        # a new runaway period, and each wheel's (checked command, window) (see ``check``).
         self._quiet: tuple[tuple[float, ...], tuple[WheelFeedback | None, ...],
-                           Sequence[tuple[float, float] | None], list[float]] | None = None
+                           Sequence[tuple[float, float] | None], list[float],
+                           list[tuple[float, float]]] | None = None
 
     def reset(self) -> None:
         """Forget every wheel's history (the drives stopped following commands)."""
@@ -177,11 +188,16 @@ class TrackingMonitor:
             quiet is not None
             and (command_rad_s is quiet[0] or command_rad_s == quiet[0])
             and len(feedback) == len(quiet[1])
-            and all(map(operator.is_, feedback, quiet[1]))
             and self.dead_bands is quiet[2]
         ):
-            # Nothing changed since a check that left every wheel inside its window with a
-            # zero count: this one would leave every count at zero and every peak as it is.
+            # The commands are those of a check that left every wheel inside its window with
+            # a zero count; when every wheel's feedback is the same, or new and inside its
+            # window again (then kept, so that the next cycles find it the same), this check
+            # would leave every count at zero and every peak as it is.
+            if not all(map(operator.is_, feedback, quiet[1])):
+                if not _inside(feedback, quiet[4]):
+                    return self._check_all(command_rad_s, feedback, now_s)
+                self._quiet = quiet = (quiet[0], tuple(feedback), quiet[2], quiet[3], quiet[4])
             self._last_s = now_s
             start = self._period_start_s
             if start is not None and now_s - start >= self.limits.time_s:
@@ -255,7 +271,14 @@ class TrackingMonitor:
             elif (c := count[i]):  # max(c - dt, 0.0), written out (steady: c is 0)
                 count[i] = c - dt if c > dt else 0.0
         if not outside and not any(count):
-            self._quiet = (tuple(command_rad_s), tuple(feedback), bands, fresh)
+            # (each wheel's checked command and window, as above, for ``check``'s skip)
+            windows = []
+            for i, command in enumerate(command_rad_s):
+                cmd, size = command, abs(command)
+                if i < n_bands and (band := bands[i]) is not None and band[0] < size < band[1]:
+                    cmd = size = 0.0
+                windows.append((cmd, abs_tol + ratio * size))
+            self._quiet = (tuple(command_rad_s), tuple(feedback), bands, fresh, windows)
         return fault
 
 

@@ -222,6 +222,21 @@ def test_tracking_skip_matches_the_full_check(seed: int) -> None:
     assert full_checks[0] < 0.7 * steps  # the skip was taken
 
 
+def test_tracking_skip_on_new_feedback_uses_each_wheels_checked_command() -> None:
+    """New feedback inside every window is skipped; a wheel whose command is in its dead band
+    is checked against zero (the controller stops it), so turning at the command is outside."""
+    limits = TrackingLimits(tolerance_rad_s=1.0, tolerance_ratio=0.2, time_s=0.2)
+    fast, full = TrackingMonitor(limits), TrackingMonitor(limits)
+    bands: list[tuple[float, float] | None] = [(0.5, 2.0), None]
+    fast.dead_bands = full.dead_bands = bands
+    command = (1.5, 3.0)
+    for k, speeds in enumerate([(0.0, 3.0), (0.2, 3.5), (1.5, 3.0), (1.5, 3.0), (0.0, 3.1)]):
+        fb = [WheelFeedback(0.0, v, 0.001 * k) for v in speeds]
+        assert fast.check(command, fb, 0.01 * k) == full._check_all(command, fb, 0.01 * k)
+        assert _monitor_state(fast) == _monitor_state(full), k
+    assert fast._count[0] > 0.0  # turning at a command in its band was outside: counted
+
+
 def test_supervisor_decisions_are_reused_only_while_equal() -> None:
     model = load_config(None).model
     sup = Supervisor(model, LoopConfig(cmd_timeout_s=0.5))
