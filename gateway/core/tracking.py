@@ -241,6 +241,7 @@ class TrackingMonitor:
         bands = self.dead_bands
         outside = False
         fresh = [0.0] * n  # each wheel's peak at the start of a new period, after this check
+        windows = []  # each wheel's (checked command, window), for ``check``'s skip
         n_bands = len(bands)
         for i, (command, fb) in enumerate(zip(command_rad_s, feedback, strict=True)):
             cmd, size = command, abs(command)
@@ -252,10 +253,11 @@ class TrackingMonitor:
                 peak[i] = size
             if size > 0.0:
                 fresh[i] = size
+            window = abs_tol + ratio * size
+            windows.append((cmd, window))
             if fb is None:
                 count[i] = 0.0
                 continue
-            window = abs_tol + ratio * size
             measured = fb.velocity_rad_s
             error = abs(measured - cmd)
             # ``not <=`` so that a NaN speed counts as outside the window.
@@ -271,13 +273,6 @@ class TrackingMonitor:
             elif (c := count[i]):  # max(c - dt, 0.0), written out (steady: c is 0)
                 count[i] = c - dt if c > dt else 0.0
         if not outside and not any(count):
-            # (each wheel's checked command and window, as above, for ``check``'s skip)
-            windows = []
-            for i, command in enumerate(command_rad_s):
-                cmd, size = command, abs(command)
-                if i < n_bands and (band := bands[i]) is not None and band[0] < size < band[1]:
-                    cmd = size = 0.0
-                windows.append((cmd, abs_tol + ratio * size))
             self._quiet = (tuple(command_rad_s), tuple(feedback), bands, fresh, windows)
         return fault
 

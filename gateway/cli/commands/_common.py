@@ -79,27 +79,36 @@ def socket_for(ctx: click.Context, config_path: str | None, socket_path: str | N
     return client_socket_path()
 
 
-def other_robot(ctx: click.Context, config_path: str | None, running: object) -> str | None:
-    """With ``-c``, why the daemon's robot (``running``: its status's ``robot``) is not the
-    configuration's; ``None`` when it is, or when there is nothing to compare."""
-    if config_path is None or not isinstance(running, str):
+def _other_robot(ours: GatewayConfig, config_path: str, running: object) -> str | None:
+    """Why the daemon's robot (``running``: its status's ``robot``) is not that of ``ours``
+    (the file ``config_path``, loaded); ``None`` when it is, or when it does not say."""
+    if not isinstance(running, str) or running == ours.name:
         return None
-    name = load(ctx, config_path).name
-    if running == name:
-        return None
-    return (f"the daemon on this socket runs the robot {running!r}, not {name!r} of "
+    return (f"the daemon on this socket runs the robot {running!r}, not {ours.name!r} of "
             f"{config_path}")
 
 
-def other_text(ctx: click.Context, config_path: str | None, running: object) -> str | None:
-    """With ``-c``, when the daemon runs the same robot (by name) from a text other than the
-    file's (``running``: its status's ``config``, path and fingerprint): what to know, e.g.
-    the file was edited after the daemon read it; ``None`` when the texts are the same, or
-    when there is nothing to compare (an earlier daemon, a configuration not from a file)."""
-    if config_path is None or not isinstance(running, dict):
+def daemon_runs(ctx: click.Context, config_path: str | None,
+                reply: dict[str, Any]) -> tuple[str | None, str | None]:
+    """With ``-c``, what the daemon's status ``reply`` says against the file, which is read
+    once: why its robot is another, or else what to know when it runs
+    this robot from another text (:func:`other_text`); ``(None, None)`` without ``-c``."""
+    if config_path is None:
+        return None, None
+    ours = load(ctx, config_path)
+    why = _other_robot(ours, config_path, reply.get("robot"))
+    return why, None if why is not None else other_text(ours, config_path, reply.get("config"))
+
+
+def other_text(ours: GatewayConfig, config_path: str, running: object) -> str | None:
+    """When the daemon runs the robot of ``ours`` (the file ``config_path``, loaded) from a
+    text other than the file's (``running``: its status's ``config``, path and fingerprint):
+    what to know, e.g. the file was edited after the daemon read it; ``None`` when the texts
+    are the same, or when there is nothing to compare (an earlier daemon, a configuration not
+    from a file)."""
+    if not isinstance(running, dict):
         return None
     path, theirs = running.get("path"), running.get("fingerprint")
-    ours = load(ctx, config_path)
     if not isinstance(path, str) or not isinstance(theirs, str) or not theirs \
             or not ours.fingerprint or theirs == ours.fingerprint:
         return None
@@ -132,7 +141,7 @@ def daemon_config(ctx: click.Context, reply: dict[str, Any]) -> tuple[GatewayCon
         return None, ""
     if cfg is None or cfg.name != reply.get("robot"):
         return None, ""
-    note = other_text(ctx, path, running)
+    note = other_text(cfg, path, running)
     return cfg, "" if note is None else f"warning: {note}"
 
 
@@ -145,11 +154,9 @@ def refuse_other_robot(ctx: click.Context, config_path: str | None, client: Any)
     """
     if config_path is None:
         return ""
-    reply = client.request({"op": "status"})
-    why = other_robot(ctx, config_path, reply.get("robot"))
+    why, note = daemon_runs(ctx, config_path, client.request({"op": "status"}))
     if why is not None:
         raise UsageExit(f"{why}: refusing to drive it (drop -c, or use its socket)")
-    note = other_text(ctx, config_path, reply.get("config"))
     return "" if note is None else f"warning: {note}"
 
 

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 import click
 
 from gateway.cli import config_option, json_option
-from gateway.cli.commands._common import other_robot, other_text, socket_for
+from gateway.cli.commands._common import daemon_runs, socket_for
 from gateway.cli.commands._guards import fail_json_of
 from gateway.core.errors import GatewayError
 from gateway.core.numfmt import fixed, short
@@ -47,9 +47,8 @@ def command(
             click.echo(json.dumps({"ok": False, "error": reply.get("error")}))
             ctx.exit(1)
         raise click.ClickException(str((reply.get("error") or {}).get("message", reply)))
-    why = other_robot(ctx, config_path, reply.get("robot"))
-    if why is None:
-        why = other_text(ctx, config_path, reply.get("config"))
+    why, note = daemon_runs(ctx, config_path, reply)
+    why = why or note
     if why is not None:
         click.echo(f"warning: {why}", err=True)
     status = status_from_json(reply)
