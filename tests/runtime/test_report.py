@@ -3,9 +3,11 @@ the one the daemon sent before the typed model, and reads back into the same mod
 
 from __future__ import annotations
 
+import binascii
 import dataclasses
 import json
 import math
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 import pytest
@@ -195,3 +197,18 @@ def test_every_event_counter_is_reported_under_its_name_in_the_legacy_order() ->
     events = event_counts(loop, edge, sup)
     assert dict(events) == expected
     assert tuple(events) == LEGACY_EVENTS
+
+
+def test_the_status_names_the_file_by_its_absolute_path_and_its_bytes_crc(
+        channel: str, sock_path: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A daemon started with a relative -c path names its file absolutely (a client runs
+    elsewhere), with the CRC-32 of the bytes it read."""
+    (tmp_path / "robot.yaml").write_bytes((CONFIG_DIR / "turtlebot3_burger.yaml").read_bytes())
+    monkeypatch.chdir(tmp_path)
+    with Rig(virtual_config(Path("robot.yaml"), channel), sock_path) as rig:
+        daemon = rig.daemon
+        assert daemon is not None
+        config = _built(daemon, rig.t).config
+    assert config is not None
+    assert config.path == str(tmp_path / "robot.yaml")
+    assert config.fingerprint == f"{binascii.crc32((tmp_path / 'robot.yaml').read_bytes()):08x}"
