@@ -22,7 +22,7 @@ from typing import IO, Any
 
 import yaml
 
-from gateway.runtime.client import ControlClient
+from gateway.runtime.client import ClientError, ControlClient
 
 #: Generous bounds for the emulated VM: process start (imports take ~10 s there), enabling.
 START_S = 180.0
@@ -164,8 +164,15 @@ class Session:
         while not os.path.exists(self.sock):
             assert time.monotonic() < end and self.procs["run"].poll() is None, self.tails()
             time.sleep(0.2)
-        while (state := self.request({"op": "status"})["state"]) != "running":
-            assert time.monotonic() < end, f"gateway state {state}\n{self.tails()}"
+        while True:
+            try:
+                state = self.request({"op": "status"})["state"]
+            except ClientError:  # the file exists from bind(), the daemon not yet listening
+                state = "not listening yet"
+            if state == "running":
+                break
+            assert time.monotonic() < end and self.procs["run"].poll() is None, \
+                f"gateway state {state}\n{self.tails()}"
             time.sleep(0.2)
 
     def request(self, req: dict[str, Any]) -> dict[str, Any]:
