@@ -130,7 +130,8 @@ GATEWAY_KEYS: Mapping[str, OptionSpec] = MappingProxyType({
     "estop_release": OptionSpec(str, _DEFAULTS.estop_release.value,
                                 choices=_choices(EstopRelease),
                                 help="who may release an e-stop: the control socket only, or "
-                                     "also a CAN twist frame's ENABLE flag"),
+                                     "also a CAN twist frame's ENABLE flag and the Zenoh "
+                                     "bridge's rpc/enable"),
     "state_file": OptionSpec(str, "", help="the e-stop latch file; empty: $STATE_DIRECTORY/"
                                            "estop, else ~/.local/state/wheelgate/"),
     "controller_watchdog": OptionSpec(

@@ -66,7 +66,7 @@ class EstopRelease(Choice):
 
     #: The control socket's ``enable`` only.
     SOCKET = "socket"
-    #: Also a CAN twist frame's ENABLE flag.
+    #: Also a CAN twist frame's ENABLE flag and a Zenoh peer's ``rpc/enable``.
     ANY = "any"
 
 
@@ -117,7 +117,8 @@ class LoopConfig:
     :param enable_on_start: enable the drives when the daemon starts (never out of a latched
         e-stop).
     :param estop_release: who may release an e-stop: ``socket`` (the control socket's
-        ``enable`` only) or ``any`` (also a CAN twist frame's ENABLE flag).
+        ``enable`` only) or ``any`` (also a CAN twist frame's ENABLE flag and the Zenoh
+        bridge's ``rpc/enable``).
     :param state_file: the e-stop latch file (empty: see :mod:`gateway.runtime.latch`).
     :param controller_watchdog: what happens when a controller-side watchdog the protocol can
         set over CAN is not confirmed (:class:`gateway.core.protection.WatchdogPolicy`).

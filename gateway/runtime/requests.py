@@ -13,6 +13,8 @@ from typing import TYPE_CHECKING, Protocol
 
 from gateway.core.control import Accepted, Source
 from gateway.core.kinematics.limits import binding_limit
+from gateway.core.settings import EstopRelease
+from gateway.core.types import ErrorCode, GatewayState
 from gateway.wire.socket import (
     CommandRequest,
     Op,
@@ -138,6 +140,13 @@ class RequestHandler:
             sup.estop(f"e-stop requested on {self.origin}")
             self.latch.set(sup.reason)
         elif request.op is Op.ENABLE:
+            if (sup.state is GatewayState.ESTOP and self.source is not Source.SOCKET
+                    and self.gateway.config.loop.estop_release is EstopRelease.SOCKET):
+                self.server.reply(client, reply_error(
+                    rid, ErrorCode.ESTOP, f"an e-stop is released only by an enable on the "
+                    f"control socket (gateway.estop_release: socket); the enable from "
+                    f"{self.origin} was refused", state=sup.state))
+                return
             sup.enable(now_s)
         elif request.op is Op.DISABLE:
             sup.disable()
