@@ -17,6 +17,7 @@ https://zenoh.io/docs/manual/configuration/); a listen endpoint on every interfa
 
 from __future__ import annotations
 
+import ipaddress
 import re
 from types import MappingProxyType
 from typing import TYPE_CHECKING
@@ -56,7 +57,9 @@ ZENOH_KEYS: Mapping[str, OptionSpec] = MappingProxyType({
     "connect": OptionSpec(list, [], help="endpoints to connect to (a router or a peer)"),
     "multicast_scouting": OptionSpec(bool, False),
     "lease_s": OptionSpec(float, 10.0, minimum=0.1, maximum=3600.0,
-                          help="seconds a silent peer (and its tokens) stays alive"),
+                          help="the gateway's lease: seconds its peers keep a silent gateway "
+                               "and its tokens alive (a frozen commander is dropped after its "
+                               "own lease)"),
 })
 ROS2_KEYS: Mapping[str, OptionSpec] = MappingProxyType({
     "domain_id": OptionSpec(int, 0, minimum=0, maximum=232, help="ROS_DOMAIN_ID"),
@@ -75,9 +78,13 @@ FOXGLOVE_KEYS: Mapping[str, OptionSpec] = MappingProxyType({
     "mcap": OptionSpec(str, "", help="also record the channels to this MCAP file"),
 })
 
-#: A Zenoh locator: protocol, slash, address (host:port, a path for unix sockets).
-_ENDPOINT = re.compile(r"^(tcp|udp|tls|quic|ws|unixsock-stream|unixpipe)/\S+$")
-_EVERYWHERE = re.compile(r"^[a-z-]+/(0\.0\.0\.0|\[::\]|::)(:|$)")
+#: A Zenoh locator: protocol, slash, address (host:port, a path for unix sockets), then
+#: optionally Zenoh's ``?metadata`` and ``#config`` parts.
+_ENDPOINT = re.compile(r"^(tcp|udp|tls|quic|ws|unixsock-stream|unixpipe)/([^?#\s]+)\S*$")
+#: The protocols whose address is ``host:port``.
+_IP = frozenset({"tcp", "udp", "tls", "quic", "ws"})
+#: ``host:port``, the host an IPv4 address, a name or a bracketed IPv6 address.
+_HOST_PORT = re.compile(r"^(\[[0-9A-Fa-f:.]+\]|[^:\[\]]+):(\d{1,5})$")
 #: One token of a name: ROS 2 naming rules (alphanumerics and underscores, no leading digit).
 _TOKEN = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
@@ -86,12 +93,33 @@ def _endpoints(value: object, where: str) -> tuple[str, ...]:
     if not isinstance(value, list):
         raise ConfigError(f"{where}: expected a list of endpoints, got {value!r}")
     for i, item in enumerate(value):
-        if not (isinstance(item, str) and _ENDPOINT.match(item)):
+        m = _ENDPOINT.match(item) if isinstance(item, str) else None
+        if m is None:
             raise ConfigError(
                 f"{where}[{i}]: expected an endpoint '<protocol>/<address>' such as "
                 f"'tcp/127.0.0.1:7447', got {item!r}"
             )
+        if m.group(1) in _IP:
+            hp = _HOST_PORT.match(m.group(2))
+            if hp is None or int(hp.group(2)) > 65535:
+                raise ConfigError(
+                    f"{where}[{i}]: expected '{m.group(1)}/<host>:<port>' (port 0 to 65535; "
+                    f"an IPv6 address in brackets, e.g. '{m.group(1)}/[::1]:7447'), got "
+                    f"{item!r}"
+                )
     return tuple(value)
+
+
+def _everywhere(endpoint: str) -> bool:
+    """Whether an endpoint listens on every interface (``0.0.0.0``, ``[::]`` in any spelling)."""
+    m = _ENDPOINT.match(endpoint)
+    hp = _HOST_PORT.match(m.group(2)) if m is not None else None
+    if hp is None:
+        return False
+    try:
+        return ipaddress.ip_address(hp.group(1).strip("[]")).is_unspecified
+    except ValueError:  # a host name
+        return False
 
 
 def check_name(value: str, where: str) -> str:
@@ -128,7 +156,7 @@ def parse_bridge(raw: object, source: str, robot: str) -> tuple[BridgeSettings, 
     warnings = [
         f"{where}.zenoh.listen: {e} listens on every network interface: anyone on those "
         f"networks can drive the robot; expected a loopback or one interface's address"
-        for e in zenoh.listen if _EVERYWHERE.match(e)
+        for e in zenoh.listen if _everywhere(e)
     ]
     if zenoh.multicast_scouting:
         warnings.append(f"{where}.zenoh.multicast_scouting: on: the robot announces itself to "
@@ -136,12 +164,14 @@ def parse_bridge(raw: object, source: str, robot: str) -> tuple[BridgeSettings, 
     namespace = str(v["namespace"])
     if namespace:
         check_name(namespace, f"{where}.namespace")
+    else:
+        try:
+            check_name(robot, f"{source}: name")
+        except ConfigError as err:
+            raise ConfigError(f"{err}: with a bridge: block and no bridge.namespace, the "
+                              f"robot's name names its keys (wheelgate/<name>/...); set "
+                              f"bridge.namespace") from None
     native = namespace or robot
-    if not _TOKEN.match(native.replace("/", "_")):
-        raise ConfigError(
-            f"{where}.namespace: the robot's name {robot!r} cannot name its keys; expected a "
-            f"namespace of letters, digits and underscores"
-        )
     ros2 = None
     if "ros2" in (raw if isinstance(raw, dict) else {}):
         r = validate_block(v["ros2"], ROS2_KEYS, f"{where}.ros2", "ros2 keys")
@@ -154,8 +184,11 @@ def parse_bridge(raw: object, source: str, robot: str) -> tuple[BridgeSettings, 
 
         if namespace:
             validate_namespace(namespace, f"{where}.namespace")
-        for key in ("cmd_vel", "odom"):  # relative to the namespace, or absolute
-            resolve_topic_name(str(r[key]), namespace or "/", f"{where}.ros2.{key}")
+        topics = {key: resolve_topic_name(str(r[key]), namespace or "/", f"{where}.ros2.{key}")
+                  for key in ("cmd_vel", "odom")}  # relative to the namespace, or absolute
+        if topics["odom"] == topics["cmd_vel"]:
+            raise ConfigError(f"{where}.ros2.odom: expected a topic other than cmd_vel's, got "
+                              f"{r['odom']!r}, which is {topics['odom']!r} as cmd_vel is")
         validate_node_name(str(r["node_name"]), f"{where}.ros2.node_name")
         for key in ("odom_frame", "base_frame"):
             check_name(str(r[key]), f"{where}.ros2.{key}")

@@ -60,8 +60,10 @@ class ZenohSettings:
     :param listen: endpoints to listen on, e.g. ``("tcp/127.0.0.1:7447",)``; none by default.
     :param connect: endpoints to connect to (a router, or another peer).
     :param multicast_scouting: whether to find peers by UDP multicast (off by default).
-    :param lease_s: how long a silent peer stays alive (its liveliness tokens with it): the
-        deadman's reaction to a frozen commander.
+    :param lease_s: the gateway's own lease: how long its peers keep a silent gateway (and its
+        liveliness tokens) alive.  A frozen commander is dropped after *its* lease, which its
+        own Zenoh configuration sets (Zenoh checks each peer against the lease that peer
+        announced).
     """
 
     mode: ZenohMode = ZenohMode.PEER

@@ -21,7 +21,7 @@ from gateway.core.events import OdometryEvent, StatusEvent
 from gateway.core.status import LastError
 from gateway.core.supervision import Source
 from gateway.core.types import ErrorCode
-from gateway.runtime.bridge.inbox import CommanderEvent
+from gateway.runtime.bridge.inbox import CommanderEvent, Inbound
 from gateway.runtime.mailbox import Snapshot, SteerSample, WheelSample
 from gateway.runtime.requests import RequestHandler
 from gateway.wire.socket import reply_error
@@ -39,7 +39,13 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
-__all__ = ["Remote", "snapshot_of"]
+__all__ = ["POLL_MAX", "SERVE_SHARE", "Remote", "snapshot_of"]
+
+#: Inbox items (queries, token events) the loop takes per cycle, at most.
+POLL_MAX = 64
+#: The share of the cycle's period the loop gives them (a status query builds the whole
+#: status): what is left waits for the next cycle.
+SERVE_SHARE = 0.2
 
 
 class Remote:
@@ -96,24 +102,39 @@ class Remote:
     # ----------------------------------------------------------------- requests
 
     def serve(self, now_s: float) -> None:
-        """Handle what came in over the bridge since the last call (loop thread)."""
+        """Handle what came in over the bridge since the last call (loop thread): the newest
+        published twist of each source first (sent before anything still waiting in the inbox
+        was taken), then queries and token events in order, at most :data:`POLL_MAX` and for at
+        most :data:`SERVE_SHARE` of the cycle's period (the rest waits for the next cycle)."""
         bridge = self.bridge
         if bridge is None:
             return
-        for item in bridge.poll():
+        for twist in bridge.take_twists():
+            self._request(twist, now_s)
+        end = time.perf_counter() + SERVE_SHARE * self.gateway.period_s
+        for _ in range(POLL_MAX):
+            item = bridge.take()
+            if item is None:
+                return
             if isinstance(item, CommanderEvent):
                 self._commander(item.commander, item.alive, now_s)
-                continue
-            try:
-                self.requests.handle(item.client, item.request, now_s)
-            except (GatewayError, ValueError, UnicodeError) as err:  # never out of the loop
-                log.warning("bridge request failed: %s", err)
-                bridge.reply(item.client, reply_error(None, ErrorCode.BAD_COMMAND,
-                                                      f"request failed: {err}"))
-                continue
-            accepted = self.requests.last_accepted
-            if item.commander is not None and accepted is not None:
-                self.deadman.accepted(item.commander, accepted)
+            else:
+                self._request(item, now_s)
+            if time.perf_counter() > end:
+                return
+
+    def _request(self, item: Inbound, now_s: float) -> None:
+        assert self.bridge is not None
+        try:
+            self.requests.handle(item.client, item.request, now_s)
+        except (GatewayError, ValueError, UnicodeError) as err:  # never out of the loop
+            log.warning("bridge request failed: %s", err)
+            self.bridge.reply(item.client, reply_error(None, ErrorCode.BAD_COMMAND,
+                                                       f"request failed: {err}"))
+            return
+        accepted = self.requests.last_accepted
+        if item.commander is not None and accepted is not None:
+            self.deadman.accepted(item.commander, accepted)
 
     def _commander(self, name: str, alive: bool, now_s: float) -> None:
         if alive:

@@ -100,6 +100,17 @@ def test_the_attachment_of_jazzys_first_rmw_zenoh_releases() -> None:
     ({"ros2": {"attachment": "labeled"}},
      "bridge.ros2.attachment: expected one of 'positional', 'labelled', got 'labeled'"),
     ({"deadman": "halt"}, "bridge.deadman: expected one of 'stop', 'estop', got 'halt'"),
+    ({"zenoh": {"listen": ["tcp/127.0.0.1"]}},
+     "bridge.zenoh.listen[0]: expected 'tcp/<host>:<port>' (port 0 to 65535; an IPv6 address "
+     "in brackets, e.g. 'tcp/[::1]:7447'), got 'tcp/127.0.0.1'"),
+    ({"zenoh": {"connect": ["udp/10.0.0.2:99999"]}},
+     "bridge.zenoh.connect[0]: expected 'udp/<host>:<port>'"),
+    ({"zenoh": {"connect": ["tcp/::1:7447"]}}, "bridge.zenoh.connect[0]: expected 'tcp/<host>"),
+    ({"ros2": {"odom": "cmd_vel"}},
+     "bridge.ros2.odom: expected a topic other than cmd_vel's, got 'cmd_vel', which is "
+     "'/cmd_vel' as cmd_vel is"),
+    ({"namespace": "r1", "ros2": {"odom": "/r1/cmd_vel"}},
+     "bridge.ros2.odom: expected a topic other than cmd_vel's"),
     ({"ros": {}}, "bridge.ros: unknown key; did you mean 'ros2'? (known bridge keys: deadman, "
      "namespace, ros2, zenoh)"),
     ("yes", "bridge: expected a mapping, got 'yes'"),
@@ -111,17 +122,42 @@ def test_a_bad_bridge_block_names_the_key(block: object, message: str) -> None:
     assert message in str(err.value), err.value
 
 
+def test_endpoints_zenoh_takes_are_accepted() -> None:
+    z = bridge(bridge={"zenoh": {"listen": ["tcp/[::1]:7447", "tcp/robot.local:0"],
+                                 "connect": ["tcp/192.168.1.10:7447#iface=eth0",
+                                             "unixsock-stream//run/zenoh.sock"]}}).zenoh
+    assert z.listen == ("tcp/[::1]:7447", "tcp/robot.local:0")
+    assert z.connect[1] == "unixsock-stream//run/zenoh.sock"
+
+
+@pytest.mark.parametrize("name", ["robot/", "/robot1", "a//b", "robot 1"])
+def test_a_robot_name_that_cannot_name_the_keys_is_refused_without_a_namespace(
+        name: str) -> None:
+    """The robot's name names the native keys when no namespace is given: a name Zenoh would
+    refuse (an empty chunk) is refused when the file is read, naming the key and the fix --
+    not a traceback when the daemon declares its keys."""
+    with pytest.raises(ConfigError) as err:
+        parse(name=name, bridge={})
+    text = str(err.value)
+    assert text.startswith("robot.yaml: name: expected a name of tokens"), text
+    assert f"got {name!r}" in text and "set bridge.namespace" in text
+    assert bridge(name=name, bridge={"namespace": "robot1"}).namespace == "robot1"
+
+
 def test_an_absolute_topic_is_accepted() -> None:
     ros2 = bridge(bridge={"ros2": {"cmd_vel": "/teleop/cmd_vel"}}).ros2
     assert ros2 is not None and ros2.cmd_vel == "/teleop/cmd_vel"
 
 
 def test_listening_everywhere_and_multicast_are_warned_about() -> None:
-    _, warnings = parse(bridge={"zenoh": {"listen": ["tcp/0.0.0.0:7447", "tcp/[::]:7448"],
+    everywhere = ["tcp/0.0.0.0:7447", "tcp/[::]:7448", "tcp/[0:0:0:0:0:0:0:0]:7449",
+                  "udp/[::0]:7450"]
+    _, warnings = parse(bridge={"zenoh": {"listen": [*everywhere, "tcp/127.0.0.1:7451"],
                                           "multicast_scouting": True}})
     text = "\n".join(warnings)
-    assert "tcp/0.0.0.0:7447 listens on every network interface" in text
-    assert "tcp/[::]:7448 listens on every network interface" in text
+    for endpoint in everywhere:
+        assert f"{endpoint} listens on every network interface" in text
+    assert "7451" not in text
     assert "multicast_scouting: on" in text
 
 

@@ -14,10 +14,11 @@ from gateway.core.bridge_settings import BridgeSettings, DeadmanAction, ZenohSet
 from gateway.core.control import ZERO
 from gateway.core.supervision import Source
 from gateway.core.types import GatewayState, Twist
+from gateway.runtime import remote as remote_module
 from gateway.runtime.bridge.deadman import Deadman
 from gateway.runtime.bridge.inbox import NO_REPLY, CommanderEvent, Inbound
 from gateway.runtime.requests import RequestHandler
-from gateway.wire.socket import TwistRequest
+from gateway.wire.socket import CommandRequest, Op, TwistRequest
 from tests.e2e_helpers import Rig, virtual_config
 
 if TYPE_CHECKING:
@@ -32,11 +33,16 @@ class FakeBridge:
     def __init__(self, action: DeadmanAction) -> None:
         self.settings = BridgeSettings(ZenohSettings(), "robot", deadman=action)
         self.inbox: list[Inbound | CommanderEvent] = []
+        #: The newest published twist, as the bridge's slot holds it.
+        self.twist: Inbound | None = None
         self.replies: list[tuple[int, bytes]] = []
 
-    def poll(self) -> list[Inbound | CommanderEvent]:
-        out, self.inbox = self.inbox, []
-        return out
+    def take_twists(self) -> list[Inbound]:
+        twist, self.twist = self.twist, None
+        return [] if twist is None else [twist]
+
+    def take(self) -> Inbound | CommanderEvent | None:
+        return self.inbox.pop(0) if self.inbox else None
 
     def reply(self, client_id: int, data: bytes) -> bool:
         self.replies.append((client_id, data))
@@ -148,3 +154,33 @@ def test_a_refused_twist_is_not_followed(rig: tuple[Rig, FakeBridge]) -> None:
     assert r.gw.state is GatewayState.DISABLED
     last = r.gw.publisher.last_error
     assert last is None or "disappeared" not in last.message, last
+
+
+def test_a_published_twist_is_taken_before_the_token_events_that_came_after_it(
+        rig: tuple[Rig, FakeBridge]) -> None:
+    """A commander's last twist and then its token's disappearance reach the loop in one
+    cycle: the twist (in the published twists' slot) is taken first, so the loss stops the
+    robot rather than the dead commander's twist driving it."""
+    r, fake = rig
+    fake.inbox.append(CommanderEvent("teleop1", True))
+    r.advance(0.1, serve)
+    fake.twist = twist_from("teleop1", 0.4)
+    fake.inbox.append(CommanderEvent("teleop1", False))
+    r.advance(r.period, serve)
+    assert r.gw.supervisor.target is ZERO
+    r.advance(1.5, serve)
+    assert max(wheel_speeds(r)) < 0.05, wheel_speeds(r)
+
+
+def test_the_loop_takes_at_least_one_waiting_item_a_cycle_within_its_share(
+        rig: tuple[Rig, FakeBridge], monkeypatch: pytest.MonkeyPatch) -> None:
+    """With no time to spare (a share of 0), every cycle still takes one query or token
+    event, and the rest wait for the next cycles: none is lost."""
+    r, fake = rig
+    monkeypatch.setattr(remote_module, "SERVE_SHARE", 0.0)
+    fake.inbox += [Inbound(k, CommandRequest(Op.STATUS)) for k in range(1, 6)]
+    serve(r)
+    assert [c for c, _ in fake.replies] == [1] and len(fake.inbox) == 4
+    for _ in range(4):
+        serve(r)
+    assert [c for c, _ in fake.replies] == [1, 2, 3, 4, 5] and fake.inbox == []

@@ -5,13 +5,14 @@ from __future__ import annotations
 
 import collections
 import json
+from types import SimpleNamespace
 
 import pytest
 
 from gateway.core.bridge_settings import ZenohMode, ZenohSettings
 from gateway.core.types import Twist
-from gateway.runtime.bridge.bridge import INBOX_MAX, POLL_MAX, Bridge
-from gateway.runtime.bridge.inbox import NO_REPLY, CommanderEvent, Inbound
+from gateway.runtime.bridge.bridge import INBOX_MAX, Bridge, _native_twist
+from gateway.runtime.bridge.inbox import NO_REPLY, CommanderEvent, Inbound, TwistSource
 from gateway.runtime.bridge.native import (
     COMMANDER_MAX_CHARS,
     RPC_OPS,
@@ -21,6 +22,7 @@ from gateway.runtime.bridge.native import (
     parse_twist_sample,
 )
 from gateway.runtime.bridge.session import session_config
+from gateway.runtime.mailbox import Mailbox
 from gateway.wire.socket import (
     CommandRequest,
     Op,
@@ -100,17 +102,64 @@ def test_the_session_listens_nowhere_and_scouts_nothing_unless_told() -> None:
     assert told["scouting/multicast/enabled"] is True
 
 
-def test_a_flood_of_twists_never_crowds_out_a_commander_event() -> None:
-    bridge = Bridge.__new__(Bridge)  # the inbox only: no Zenoh session
+class Ring:
+    """A subscriber with a ring of one sample, as Zenoh's ``RingChannel(1)`` keeps it."""
+
+    def __init__(self) -> None:
+        self.sample: object | None = None
+
+    def put(self, payload: bytes, attachment: bytes | None = None) -> None:
+        self.sample = SimpleNamespace(
+            payload=SimpleNamespace(to_bytes=lambda: payload), key_expr=KEYS.twist,
+            attachment=None if attachment is None else SimpleNamespace(
+                to_bytes=lambda: attachment))
+
+    def try_recv(self) -> object | None:
+        sample, self.sample = self.sample, None
+        return sample
+
+
+def _bare_bridge(*rings: Ring) -> Bridge:
+    bridge = Bridge.__new__(Bridge)  # the loop's side only: no Zenoh session
     bridge._inbox = collections.deque()
-    bridge.dropped = 0
-    for _ in range(INBOX_MAX + 10):
-        bridge._admit(Inbound(NO_REPLY, TwistRequest(Twist(0.1, 0.0, 0.0))))
+    bridge._twists = [TwistSource(ring, _native_twist) for ring in rings]
+    bridge.bad_twists = bridge.dropped = 0
+    bridge.mailbox = Mailbox()
+    return bridge
+
+
+def _twist(vx: object) -> bytes:
+    return json.dumps({"op": "twist", "vx": vx}).encode()
+
+
+def test_the_loop_parses_the_newest_published_twist_of_each_source() -> None:
+    """Zenoh keeps the newest sample of each twist subscriber (a ring of one): the loop parses
+    that one, with its commander; a bad newest sample is counted and reported on the error
+    key, and nothing of it is followed."""
+    native, stamped = Ring(), Ring()
+    bridge = _bare_bridge(native, stamped)
+    native.put(_twist(0.999), b"teleop1")
+    assert bridge.take_twists() == [
+        Inbound(NO_REPLY, TwistRequest(Twist(0.999, 0.0, 0.0)), "teleop1")]
+    assert bridge.take_twists() == []
+    native.put(_twist("fast"))
+    stamped.put(_twist(0.2))
+    assert bridge.take_twists() == [Inbound(NO_REPLY, TwistRequest(Twist(0.2, 0.0, 0.0)))]
+    assert bridge.bad_twists == 1
+    errors = bridge.mailbox.take(0.0).errors
+    assert [e.message for e in errors] == ['twist.vx: expected a finite number, got "fast"']
+    native.put(_twist(0.1), b"a b")
+    assert bridge.take_twists() == [] and bridge.bad_twists == 2
+    assert "attachment: expected a commander name" in bridge.mailbox.take(0.0).errors[0].message
+
+
+def test_a_flood_of_queries_never_crowds_out_a_commander_event() -> None:
+    bridge = _bare_bridge()
+    for k in range(INBOX_MAX + 10):
+        bridge._admit(Inbound(k + 1, CommandRequest(Op.STATUS)))
     assert len(bridge._inbox) == INBOX_MAX and bridge.dropped == 10
     assert bridge._admit(CommanderEvent("teleop1", alive=False))
-    first = bridge.poll()
-    assert len(first) == POLL_MAX and isinstance(first[0], Inbound)
     rest: list[object] = []
-    while batch := bridge.poll():
-        rest += batch
-    assert rest[-1] == CommanderEvent("teleop1", alive=False)
+    while (item := bridge.take()) is not None:
+        rest.append(item)
+    assert len(rest) == INBOX_MAX + 1 and rest[-1] == CommanderEvent("teleop1", alive=False)

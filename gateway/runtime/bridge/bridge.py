@@ -2,19 +2,25 @@
 
 Three kinds of threads meet here, and none waits for another:
 
-* Zenoh's own threads run the callbacks: a twist sample, a query, a commander's token coming or
-  going is parsed there and appended to the inbox (a bounded deque; appends are atomic);
-* the loop thread drains the inbox between cycles (:meth:`Bridge.poll`, at most
-  :data:`POLL_MAX` items a call), hands each request to the same
-  :class:`~gateway.runtime.requests.RequestHandler` logic as the socket's, and posts news and
-  replies to the :class:`~gateway.runtime.mailbox.Mailbox` -- a lock held for a few stores;
+* published twists (``cmd/twist``, a ROS ``cmd_vel``) run no Python at all as they arrive:
+  their subscribers keep the newest sample in a ring of one inside Zenoh (newest wins, as on
+  the socket; :class:`~gateway.runtime.bridge.inbox.TwistSource`);
+* Zenoh's own threads run the other callbacks: a query or a commander's token coming or going
+  is parsed there and appended to the inbox (a bounded deque; appends are atomic);
+* the loop thread takes the newest twist of each source and parses it
+  (:meth:`Bridge.take_twists`: one parse a cycle however many samples came), then drains the
+  inbox between cycles
+  (:meth:`Bridge.take`, within the time :mod:`gateway.runtime.remote` allows), hands each
+  request to the same :class:`~gateway.runtime.requests.RequestHandler` logic as the socket's,
+  and posts news and replies to the :class:`~gateway.runtime.mailbox.Mailbox` -- a lock held
+  for a few stores;
 * the bridge's worker thread takes from the mailbox and does every Zenoh ``put`` and query
   reply (50-70 us each of the calling thread): never the loop.
 
-A flood cannot grow memory or the loop's work: the inbox holds :data:`INBOX_MAX` items (a query
-beyond it is answered "busy" at once, a twist beyond it is dropped and counted; a commander's
-token event still gets in, into :data:`COMMANDER_RESERVE` more), and the loop takes at most
-:data:`POLL_MAX` a call.
+A flood cannot grow memory or the loop's work: published twists replace each other in their
+rings; the inbox holds :data:`INBOX_MAX` items (a query beyond it is answered "busy" at once; a
+commander's token event still gets in, into :data:`COMMANDER_RESERVE` more, and one beyond even
+that is logged), and the loop takes at most what :mod:`gateway.runtime.remote` allows a cycle.
 """
 
 from __future__ import annotations
@@ -23,12 +29,14 @@ import collections
 import functools
 import logging
 import threading
+import time
 from typing import TYPE_CHECKING, Any, cast
 
+from gateway.core.bridge_settings import ZenohMode
 from gateway.core.events import OdometryEvent
 from gateway.core.status import LastError
 from gateway.core.types import ErrorCode
-from gateway.runtime.bridge.inbox import NO_REPLY, CommanderEvent, Inbound
+from gateway.runtime.bridge.inbox import NO_REPLY, CommanderEvent, Inbound, TwistSource
 from gateway.runtime.bridge.native import (
     RPC_OPS,
     NativeKeys,
@@ -36,7 +44,7 @@ from gateway.runtime.bridge.native import (
     parse_query,
     parse_twist_sample,
 )
-from gateway.runtime.bridge.session import open_session
+from gateway.runtime.bridge.session import BridgeError, import_zenoh, open_session
 from gateway.runtime.mailbox import Mailbox
 from gateway.wire.socket import ProtocolError, reply_error
 from gateway.wire.socket.events import event_line
@@ -51,23 +59,31 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
-__all__ = ["COMMANDER_RESERVE", "INBOX_MAX", "POLL_MAX", "Bridge"]
+__all__ = ["COMMANDER_RESERVE", "INBOX_MAX", "Bridge"]
 
-#: Items the inbox holds (twists beyond are dropped, queries answered "busy").
+#: Items the inbox holds (queries beyond are answered "busy").
 INBOX_MAX = 1024
 #: Room beyond :data:`INBOX_MAX` kept for the commanders' token events.
 COMMANDER_RESERVE = 256
-#: Items the loop takes per :meth:`Bridge.poll`.
-POLL_MAX = 64
 #: Seconds the worker waits for news before looking again (it also wakes on news).
 WORKER_WAKE_S = 0.5
+#: A client whose router cannot be reached tries again after this long, doubling up to
+#: :data:`CONNECT_MAX_S` (s).
+CONNECT_FIRST_S = 1.0
+CONNECT_MAX_S = 10.0
+#: Zenoh's words for a router that cannot be reached (not a bad configuration).
+_UNREACHABLE = "Unable to connect"
 
 
 class Bridge:
     """The Zenoh side of the daemon (see the module's doc).
 
     :param settings: the ``bridge:`` block.
-    :raises BridgeError: when Zenoh is missing or the session cannot be opened.
+    :raises BridgeError: when Zenoh is missing, the session cannot be opened or its keys
+        cannot be declared.  A client whose router cannot be reached is no error: the robot
+        may boot before the machine that runs the router, so the bridge keeps trying in a
+        thread of its own (1 s, doubling up to 10 s between tries) while the gateway runs
+        without it, and declares its keys once it is connected.
     """
 
     def __init__(self, settings: BridgeSettings) -> None:
@@ -79,28 +95,83 @@ class Bridge:
         self._lock = threading.Lock()
         self._queries: dict[int, Any] = {}
         self._next_client = NO_REPLY + 1
-        #: Twists dropped because the inbox was full; queries answered "busy".
+        #: Where published twists come in (the native key, and ROS's cmd_vel types).
+        self._twists: list[TwistSource] = []
+        #: Published twists the loop took that did not parse (each reported on the error key).
+        self.bad_twists = 0
+        #: Items the full inbox refused: queries (answered "busy") and token events (logged).
         self.dropped = 0
         self._closed = False
+        self._stop = threading.Event()
         self._entities: list[Any] = []
+        self._ros: Ros2Side | None = None
+        self._worker: threading.Thread | None = None
         # Any: the zenoh stubs leave close() and undeclare() untyped.
-        self.session: Any = cast("Any", open_session(settings.zenoh))
+        self.session: Any = None
         try:
-            self._declare()
+            session = open_session(settings.zenoh)
+        except BridgeError as err:
+            if settings.zenoh.mode is not ZenohMode.CLIENT or _UNREACHABLE not in str(err):
+                raise
+            log.warning("%s; the gateway runs without its bridge meanwhile, and the bridge "
+                        "tries again every %g s to %g s", err, CONNECT_FIRST_S, CONNECT_MAX_S)
+            threading.Thread(target=self._connect, name="wheelgate-bridge-connect",
+                             daemon=True).start()
+            return
+        self._start(session)
+
+    def _start(self, session: Any) -> None:
+        """Declare the keys on an open session and start the worker (the session is closed
+        instead if the bridge was closed meanwhile).
+
+        :raises BridgeError: when a key cannot be declared (the session is closed).
+        """
+        zenoh: Any = import_zenoh()
+        try:
+            self._declare(session)
+        except zenoh.ZError as err:
+            session.close()
+            raise BridgeError(f"bridge: cannot declare the keys {self.keys.root}/...: "
+                              f"{err}") from err
         except BaseException:
-            self.session.close()
+            session.close()
             raise
-        self._worker = threading.Thread(target=self._work, name="wheelgate-bridge", daemon=True)
-        self._worker.start()
-        log.info("bridge: Zenoh session %s, keys %s/..., listening on %s", self.session.zid(),
-                 self.keys.root, ", ".join(settings.zenoh.listen) or "nothing")
+        with self._lock:
+            if self._closed:
+                session.close()
+                return
+            self.session = session
+            self._worker = threading.Thread(target=self._work, name="wheelgate-bridge",
+                                            daemon=True)
+            self._worker.start()
+        log.info("bridge: Zenoh session %s, keys %s/..., listening on %s", session.zid(),
+                 self.keys.root, ", ".join(self.settings.zenoh.listen) or "nothing")
+
+    def _connect(self) -> None:
+        """A client's tries to reach its router, until one succeeds or the bridge closes."""
+        delay, since = CONNECT_FIRST_S, time.monotonic()
+        while not self._stop.wait(delay):
+            try:
+                session = open_session(self.settings.zenoh)
+            except BridgeError as err:
+                delay = min(2.0 * delay, CONNECT_MAX_S)
+                log.debug("bridge: %s", err)
+                continue
+            log.info("bridge: connected to the router after %.0f s",
+                     time.monotonic() - since)
+            try:
+                self._start(session)
+            except BridgeError as err:
+                log.error("%s; the bridge stays off", err)
+            return
 
     # ----------------------------------------------------------------- declarations
 
-    def _declare(self) -> None:
-        s = self.session
+    def _declare(self, s: Any) -> None:
         keys = self.keys
-        self._entities.append(s.declare_subscriber(keys.twist, self._on_twist))
+        ring = cast("Any", import_zenoh()).handlers.RingChannel
+        twists = [TwistSource(s.declare_subscriber(keys.twist, ring(1)), _native_twist)]
+        self._entities.append(twists[0].subscriber)
         for op in RPC_OPS:
             self._entities.append(s.declare_queryable(
                 keys.rpc(op), functools.partial(self._on_query, op)))
@@ -110,16 +181,15 @@ class Bridge:
         self._status = s.declare_publisher(keys.status)
         self._error = s.declare_publisher(keys.error)
         self._entities += [self._odom, self._status, self._error]
-        self._ros: Ros2Side | None = None
         if self.settings.ros2 is not None:
             from gateway.runtime.bridge.ros2 import Ros2Side  # noqa: PLC0415 - with ros2: only
 
             self._ros = Ros2Side(
                 s, self.settings.ros2, self.settings.ros_namespace,
-                twist=lambda request, who: self._admit_twist(Inbound(NO_REPLY, request, who)),
-                commander=lambda who, alive: self._admit(CommanderEvent(who, alive)),
-                error=lambda err: self.mailbox.post(errors=(err,)))
+                commander=lambda who, alive: self._admit(CommanderEvent(who, alive)))
+            twists += self._ros.twists
         self._token: Any = s.liveliness().declare_token(keys.gateway_token)
+        self._twists = twists  # (one store: the loop may be reading the list)
 
     # ----------------------------------------------------------------- Zenoh's threads
 
@@ -129,24 +199,12 @@ class Bridge:
         bound = INBOX_MAX + COMMANDER_RESERVE if isinstance(item, CommanderEvent) else INBOX_MAX
         if len(self._inbox) >= bound:
             self.dropped += 1
+            if isinstance(item, CommanderEvent):  # (a deadman's news: never lost silently)
+                log.warning("bridge: inbox full: commander %s %s, not seen by the deadman",
+                            item.commander, "came" if item.alive else "went")
             return False
         self._inbox.append(item)
         return True
-
-    def _on_twist(self, sample: Any) -> None:
-        key = str(sample.key_expr)
-        try:
-            attachment = sample.attachment
-            commander = commander_of(None if attachment is None else attachment.to_bytes(), key)
-            request: Request | ProtocolError = parse_twist_sample(sample.payload.to_bytes(), key)
-        except ProtocolError as err:
-            self.mailbox.post(errors=(_bad(err),))
-            return
-        self._admit_twist(Inbound(NO_REPLY, request, commander))
-
-    def _admit_twist(self, item: Inbound) -> None:
-        if not self._admit(item):
-            log.debug("bridge: inbox full, a twist dropped")
 
     def _on_query(self, op: Op, query: Any) -> None:
         key = str(query.key_expr)
@@ -178,13 +236,27 @@ class Bridge:
 
     # ----------------------------------------------------------------- the loop's side
 
-    def poll(self) -> list[Inbound | CommanderEvent]:
-        """What came in since the last call (at most :data:`POLL_MAX`), oldest first."""
-        out: list[Inbound | CommanderEvent] = []
-        inbox = self._inbox
-        while inbox and len(out) < POLL_MAX:
-            out.append(inbox.popleft())
+    def take_twists(self) -> list[Inbound]:
+        """The newest published twist of each source since the last call, parsed (one that
+        does not parse is counted and reported on the error key instead)."""
+        out = []
+        for source in self._twists:
+            try:
+                got = source.take()
+            except ProtocolError as err:
+                self.bad_twists += 1
+                self.mailbox.post(errors=(_bad(err),))
+                continue
+            if got is not None:
+                out.append(got)
         return out
+
+    def take(self) -> Inbound | CommanderEvent | None:
+        """The oldest query or token event waiting (``None``: none)."""
+        try:
+            return self._inbox.popleft()
+        except IndexError:
+            return None
 
     def reply(self, client_id: int, data: bytes) -> bool:
         """Queue the reply to request ``client_id`` for the worker (a published twist's goes
@@ -227,6 +299,11 @@ class Bridge:
             self._status.put(event_line(news.status))
         for err in news.errors:
             self._error.put(event_line(err))
+        if news.errors_dropped:
+            lost = LastError(ErrorCode.BAD_COMMAND, f"{news.errors_dropped} errors were not "
+                             f"published: the bridge fell behind (a flood of bad requests?)")
+            self._error.put(event_line(lost))
+            log.warning("bridge: %s", lost.message)
 
     # ----------------------------------------------------------------- closing
 
@@ -237,12 +314,16 @@ class Bridge:
             if self._closed:
                 return
             self._closed = True
+        self._stop.set()  # (a client still trying to reach its router stops trying)
         self.mailbox.close()
-        self._worker.join(timeout=2.0)
+        if self._worker is not None:
+            self._worker.join(timeout=2.0)
         with self._lock:
             pending, self._queries = self._queries, {}
         for query in pending.values():
             _answer(query, reply_error(None, ErrorCode.BAD_COMMAND, "the gateway is stopping"))
+        if self.session is None:  # never connected: nothing declared
+            return
         try:
             if self._ros is not None:
                 self._ros.close()
@@ -250,6 +331,16 @@ class Bridge:
             self.session.close()
         except Exception:  # closing is best effort: the process ends next
             log.exception("bridge: closing the Zenoh session failed")
+
+
+def _native_twist(payload: bytes, attachment: bytes | None, key: str) -> Inbound:
+    """A twist published on ``cmd/twist``, with the commander its attachment names.
+
+    :raises ProtocolError: for a bad payload or commander name.
+    """
+    commander = commander_of(attachment, key)
+    request: Request = parse_twist_sample(payload, key)
+    return Inbound(NO_REPLY, request, commander)
 
 
 def _bad(err: ProtocolError) -> LastError:

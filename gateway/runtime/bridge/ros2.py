@@ -19,15 +19,16 @@ publisher, time, GID) on every sample, and the graph as liveliness tokens under 
 
 from __future__ import annotations
 
+import functools
 import json
 import logging
 import math
 import time
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 from gateway.core.errors import DecodeError, EncodeError
-from gateway.core.status import LastError
-from gateway.core.types import ErrorCode
+from gateway.runtime.bridge.inbox import NO_REPLY, Inbound, TwistSource
+from gateway.runtime.bridge.session import import_zenoh
 from gateway.wire.ros2 import (
     ODOMETRY,
     TF_MESSAGE,
@@ -117,17 +118,15 @@ class Ros2Side:
     :param session: the bridge's Zenoh session.
     :param settings: the ``bridge.ros2`` block.
     :param namespace: the ROS namespace ('' for none).
-    :param twist: takes a twist request and its commander (Zenoh's threads call it).
     :param commander: a commander's token came (``True``) or went (Zenoh's threads call it).
-    :param error: reports a sample that could not be used.
+
+    :attr:`twists` are the ``cmd_vel`` subscribers (one per type), for the loop to take from.
     """
 
     def __init__(self, session: Any, settings: Ros2Settings, namespace: str,
-                 twist: Callable[[TwistRequest, str | None], None],
-                 commander: Callable[[str, bool], object],
-                 error: Callable[[LastError], None]) -> None:
+                 commander: Callable[[str, bool], object]) -> None:
         self.settings = settings
-        self._twist, self._commander, self._error = twist, commander, error
+        self._commander = commander
         ns = "/" + namespace if namespace else "/"
         domain, zid, name = settings.domain_id, str(session.zid()), settings.node_name
         self.cmd_vel = resolve_topic_name(settings.cmd_vel, ns)
@@ -135,10 +134,14 @@ class Ros2Side:
         ids = iter(range(1, 100))
         self._entities: list[Any] = [
             session.liveliness().declare_token(node_token(domain, zid, 0, ns, name))]
+        #: The cmd_vel subscribers, newest sample only (see TwistSource).
+        self.twists: list[TwistSource] = []
+        ring = cast("Any", import_zenoh()).handlers.RingChannel
         for ros_type, decode in ((TWIST, _plain), (TWIST_STAMPED, _stamped)):
-            self._entities.append(session.declare_subscriber(
-                topic_subscription_key(domain, self.cmd_vel, ros_type),
-                lambda sample, decode=decode: self._on_twist(sample, decode)))
+            self.twists.append(TwistSource(session.declare_subscriber(
+                topic_subscription_key(domain, self.cmd_vel, ros_type), ring(1)),
+                functools.partial(_ros_twist, decode)))
+            self._entities.append(self.twists[-1].subscriber)
             self._entities.append(session.liveliness().declare_token(entity_token(
                 EntityKind.SUBSCRIPTION, domain, zid, 0, next(ids), ns, name, self.cmd_vel,
                 ros_type, QosProfile())))
@@ -154,21 +157,6 @@ class Ros2Side:
             f"@ros2_lv/{domain}/**", self._on_token, history=True))
 
     # ----------------------------------------------------------------- in (Zenoh's threads)
-
-    def _on_twist(self, sample: Any, decode: Callable[[bytes], Twist3D]) -> None:
-        key = str(sample.key_expr)
-        try:
-            twist = decode(sample.payload.to_bytes())
-            attachment = sample.attachment
-            commander = None
-            if attachment is not None:
-                commander = commander_name(decode_attachment(attachment.to_bytes()).gid)
-            request = twist_request(twist, key)
-        except (DecodeError, ProtocolError) as err:
-            self._error(LastError(ErrorCode.BAD_COMMAND, f"{key}: {err}" if isinstance(
-                err, DecodeError) else str(err)))
-            return
-        self._twist(request, commander)
 
     def _on_token(self, sample: Any) -> None:
         try:
@@ -207,6 +195,22 @@ class Ros2Side:
                 publisher.token.undeclare()
         for entity in self._entities:
             entity.undeclare()
+
+
+def _ros_twist(decode: Callable[[bytes], Twist3D], payload: bytes, attachment: bytes | None,
+               key: str) -> Inbound:
+    """A ``cmd_vel`` sample's twist request, its commander the publisher's GID.
+
+    :raises ProtocolError: for a payload or attachment that does not decode, or a twist the
+        socket would refuse, naming the key.
+    """
+    try:
+        twist = decode(payload)
+        commander = None if attachment is None else commander_name(
+            decode_attachment(attachment).gid)
+    except DecodeError as err:
+        raise ProtocolError(f"{key}: {err}") from None
+    return Inbound(NO_REPLY, twist_request(twist, key), commander)
 
 
 def _plain(payload: bytes) -> Twist3D:

@@ -2,9 +2,10 @@
 
 Zenoh's defaults suit a laptop, not a robot: a peer listens on every interface on a random port
 (``tcp/[::]:0``) and announces itself by UDP multicast.  Here nothing listens unless ``listen``
-names an endpoint, multicast scouting is off unless asked for, and the lease (how long a silent
-peer and its liveliness tokens live; the deadman's reaction to a frozen commander) is the
-block's.  Configuration keys: https://github.com/eclipse-zenoh/zenoh/blob/main/DEFAULT_CONFIG.json5
+names an endpoint, multicast scouting is off unless asked for, and the gateway's lease (how
+long its peers keep it and its liveliness tokens alive when it falls silent; each peer is
+judged by the lease it announces itself, so a frozen commander by its own) is the block's.
+Configuration keys: https://github.com/eclipse-zenoh/zenoh/blob/main/DEFAULT_CONFIG.json5
 (``mode``, ``listen/endpoints``, ``connect/endpoints``, ``scouting/multicast/enabled``,
 ``transport/link/tx/lease`` in ms).
 """
