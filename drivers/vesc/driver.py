@@ -161,6 +161,25 @@ class VescDriver(MotorDriver[VescOptions]):
             return prot
         return dataclasses.replace(prot, how=UNSTATED_HOW)
 
+    def doubts(self) -> tuple[str, ...]:
+        """A motor whose VESC speed-controls none of the speeds it may be commanded: ``max_rpm``
+        at the wheel is inside the band below ``min_erpm`` (:meth:`uncontrolled_band`), so the
+        wheel can only stop or brake -- ``spin`` has no speed to try, a twist no speed to
+        follow."""
+        out = []
+        for i, m in enumerate(self.motors):
+            band = self.uncontrolled_band(i)
+            if band is not None and not m.steering and m.max_wheel_rad_s <= band[1]:
+                o = self.opts[i]
+                out.append(
+                    f"motor {m.wheel!r}: its VESC speed-controls no speed it may be commanded: "
+                    f"max_rpm {m.max_rpm:g} is {m.max_wheel_rad_s:.3g} rad/s at the wheel, and "
+                    f"below {band[1]:.3g} rad/s (min_erpm {o.min_erpm:g} with pole_pairs "
+                    f"{o.pole_pairs} and gear_ratio {m.gear_ratio:g}) the VESC does not run its "
+                    f"speed controller; lower s_pid_min_erpm on the VESC (VESC Tool) and "
+                    f"min_erpm here, or check pole_pairs, gear_ratio and max_rpm")
+        return tuple(out)
+
     def uncontrolled_band(self, index: int) -> tuple[float, float] | None:
         """The wheel speeds (rad/s) motor ``index``'s VESC does not speed-control: ``(0.0,
         high)`` for every speed with ``0 < |speed| < high`` (``high`` is ``min_erpm`` at the

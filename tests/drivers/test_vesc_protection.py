@@ -246,12 +246,26 @@ def test_uncontrolled_band_per_motor() -> None:
         assert not in_band(drv.erpm_for(i, band[1] * 1.01), min_erpm)
 
 
+def test_a_motor_whose_every_speed_is_in_the_band_is_doubted() -> None:
+    """A VESC whose minimum ERPM lies above the motor's max_rpm speed-controls nothing the
+    gateway may command (``init --driver vesc`` on a slow-wheeled robot gave one): ``check``
+    and ``run`` warn, naming the keys; a band below max_rpm is no doubt."""
+    # 7 pole pairs, 900 eRPM: 128.6 motor rpm; max_rpm 100 is inside the band, 3000 is not.
+    drv = VescDriver([motor(23, max_rpm=100.0), motor(24, wheel="right", max_rpm=3000.0),
+                      motor(25, wheel="third", max_rpm=100.0, min_erpm=0.0)])
+    assert drv.doubts() == (
+        "motor 'left': its VESC speed-controls no speed it may be commanded: max_rpm 100 is "
+        "10.5 rad/s at the wheel, and below 13.5 rad/s (min_erpm 900 with pole_pairs 7 and "
+        "gear_ratio 1) the VESC does not run its speed controller; lower s_pid_min_erpm on "
+        "the VESC (VESC Tool) and min_erpm here, or check pole_pairs, gear_ratio and max_rpm",)
+
+
 def test_the_shipped_vesc_robots_state_their_vesc_and_report_the_band() -> None:
     bands = {}
     for name in VESC_CONFIGS:
         raw = yaml.safe_load((CONFIG_DIR / name).read_text())
         cfg = parse_config(raw, name)
-        assert not [w for w in cfg.warnings if "VESC" in w], cfg.warnings
+        assert not [w for w in cfg.warnings if "VESC" in w], cfg.warnings  # (no doubt either)
         radius = float(cfg.geometry["wheel_radius"])  # type: ignore[arg-type]
         for drv, _ in DriveSet(cfg).groups:
             if not isinstance(drv, VescDriver):
