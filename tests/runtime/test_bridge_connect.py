@@ -4,6 +4,7 @@ machine that runs the router).  Real Zenoh sessions on the loopback, free ports.
 
 from __future__ import annotations
 
+import sys
 import time
 from typing import Any
 
@@ -14,7 +15,10 @@ from gateway.runtime.bridge import bridge as bridge_module
 from gateway.runtime.bridge.bridge import Bridge
 from gateway.runtime.bridge.native import NativeKeys
 from gateway.runtime.bridge.session import BridgeError, open_session
-from tools.bridge_peer import free_port
+from tests.conftest import REPO
+
+sys.path.insert(0, str(REPO / "tools"))
+from bridge_peer import free_port
 
 pytest.importorskip("zenoh", reason="eclipse-zenoh not installed: pip install 'wheelgate[zenoh]'")
 pytestmark = pytest.mark.timeout(60)
