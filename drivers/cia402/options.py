@@ -64,7 +64,7 @@ class Cia402Options(DriverOptions):
     """The protocol keys of one ``driver: cia402`` motor block, validated, with defaults."""
 
     velocity_factor: float = option(
-        float, 1.0, minimum=1e-9,
+        float, 1.0, above=0.0,
         help="device velocity units per motor RPM (units = motor RPM x factor)",
     )
     counts_per_rev: int = option(

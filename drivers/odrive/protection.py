@@ -93,11 +93,25 @@ def axis_protection(
             "(https://docs.odriverobotics.com/releases/firmware)",
             configurable=True,
         )
-    axis = f"odrv.axis0 of node {node_id}"
     return Protection(
         Guard.UNSTATED, None, "unknown",
         "not stated: an ODrive's watchdog is off from the factory",
-        f"in odrivetool: {axis}.config.watchdog_timeout = 0.25, "
-        f"{axis}.config.enable_watchdog = True, save_configuration(); then state "
-        "controller_timeout_s: 0.25",
+        odrivetool_fix(node_id, DEFAULT_TIMEOUT_S),
     )
+
+
+def odrivetool_fix(node_id: int, timeout_s: float) -> str:
+    """How to set the watchdog of the 0.5 axis at CAN node ``node_id`` with odrivetool, in
+    its own syntax (the ``Axis.config`` attributes ``watchdog_timeout`` and
+    ``enable_watchdog``, then ``save_configuration()`` of the board, from the firmware's
+    ``Firmware/odrive-interface.yaml`` in odriverobotics/ODrive).
+
+    Which of a board's two axes has the node ID is set on the board (``config.can.node_id``;
+    ``config.can_node_id`` before 0.5.2) and is not on the bus, so the advice names axis0
+    and says how to tell.
+    """
+    axis = "odrv0.axis0"
+    return (f"on the ODrive whose axis has CAN node {node_id}, in odrivetool: {axis}.config."
+            f"watchdog_timeout = {timeout_s:g}; {axis}.config.enable_watchdog = True; "
+            f"odrv0.save_configuration() (axis1 for axis0 if odrv0.axis1.config.can.node_id "
+            f"is {node_id}); then state controller_timeout_s: {timeout_s:g}")

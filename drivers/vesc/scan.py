@@ -12,6 +12,15 @@ and does not reset the command timeout (``decode_msg`` calls ``timeout_reset()``
 motor commands).  Status frames seen (STATUS 1..6, any packet of the six, DLC 8) also show a
 controller, and STATUS and STATUS_5 are read.
 
+A PONG is taken only in the shape the firmware sends it: a data frame of two bytes, the ID and
+``HW_TYPE`` (``comm/comm_can.c``, ``decode_msg``, ``case CAN_PACKET_PING``: ``buffer[1] =
+HW_TYPE_VESC``, sent with length 2), or of one, the ID alone, from firmware before ``HW_TYPE``
+was added (its ``case CAN_PACKET_PONG`` still reads a one-byte PONG as ``HW_TYPE_VESC``), whose
+first byte is the ID that was pinged
+(:class:`PingRequest`).  Any other frame on the PONG identifier (another device's, eight bytes
+that happen to start with that ID) answers nothing: it is counted as traffic on its identifier
+and listed with the unknown ones, and no VESC is made of it.
+
 The pings go out once, after the scan's listening quarter, to 29-bit identifiers
 0x1100..0x11FE (a VESC powered after its PING went out is found only by its status frames); a
 device of another protocol whose frames use them (an ODrive with 29-bit identifiers at node
@@ -20,6 +29,7 @@ device of another protocol whose frames use them (an ODrive with 29-bit identifi
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, ClassVar
 
 from drivers.vesc.codec import (
@@ -39,6 +49,7 @@ from gateway.drive.scan import Description, Found, Request, ScanProbe
 if TYPE_CHECKING:
     from collections.abc import Sequence
 
+    from gateway.core.types import Frame
     from gateway.drive.scan import Answer, Heard, Reading
 
 #: The controller ID the scan pings as (where the PONGs go).  254, next to the broadcast ID:
@@ -51,6 +62,23 @@ STATUS_PACKETS = frozenset({CanPacketId.STATUS, CanPacketId.STATUS_2, CanPacketI
 PING = "PING"
 #: Identifier bits a VESC frame leaves zero (``decode_msg``: packet below 256, ID one byte).
 _HIGH_BITS = ~0xFFFF
+
+
+@dataclass(frozen=True, slots=True)
+class PingRequest(Request):
+    """A PING, answered only by a PONG as the firmware sends it (see the module): a data
+    frame on the PONG identifier, of one or two bytes (:func:`~drivers.vesc.codec.decode`
+    checks the length), the first the ID that was pinged."""
+
+    def answered_by(self, frame: Frame) -> bool:
+        # (Request's method by name: a slotted dataclass has no zero-argument super().)
+        if not Request.answered_by(self, frame):
+            return False
+        try:
+            pong = decode(frame)
+        except DecodeError:
+            return False
+        return isinstance(pong, VescPong) and pong.node_id == self.node_id
 
 
 class VescProbe(ScanProbe):
@@ -81,11 +109,12 @@ class VescProbe(ScanProbe):
 
     def discovery(self) -> tuple[Request, ...]:
         pong = arbitration_id(CanPacketId.PONG, PINGER_ID)
-        return tuple(Request(PING, k, make_ping(k, PINGER_ID), pong, True, bytes((k,)))
+        return tuple(PingRequest(PING, k, make_ping(k, PINGER_ID), pong, True, bytes((k,)))
                      for k in range(BROADCAST_ID))
 
     def found_by(self, answer: Answer) -> Found | None:
-        if answer.request.key != PING or answer.frame is None:
+        pong = _pong(answer)
+        if pong is None or pong.node_id != answer.request.node_id:
             return None
         return Found(answer.request.node_id, True, "pong")
 

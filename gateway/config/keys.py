@@ -52,15 +52,15 @@ TOP_KEYS = frozenset(
 MOTOR_KEYS: Mapping[str, OptionSpec] = MappingProxyType({
     "driver": OptionSpec(str, help="driver name, e.g. odrive"),
     "node_id": OptionSpec(int, help="the controller's node ID"),
-    "gear_ratio": OptionSpec(float, 1.0, minimum=1e-9, help="motor turns per wheel turn"),
+    "gear_ratio": OptionSpec(float, 1.0, above=0.0, help="motor turns per wheel turn"),
     "invert": OptionSpec(bool, False),
-    "max_rpm": OptionSpec(float, minimum=1e-9, help="motor speed limit in RPM at the motor"),
+    "max_rpm": OptionSpec(float, above=0.0, help="motor speed limit in RPM at the motor"),
 })
 #: The keys of a steering actuator's block (``steering:``, with ``steering_defaults:`` merged
 #: in first) that every driver takes; any other key is a protocol key of the driver.
 STEERING_KEYS: Mapping[str, OptionSpec] = MappingProxyType({
     **MOTOR_KEYS,
-    "gear_ratio": OptionSpec(float, 1.0, minimum=1e-9,
+    "gear_ratio": OptionSpec(float, 1.0, above=0.0,
                              help="motor turns per turn of the wheel's plane"),
     "zero_rad": OptionSpec(float, 0.0, help="motor position (rad, the controller's frame) "
                                              "with the wheels at their neutral angle"),
@@ -81,18 +81,18 @@ WHEEL_KEYS: Mapping[str, OptionSpec] = MappingProxyType({
     "alpha": OptionSpec(float, help="polar angle of the mounting point, rad"),
     "l": OptionSpec(float, minimum=0.0, help="distance from the body origin, m"),
     "beta": OptionSpec(float, help="plane angle, rad"),
-    "radius": OptionSpec(float, minimum=1e-9, help="wheel radius, m"),
+    "radius": OptionSpec(float, above=0.0, help="wheel radius, m"),
     "gamma": OptionSpec(float, 0.0),
     "d": OptionSpec(float, 0.0, minimum=0.0),
     "steer_min": OptionSpec(float, -math.pi),
     "steer_max": OptionSpec(float, math.pi),
-    "max_steer_rate": OptionSpec(float, math.inf, minimum=1e-9),
+    "max_steer_rate": OptionSpec(float, math.inf, above=0.0),
     "steer_group": OptionSpec(str, ""),
     "motor": OptionSpec(dict, {}),
 })
 #: The keys of ``limits:``.
 LIMIT_KEYS: Mapping[str, OptionSpec] = MappingProxyType({
-    "max_wheel_accel_rad_s2": OptionSpec(float, math.inf, minimum=1e-9,
+    "max_wheel_accel_rad_s2": OptionSpec(float, math.inf, above=0.0,
                                          help="how fast a wheel's speed may change, rad/s^2"),
     "max_wheel_decel_rad_s2": OptionSpec(float, 0.0, minimum=0.0,
                                          help="how fast a wheel may slow down, rad/s^2; 0: "

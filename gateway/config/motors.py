@@ -38,17 +38,11 @@ if TYPE_CHECKING:
     from collections.abc import Mapping
 
     from gateway.core.kinematics import Wheel
+    from gateway.core.options import OptionSpec
     from gateway.drive.driver import MotorDriver
 
-__all__ = [
-    "STEER_RATE_SHARE",
-    "check_nodes",
-    "limit_steer_rates",
-    "motor_block",
-    "motor_path",
-    "preset_motors",
-    "steering_blocks",
-]
+__all__ = ["STEER_RATE_SHARE", "check_nodes", "limit_steer_rates", "motor_block", "motor_path",
+           "preset_motors", "steering_blocks"]
 
 
 def motor_path(drive: object, index: int, name: str) -> str:
@@ -56,9 +50,7 @@ def motor_path(drive: object, index: int, name: str) -> str:
     return f"wheels[{index}].motor" if drive == "generic" else f"motors.{name}"
 
 
-def preset_motors(
-    raw: object, wheels: list[Wheel], source: str
-) -> list[dict[str, object] | None]:
+def preset_motors(raw: object, wheels: list[Wheel], source: str) -> list[dict[str, object] | None]:
     """The ``motors:`` block of a preset drive: per wheel, its motor block (``None``: passive).
 
     :raises ConfigError: for an unknown wheel, a driven wheel without a block, a passive wheel
@@ -74,9 +66,8 @@ def preset_motors(
                           f"got {raw!r}")
     for key in raw:
         if key not in names:
-            raise ConfigError(
-                f"{source}: motors.{key}: unknown wheel (wheels of this drive: {', '.join(names)})"
-            )
+            raise ConfigError(f"{source}: motors.{key}: unknown wheel (wheels of this drive: "
+                              f"{', '.join(names)})")
     out: list[dict[str, object] | None] = []
     for w in wheels:
         block = raw.get(w.name)
@@ -90,9 +81,8 @@ def preset_motors(
     return out
 
 
-def steering_blocks(
-    raw: object, defaults: object, wheels: list[Wheel], source: str, config_dir: str
-) -> tuple[MotorConfig, ...]:
+def steering_blocks(raw: object, defaults: object, wheels: list[Wheel], source: str,
+                    config_dir: str) -> tuple[MotorConfig, ...]:
     """The ``steering:`` blocks: one actuator per steered wheel or steer group."""
     if raw is None:
         if defaults not in (None, {}):
@@ -256,37 +246,40 @@ def motor_block(
     :param travel: the actuator's steering range, rad.
     :param linkage: how the actuator's angle turns its wheels.
     :param defaults_where: the file and key path of ``defaults`` (``motor_defaults``): an
-        unknown key given there is named there (one line however many blocks inherit it).
+        unknown key or a bad value given there is named there (one line however many blocks
+        inherit it).
     :raises ConfigError: naming the key of each problem (the general keys first; the
         protocol's keys when the general ones are right).
     """
     keys = STEERING_KEYS if steers else MOTOR_KEYS
     merged = {**defaults, **raw}
+    inherited = {k: x for k, x in defaults.items() if k not in raw}
+    # Keys of the defaults are named there (:func:`_name_where_written`): the general keys, and
+    # the protocol's when the block takes its driver from them too (else they are its own).
+    own = raw.get("driver", defaults.get("driver")) == defaults.get("driver")
+    at = defaults_where or where
     common = {k: merged[k] for k in keys if k in merged}
     found = Problems()  # the general keys' problems and the protocol's, together
     v = found.check(lambda: validate_block(common, keys, where,
                                            "steering keys" if steers else "motor keys"))
     driver = merged.get("driver")
-    cls = found.check(lambda: _driver_class(driver, steers, where)) if isinstance(
-        driver, str) else None
+    cls = found.check(lambda: _driver_class(driver, steers, at if "driver" in inherited
+                                            else where)) if isinstance(driver, str) else None
     if cls is None:
+        _name_where_written(found, keys, inherited, where, at)
         found.raise_any()
         raise AssertionError("a motor block without a driver passed validate_block")
     protocol = {k: x for k, x in merged.items() if k not in keys}
     for key in protocol:
         if key not in cls.OPTIONS and key != "config_dir":
-            # Named where it is written: in the defaults when the block takes both the key and
-            # the driver from them (a block with a driver of its own is the block's problem).
-            inherited = key in defaults and key not in raw
-            given = ("steering_defaults" if steers else "motor_defaults") if inherited \
+            given = ("steering_defaults" if steers else "motor_defaults") if key in inherited \
                 else "its block"
             elsewhere = (f" ({key!r}, given in {given}, is a gateway: key)"
                          if key in GATEWAY_KEYS else "")
-            own = raw.get("driver", defaults.get("driver")) == defaults.get("driver")
-            at = defaults_where if (inherited and defaults_where and own) else where
-            if inherited and at == where and not elsewhere:
+            named = at if key in inherited and own else where
+            if key in inherited and named == where and not elsewhere:
                 elsewhere = f" (given in {given}, which the {driver} driver does not take)"
-            found.add(str(unknown_key(f"{at}.{key}", key, {
+            found.add(str(unknown_key(f"{named}.{key}", key, {
                 "steering keys" if steers else "motor keys": keys,
                 f"{driver} keys": [k for k in cls.OPTIONS if k != "config_dir"],
             })) + elsewhere)
@@ -299,23 +292,30 @@ def motor_block(
     if options is not None and isinstance(node, int) and not isinstance(node, bool):
         # its range may depend on the protocol's keys (ODrive's 29-bit identifiers)
         found.check(lambda: cls.validate_node_id(node, f"{where}.node_id", options))
+    _name_where_written(found, {**(cls.OPTIONS if own else {}), **keys}, inherited, where, at)
     found.raise_any()
     assert v is not None and options is not None
-    node_id = int(v["node_id"])  # type: ignore[call-overload]
     return MotorConfig(
-        wheel=wheel,
-        driver=str(driver),
-        node_id=node_id,
-        gear_ratio=float(v["gear_ratio"]),  # type: ignore[arg-type]
-        invert=bool(v["invert"]),
-        max_rpm=float(v["max_rpm"]),  # type: ignore[arg-type]
-        options=MappingProxyType(options),
+        wheel=wheel, driver=str(driver), node_id=int(v["node_id"]),  # type: ignore[call-overload]
+        gear_ratio=float(v["gear_ratio"]), invert=bool(v["invert"]),  # type: ignore[arg-type]
+        max_rpm=float(v["max_rpm"]), options=MappingProxyType(options),  # type: ignore[arg-type]
         role=MotorRole.STEER if steers else MotorRole.DRIVE,
         zero_rad=float(v.get("zero_rad", 0.0)),  # type: ignore[arg-type]
-        steers=steers,
-        steer_range_rad=travel,
-        linkage=linkage,
-    )
+        steers=steers, steer_range_rad=travel, linkage=linkage)
+
+
+def _name_where_written(found: Problems, specs: Mapping[str, OptionSpec],
+                        inherited: Mapping[str, object], where: str, at: str) -> None:
+    """Name a bad value the block at ``where`` inherits (``gear_ratio: FILL`` in
+    ``motor_defaults:``) where it is written, at ``at``, as an unknown key is: once however many
+    blocks inherit it.  Only its own spec's problem moves; one across keys stays the block's."""
+    moved: dict[str, str] = {}
+    for key in specs.keys() & inherited.keys():
+        try:
+            specs[key].validate(inherited[key], f"{where}.{key}")
+        except ConfigError as err:
+            moved.update((p, f"{at}.{key}{p[len(where) + len(key) + 1:]}") for p in err.problems)
+    found.found = [moved.get(p, p) for p in found.found]
 
 
 def _driver_class(driver: str, steers: tuple[str, ...], where: str) -> type[MotorDriver[Any]]:
@@ -329,10 +329,8 @@ def _driver_class(driver: str, steers: tuple[str, ...], where: str) -> type[Moto
         raise ConfigError(f"{where}.driver: {err}") from err
     if steers and not cls.STEERING:
         able = sorted(n for n in valid_drivers() if _steers(n))
-        raise ConfigError(
-            f"{where}.driver: the {driver} driver does not command steering actuators "
-            f"(drivers that do: {', '.join(able) or 'none'})"
-        )
+        raise ConfigError(f"{where}.driver: the {driver} driver does not command steering "
+                          f"actuators (drivers that do: {', '.join(able) or 'none'})")
     return cls
 
 

@@ -65,9 +65,11 @@ def option(
     minimum: float | None = None,
     maximum: float | None = None,
     help: str = "",  # noqa: A002 - the OptionSpec field's name
+    above: float | None = None,
 ) -> Any:
-    """A dataclass field that is a protocol key (``default=None``: the key is required)."""
-    return spec_field(OptionSpec(kind, default, choices, minimum, maximum, help))
+    """A dataclass field that is a protocol key (``default=None``: the key is required;
+    ``above``: a number it must exceed, as a ratio that must not be 0)."""
+    return spec_field(OptionSpec(kind, default, choices, minimum, maximum, help, above))
 
 
 def spec_field(spec: OptionSpec) -> Any:

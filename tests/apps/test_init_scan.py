@@ -149,3 +149,48 @@ def test_an_empty_scan_says_nothing_answered() -> None:
     with pytest.raises(ConfigError, match=re.escape(
             "s: the scan found no vesc node; expected 2, one per vesc controller")):
         generate(EXAMPLES, "differential_tub", None, [], "s")
+
+
+# ----------------------------------------------------------------------------- identifiers
+
+
+def test_a_scans_29_bit_odrives_get_extended_id_and_the_file_loads_so(tmp_path: Path) -> None:
+    """ODrive axes found on 29-bit identifiers (``"extended_id": true``) get ``extended_id:
+    true`` in the blocks that take them: with the node ID alone the driver would talk 11-bit
+    to them and the motors would never enable."""
+    text = json.dumps([{**row("odrive", 2), "extended_id": True},
+                       {**row("odrive", 1), "extended_id": True}])
+    found = parse_scan(text, "scan.json")
+    assert found == (FoundNode("odrive", 1, True), FoundNode("odrive", 2, True))
+    written = generate(EXAMPLES, "turtlebot3_burger", None, found, "scan.json")
+    assert yaml.safe_load(written.text)["motors"] == {
+        "left": {"node_id": 1, "extended_id": True},
+        "right": {"node_id": 2, "invert": True, "extended_id": True}}
+    assert [a.address() for a in written.assignments] == [
+        "odrive node 1 on 29-bit identifiers", "odrive node 2 on 29-bit identifiers"]
+    assert "# from the scan: odrive node 1 on 29-bit identifiers" in written.text
+    (tmp_path / "robot.yaml").write_text(written.text)
+    cfg = load_config(tmp_path / "robot.yaml")
+    assert [m.options["extended_id"] for m in cfg.motors if m is not None] == [True, True]
+
+
+def test_11_bit_nodes_leave_the_block_as_it_was_and_a_29_bit_scan_overrides_a_default() -> None:
+    written = generate(EXAMPLES, "turtlebot3_burger", None, nodes("odrive", 1, 2), "s")
+    assert "extended_id" not in written.text
+    # An example saying 29-bit in its defaults gets 11-bit nodes' blocks told otherwise.
+    example = EXAMPLES["turtlebot3_burger"].replace("  driver: odrive\n", "  driver: odrive\n"
+                                                    "  extended_id: true\n", 1)
+    assert example != EXAMPLES["turtlebot3_burger"]
+    written = generate({**EXAMPLES, "t": example}, "t", None, nodes("odrive", 1, 2), "s")
+    raw = yaml.safe_load(written.text)
+    assert [m["extended_id"] for m in raw["motors"].values()] == [False, False]
+    # VESCs are 29-bit by their protocol: nothing to write.
+    vescs = [FoundNode("vesc", 1, True), FoundNode("vesc", 2, True)]
+    assert "extended_id" not in generate(EXAMPLES, "differential_tub", None, vescs, "s").text
+
+
+def test_an_extended_id_that_is_not_a_boolean_is_refused() -> None:
+    with pytest.raises(ConfigError, match=re.escape(
+            "scan.json: [0].extended_id: expected true (29-bit identifiers) or false (11-bit), "
+            "got 'yes'")):
+        parse_scan('[{"driver": "odrive", "node_id": 1, "extended_id": "yes"}]', "scan.json")

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from gateway.apps.scan import ScanSession, ScanTiming, scan
+from gateway.apps.scan import ScanSession, ScanTiming, render, scan
 from gateway.apps.scan.own import MotorClaims, motor_claims, own_messages
 from gateway.apps.scan.registry import load_probes
 from gateway.config import load_config
@@ -21,6 +21,8 @@ from gateway.sim.registry import simulator_for
 from tests.conftest import CONFIG_DIR
 
 if TYPE_CHECKING:
+    from pathlib import Path
+
     from gateway.apps.scan import ScanReport
     from gateway.core.settings import GatewayConfig
 
@@ -98,3 +100,47 @@ def test_no_other_protocols_request_goes_to_a_configured_motors_identifier() -> 
     (odrive,) = report.rows
     assert "Get_Version not asked: 0x060 is 'left''s (dbc node 1, configured)" in (
         odrive.description.notes)
+
+
+def _scan_odrives(cfg: GatewayConfig, extended: bool) -> ScanReport:
+    """A scan with ``cfg``'s motors and claims, hearing ODrive node 1's heartbeat."""
+    motors = [m for m in cfg.motors if m is not None]
+    session = ScanSession(PROBES, TIMING, 0.0, known=motors, claimed=motor_claims(cfg))
+    heartbeat = bytes.fromhex("0000000001000100")  # IDLE
+    session.on_frame(Frame(0x021, heartbeat, is_extended_id=extended), 0.1)
+    for k in range(2000):
+        session.poll(k / 1000)
+    return session.report(2.0, "virtual:test")
+
+
+def test_an_odrive_on_29_bit_identifiers_is_not_the_block_of_its_node_on_11_bit_ones(
+        tmp_path: Path) -> None:
+    """The block says node 1 on 11-bit identifiers (no extended_id); the axis answers on 29-bit
+    ones: its driver would never reach it, so it is not 'left', and the row and the notes say
+    what differs."""
+    cfg = load_config(CONFIG_DIR / "turtlebot3_burger.yaml")
+    report = _scan_odrives(cfg, extended=True)
+    (row,) = report.rows
+    assert (row.protocol, row.node_id, row.extended, row.wheel) == ("odrive", 1, True, None)
+    assert row.description.notes[0] == (
+        "not the configuration's 'left' (odrive node 1 on 11-bit identifiers): this controller "
+        "answers on 29-bit identifiers (set extended_id: true in that block)")
+    assert report.notes == (
+        "configured but not found: 'left' (odrive node 1 on 11-bit identifiers; heard on "
+        "29-bit identifiers instead), 'right' (odrive node 2)",)
+    assert "configured as" not in render(report)
+    # The same axis on 11-bit identifiers is 'left'.
+    (row,) = _scan_odrives(cfg, extended=False).rows
+    assert row.wheel == "left" and not any("not the configuration's" in n
+                                           for n in row.description.notes)
+    # And a block that says extended_id: true is the 29-bit axis's.
+    text = (CONFIG_DIR / "turtlebot3_burger.yaml").read_text("utf-8").replace(
+        "  driver: odrive\n", "  driver: odrive\n  extended_id: true\n", 1)
+    (tmp_path / "robot.yaml").write_text(text)
+    wide = load_config(tmp_path / "robot.yaml")
+    (row,) = _scan_odrives(wide, extended=True).rows
+    assert row.wheel == "left"
+    (row,) = _scan_odrives(wide, extended=False).rows
+    assert row.wheel is None and row.description.notes[0] == (
+        "not the configuration's 'left' (odrive node 1 on 29-bit identifiers): this controller "
+        "answers on 11-bit identifiers (set extended_id: false in that block)")

@@ -220,3 +220,25 @@ def test_the_gateways_own_frames_come_from_the_configuration() -> None:
     bus_wide = {k: v for k, v in own_messages(tricycle, drivers=True).items() if k not in wg}
     assert bus_wide == {(0x000, False): "CiA 402 NMT", (0x77F, False): "CiA 402 HEARTBEAT",
                         (0x080, False): "CiA 402 SYNC"}
+
+
+def test_only_a_pong_as_the_firmware_sends_it_shows_a_vesc() -> None:
+    """vedderb/bldc ``comm_can.c`` answers a PING with two bytes, its ID and HW_TYPE (one byte,
+    the ID, before HW_TYPE was added).  Eight bytes on 0x12FE that start with a pinged ID, a
+    remote frame there, or a PONG naming an ID not pinged are no answer: counted as traffic on the
+    identifier, no VESC made of them, and the real PONG after them still answers."""
+    session = ScanSession(PROBES, TIMING, 0.0)
+    run(session, 0.6)  # PINGs 0..49 went out from 0.5 s, 2 ms apart: PING k at 0.5 + 0.002 k
+    session.on_frame(Frame(0x12FE, bytes([23, 0, 0, 0, 0, 0, 0, 0]), True), 0.6)
+    session.on_frame(Frame(0x12FE, b"", True, is_remote_frame=True), 0.6)
+    session.on_frame(Frame(0x12FE, bytes([200]), True), 0.6)  # PING 200 has not gone out
+    session.on_frame(Frame(0x12FE, bytes([30, 0, 0]), True), 0.6)  # three bytes
+    session.on_frame(Frame(0x12FE, bytes([23, 0]), True), 0.61)  # VESC 23, HW_TYPE_VESC
+    session.on_frame(Frame(0x12FE, bytes([31]), True), 0.61)  # VESC 31, old firmware
+    report = session.report(2.0, "virtual:test")
+    assert [(r.protocol, r.node_id, r.seen_by) for r in report.rows] == [
+        ("vesc", 23, "pong"), ("vesc", 31, "pong"), ("unknown", None, None)]
+    unknown = report.rows[2]
+    assert [(h.arbitration_id, h.is_extended_id, h.count) for h in unknown.ids] == [
+        (0x12FE, True, 4)]
+    assert [r.description.hardware for r in report.rows[:2]] == ["VESC", "VESC"]

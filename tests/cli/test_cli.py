@@ -76,8 +76,11 @@ def test_ik_infeasible_exits_3(runner: CliRunner) -> None:
 def test_ik_infeasible_json_error_object(runner: CliRunner) -> None:
     result = runner.invoke(main, ["ik", "-c", ACKERMANN, "--wz", "1", "--json"])
     assert result.exit_code == 3
-    err = json.loads(result.stdout)["error"]
-    assert err["type"] == "infeasible_twist"
+    doc = json.loads(result.stdout)
+    assert doc["ok"] is False and not result.stderr
+    err = doc["error"]
+    assert err["code"] == "infeasible_twist" and "type" not in err
+    assert err["message"].startswith("Twist (vx=0 m/s, vy=0 m/s, wz=1 rad/s) is infeasible")
     assert err["constraint"] == "steering limit"
     assert err["wheel"] in ("front_left", "front_right")
     assert err["nearest"]["vx_m_s"] > 0

@@ -204,3 +204,53 @@ def test_unit_writes_the_systemd_unit(runner: CliRunner, tmp_path: Path,
     assert printed.exit_code == 0 and printed.stdout_bytes == unit
     mixed = runner.invoke(main, ["init", "--unit", "--drive", "mecanum"])
     assert mixed.exit_code == 2 and "--unit writes the systemd unit only" in mixed.output
+
+
+def test_a_scan_file_that_is_not_utf8_is_named_not_a_traceback(runner: CliRunner,
+                                                              tmp_path: Path) -> None:
+    scan = tmp_path / "bin.json"
+    scan.write_bytes(b"\xff\xfe")
+    out = tmp_path / "robot.yaml"
+    said = (f"Error: {scan}: expected UTF-8 text (the JSON of `wheelgate scan --json`), got "
+            f"byte 0xff at offset 0\n")
+    result = runner.invoke(main, ["init", "--drive", "differential", "--from-scan", str(scan),
+                                  "-o", str(out)])
+    assert (result.exit_code, result.stderr) == (2, said), result.output
+    assert isinstance(result.exception, SystemExit) and not out.exists()
+    piped = runner.invoke(main, ["init", "--drive", "differential", "--from-scan", "-", "-o",
+                                 str(out)], input=b"[\xc3]")
+    assert (piped.exit_code, piped.stderr) == (2, "Error: <stdin>: expected UTF-8 text (the "
+                                                  "JSON of `wheelgate scan --json`), got byte "
+                                                  "0xc3 at offset 1\n"), piped.output
+
+
+def test_o_says_what_is_in_the_way_and_creates_missing_directories(runner: CliRunner,
+                                                                   tmp_path: Path) -> None:
+    """One line each, naming the path, what was expected and what is there; --force replaces
+    a file, never a directory.  A missing directory is created, as the README's systemd steps
+    need (/etc/wheelgate/robot.yaml on a fresh machine), and said."""
+    def init(*args: str) -> tuple[int, str]:
+        result = runner.invoke(main, ["init", "--drive", "differential", *args])
+        return result.exit_code, result.stderr if result.exit_code else result.stdout
+
+    folder = tmp_path / "adir"
+    folder.mkdir()
+    for force in ((), ("--force",)):
+        assert init("-o", str(folder), *force) == (2, (
+            f"Error: {folder}: a directory is there; expected the name of a file to write "
+            f"(e.g. {folder / 'robot.yaml'}); --force replaces files only\n"))
+    unit = runner.invoke(main, ["init", "--unit", "-o", str(folder)])
+    assert unit.exit_code == 2 and f"(e.g. {folder / 'wheelgate.service'})" in unit.stderr
+    afile = tmp_path / "g.json"
+    afile.write_text("{}")
+    for inside in (afile / "x.yaml", afile / "deeper" / "x.yaml"):
+        assert init("-o", str(inside)) == (
+            2, f"Error: {inside}: {afile} is a file; expected a directory there\n")
+    assert afile.read_text() == "{}" and list(folder.iterdir()) == []
+    new = tmp_path / "no" / "such" / "r.yaml"
+    code, said = init("-o", str(new))
+    assert code == 0 and said.startswith(
+        f"created {tmp_path / 'no'}: the directory did not exist\n"
+        f"created {tmp_path / 'no' / 'such'}: the directory did not exist\n"
+        f"wrote {new}: drive differential"), said
+    assert new.is_file()

@@ -110,8 +110,14 @@ def with_(path: str, value: object) -> dict[str, object]:
         ("motors.middle", {"node_id": 3}, "robot.yaml: motors.middle: unknown wheel (wheels of "
                                           "this drive: left, right)"),
         ("motors.right", ..., "robot.yaml: motors.right: driven wheel needs a motor block"),
-        ("motor_defaults.driver", "tesla", "robot.yaml: motors.left.driver: Unknown driver "
+        ("motor_defaults.driver", "tesla", "robot.yaml: motor_defaults.driver: Unknown driver "
                                            "'tesla'; expected one of: "),
+        ("motor_defaults.gear_ratio", "FILL", "robot.yaml: motor_defaults.gear_ratio: expected "
+                                              "float, got 'FILL'"),
+        ("motors.left.gear_ratio", 0, "robot.yaml: motors.left.gear_ratio: expected more than "
+                                      "0, got 0.0"),
+        ("motors.left.max_rpm", -5, "robot.yaml: motors.left.max_rpm: expected more than 0, got "
+                                    "-5.0"),
         ("motor_defaults.max_rpm", ..., "robot.yaml: motors.left.max_rpm: required key is missing"),
         ("motors.left.colour", "red", "robot.yaml: motors.left.colour: unknown key"),
         ("motors.left.gear_ratio", math.nan, "robot.yaml: motors.left.gear_ratio: expected a "
@@ -135,7 +141,7 @@ GENERIC_WHEEL = {"name": "a", "type": "fixed", "alpha": 1.5707963, "l": 0.2, "be
     ("change", "message"),
     [
         ({"type": "hover"}, "robot.yaml: wheels[0].type: expected one of 'fixed', 'steerable'"),
-        ({"radius": 0.0}, "robot.yaml: wheels[0].radius: expected at least 1e-09, got 0.0"),
+        ({"radius": 0.0}, "robot.yaml: wheels[0].radius: expected more than 0, got 0.0"),
         ({"gamma": 0.5}, "robot.yaml: wheels[0]: wheel 'a': gamma applies to Swedish wheels"),
         ({"type": "castor"}, "robot.yaml: wheels[0]: wheel 'a': expected castor offset d > 0 m"),
         ({"type": "swedish", "gamma": 1.5707963267948966},

@@ -254,6 +254,26 @@ motors: {left: {node_id: 1, driver: odrive}, right: {node_id: 2, kpp: 1}}
     assert problems[0].endswith(
         "('controller_watchdog', given in motor_defaults, is a gateway: key)")
     assert ": motors.right.kpp: unknown key" in problems[1]
+    # A bad value of motor_defaults is named there too, once: not at motors.left and
+    # motors.right, which do not have the key; a block's own value stays the block's.
+    with pytest.raises(ConfigError) as info:
+        load_config(write(tmp_path, """\
+drive: differential
+geometry: {wheel_radius: 0.033, track: 0.16}
+motor_defaults: {driver: odrive, max_rpm: 100, gear_ratio: FILL, firmware: "0.7"}
+motors: {left: {node_id: 1}, right: {node_id: 2, max_rpm: 0}}
+"""))
+    assert [p.partition(": ")[2] for p in info.value.problems] == [
+        "motor_defaults.gear_ratio: expected float, got 'FILL'",
+        "motor_defaults.firmware: expected one of '0.5', '0.6', got '0.7'",
+        "motors.right.max_rpm: expected more than 0, got 0.0"], info.value.problems
+    # ...and so is one of steering_defaults, for every actuator that inherits it.
+    raw = yaml.safe_load((CONFIG_DIR / "swerve.yaml").read_text())
+    raw["steering_defaults"] = {**raw.get("steering_defaults", {}), "gear_ratio": 0}
+    with pytest.raises(ConfigError) as info:
+        load_config(write(tmp_path, yaml.safe_dump(raw)))
+    assert [p.partition(": ")[2] for p in info.value.problems] == [
+        "steering_defaults.gear_ratio: expected more than 0, got 0.0"], info.value.problems
     # A key of the defaults that only a block's own driver does not take is that block's; a
     # gateway key in steering_defaults says so.
     raw = yaml.safe_load((CONFIG_DIR / "swerve.yaml").read_text())

@@ -251,6 +251,26 @@ def test_config_0_5_states_the_watchdog_or_gets_the_warning(tmp_path: Path) -> N
         )
 
 
+def test_the_0_5_advice_is_odrivetool_syntax_per_node(tmp_path: Path) -> None:
+    """What to type, as odrivetool takes it: the board object ``odrv0``, its axis, the two
+    ``Axis.config`` attributes of firmware 0.5 (``Firmware/odrive-interface.yaml``), then the
+    board's ``save_configuration()``; the node ID said apart, not spliced into the names."""
+    cfg = load_config(str(_config(tmp_path, 'firmware: "0.5"')))
+    fixes = [w.partition("; fix: ")[2] for w in cfg.warnings]
+    assert fixes == [
+        f"on the ODrive whose axis has CAN node {n}, in odrivetool: "
+        f"odrv0.axis0.config.watchdog_timeout = 0.25; "
+        f"odrv0.axis0.config.enable_watchdog = True; odrv0.save_configuration() "
+        f"(axis1 for axis0 if odrv0.axis1.config.can.node_id is {n}); "
+        f"then state controller_timeout_s: 0.25"
+        for n in (1, 2)]
+    for fix in fixes:
+        said = fix.partition("odrivetool: ")[2].partition(" (")[0]
+        for statement in said.split("; "):  # each one a Python statement on odrv0
+            compile(statement, "odrivetool", "exec")
+            assert statement.startswith("odrv0.")
+
+
 def test_a_timeout_shorter_than_three_periods_is_warned(tmp_path: Path) -> None:
     cfg = load_config(
         str(_config(tmp_path, 'firmware: "0.5", controller_timeout_s: 0.01', "rate_hz: 200"))

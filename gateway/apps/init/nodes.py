@@ -1,10 +1,17 @@
 """Node IDs from a bus scan: ``wheelgate scan --json``'s output read, and its nodes put on the
 controllers of a configuration, in order.
 
-The scan's output is a JSON list of objects, one per row: a controller has a ``node_id`` and
-the ``driver`` that speaks its ``protocol`` (CANopen nodes: ``cia402``); the gateway's own
-messages and unknown identifiers have ``node_id: null`` and are skipped, as are the other
-fields.  A row without ``driver`` is taken as ``protocol`` naming the driver.
+The scan's output is a JSON list of objects, one per row: a controller has a ``node_id``, the
+``driver`` that speaks its ``protocol`` (CANopen nodes: ``cia402``) and ``extended_id``, whether
+it answered on 29-bit identifiers (11-bit when absent); the gateway's own messages and unknown
+identifiers have ``node_id: null`` and are skipped, as are the other fields.  A row without
+``driver`` is taken as ``protocol`` naming the driver.
+
+A node's address is its node ID and its identifier type.  A driver whose blocks choose the type
+(a key ``extended_id``: ODrive, ``axis.config.can.is_extended``) gets it written into the block
+that takes the node, where the block would otherwise say another (``extended_id: true`` for an
+axis on 29-bit identifiers); the other drivers' protocols have one type each (VESC 29-bit,
+CANopen and DJI 11-bit), which is all their probes find.
 
 The controllers are the drive motors in the order of the file (``motors:``, or the driven
 wheels of ``wheels:``), then the steering actuators (``steering:``); those of one driver take
@@ -19,12 +26,17 @@ import json
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from gateway.core.errors import ConfigError
+from gateway.core.errors import ConfigError, DriverNotFoundError
+from gateway.drive.registry import get_driver_class
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
 
     from gateway.apps.init.annotated import Document, KeyPath
+
+
+#: The motor-block key that chooses a node's identifier type, for the drivers that have one.
+EXTENDED_KEY = "extended_id"
 
 
 @dataclass(frozen=True, slots=True, order=True)
@@ -33,10 +45,12 @@ class FoundNode:
 
     :param driver: the driver that speaks its protocol (``odrive``, ``cia402``, ...).
     :param node_id: its node ID.
+    :param extended: whether it answered on 29-bit identifiers.
     """
 
     driver: str
     node_id: int
+    extended: bool = False
 
 
 @dataclass(frozen=True, slots=True)
@@ -46,18 +60,35 @@ class Assignment:
     :param block: where its block is in the file (``motors.front_left``).
     :param driver: its driver.
     :param node_id: the node ID it was given.
+    :param extended: whether the node is on 29-bit identifiers.
     """
 
     block: str
     driver: str
     node_id: int
+    extended: bool = False
+
+    def address(self) -> str:
+        """``odrive node 1`` (``... on 29-bit identifiers``)."""
+        return f"{self.driver} node {self.node_id}" + (
+            " on 29-bit identifiers" if self.extended else "")
 
 
-def parse_scan(text: str, source: str) -> tuple[FoundNode, ...]:
-    """The nodes of a ``wheelgate scan --json`` output, each once, sorted.
+def parse_scan(text: str | bytes, source: str) -> tuple[FoundNode, ...]:
+    """The nodes of a ``wheelgate scan --json`` output (its text, or the bytes of its file),
+    each once, sorted.
 
-    :raises ConfigError: naming ``source`` and the entry, for text that is not such a list.
+    :raises ConfigError: naming ``source`` and the entry, for text that is not such a list, or
+        bytes that are not UTF-8 (the byte and its offset, as the configuration loader says
+        it of a configuration file).
     """
+    if isinstance(text, bytes):
+        try:
+            text = text.decode("utf-8")
+        except UnicodeDecodeError as err:
+            raise ConfigError(f"{source}: expected UTF-8 text (the JSON of `wheelgate scan "
+                              f"--json`), got byte {err.object[err.start]:#04x} at offset "
+                              f"{err.start}") from err
     try:
         raw = json.loads(text)
     except ValueError as err:
@@ -80,7 +111,11 @@ def parse_scan(text: str, source: str) -> tuple[FoundNode, ...]:
         if not isinstance(node_id, int) or isinstance(node_id, bool) or node_id < 0:
             raise ConfigError(f"{source}: [{i}].node_id: expected a node ID (an integer >= 0), "
                               f"got {node_id!r}")
-        found.add(FoundNode(driver, node_id))
+        extended = entry.get("extended_id", False)
+        if not isinstance(extended, bool):
+            raise ConfigError(f"{source}: [{i}].extended_id: expected true (29-bit identifiers) "
+                              f"or false (11-bit), got {extended!r}")
+        found.add(FoundNode(driver, node_id, extended))
     return tuple(sorted(found))
 
 
@@ -135,8 +170,10 @@ def assign(
         if path[0] != "steering":
             motors.add(driver)
     ids: dict[str, list[int]] = {}
+    nodes: dict[str, list[FoundNode]] = {}
     for node in sorted(found):
         ids.setdefault(node.driver, []).append(node.node_id)
+        nodes.setdefault(node.driver, []).append(node)
     others = {p: v for p, v in ids.items() if p not in wanted}
     problems = []
     for driver, blocks in wanted.items():
@@ -157,10 +194,28 @@ def assign(
         raise ConfigError("\n".join(problems))
     out = []
     for driver, blocks in wanted.items():
-        for (path, label), node_id in zip(blocks, ids[driver], strict=True):
+        for (path, label), node in zip(blocks, nodes[driver], strict=True):
             block = doc.get(path)
-            block["node_id"] = node_id
-            doc.annotate(path[:2], end=f"from the scan: {driver} node {node_id}")
-            out.append(Assignment(label, driver, node_id))
-    unused = tuple(FoundNode(p, i) for p, v in others.items() for i in v)
+            block["node_id"] = node.node_id
+            _address(doc, path, driver, node.extended)
+            done = Assignment(label, driver, node.node_id, node.extended)
+            doc.annotate(path[:2], end=f"from the scan: {done.address()}")
+            out.append(done)
+    unused = tuple(n for p in others for n in nodes[p])
     return tuple(out), unused
+
+
+def _address(doc: Document, path: KeyPath, driver: str, extended: bool) -> None:
+    """Write the node's identifier type into the block at ``path`` when its driver takes one
+    (see the module's doc) and the block, or the defaults it takes it from, says another."""
+    try:
+        spec = get_driver_class(driver).OPTIONS.get(EXTENDED_KEY)
+    except DriverNotFoundError:
+        return  # (the loader says why)
+    if spec is None:
+        return
+    block = doc.get(path)
+    defaults = _mapping(doc.data.get("steering_defaults" if path[0] == "steering"
+                                     else "motor_defaults"))
+    if block.get(EXTENDED_KEY, defaults.get(EXTENDED_KEY, spec.default)) != extended:
+        block[EXTENDED_KEY] = extended

@@ -32,6 +32,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from gateway.apps.scan.classify import Classified, Configured, Sighting, classify
+from gateway.apps.scan.known import KnownMotors
 from gateway.apps.scan.report import UNKNOWN, WHEELGATE, ScannedDevice, ScanReport, hex_id
 from gateway.drive.labels import DRIVER_TITLES
 from gateway.drive.scan import Answer, Description, Heard
@@ -112,9 +113,10 @@ class ScanSession:
     :param timing: how long to listen, wait and pace.
     :param start_s: when the scan starts (monotonic s).
     :param own_ids: ``(identifier, extended)`` -> name of the gateway's own messages.
-    :param known: the configuration's motors: a controller found with a motor's driver and
-        node ID is reported with its wheel; a motor whose controller was not found is named in
-        the report's notes.
+    :param known: the configuration's motors: a controller found with a motor's driver, node
+        ID and identifier type (from ``claimed``) is reported with its wheel; a motor whose
+        controller was not found is named in the report's notes
+        (:class:`~gateway.apps.scan.known.KnownMotors`).
     :param claimed: the configured motors' declared identifiers (see the module).
     """
 
@@ -126,7 +128,7 @@ class ScanSession:
         self.timing = timing
         self.start_s = start_s
         self.own_ids = dict(own_ids or {})
-        self.known = {(m.driver, m.node_id): m.wheel for m in known}
+        self.known = KnownMotors(known, claimed)
         self.claimed = tuple(claimed)
         #: Frames sent.
         self.requests_sent = 0
@@ -309,14 +311,11 @@ class ScanSession:
                                message=name) for name, h in final.own]
         rows += [ScannedDevice(UNKNOWN, UNKNOWN, None, None, h.is_extended_id, None, (h,))
                  for h in final.unknown]
-        seen = {(r.driver, r.node_id) for r in rows}
-        missing = [f"{wheel!r} ({driver} node {node})"
-                   for (driver, node), wheel in self.known.items() if (driver, node) not in seen]
+        missing = self.known.missing((r.driver, r.node_id, r.extended) for r in rows)
         notes = self._scan_notes()
         if missing:
-            notes.append(f"configured but not found: {', '.join(missing)}")
-            if any(driver == "cia402" for driver, node in self.known
-                   if (driver, node) not in seen):
+            notes.append(f"configured but not found: {', '.join(said for _, said in missing)}")
+            if any(m.driver == "cia402" for m, _ in missing):
                 notes.append("a CANopen node that booted before the scan and sends no "
                              "heartbeat (0x1017 = 0, its factory setting) stays silent: power "
                              "it up, or reset it (NMT), while the scan listens")
@@ -332,6 +331,9 @@ class ScanSession:
                     if j == i and a.request.node_id == s.found.node_id]
         desc = s.probe.describe(s.found, s.heard, answers)
         notes = list(desc.notes)
+        differs = self.known.differs(s.probe.DRIVER, s.found.node_id, s.found.extended)
+        if differs is not None:
+            notes.insert(0, differs)
         if interview is not None:
             notes += interview.notes
             if interview.queue:
@@ -342,7 +344,8 @@ class ScanSession:
         return ScannedDevice(s.probe.PROTOCOL, s.probe.TITLE, s.probe.DRIVER, s.found.node_id,
                              s.found.extended, s.found.seen_by, s.heard,
                              dataclasses.replace(desc, notes=tuple(notes)),
-                             self.known.get((s.probe.DRIVER, s.found.node_id)))
+                             self.known.wheel(s.probe.DRIVER, s.found.node_id,
+                                              s.found.extended))
 
     def _scan_notes(self) -> list[str]:
         notes = []

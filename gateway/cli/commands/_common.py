@@ -1,7 +1,9 @@
-"""Helpers shared by subcommands: loading the config with CLI overrides, parsing twists."""
+"""Helpers shared by subcommands: loading the config with CLI overrides, parsing twists, and
+``--json`` failures of the commands that compute (:func:`json_failures`)."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
@@ -10,15 +12,14 @@ from typing import TYPE_CHECKING, Any
 
 import click
 
-from gateway.cli import UsageExit
+from gateway.cli import EXIT_INFEASIBLE, UsageExit
 from gateway.config import client_socket_path, load_config
-from gateway.core.errors import GatewayError
+from gateway.core.errors import GatewayError, InfeasibleTwistError
 from gateway.core.types import MAX_TWIST_COMPONENT
 
 if TYPE_CHECKING:
-    from collections.abc import Collection
+    from collections.abc import Collection, Iterator
 
-    from gateway.core.errors import InfeasibleTwistError
     from gateway.core.settings import GatewayConfig
     from gateway.core.types import Twist
 
@@ -189,20 +190,41 @@ def twist_json(t: Twist) -> dict[str, float]:
 
 
 def infeasible_json(err: InfeasibleTwistError) -> str:
-    """The JSON error object printed on stdout for an infeasible twist with ``--json``."""
-    return json.dumps(
-        {
-            "error": {
-                "type": "infeasible_twist",
-                "message": str(err),
-                "wheel": err.wheel,
-                "constraint": err.constraint,
-                "residual_m_s": err.residual_m_s,
-                "twist": twist_json(err.twist),
-                "nearest": twist_json(err.nearest),
-            }
-        }
-    )
+    """The JSON error object printed on stdout for an infeasible twist with ``--json``: the
+    shape of every ``--json`` failure (``{"ok": false, "error": {"code", "message"}}``) with
+    the control socket's details of this one (README, the control socket's ``twist`` reply)."""
+    return json.dumps({"ok": False, "error": {
+        "code": "infeasible_twist",
+        "message": str(err),
+        "wheel": err.wheel,
+        "constraint": err.constraint,
+        "residual_m_s": err.residual_m_s,
+        "twist": twist_json(err.twist),
+        "nearest": twist_json(err.nearest),
+    }})
+
+
+@contextlib.contextmanager
+def json_failures(ctx: click.Context, as_json: bool) -> Iterator[None]:
+    """With ``--json``, a failure in the block is a JSON object on stdout, as every command's
+    (``{"ok": false, "error": {"code", "message"}}``: ``bad_config``, ``bad_usage``,
+    ``bus_unavailable``, ``error``; an infeasible twist: :func:`infeasible_json`), with the
+    exit code it has without ``--json`` (2, 2, 1, 1; 3).  Without ``--json``, it goes on as
+    it came (the message on stderr)."""
+    try:
+        yield
+    except InfeasibleTwistError as err:
+        if not as_json:
+            raise
+        click.echo(infeasible_json(err))
+        ctx.exit(EXIT_INFEASIBLE)
+    except (GatewayError, click.ClickException) as err:
+        if not as_json:
+            raise
+        # Imported here: only a failure pays for it (``ik``'s start-up does not).
+        from gateway.cli.commands._guards import fail_json_of  # noqa: PLC0415
+
+        fail_json_of(ctx, err)
 
 
 def rad_s_to_rpm(value: float) -> float:

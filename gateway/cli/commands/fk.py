@@ -7,6 +7,10 @@ steering angle by the wheel's range, ``steer_min`` to ``steer_max`` (not wrapped
 outside it is no angle the wheel can have).  A wheel not given, when the others fix the twist,
 and a steered wheel given without ``--steer`` (taken at 0 rad) are noted on stderr and, with
 ``--json``, in ``not_given`` and ``steer_taken_as_zero``.
+
+With ``--json`` every outcome is one JSON object on stdout: ``{"ok": true, "twist", ...}``, or
+a failure, ``{"ok": false, "error": {"code", "message"}}`` with the exit code it has without
+(:func:`~gateway.cli.commands._common.json_failures`).
 """
 
 from __future__ import annotations
@@ -18,7 +22,7 @@ from typing import TYPE_CHECKING
 import click
 
 from gateway.cli import config_option, json_option
-from gateway.cli.commands._common import load, twist_json
+from gateway.cli.commands._common import json_failures, load, twist_json
 from gateway.core.errors import KinematicsError
 from gateway.core.kinematics.feasibility import LIMIT_SLACK
 from gateway.core.numfmt import fixed, short
@@ -78,23 +82,13 @@ def _check_steer(cfg: GatewayConfig, i: int, value: float) -> None:
             param_hint="--steer")
 
 
-@click.command()
-@config_option
-@click.option("--wheel", "wheels", multiple=True, metavar="NAME=RAD_S",
-              help="A wheel's angular speed in rad/s (repeat for each wheel).")
-@click.option("--steer", "steers", multiple=True, metavar="NAME=RAD",
-              help="A steered wheel's steering angle in rad.")
-@json_option
-@click.pass_context
-def command(
-    ctx: click.Context,
-    config_path: str | None,
-    wheels: tuple[str, ...],
-    steers: tuple[str, ...],
-    as_json: bool,
-) -> None:
-    """Forward kinematics: the body twist (least squares) and the slip residual."""
-    cfg = load(ctx, config_path)
+def _inputs(cfg: GatewayConfig, wheels: tuple[str, ...], steers: tuple[str, ...]
+            ) -> tuple[list[float | None], list[float | None], set[int]]:
+    """The wheel speeds and steering angles given (each checked, see the module), and which
+    steering angles were given.
+
+    :raises click.BadParameter: naming the option, what it expects and what came.
+    """
     model = cfg.model
     speeds: list[float | None] = [None] * model.n
     for name, value in _pairs(wheels, "--wheel").items():
@@ -118,14 +112,37 @@ def command(
         given_steer.add(i)
     if all(s is None for s in speeds):
         raise click.BadParameter("give at least one wheel speed", param_hint="--wheel")
-    missing = [w.name for w, s in zip(model.wheels, speeds, strict=True) if s is None]
-    try:
-        result = model.fk(speeds, steer)
-    except KinematicsError as err:
-        # Too few wheels to fix the twist: a usage error that names what is missing.
-        text = str(err)
-        raise click.BadParameter(f"{text[:1].lower()}{text[1:]}; not given: "
-                                 f"{', '.join(missing)}", param_hint="--wheel") from err
+    return speeds, steer, given_steer
+
+
+@click.command()
+@config_option
+@click.option("--wheel", "wheels", multiple=True, metavar="NAME=RAD_S",
+              help="A wheel's angular speed in rad/s (repeat for each wheel).")
+@click.option("--steer", "steers", multiple=True, metavar="NAME=RAD",
+              help="A steered wheel's steering angle in rad.")
+@json_option
+@click.pass_context
+def command(
+    ctx: click.Context,
+    config_path: str | None,
+    wheels: tuple[str, ...],
+    steers: tuple[str, ...],
+    as_json: bool,
+) -> None:
+    """Forward kinematics: the body twist (least squares) and the slip residual."""
+    with json_failures(ctx, as_json):
+        cfg = load(ctx, config_path)
+        speeds, steer, given_steer = _inputs(cfg, wheels, steers)
+        missing = [w.name for w, s in zip(cfg.model.wheels, speeds, strict=True) if s is None]
+        try:
+            result = cfg.model.fk(speeds, steer)
+        except KinematicsError as err:
+            # Too few wheels to fix the twist: a usage error that names what is missing.
+            text = str(err)
+            raise click.BadParameter(f"{text[:1].lower()}{text[1:]}; not given: "
+                                     f"{', '.join(missing)}", param_hint="--wheel") from err
+    model = cfg.model
     zeroed = [w.name for i, w in enumerate(model.wheels)
               if steer[i] is not None and speeds[i] is not None and i not in given_steer]
     if missing:
@@ -136,6 +153,7 @@ def command(
                    err=True)
     if as_json:
         click.echo(json.dumps({
+            "ok": True,
             "twist": twist_json(result.twist),
             "residual_m_s": result.residual_m_s,
             "wheels": [

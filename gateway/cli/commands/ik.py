@@ -1,4 +1,10 @@
-"""``wheelgate ik``: wheel speeds and steering angles for a twist."""
+"""``wheelgate ik``: wheel speeds and steering angles for a twist.
+
+With ``--json`` every outcome is one JSON object on stdout: ``{"ok": true, "twist", "wheels",
+"speed_scale"}``, or a failure, ``{"ok": false, "error": {"code", "message", ...}}``
+(:func:`~gateway.cli.commands._common.json_failures`; an infeasible twist: exit 3, ``"code":
+"infeasible_twist"`` with the wheel, constraint, residual and nearest twist).
+"""
 
 from __future__ import annotations
 
@@ -8,16 +14,15 @@ from typing import Any
 
 import click
 
-from gateway.cli import EXIT_INFEASIBLE, config_option, json_option
+from gateway.cli import config_option, json_option
 from gateway.cli.commands._common import (
     check_finite,
-    infeasible_json,
+    json_failures,
     load,
     rad_s_to_rpm,
     twist_json,
     twist_options,
 )
-from gateway.core.errors import InfeasibleTwistError
 from gateway.core.kinematics.limits import speed_scale
 from gateway.core.numfmt import fixed, short
 from gateway.core.types import Twist
@@ -38,18 +43,13 @@ def command(
     as_json: bool,
 ) -> None:
     """Inverse kinematics: per wheel its speed (rad/s, wheel and motor RPM) and steering."""
-    check_finite(vx=vx, vy=vy, wz=wz)
-    cfg = load(ctx, config_path)
     twist = Twist(vx, vy, wz)
-    try:
+    with json_failures(ctx, as_json):
+        check_finite(vx=vx, vy=vy, wz=wz)
+        cfg = load(ctx, config_path)
         result = cfg.model.ik(twist)
-    except InfeasibleTwistError as err:
-        if as_json:
-            click.echo(infeasible_json(err))
-            ctx.exit(EXIT_INFEASIBLE)
-        raise
-    scale = speed_scale(cfg.model, result, cfg.limits)
-    bands = DriveSet(cfg).uncontrolled_bands()
+        scale = speed_scale(cfg.model, result, cfg.limits)
+        bands = DriveSet(cfg).uncontrolled_bands()
     rows: list[dict[str, Any]] = []
     for i, w in enumerate(cfg.model.wheels):
         speed = result.wheel_rad_s[i]
@@ -69,9 +69,8 @@ def command(
             row["not_speed_controlled"] = {"below_rad_s": band[1]}
         rows.append(row)
     if as_json:
-        click.echo(
-            json.dumps({"twist": twist_json(twist), "wheels": rows, "speed_scale": scale})
-        )
+        click.echo(json.dumps({"ok": True, "twist": twist_json(twist), "wheels": rows,
+                               "speed_scale": scale}))
         return
     click.echo(f"twist: {twist}")
     click.echo(

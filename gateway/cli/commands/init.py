@@ -3,7 +3,10 @@
 The text comes from :mod:`gateway.apps.init`; this edge reads the shipped files and the scan,
 loads the result from a temporary directory exactly as ``wheelgate check -c FILE`` will (so a
 configuration ``check`` refuses is never written), and writes it, with the DBC file it names if
-it names one, never over an existing file without ``--force``.
+it names one, never over an existing file without ``--force``.  ``-o`` naming a directory, or a
+path through a file, is refused naming it; the directories of ``-o`` that do not exist are
+created, and said (the README's systemd steps write /etc/wheelgate/robot.yaml on a machine
+without /etc/wheelgate).
 
 ``--drive`` takes an example's name or a drive (``differential``: the example
 :data:`gateway.apps.init.shipped.BY_DRIVE` gives for it, the others named).  The root options
@@ -24,6 +27,7 @@ import click
 
 from gateway.apps.init import choose, describe, generate, parse_scan, shipped
 from gateway.apps.init.unit import unit_text
+from gateway.cli import UsageExit
 from gateway.config import load_config
 from gateway.core.errors import ConfigError
 from gateway.core.protection import Guard
@@ -31,7 +35,7 @@ from gateway.drive.driveset import DriveSet
 from gateway.drive.registry import valid_drivers
 
 if TYPE_CHECKING:
-    from typing import TextIO
+    from typing import BinaryIO
 
     from gateway.apps.init import Chosen, Written
     from gateway.core.settings import GatewayConfig
@@ -55,12 +59,13 @@ STDOUT = "-"
                   n for n in valid_drivers() if n.startswith(incomplete)],
               help="Put the drive motors on this driver instead of the example's (its keys come "
                    "from a shipped example that uses it).")
-@click.option("--from-scan", "scan", type=click.File("r"), metavar="FILE",
+@click.option("--from-scan", "scan", type=click.File("rb"), metavar="FILE",
               help="Give the controllers, in order, the node IDs of a saved `wheelgate scan "
                    "--json` output ('-': standard input, e.g. piped from the scan).")
 @click.option("-o", "--output", metavar="FILE",
               help=f"Where to write: {DEFAULT_OUTPUT} (with --unit: {shipped.UNIT}) unless "
-                   f"given; '{STDOUT}': standard output.")
+                   f"given (its missing directories are created); '{STDOUT}': standard "
+                   f"output.")
 @click.option("--force", is_flag=True, help="Replace files that exist.")
 @click.option("--acknowledge-no-controller-stop", "acknowledged", is_flag=True,
               help="For controllers that cannot stop by themselves (DJI ESCs): you know, and "
@@ -69,7 +74,7 @@ STDOUT = "-"
 @click.option("--unit", is_flag=True, help="Write the systemd unit instead of a configuration.")
 @click.option("--list", "listing", is_flag=True, help="List the shipped examples.")
 @click.pass_context
-def command(ctx: click.Context, example: str | None, driver: str | None, scan: TextIO | None,
+def command(ctx: click.Context, example: str | None, driver: str | None, scan: BinaryIO | None,
             output: str | None, force: bool, acknowledged: bool, unit: bool,
             listing: bool) -> None:
     """Write a commented robot configuration from a shipped example, for `check` and `run`.
@@ -89,7 +94,8 @@ def command(ctx: click.Context, example: str | None, driver: str | None, scan: T
         target = output or shipped.UNIT
         program = running_wheelgate()
         text = unit_text(shipped.read_text(shipped.UNIT), program)
-        _write(target, [(target, text.encode("utf-8"))], force)
+        created = _write(target, [(target, text.encode("utf-8"))], force, shipped.UNIT)
+        _say_created(created)
         if target != STDOUT:
             starts = (f"it starts {program}" if program is not None else
                       "wheelgate was not found beside this Python nor on PATH: check its "
@@ -113,8 +119,9 @@ def command(ctx: click.Context, example: str | None, driver: str | None, scan: T
         if target != STDOUT:
             beside = Path(target).parent
             files += [(str(beside / f), shipped.read(f)) for f in written.files]
-        _write(target, files, force)
-    _summary(written, files[1:], config, target, scan.name if scan else "", chosen)
+        created = _write(target, files, force)
+    _say_created(created)
+    _summary(written, files[1:], config, target, _scan_name(scan), chosen)
 
 
 def running_wheelgate() -> str | None:
@@ -140,7 +147,7 @@ def _examples() -> dict[str, str]:
 
 
 def _generate(stack: contextlib.ExitStack, examples: dict[str, str], name: str,
-              driver: str | None, scan: TextIO | None, target: str,
+              driver: str | None, scan: BinaryIO | None, target: str,
               bus: dict[str, str]) -> Written:
     """The configuration's text; on standard output, the shipped files it names are named
     where they are installed (there is no directory to put them beside it)."""
@@ -148,9 +155,14 @@ def _generate(stack: contextlib.ExitStack, examples: dict[str, str], name: str,
     place = {}
     if target == STDOUT:
         place = {n: str(stack.enter_context(shipped.path_of(n))) for n in others}
-    found = parse_scan(scan.read(), scan.name) if scan is not None else None
-    return generate(examples, name, driver, found, scan.name if scan else "",
+    found = parse_scan(scan.read(), _scan_name(scan)) if scan is not None else None
+    return generate(examples, name, driver, found, _scan_name(scan),
                     "robot.yaml" if target == STDOUT else target, others, place, bus)
+
+
+def _scan_name(scan: BinaryIO | None) -> str:
+    """How messages name the scan's file (``<stdin>`` for ``-``); ``""`` without one."""
+    return "" if scan is None else str(getattr(scan, "name", "<stdin>"))
 
 
 def _check(written: Written, target: str, acknowledged: bool) -> GatewayConfig:
@@ -195,23 +207,66 @@ def _acknowledge(config: GatewayConfig, acknowledged: bool) -> None:
             f"acknowledged`, which `wheelgate run` requires.  Nothing was written.")
 
 
-def _write(target: str, files: list[tuple[str, bytes]], force: bool) -> None:
+def _write(target: str, files: list[tuple[str, bytes]], force: bool,
+           default: str = DEFAULT_OUTPUT) -> list[Path]:
     """Write every file, or none when one exists and ``force`` is not given (a shipped file
-    beside the configuration that is there already with the same bytes is left as it is)."""
+    beside the configuration that is there already with the same bytes is left as it is), or
+    when a path cannot be a file (:func:`_check_path`).  The directories it names that do not
+    exist are created (the README's systemd steps write /etc/wheelgate/robot.yaml on a machine
+    that has no /etc/wheelgate yet).
+
+    :param default: the file's name when ``-o`` is not given, for the advice.
+    :return: the directories it created, to be said.
+    :raises UsageExit: naming the path, what was expected and what is there.
+    """
     if target == STDOUT:
         click.echo(files[0][1].decode("utf-8"), nl=False)
-        return
+        return []
+    for name, _ in files:
+        _check_path(name, default)
     exist = [name for name, data in files if Path(name).exists()
              and (name == target or Path(name).read_bytes() != data)]
     if exist and not force:
-        raise click.UsageError(f"{', '.join(exist)}: the file exists; expected a new file "
-                               f"(--force replaces it)")
+        raise UsageExit(f"{', '.join(exist)}: the file exists; expected a new file (--force "
+                        f"replaces it)")
+    folder = Path(target).parent
+    created = [d for d in (folder, *folder.parents) if not d.exists()][::-1]
+    if created:
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+        except OSError as err:
+            raise click.ClickException(f"{created[0]}: could not create the directory for "
+                                       f"{target}: {err.strerror}") from err
     for name, data in files:
         try:
-            Path(name).parent.mkdir(parents=True, exist_ok=True)
             Path(name).write_bytes(data)
         except OSError as err:
             raise click.FileError(name, err.strerror) from err
+    return created
+
+
+def _check_path(name: str, default: str) -> None:
+    """That ``name`` can be written as a file: it is no directory, and the nearest of its
+    parents that exists is a directory.
+
+    :raises UsageExit: naming the path, what was expected and what is there.
+    """
+    path = Path(name)
+    if path.is_dir():
+        raise UsageExit(f"{name}: a directory is there; expected the name of a file to write "
+                        f"(e.g. {path / default}); --force replaces files only")
+    for parent in path.parents:
+        if parent.is_dir():
+            return
+        if parent.exists() or parent.is_symlink():
+            what = "a file" if parent.is_file() else "not a directory"
+            raise UsageExit(f"{name}: {parent} is {what}; expected a directory there")
+
+
+def _say_created(created: list[Path]) -> None:
+    """Say which directories were created for the files written."""
+    for folder in created:
+        click.echo(f"created {folder}: the directory did not exist")
 
 
 def _summary(written: Written, beside: list[tuple[str, bytes]], config: GatewayConfig,
@@ -242,9 +297,10 @@ def _summary(written: Written, beside: list[tuple[str, bytes]], config: GatewayC
             f"{'FILE' if err else target} WHEEL):")
         width = max(len(a.block) for a in written.assignments) + 2
         for a in written.assignments:
-            say(f"  {a.block:<{width}}{a.driver} node {a.node_id}")
+            say(f"  {a.block:<{width}}{a.address()}")
     if written.unused:
-        say("not used: " + ", ".join(f"{n.driver} node {n.node_id}" for n in written.unused))
+        say("not used: " + ", ".join(f"{n.driver} node {n.node_id}" + (
+            " (29-bit identifiers)" if n.extended else "") for n in written.unused))
     warned = f", with {len(config.warnings)} warning(s)" if config.warnings else ""
     check = "wheelgate check -c " + ("FILE" if err else target)
     say(f"check: ok{warned}; next: MEASURE and FILL IN what its comments mark, then {check}")

@@ -7,10 +7,12 @@ read-only questions (which, and why none can move a motor or change a setting:
 VESCs by status frames and PING; CANopen nodes by boot-up and heartbeat, and their device type
 (0x1000) and identity (0x1018) by SDO reads; DJI ESCs by their feedback.  The gateway's own
 messages (``gateway.can_ids``) are named, and every other identifier is listed with its rate.
-With ``-c``, a controller that a motor block names (driver and node ID) is shown with its
-wheel, a motor block whose controller was not found is named at the end, and the frames the
-configured drivers send to all their controllers (CANopen SYNC and the gateway's own
-heartbeat, DJI commands) are named as the gateway's (:mod:`gateway.apps.scan.own`).  The
+With ``-c``, a controller that a motor block names (driver, node ID and identifier type: an
+ODrive on 29-bit identifiers is not the block of its node on 11-bit ones, and its row says what
+differs) is shown with its wheel, a motor block whose controller was not found is named at the
+end, and the frames the configured drivers send to all their controllers (CANopen SYNC and the
+gateway's own heartbeat, DJI commands) are named as the gateway's
+(:mod:`gateway.apps.scan.own`).  The
 identifiers each configured motor's driver declares as that motor's are the motor's: only its
 own protocol's probe looks at them, no other protocol's request is sent there, and a motor
 heard there that no probe recognises (a DBC controller) is listed as found by ``config``

@@ -23,7 +23,11 @@ Output, one line each (``--json``: one JSON object each):
   pose as unknown (``null``);
 * state lines (:func:`gateway.sim.truth.state_line`; JSON: ``"event": "state"`` and the
   fields of :meth:`gateway.sim.truth.SimTruth.snapshot`), the last one prefixed
-  ``sim stopped:`` (``"event": "stopped"``).
+  ``sim stopped:`` (``"event": "stopped"``);
+* with ``--json``, a failure (a configuration it cannot load, a bus it cannot open, the
+  simulator thread stopping) is the last line, ``{"ok": false, "error": {"code", "message"}}``
+  as every command's, with the exit code it has without ``--json``
+  (:func:`~gateway.cli.commands._common.json_failures`).
 """
 
 from __future__ import annotations
@@ -40,7 +44,7 @@ from typing import TYPE_CHECKING, Any
 import click
 
 from gateway.cli import config_option
-from gateway.cli.commands._common import VIRTUAL_HINT, check_finite, load
+from gateway.cli.commands._common import VIRTUAL_HINT, check_finite, json_failures, load
 from gateway.cli.commands._guards import MAX_DURATION_S
 from gateway.core.errors import BusError, GatewayError
 from gateway.drive.driveset import DriveSet
@@ -127,6 +131,13 @@ def open_controllers(cfg: GatewayConfig, sims: Sequence[DeviceSimulator],
 def command(ctx: click.Context, config_path: str | None, rate_hz: float, every_s: float,
             as_json: bool) -> None:
     """Run the configuration's simulated controllers on its bus, as separate devices."""
+    with json_failures(ctx, as_json):
+        _run(ctx, config_path, rate_hz, every_s, as_json)
+
+
+def _run(ctx: click.Context, config_path: str | None, rate_hz: float, every_s: float,
+         as_json: bool) -> None:
+    """The simulators until a signal stops them (see the module)."""
     check_finite(rate=rate_hz, every=every_s)
     cfg = load(ctx, config_path)
     drives = DriveSet(cfg)
