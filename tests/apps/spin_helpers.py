@@ -8,6 +8,7 @@ from __future__ import annotations
 import io
 import math
 import threading
+import time
 from typing import TYPE_CHECKING, Any
 
 import can
@@ -29,12 +30,15 @@ if TYPE_CHECKING:
 def robot_config(dest: Path, channel: str, base: str = "turtlebot3_burger.yaml",
                  motors: dict[str, dict[str, Any]] | None = None,
                  steering: dict[str, dict[str, Any]] | None = None,
-                 gateway: dict[str, Any] | None = None, name: str = "") -> Path:
-    """A shipped robot on the virtual bus ``channel``, with keys of its motor and steering
-    blocks replaced, a control socket nobody listens on (unless ``gateway`` names one), written
-    to ``dest`` (under another ``name`` when given)."""
+                 gateway: dict[str, Any] | None = None, name: str = "",
+                 geometry: dict[str, Any] | None = None) -> Path:
+    """A shipped robot on the virtual bus ``channel``, with keys of its motor, steering and
+    geometry blocks replaced, a control socket nobody listens on (unless ``gateway`` names
+    one), written to ``dest`` (under another ``name`` when given)."""
     raw: dict[str, Any] = yaml.safe_load((CONFIG_DIR / base).read_text())
     raw["name"] = name or raw["name"]
+    if geometry:
+        raw.setdefault("geometry", {}).update(geometry)
     raw["bus"] = {"interface": "virtual", "channel": channel}
     raw.setdefault("gateway", {}).update({"socket": str(dest.parent / "nobody.sock"),
                                           **(gateway or {})})
@@ -145,3 +149,37 @@ class Listener:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+#: ODrive CANSimple of node 1: Set_Input_Vel (0x0D), Set_Axis_State (0x07) IDLE (1).
+SET_INPUT_VEL = 1 << 5 | 0x0D
+SET_AXIS_STATE = 1 << 5 | 0x07
+IDLE = bytes([1, 0, 0, 0])
+
+
+def when_turning(shaft: Shaft, act: Callable[[], object], after_rad: float = 0.0) -> None:
+    """Call ``act`` once, from the simulator's thread, as soon as the wheel turns (and has
+    turned ``after_rad``)."""
+    done: list[float] = []
+
+    def step(now_s: float) -> None:
+        shaft._track(now_s)
+        if (not done and shaft.sim.model.armed and shaft.sim.model.velocity_rad_s > 0.05
+                and shaft.position() - shaft.start_rad >= after_rad):  # (on its thread)
+            done.append(now_s)
+            act()
+
+    shaft.ctl.on_step = step
+
+
+def assert_stopped(shaft: Shaft, sent: list[Frame]) -> None:
+    """The stop reached the bus after the last command, and the simulated wheel is disarmed
+    and standing."""
+    commands = [k for k, f in enumerate(sent) if f.arbitration_id == SET_INPUT_VEL]
+    stops = [k for k, f in enumerate(sent)
+             if f.arbitration_id == SET_AXIS_STATE and f.data[:4] == IDLE]
+    assert commands and stops and stops[-1] > commands[-1], [f.to_cansend() for f in sent]
+    deadline = time.monotonic() + 2.0
+    while shaft.sim.model.armed or abs(shaft.sim.model.velocity_rad_s) > 1e-3:
+        assert time.monotonic() < deadline, "the simulated wheel was not stopped"
+        time.sleep(0.01)

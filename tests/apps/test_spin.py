@@ -11,14 +11,18 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from gateway.apps.spin.judge import (
+    EXIT_FIX,
     Check,
     Measured,
     Sample,
+    exit_status,
     judge,
     measure,
     parse_seen,
 )
 from gateway.apps.spin.plan import (
+    NoRoomError,
+    NoSpinError,
     SpinPlan,
     SpinUsageError,
     describe,
@@ -101,10 +105,58 @@ def test_a_sweep_turns_towards_the_side_with_room(origin: float, amplitude: floa
 
 def test_a_short_travel_is_swept_in_part_or_refused() -> None:
     narrow = dataclasses.replace(STEER, steer_range_rad=(-0.1, 0.1))
-    assert steer_plan(narrow, 0.3, 3.0, 1.0).from_origin(0.0).amplitude_rad == pytest.approx(0.08)
-    stuck = dataclasses.replace(STEER, steer_range_rad=(-0.02, 0.02))
-    with pytest.raises(SpinUsageError, match="expected 2 deg of travel on one side"):
-        steer_plan(stuck, 0.3, 3.0, 1.0).from_origin(0.0)
+    plan = steer_plan(narrow, 0.3, 3.0, 1.0)
+    assert plan.amplitude_rad == pytest.approx(0.08)  # announced as it will be, from the middle
+    assert plan.from_origin(0.0).amplitude_rad == pytest.approx(0.08)
+    assert plan.from_origin(0.09).amplitude_rad == pytest.approx(-0.08)
+
+
+def test_no_room_to_sweep_is_refused_before_anything_is_sent() -> None:
+    # The travel from the neutral angle is known from the configuration: refused when the plan
+    # is made (before arming), naming the key and the travel needed.
+    stuck = dataclasses.replace(STEER, steer_range_rad=(-0.03, 0.03))
+    with pytest.raises(NoSpinError) as err:
+        steer_plan(stuck, 0.3, 3.0, 1.0, "geometry max_steer 0.03 rad")
+    assert str(err.value) == (
+        "front_left steering: no room to sweep: expected 2.5 deg (0.0436 rad) of travel on one "
+        "side of its neutral angle, to sweep 2 deg clear of the end stop, but its travel is "
+        "-1.72..+1.72 deg, from geometry max_steer 0.03 rad; widen it if its steering turns "
+        "further")
+
+
+def test_no_room_where_the_wheels_stand_is_an_error_after_enabling() -> None:
+    # Where the wheels stand is known once enabled: a runtime error (the runner then sends
+    # the stop), not a usage error.
+    lopsided = dataclasses.replace(STEER, steer_range_rad=(-0.01, 0.05))
+    plan = steer_plan(lopsided, 0.3, 3.0, 1.0)
+    assert plan.amplitude_rad == pytest.approx(0.04)
+    with pytest.raises(NoRoomError, match=r"its wheels stand at \+1.1 deg within its travel "
+                                          r"-0.6..\+2.9 deg: expected 2.5 deg of room on one "
+                                          r"side") as err:
+        plan.from_origin(0.02)
+    assert not isinstance(err.value, SpinUsageError)
+
+
+def test_no_speed_at_all_when_the_dead_band_reaches_past_half_the_limit() -> None:
+    # A TurtleBot-like wheel on a VESC: min_erpm 900 at 7 pole pairs, gear_ratio 1 is 13.46
+    # rad/s, above max_rpm 61 (6.39 rad/s): whatever --speed, no spin; said before arming.
+    vesc = motor("vesc", 1, "left", max_rpm=61.0, min_erpm=900.0, pole_pairs=7)
+    limit, band = vesc.max_wheel_rad_s, (0.0, 900.0 / 7 * 2 * math.pi / 60)
+    for speed in (None, 3.0, 13.5):
+        with pytest.raises(NoSpinError) as err:
+            drive_plan(vesc, speed, 3.0, limit, 40.0, band)
+        assert str(err.value) == (
+            "left: no spin speed is possible: its vesc controller does not speed-control wheel "
+            "speeds below 13.5 rad/s (min_erpm 900 through pole_pairs 7 and gear_ratio 1), and "
+            "a spin goes at most 3.19 rad/s at the wheel (half the limit, 6.39, of max_rpm 61 "
+            "through gear_ratio 1 and the robot's wheel speeds); lower min_erpm (on the "
+            "controller, then in the configuration), or check pole_pairs, gear_ratio and "
+            "max_rpm (the motor's own)")
+    # The band just below half the limit leaves a speed.
+    assert drive_plan(vesc, None, 3.0, limit, 40.0, (0.0, 3.0)).speed_rad_s == pytest.approx(
+        0.5 * limit)
+    with pytest.raises(NoSpinError, match=r"a spin goes at least 0\.1 rad/s"):
+        drive_plan(vesc, None, 3.0, 0.15, 40.0, None)
 
 
 def test_the_operator_is_told_which_way_the_robot_would_roll() -> None:
@@ -225,8 +277,28 @@ def test_what_cannot_be_judged() -> None:
     stopped = judge(plan, None, None, stopped_by="a key")
     assert not stopped.judged and stopped.lines() == [
         "front_right: nothing judged: stopped early by a key; the motion was not measured"]
-    doc = stopped.as_json()
+    doc = stopped.as_json(exit_status(stopped))
     assert doc["judged"] is False and doc["stopped_by"] == "a key" and doc["measured"] is None
+    assert doc["ok"] is False
+
+
+@pytest.mark.parametrize(("seen", "unchecked", "signalled", "status"), [
+    (1.0, "", 0, 0),
+    (-1.0, "", 0, EXIT_FIX),
+    (None, "--no-ask", 0, 0),
+    (None, "answered: not seen", 0, 1),  # s: invert and gear_ratio went unchecked
+    (None, "no answer: standard input ended", 0, 1),
+    (None, "Ctrl-C", 130, 130),
+    (1.0, "", 130, 130),
+])
+def test_json_ok_is_exactly_exit_status_zero(seen: float | None, unchecked: str,
+                                             signalled: int, status: int) -> None:
+    plan = plan_of()
+    verdict = judge(plan, at(plan, 1.0), seen, unchecked=unchecked)
+    assert exit_status(verdict, signalled) == status
+    doc = verdict.as_json(status)
+    assert doc["ok"] is (status == 0)
+    assert doc["judged"] is True and doc["config_checked"] is (seen is not None)
 
 
 @given(g_true=st.floats(0.05, 100.0), g_cfg=st.floats(0.05, 100.0), inv_true=st.booleans(),

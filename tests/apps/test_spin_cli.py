@@ -133,7 +133,7 @@ def test_no_answer_without_no_ask_does_not_pass(runner: CliRunner, channel: str,
         " ".join(result.stderr.split()))
     if json_out:
         doc = verdict(result)
-        assert doc["ok"] and not doc["config_checked"]
+        assert doc["ok"] is False and not doc["config_checked"]  # "ok" is exit status 0
         assert doc["unchecked"] == "no answer: standard input ended"
     else:
         assert "right: the controller agrees: measured +1.00 rad/s for +1.00 rad/s; invert " \

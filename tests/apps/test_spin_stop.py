@@ -14,16 +14,16 @@ from typing import TYPE_CHECKING
 import pytest
 
 from gateway.apps.spin import runner as runner_module
+from gateway.apps.spin.deadman import Deadman
 from gateway.apps.spin.plan import SpinPlan
-from gateway.apps.spin.runner import Deadman
 from gateway.bus.can_bus import send_frames
 from gateway.cli import main
+from gateway.cli.commands import spin as spin_command
 from gateway.core.errors import EncodeError
 from gateway.core.types import DriveState, GatewayState
-from tests.apps.spin_helpers import Listener, Shaft, robot_config
+from tests.apps.spin_helpers import Listener, Shaft, assert_stopped, robot_config, when_turning
 
 if TYPE_CHECKING:
-    from collections.abc import Callable
     from pathlib import Path
 
     import can
@@ -33,40 +33,6 @@ if TYPE_CHECKING:
     from gateway.runtime.daemon import Daemon
 
 pytestmark = pytest.mark.timeout(60)
-
-#: ODrive CANSimple of node 1: Set_Input_Vel (0x0D), Set_Axis_State (0x07) IDLE (1).
-SET_INPUT_VEL = 1 << 5 | 0x0D
-SET_AXIS_STATE = 1 << 5 | 0x07
-IDLE = bytes([1, 0, 0, 0])
-
-
-def when_turning(shaft: Shaft, act: Callable[[], object], after_rad: float = 0.0) -> None:
-    """Call ``act`` once, from the simulator's thread, as soon as the wheel turns (and has
-    turned ``after_rad``)."""
-    done: list[float] = []
-
-    def step(now_s: float) -> None:
-        shaft._track(now_s)
-        if (not done and shaft.sim.model.armed and shaft.sim.model.velocity_rad_s > 0.05
-                and shaft.position() - shaft.start_rad >= after_rad):  # (on its thread)
-            done.append(now_s)
-            act()
-
-    shaft.ctl.on_step = step
-
-
-def assert_stopped(shaft: Shaft, sent: list[Frame]) -> None:
-    """The stop reached the bus after the last command, and the simulated wheel is disarmed
-    and standing."""
-    commands = [k for k, f in enumerate(sent) if f.arbitration_id == SET_INPUT_VEL]
-    stops = [k for k, f in enumerate(sent)
-             if f.arbitration_id == SET_AXIS_STATE and f.data[:4] == IDLE]
-    assert commands and stops and stops[-1] > commands[-1], [f.to_cansend() for f in sent]
-    deadline = time.monotonic() + 2.0
-    while shaft.sim.model.armed or abs(shaft.sim.model.velocity_rad_s) > 1e-3:
-        assert time.monotonic() < deadline, "the simulated wheel was not stopped"
-        time.sleep(0.01)
-
 
 def test_ctrl_c_stops_the_wheel(runner: CliRunner, channel: str, tmp_path: Path) -> None:
     config = robot_config(tmp_path / "robot.yaml", channel)
@@ -133,7 +99,72 @@ def test_a_key_on_the_terminal_stops_the_wheel(channel: str, tmp_path: Path,
         os.close(slave)
     assert code == 1
     err = capsys.readouterr().err
-    assert "Any key or Ctrl-C stops" in err and "stopped by a key" in err
+    assert "Any key (Ctrl-Z too) or Ctrl-C stops" in err and "stopped by a key" in err
+
+
+@pytest.mark.parametrize(("key", "name", "status"), [
+    (b"\x1a", "Ctrl-Z", 1), (b"\x03", "Ctrl-C", 130), (b"\x1c", "Ctrl-\\", 131),
+])
+def test_the_terminals_signal_keys_stop_the_wheel(key: bytes, name: str, status: int,
+                                                  channel: str, tmp_path: Path,
+                                                  monkeypatch: pytest.MonkeyPatch,
+                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    """Read without ISIG, the terminal's suspend, interrupt and quit characters reach the
+    deadman as keys and stop the wheel (Ctrl-C and Ctrl-\\ then exit as their signals
+    would); with ISIG they would be signals -- Ctrl-Z a suspension with the motor turning (on
+    this pty, no one's controlling terminal, nothing at all: the spin ran on)."""
+    config = robot_config(tmp_path / "robot.yaml", channel)
+    master, slave = os.openpty()
+    before = termios.tcgetattr(slave)
+    try:
+        with open(slave, encoding="utf-8", closefd=False) as tty_in:
+            monkeypatch.setattr("sys.stdin", tty_in)
+            with Shaft(config, "left") as shaft, Listener(channel) as bus:
+                when_turning(shaft, lambda: os.write(master, key))
+                code = main.main(["spin", "-c", str(config), "left", "--duration", "10",
+                                  "--no-ask"], standalone_mode=False)
+                assert_stopped(shaft, bus.frames())
+                assert shaft.turned() < 1.0  # far from the 9.8 rad of the whole spin
+        assert termios.tcgetattr(slave) == before  # the terminal restored
+    finally:
+        os.close(master)
+        os.close(slave)
+    assert code == status
+    assert f"stopped by {name}" in capsys.readouterr().err
+
+
+def test_sigtstp_stops_the_wheel_then_suspends(runner: CliRunner, channel: str, tmp_path: Path,
+                                               monkeypatch: pytest.MonkeyPatch) -> None:
+    """SIGTSTP that is no key of the deadman's terminal (Ctrl-Z where standard input is not a
+    terminal, kill -TSTP): the stop goes out, the handlers are restored, then the command
+    suspends itself (recorded here, not done)."""
+    config = robot_config(tmp_path / "robot.yaml", channel)
+    unhandled: list[int] = []
+
+    def canary(signum: int, frame: object) -> None:
+        unhandled.append(signum)
+
+    # Were SIGTSTP not the deadman's, its default action would stop this test process.
+    previous = signal.signal(signal.SIGTSTP, canary)
+    suspended: list[tuple[list[Frame], object]] = []
+    try:
+        with Shaft(config, "left") as shaft, Listener(channel) as bus:
+            monkeypatch.setattr(spin_command, "suspend", lambda: suspended.append(
+                (bus.frames(), signal.getsignal(signal.SIGTSTP))))
+            when_turning(shaft, lambda: os.kill(os.getpid(), signal.SIGTSTP))
+            result = runner.invoke(main, ["spin", "-c", str(config), "left", "--duration",
+                                          "10", "--no-ask"])
+            assert len(suspended) == 1, result.output
+            sent, handler = suspended[0]
+            assert_stopped(shaft, sent)  # the stop was on the bus before the suspension
+            assert shaft.turned() < 1.0
+            assert handler is canary  # the deadman's handlers were restored first
+    finally:
+        signal.signal(signal.SIGTSTP, previous)
+    assert unhandled == []
+    assert result.exit_code == 1, result.output  # stopped before anything was measured
+    assert "stop sent (zero and disarm) after" in result.stderr
+    assert "stopped by SIGTSTP" in result.stderr
 
 
 def test_the_deadman_takes_keys_and_signals_and_restores_both() -> None:
@@ -142,10 +173,15 @@ def test_the_deadman_takes_keys_and_signals_and_restores_both() -> None:
     handler = signal.getsignal(signal.SIGTERM)
     try:
         with Deadman(slave) as deadman:
-            assert not termios.tcgetattr(slave)[3] & termios.ICANON
+            mode = termios.tcgetattr(slave)
+            assert not mode[3] & (termios.ICANON | termios.ECHO | termios.ISIG)
+            assert mode[1] & termios.OPOST  # lines printed meanwhile stay lines
             assert deadman.wait(0.01) == ""
             os.write(master, b"x")
             assert deadman.wait(2.0) == "a key"
+        with Deadman(slave) as deadman:
+            os.write(master, b"\x1a")
+            assert deadman.wait(2.0) == "Ctrl-Z"
         with Deadman(None) as deadman:
             os.kill(os.getpid(), signal.SIGTERM)
             assert deadman.wait(0.01) == "SIGTERM"

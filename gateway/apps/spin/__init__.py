@@ -16,6 +16,8 @@ measures exactly the command whichever sign and ratio the configuration states):
 * :mod:`gateway.apps.spin.judge`: the measurement, the operator's answer and the verdict;
 * :mod:`gateway.apps.spin.runner`: the edge: one motor's driver on the bus for the duration,
   behind a deadman, and the stop (zero and disarm) sent whatever happens.
+* :mod:`gateway.apps.spin.deadman`: why the spin must stop: a key on the terminal (read without
+  its signal characters: Ctrl-Z stops, never suspends, a turning motor) or a signal.
 
 The command is :mod:`gateway.cli.commands.spin`.
 """

@@ -38,6 +38,9 @@ ENCODER_TOLERANCE = 1.25
 SEEN_TOLERANCE = 1.5
 #: The shortest steady stretch that is measured (s).
 MIN_SPAN_S = 0.2
+#: The exit status of a verdict with something to fix (0 agrees, 1 error or not checked,
+#: 2 usage, 3 is ``twist``'s infeasible twist).
+EXIT_FIX = 4
 
 
 class Check(enum.Enum):
@@ -144,8 +147,12 @@ class Verdict:
                     f"checked by a person{why}"]
         return [f"{name}: agrees: {said}, and the wheel did as described"]
 
-    def as_json(self) -> dict[str, Any]:
-        """The verdict as a JSON object (``wheelgate spin --json``)."""
+    def as_json(self, exit_status: int) -> dict[str, Any]:
+        """The verdict as a JSON object (``wheelgate spin --json``), for the command's
+        ``exit_status`` (:func:`exit_status`): ``"ok"`` is whether it is 0 -- the motor agrees
+        and was checked as asked -- while ``"findings"`` say what to fix, ``"judged"``
+        whether anything was measured and ``"config_checked"`` whether a person checked
+        invert and gear_ratio."""
         m, plan = self.measured, self.plan
         return {
             "motor": plan.motor.wheel, "driver": plan.motor.driver,
@@ -154,12 +161,26 @@ class Verdict:
             "duration_s": plan.duration_s,
             "measured": None if m is None else {"value": m.value, "ratio": m.ratio,
                                                 "travel_rad": m.travel_rad},
-            "seen_ratio": self.seen, "ok": self.ok, "judged": self.judged,
+            "seen_ratio": self.seen, "ok": exit_status == 0, "judged": self.judged,
             "findings": [{"check": f.check.value, "advice": f.advice} for f in self.findings],
             "notes": list(self.notes), "stopped_by": self.stopped_by or None,
             "config_checked": self.seen is not None,
             "unchecked": (self.unchecked or None) if self.seen is None else None,
         }
+
+
+def exit_status(verdict: Verdict, signalled: int = 0) -> int:
+    """The exit status of ``wheelgate spin`` for ``verdict``: ``signalled`` (128 + the signal
+    that stopped it, 0: none) first; 1 when nothing was judged, or when the controller agrees
+    but no person checked invert and gear_ratio without ``--no-ask`` saying so; else 0 when
+    the motor agrees, :data:`EXIT_FIX` when there is something to fix."""
+    if signalled:
+        return signalled
+    if not verdict.judged:
+        return 1
+    if verdict.ok and verdict.seen is None and verdict.unchecked != "--no-ask":
+        return 1
+    return 0 if verdict.ok else EXIT_FIX
 
 
 def measure(plan: SpinPlan, samples: Sequence[Sample], until_s: float = math.inf

@@ -18,7 +18,7 @@ import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from gateway.core.errors import GatewayError
+from gateway.core.errors import ConfigError, GatewayError
 
 if TYPE_CHECKING:
     from collections.abc import Iterable
@@ -48,6 +48,8 @@ MIN_WINDOW_S = 0.4
 #: A steering actuator's sweep, and the smallest one worth judging (rad).
 STEER_AMPLITUDE_RAD = math.radians(15.0)
 MIN_STEER_AMPLITUDE_RAD = math.radians(2.0)
+#: The share of the travel left on a side that a short sweep takes (clear of the end stop).
+STEER_ROOM_SHARE = 0.8
 #: The compass words of a heading in the body frame, from forward, counter-clockwise.
 _COMPASS = ("forward", "forward-left", "left", "backward-left", "backward", "backward-right",
             "right", "forward-right")
@@ -63,6 +65,17 @@ class SpinUsageError(GatewayError, ValueError):
     def __init__(self, message: str, option: str) -> None:
         super().__init__(message)
         self.option = option
+
+
+class NoSpinError(ConfigError):
+    """The configuration leaves no spin of the motor possible, whatever the options (no speed
+    within its limits that its controller speed-controls, no travel to sweep); the message
+    names the keys to change.  Raised before anything is sent."""
+
+
+class NoRoomError(GatewayError):
+    """A steering actuator's wheels, found where they stand once it is enabled, leave no room
+    to sweep on either side (the spin's stop then goes out)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -124,29 +137,40 @@ class SpinPlan:
 
     def from_origin(self, origin_rad: float) -> SpinPlan:
         """A steering sweep from where the wheels stand: towards the side with room (the
-        counter-clockwise side when both have), at most :data:`STEER_AMPLITUDE_RAD`.
+        counter-clockwise side when both have), at most the planned amplitude.
 
-        :raises SpinUsageError: when neither side has :data:`MIN_STEER_AMPLITUDE_RAD` of travel.
+        :raises NoRoomError: when neither side has room for :data:`MIN_STEER_AMPLITUDE_RAD`.
         """
         if not self.steering:
             return self
         lo, hi = self.motor.steer_range_rad
-        want = abs(self.amplitude_rad) or STEER_AMPLITUDE_RAD
-        room_up, room_down = hi - origin_rad, origin_rad - lo
-        if room_up >= want:
-            amplitude = want
-        elif room_down >= want:
-            amplitude = -want
-        else:  # short of travel either way: most of the longer side, clear of its end stop
-            amplitude = 0.8 * room_up if room_up >= room_down else -0.8 * room_down
+        amplitude = sweep(lo, hi, origin_rad, abs(self.amplitude_rad) or STEER_AMPLITUDE_RAD)
         if abs(amplitude) < MIN_STEER_AMPLITUDE_RAD:
-            raise SpinUsageError(
-                f"{self.motor.wheel}: expected {math.degrees(MIN_STEER_AMPLITUDE_RAD):g} deg of "
-                f"travel on one side, but the wheels stand at {math.degrees(origin_rad):+.1f} deg "
-                f"within {math.degrees(lo):+.1f}..{math.degrees(hi):+.1f} deg", "MOTOR")
+            raise NoRoomError(
+                f"{self.motor.wheel}: its wheels stand at {math.degrees(origin_rad):+.1f} deg "
+                f"within its travel {math.degrees(lo):+.1f}..{math.degrees(hi):+.1f} deg: "
+                f"expected {math.degrees(MIN_STEER_AMPLITUDE_RAD / STEER_ROOM_SHARE):.3g} deg "
+                f"of room on one side to sweep {math.degrees(MIN_STEER_AMPLITUDE_RAD):g} deg "
+                f"clear of the end stop; steer them towards the middle first (wheelgate jog)")
         ramp = abs(amplitude) / self.speed_rad_s
         return dataclasses.replace(self, amplitude_rad=amplitude, origin_rad=origin_rad,
                                    ramp_s=ramp)
+
+
+def sweep(lo: float, hi: float, origin: float, want: float) -> float:
+    """The sweep (signed, rad) from ``origin`` within the travel ``lo..hi``: ``want`` towards
+    the side with room (the counter-clockwise side when both have), else
+    :data:`STEER_ROOM_SHARE` of the longer side (possibly too short to judge).
+
+    >>> round(sweep(-0.1, 0.1, 0.0, 0.26), 3), sweep(-1.0, 0.1, 0.0, 0.5)
+    (0.08, -0.5)
+    """
+    room_up, room_down = hi - origin, origin - lo
+    if room_up >= want:
+        return want
+    if room_down >= want:
+        return -want
+    return STEER_ROOM_SHARE * (room_up if room_up >= room_down else -room_down)
 
 
 def drive_plan(motor: MotorConfig, speed: float | None, duration_s: float, limit_rad_s: float,
@@ -158,10 +182,13 @@ def drive_plan(motor: MotorConfig, speed: float | None, duration_s: float, limit
     :param limit_rad_s: the wheel's speed limit (its ``max_rpm`` and the robot's limit).
     :param accel_rad_s2: the wheels' acceleration limit (``inf``: none).
     :param band: the speeds the controller does not speed-control (``low < |v| < high``).
+    :raises NoSpinError: when no speed at all is allowed: the band reaches beyond half the
+        limit (or half the limit is below :data:`MIN_SPEED_RAD_S`), whatever ``speed`` is.
     :raises SpinUsageError: for a speed beyond half the limit, below :data:`MIN_SPEED_RAD_S` or
         in the band, or a duration too short to ramp and measure.
     """
     _check_duration(duration_s)
+    _check_some_speed(motor, limit_rad_s, band)
     if speed is None:
         speed = min(DEFAULT_SPEED_RAD_S, SPEED_SHARE * limit_rad_s)
         if band is not None and band[0] < speed < band[1]:
@@ -179,15 +206,19 @@ def drive_plan(motor: MotorConfig, speed: float | None, duration_s: float, limit
 
 
 def steer_plan(motor: MotorConfig, rate: float | None, duration_s: float,
-               limit_rad_s: float) -> SpinPlan:
-    """A steering actuator's sweep (its origin and side are chosen at the start,
-    :meth:`SpinPlan.from_origin`).
+               limit_rad_s: float, travel_keys: str = "its wheels' steer_min and steer_max"
+               ) -> SpinPlan:
+    """A steering actuator's sweep, as from its neutral angle (its origin and side are chosen
+    at the start, :meth:`SpinPlan.from_origin`, where the wheels stand).
 
     :param rate: the steering rate asked for (rad/s, > 0); ``None``: the default.
     :param limit_rad_s: the steering rate limit (its wheels' and its ``max_rpm``).
+    :param travel_keys: the configuration's keys that set its travel, for the error.
+    :raises NoSpinError: when its travel leaves no room for a sweep from its neutral angle.
     :raises SpinUsageError: for a rate beyond half the limit or a duration too short.
     """
     _check_duration(duration_s)
+    amplitude = abs(_neutral_sweep(motor, travel_keys))
     if rate is None:
         rate = min(DEFAULT_STEER_RATE_RAD_S, SPEED_SHARE * limit_rad_s)
     _check_speed(motor, rate, limit_rad_s, "rad/s of steering angle",
@@ -195,15 +226,64 @@ def steer_plan(motor: MotorConfig, rate: float | None, duration_s: float,
     if rate < 0:
         raise SpinUsageError(f"{motor.wheel}: expected a positive steering rate (the sweep "
                              f"turns out and back), got {rate:g}", "--speed")
-    plan = SpinPlan(motor, rate, duration_s, STEER_AMPLITUDE_RAD / rate, STEER_AMPLITUDE_RAD)
+    plan = SpinPlan(motor, rate, duration_s, amplitude / rate, amplitude)
     _check_window(plan)
     return plan
+
+
+def _neutral_sweep(motor: MotorConfig, travel_keys: str) -> float:
+    """The sweep from the neutral angle (0, or the nearest end of the travel).
+
+    :raises NoSpinError: when it is too short to judge.
+    """
+    lo, hi = motor.steer_range_rad
+    amplitude = sweep(lo, hi, min(max(0.0, lo), hi), STEER_AMPLITUDE_RAD)
+    if abs(amplitude) < MIN_STEER_AMPLITUDE_RAD:
+        need = MIN_STEER_AMPLITUDE_RAD / STEER_ROOM_SHARE
+        raise NoSpinError(
+            f"{motor.wheel}: no room to sweep: expected {math.degrees(need):.3g} deg "
+            f"({need:.3g} rad) of travel on one side of its neutral angle, to sweep "
+            f"{math.degrees(MIN_STEER_AMPLITUDE_RAD):g} deg clear of the end stop, but its "
+            f"travel is {math.degrees(lo):+.2f}..{math.degrees(hi):+.2f} deg, from "
+            f"{travel_keys}; widen it if its steering turns further")
+    return amplitude
 
 
 def _check_duration(duration_s: float) -> None:
     if not MIN_DURATION_S <= duration_s <= MAX_DURATION_S:
         raise SpinUsageError(f"expected {MIN_DURATION_S:g} to {MAX_DURATION_S:g} s, got "
                              f"{duration_s:g}", "--duration")
+
+
+def _check_some_speed(motor: MotorConfig, limit: float, band: tuple[float, float] | None
+                      ) -> None:
+    """That some speed is left to a drive motor's spin: between :data:`MIN_SPEED_RAD_S` (and
+    the top of the ``band`` its controller does not speed-control) and half the ``limit``.
+
+    :raises NoSpinError: naming the keys behind both ends.
+    """
+    most = SPEED_SHARE * limit
+    least = max(MIN_SPEED_RAD_S, band[1] if band is not None else 0.0)
+    if least <= most or f"{least:.3g}" == f"{most:.3g}":
+        return
+    if band is not None and band[1] > MIN_SPEED_RAD_S:
+        keys = [f"{k} {motor.options[k]:g}" for k in ("min_erpm", "pole_pairs")
+                if isinstance(motor.options.get(k), (int, float))]
+        low = (f"its {motor.driver} controller does not speed-control wheel speeds below "
+               f"{band[1]:.3g} rad/s ({' through '.join(keys) or 'its minimum speed'} and "
+               f"gear_ratio {motor.gear_ratio:g})")
+        fix = ("lower min_erpm (on the controller, then in the configuration)" if keys else
+               "lower the controller's minimum speed")
+        fix += ", or check pole_pairs, gear_ratio and max_rpm (the motor's own)"
+    else:
+        low = (f"a spin goes at least {MIN_SPEED_RAD_S:g} rad/s (slower, an encoder says too "
+               f"little)")
+        fix = "check max_rpm and gear_ratio"
+    raise NoSpinError(
+        f"{motor.wheel}: no spin speed is possible: {low}, and a spin goes at most "
+        f"{most:.3g} rad/s at the wheel (half the limit, {limit:.3g}, of max_rpm "
+        f"{motor.max_rpm:g} through gear_ratio {motor.gear_ratio:g} and the robot's wheel "
+        f"speeds); {fix}")
 
 
 def _check_speed(motor: MotorConfig, speed: float, limit: float, unit: str, whose: str) -> None:

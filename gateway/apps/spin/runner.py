@@ -8,41 +8,36 @@ feedback, and then -- in a ``finally``, so also after a fault, a deadman stop or
 sends the driver's stop (zero and disarm) and records the wheel coasting down.
 
 The motor gets a driver instance of its own (from the registry, as the drive set makes them),
-so no other motor of the robot is armed.  The :class:`Deadman` ends the spin at any key on a
-terminal (cbreak mode, restored after) and at SIGINT, SIGTERM or SIGHUP, whose handlers only
-take note: the stop goes out from the loop, never from a signal handler.  Should this process
-die without sending it, the controller's own timeout is the second stop.  An error once
-something was sent comes out as :class:`SpinFailedError`, which says the stop went out.
+so no other motor of the robot is armed.  The
+:class:`~gateway.apps.spin.deadman.Deadman` ends the spin at any key on a terminal (Ctrl-Z
+and Ctrl-C included) and at a signal; the stop goes out from the loop, never from a signal
+handler.  Should this process die without sending it, the controller's own timeout is the
+second stop.  An error once something was sent comes out as :class:`SpinFailedError`, which
+says the stop went out; the gateway's refusal to arm the motor (its controller watchdog not
+confirmed) as :class:`ArmRefusedError`, apart from a fault the controller reports.
 """
 
 from __future__ import annotations
 
-import contextlib
 import logging
-import os
-import select
-import signal
-import termios
-import threading
 import time
-import tty
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from gateway.apps.spin.judge import Sample
-from gateway.apps.spin.plan import SpinUsageError, command_ids, someone_else
+from gateway.apps.spin.plan import command_ids, someone_else
 from gateway.bus.can_bus import drain, send_frames
 from gateway.core.errors import BusError, DriveFaultError, GatewayError, GatewayTimeoutError
-from gateway.core.lifecycle import Closing
+from gateway.core.protection import ProtectionState
 from gateway.core.types import DriveState
 from gateway.drive.registry import get_driver_class
 
 if TYPE_CHECKING:
     from collections.abc import Callable
-    from types import FrameType
 
     import can
 
+    from gateway.apps.spin.deadman import Deadman
     from gateway.apps.spin.plan import SpinPlan
     from gateway.core.can_ids import CanIds
     from gateway.core.protection import WatchdogPolicy
@@ -55,14 +50,26 @@ log = logging.getLogger(__name__)
 LISTEN_S = 0.5
 #: How long the wheel is watched coasting down after the stop (s).
 COAST_S = 0.5
-_SIGNALS = {signal.SIGINT: "Ctrl-C", signal.SIGTERM: "SIGTERM", signal.SIGHUP: "SIGHUP"}
-#: The exit status after a signal stopped the spin: 128 + its number, as a shell reports a
-#: process the signal killed (Ctrl-C: 130).
-SIGNAL_EXIT = {name: 128 + int(signum) for signum, name in _SIGNALS.items()}
 
 
 class BusInUseError(BusError):
     """Someone else drives the bus (a daemon, another commander): nothing was sent."""
+
+
+class ArmRefusedError(GatewayError):
+    """The gateway did not arm the motor: its controller-side stop (the controller watchdog
+    the driver sets over CAN and reads back) could not be confirmed, and
+    ``gateway.controller_watchdog: required`` arms no motor without it.  The gateway's refusal,
+    not a fault the controller reports.
+
+    :param why: what came back, or the silence (the driver's ``protection_failure``).
+    :param fix: what to do, as the driver says (``""``: it says nothing).
+    """
+
+    def __init__(self, message: str, why: str, fix: str) -> None:
+        super().__init__(message)
+        self.why = why
+        self.fix = fix
 
 
 class SpinFailedError(GatewayError):
@@ -73,58 +80,6 @@ class SpinFailedError(GatewayError):
         super().__init__(str(cause))
         self.cause = cause
         self.stop = stop
-
-
-class Deadman(Closing):
-    """Why the spin must stop: a key on the terminal ``tty_fd`` (in cbreak mode until
-    :meth:`close`), or SIGINT, SIGTERM or SIGHUP (handled until :meth:`close`; only in the
-    main thread, where Python runs handlers).
-
-    :param tty_fd: a terminal to watch for keys; ``None``: signals only.
-    """
-
-    def __init__(self, tty_fd: int | None) -> None:
-        self.reason = ""
-        self._fd = tty_fd
-        self._saved_tty: list[Any] | None = None
-        self._saved: dict[int, object] = {}
-        if threading.current_thread() is threading.main_thread():
-            self._saved = {int(s): signal.signal(s, self._on_signal) for s in _SIGNALS}
-        if tty_fd is not None:
-            try:
-                self._saved_tty = termios.tcgetattr(tty_fd)
-                tty.setcbreak(tty_fd)
-            except termios.error:
-                self._fd = None
-
-    def _on_signal(self, signum: int, frame: FrameType | None) -> None:
-        self.reason = self.reason or _SIGNALS.get(signal.Signals(signum), str(signum))
-
-    def wait(self, timeout_s: float) -> str:
-        """Wait up to ``timeout_s`` for a stop; return why to stop (``""``: keep going)."""
-        if not self.reason:
-            timeout_s = max(timeout_s, 0.0)
-            if self._fd is None:
-                time.sleep(timeout_s)
-            else:
-                ready, _, _ = select.select([self._fd], [], [], timeout_s)
-                if ready:
-                    try:
-                        typed = os.read(self._fd, 64)
-                    except OSError:  # the terminal is gone
-                        typed = b""
-                    self.reason = self.reason or ("a key" if typed else "end of input")
-        return self.reason
-
-    def close(self) -> None:
-        """Restore the terminal and the signal handlers (safe to call twice)."""
-        for signum, handler in self._saved.items():
-            signal.signal(signum, handler)  # type: ignore[arg-type]
-        self._saved = {}
-        if self._saved_tty is not None and self._fd is not None:
-            with contextlib.suppress(termios.error):
-                termios.tcsetattr(self._fd, termios.TCSADRAIN, self._saved_tty)
-            self._saved_tty = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -170,9 +125,11 @@ def run_spin(bus: can.BusABC, plan: SpinPlan, deadman: Deadman, *, rate_hz: floa
         anything was sent).
     :raises BusInUseError: when someone else drives the bus (nothing was sent).
     :raises SpinFailedError: once something was sent, for an error whose stop was sent: the
-        controller faults while enabling (:class:`DriveFaultError`), it does not enable in
-        time (:class:`GatewayTimeoutError`), a frame cannot be sent (:class:`BusError`).
-    :raises SpinUsageError: when a steering actuator has no room to sweep (the stop was sent).
+        controller faults while enabling (:class:`DriveFaultError`), the gateway refuses to
+        arm it (:class:`ArmRefusedError`), it does not enable in time
+        (:class:`GatewayTimeoutError`), a steering actuator's wheels stand where they leave no
+        room to sweep (:class:`~gateway.apps.spin.plan.NoRoomError`), a frame cannot be sent
+        (:class:`BusError`).
     :raises BusError: when the stop itself cannot be sent.
     """
     motor = plan.motor
@@ -213,8 +170,6 @@ def run_spin(bus: can.BusABC, plan: SpinPlan, deadman: Deadman, *, rate_hz: floa
             fault, stopped_by = _command(bus, driver, plan, deadman, period, t0, samples,
                                          truth, probe)
             ended = min(time.monotonic() - t0, plan.duration_s)
-    except SpinUsageError:
-        raise
     except GatewayError as err:
         failed = err
     finally:
@@ -266,6 +221,7 @@ def _enabled(bus: can.BusABC, driver: MotorDriver[Any], deadman: Deadman, period
     """Until the driver reports its motor armed, as the loop enables: a hold command and the
     housekeeping every cycle.  Returns what stopped it (``""``: armed).
 
+    :raises ArmRefusedError: when the gateway refuses to arm it (its protection failed).
     :raises DriveFaultError: when the controller reports a fault.
     :raises GatewayTimeoutError: at ``deadline``, saying where the enable stands.
     """
@@ -279,6 +235,9 @@ def _enabled(bus: can.BusABC, driver: MotorDriver[Any], deadman: Deadman, period
         if state is DriveState.ENABLED:
             return ""
         node = f"{motor.wheel} ({motor.driver} node {motor.node_id})"
+        refused = _refusal(driver, node)
+        if refused is not None:
+            raise refused
         if state is DriveState.FAULT:
             raise DriveFaultError(f"{node} did not enable: it reports a fault: "
                                   f"{driver.detail(0) or driver.faults(0)!r}", motor.node_id,
@@ -298,6 +257,20 @@ def _enabled(bus: can.BusABC, driver: MotorDriver[Any], deadman: Deadman, period
         reason = deadman.wait(period)
         if reason:
             return reason
+
+
+def _refusal(driver: MotorDriver[Any], node: str) -> ArmRefusedError | None:
+    """Why the gateway itself will not arm the motor: its protection is
+    :attr:`ProtectionState.FAILED` and the policy arms nothing without it (the driver then
+    also raises the fault flag WATCHDOG, with the same text, whatever the controller says);
+    ``None``: no such refusal."""
+    if driver.protection_state(0) is not ProtectionState.FAILED or driver.may_arm(0):
+        return None
+    why, fix = driver.protection_failure(0), driver.protection(0).fix
+    return ArmRefusedError(
+        f"{node} did not enable: the gateway did not arm it: its controller watchdog was not "
+        f"confirmed: {why}{f'; fix: {fix}' if fix else ''} (gateway.controller_watchdog: "
+        f"required arms no motor without it)", why, fix)
 
 
 def _receive(bus: can.BusABC, driver: MotorDriver[Any], samples: list[Sample],

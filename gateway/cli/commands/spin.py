@@ -6,14 +6,19 @@ motor's simulated controller), runs the spin behind the deadman, asks the operat
 wheel did and prints the verdict.
 
 Exit status: 0 the motor agrees (with ``--no-ask``: the controller agrees, and the verdict
-says invert and gear_ratio were not checked by a person); 4 (:data:`EXIT_FIX`) something to
-fix, with the advice; 1 an error (the motor did not enable, a daemon or another sender drives
-the bus, nothing was measured) or no answer to the question without ``--no-ask`` (standard
-input ended, or ``s``: not seen), since then invert and gear_ratio were not checked; 2 bad
-usage (an unknown motor, a speed or duration out of bounds); 130 stopped by Ctrl-C (143
-SIGTERM, 129 SIGHUP), after the stop was sent.  With ``--json`` an error is a JSON object on
-stdout (``{"ok": false, "error": {"code", "message"}}``, as ``status --json``; the message
-ends saying whether the stop was sent).
+says invert and gear_ratio were not checked by a person); 4
+(:data:`~gateway.apps.spin.judge.EXIT_FIX`) something to fix, with the advice; 1 an error (the
+motor did not enable, the gateway did not arm it, a daemon or another sender drives the bus,
+nothing was measured) or no answer to the question without ``--no-ask`` (standard input
+ended, or ``s``: not seen), since then invert and gear_ratio were not checked; 2 bad
+usage (an unknown motor, a speed or duration out of bounds) or a configuration that leaves no
+spin possible (no speed its controller controls within its limit, no travel to sweep), before
+anything is sent; 130 stopped by Ctrl-C (131 Ctrl-\\ or SIGQUIT, 143 SIGTERM, 129 SIGHUP),
+after the stop was sent.  Ctrl-Z is a key like any other while the motor may turn (the terminal
+is read without its signal characters); SIGTSTP from elsewhere stops the spin, and the command
+suspends once the stop is sent.  With ``--json`` the verdict's ``ok`` is true exactly when the
+exit status is 0, and an error is a JSON object on stdout (``{"ok": false, "error": {"code",
+"message"}}``, as ``status --json``; the message ends saying whether the stop was sent).
 """
 
 from __future__ import annotations
@@ -26,15 +31,25 @@ from typing import TYPE_CHECKING, NoReturn
 
 import click
 
-from gateway.apps.spin.judge import NO_MOTION_RATIO, described, judge, measure, parse_seen
-from gateway.apps.spin.plan import SpinUsageError, describe, drive_plan, steer_plan, way
-from gateway.apps.spin.runner import (
-    SIGNAL_EXIT,
-    BusInUseError,
-    Deadman,
-    SpinFailedError,
-    run_spin,
+from gateway.apps.spin.deadman import SIGNAL_EXIT, Deadman, suspend
+from gateway.apps.spin.judge import (
+    NO_MOTION_RATIO,
+    described,
+    exit_status,
+    judge,
+    measure,
+    parse_seen,
 )
+from gateway.apps.spin.plan import (
+    NoRoomError,
+    NoSpinError,
+    SpinUsageError,
+    describe,
+    drive_plan,
+    steer_plan,
+    way,
+)
+from gateway.apps.spin.runner import ArmRefusedError, BusInUseError, SpinFailedError, run_spin
 from gateway.bus.can_bus import open_bus
 from gateway.bus.edge import bus_options
 from gateway.cli import config_option, json_option
@@ -57,10 +72,6 @@ if TYPE_CHECKING:
     from gateway.core.kinematics import Wheel
     from gateway.core.settings import GatewayConfig
     from gateway.core.types import MotorConfig
-
-#: The exit status of a verdict with something to fix (0 agrees, 1 error, 2 usage, 3 is
-#: ``twist``'s infeasible twist).
-EXIT_FIX = 4
 
 
 def motors_by_name(cfg: GatewayConfig) -> dict[str, MotorConfig]:
@@ -110,15 +121,24 @@ def make_plan(cfg: GatewayConfig, motor: MotorConfig, speed: float | None,
     """The spin of ``motor`` within its limits and the robot's.
 
     :raises SpinUsageError: for a speed or duration out of bounds.
+    :raises NoSpinError: when the configuration leaves no spin of ``motor`` possible (its file
+        named first).
     """
-    if motor.steering:
-        wheels = [w for w in cfg.wheels if w.name in motor.steers]
-        rate = min([motor.max_wheel_rad_s, *(w.max_steer_rate for w in wheels)])
-        return steer_plan(motor, speed, duration_s, rate)
-    index = [w.name for w in cfg.wheels].index(motor.wheel)
-    limit = min(motor.max_wheel_rad_s, cfg.limits.max_wheel_rad_s[index])
-    band = get_driver_class(motor.driver)([motor]).uncontrolled_band(0)
-    return drive_plan(motor, speed, duration_s, limit, cfg.limits.max_wheel_accel_rad_s2, band)
+    try:
+        if motor.steering:
+            wheels = [w for w in cfg.wheels if w.name in motor.steers]
+            rate = min([motor.max_wheel_rad_s, *(w.max_steer_rate for w in wheels)])
+            travel = cfg.geometry.get("max_steer")
+            keys = (f"geometry max_steer {travel:g} rad" if isinstance(travel, (int, float))
+                    else "its wheels' steer_min and steer_max")
+            return steer_plan(motor, speed, duration_s, rate, keys)
+        index = [w.name for w in cfg.wheels].index(motor.wheel)
+        limit = min(motor.max_wheel_rad_s, cfg.limits.max_wheel_rad_s[index])
+        band = get_driver_class(motor.driver)([motor]).uncontrolled_band(0)
+        return drive_plan(motor, speed, duration_s, limit, cfg.limits.max_wheel_accel_rad_s2,
+                          band)
+    except NoSpinError as err:
+        raise NoSpinError(f"{cfg.source}: {err}") from err
 
 
 def refuse_daemon(path: str, robot: str) -> None:
@@ -245,9 +265,10 @@ def command(ctx: click.Context, config_path: str | None, motor_name: str, speed:
     """Turn one MOTOR (a wheel's name, or a steering actuator's) slowly, compare its motion with
     the command, and say what to fix (invert, gear_ratio, the controller).
 
-    Lift the wheel off the ground.  Any key or Ctrl-C stops; the stop (zero and disarm) is
-    always sent.  Exit 0: it agrees; 4: something to fix; 1: an error, or no answer to the
-    question without --no-ask; 2: bad usage; 130: Ctrl-C.
+    Lift the wheel off the ground.  Any key (Ctrl-Z too) or Ctrl-C stops; the stop (zero and
+    disarm) is always sent.  Exit 0: it agrees; 4: something to fix; 1: an error, or no answer
+    to the question without --no-ask; 2: bad usage, or a configuration that leaves no spin
+    possible; 130: Ctrl-C.  With --json, "ok" is true exactly when the exit status is 0.
     """
     try:
         check_finite(duration=duration, **({} if speed is None else {"speed": speed}))
@@ -264,8 +285,6 @@ def command(ctx: click.Context, config_path: str | None, motor_name: str, speed:
     wheel = next((w for w in cfg.wheels if w.name == motor.wheel), None)
     try:
         record = _spin(ctx, cfg, motor, plan, wheel, sim, config_path, socket_path)
-    except SpinUsageError as err:
-        raise click.BadParameter(str(err), param_hint=err.option) from err
     except GatewayError as err:
         _failed(ctx, err, as_json)
     measured = measure(record.plan, record.samples, record.ended_s)
@@ -278,24 +297,20 @@ def command(ctx: click.Context, config_path: str | None, motor_name: str, speed:
     elif measured is not None and not record.fault and abs(measured.ratio) >= NO_MOTION_RATIO:
         seen, unchecked = _ask(record.plan, measured, wheel) if ask else (None, "--no-ask")
     verdict = judge(record.plan, measured, seen, record.fault, record.stopped_by, unchecked)
+    signalled = SIGNAL_EXIT.get(record.stopped_by) or SIGNAL_EXIT.get(unchecked) or 0
+    status = exit_status(verdict, signalled)
     if as_json:
-        click.echo(json.dumps(verdict.as_json()))
+        click.echo(json.dumps(verdict.as_json(status)))
     else:
         for line in verdict.lines():
             click.echo(line)
         for note in verdict.notes if verdict.judged else ():
             click.echo(f"note: {note}")
-    signalled = SIGNAL_EXIT.get(record.stopped_by) or SIGNAL_EXIT.get(unchecked)
-    if signalled:
-        ctx.exit(signalled)
-    if not verdict.judged:
-        ctx.exit(1)
-    if verdict.ok and seen is None and unchecked != "--no-ask":
+    if not signalled and verdict.judged and verdict.ok and status != 0:
         click.echo(f"spin: not checked: invert and gear_ratio of {motor.wheel} ({unchecked}); "
                    f"run spin where you can watch the wheel and answer, or give --no-ask to "
                    f"judge the controller alone", err=True)
-        ctx.exit(1)
-    ctx.exit(0 if verdict.ok else EXIT_FIX)
+    ctx.exit(status)
 
 
 def _spin(ctx: click.Context, cfg: GatewayConfig, motor: MotorConfig, plan: SpinPlan,
@@ -310,7 +325,8 @@ def _spin(ctx: click.Context, cfg: GatewayConfig, motor: MotorConfig, plan: Spin
     tty_fd = _tty_fd()
     with _bus(cfg, motor, sim) as (bus, probe, where):
         header = (f"{motor.wheel} ({motor.driver} node {motor.node_id}) on {where}: "
-                  f"{describe(plan, wheel)}.  {'Any key or ' if tty_fd is not None else ''}"
+                  f"{describe(plan, wheel)}.  "
+                  f"{'Any key (Ctrl-Z too) or ' if tty_fd is not None else ''}"
                   f"Ctrl-C stops; the stop is always sent.")
         with Deadman(tty_fd) as deadman:
             record = run_spin(bus, plan, deadman, rate_hz=cfg.loop.rate_hz,
@@ -324,6 +340,8 @@ def _spin(ctx: click.Context, cfg: GatewayConfig, motor: MotorConfig, plan: Spin
                    err=True)
     else:
         click.echo(f"spin: stopped by {record.stopped_by} before anything was sent", err=True)
+    if deadman.suspend_asked:  # stopped, terminal restored: now as SIGTSTP would have
+        suspend()
     return record
 
 
@@ -341,8 +359,10 @@ def _failed(ctx: click.Context, err: GatewayError, as_json: bool) -> NoReturn:
         click.echo(after, err=True)
     if as_json:
         code = ("bus_in_use" if isinstance(cause, BusInUseError) else
+                "not_armed" if isinstance(cause, ArmRefusedError) else
                 "fault" if isinstance(cause, DriveFaultError) else
-                "not_enabled" if isinstance(cause, GatewayTimeoutError) else "error")
+                "not_enabled" if isinstance(cause, GatewayTimeoutError) else
+                "no_room" if isinstance(cause, NoRoomError) else "error")
         said = f"; {after.removeprefix('spin: ')}" if after else ""
         fail_json(ctx, code, message=f"{err}{said}")
     ctx.exit(1)
