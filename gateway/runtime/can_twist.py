@@ -28,8 +28,8 @@ if TYPE_CHECKING:
 
     #: ``Gateway.twist``: a twist from a source, checked and followed.
     TwistSink = Callable[[Twist, float, Source], Accepted | Rejection]
-    #: ``Gateway.report_error``: (code, message, out, rejection, twist counter).
-    ErrorSink = Callable[[ErrorCode, str, list[Frame], Rejection | None, int], None]
+    #: ``Gateway.report_error``: (code, message, rejection, twist counter).
+    ErrorSink = Callable[[ErrorCode, str, Rejection | None, int], None]
 
 
 class CanTwists:
@@ -56,14 +56,14 @@ class CanTwists:
         self.counter = CounterTracker()
         self._last_s: float | None = None
 
-    def handle(self, frame: Frame, now_s: float, out: list[Frame]) -> None:
-        """A WG_Twist_Cmd from the bus (counter checked; errors answered with WG_Error, which
-        is appended to ``out``)."""
+    def handle(self, frame: Frame, now_s: float) -> None:
+        """A WG_Twist_Cmd from the bus (counter checked; errors answered with WG_Error, with
+        the cycle's reports)."""
         try:
             cmd = self.wg.decode_twist(frame)
         except DecodeError as err:
             self.counts.bad_can_twists += 1
-            self._report(ErrorCode.BAD_COMMAND, str(err), out, None, NO_TWIST_COUNTER)
+            self._report(ErrorCode.BAD_COMMAND, str(err), None, NO_TWIST_COUNTER)
             return
         if cmd is None:
             return
@@ -93,7 +93,7 @@ class CanTwists:
                 self._report(
                     ErrorCode.ESTOP, "an e-stop is released only by an enable on the control "
                     "socket (gateway.estop_release: socket); the CAN ENABLE flag was ignored",
-                    out, None, cmd.counter)
+                    None, cmd.counter)
                 return
             sup.enable(now_s)
             return
@@ -102,4 +102,4 @@ class CanTwists:
             return
         result = self._twist(cmd.twist, now_s, Source.CAN)
         if isinstance(result, Rejection):
-            self._report(result.code, result.message, out, result, cmd.counter)
+            self._report(result.code, result.message, result, cmd.counter)

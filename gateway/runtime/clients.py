@@ -12,11 +12,14 @@ pipelines requests and reads its replies slowly is slowed down, not dropped, and
 replies stay bounded; an event that would take a subscriber's queue beyond that limit (or all
 clients' beyond :attr:`~ClientTable.MAX_PENDING_BYTES_TOTAL`) disconnects it as too slow
 instead.
+
+:func:`fit_clients` makes room for the clients under the process's open-file limit.
 """
 
 from __future__ import annotations
 
 import logging
+import resource
 import selectors
 import socket
 import time
@@ -30,12 +33,40 @@ from gateway.wire.socket import LineFramer, Request, Topic
 if TYPE_CHECKING:
     from collections.abc import Iterable
 
-__all__ = ["ClientTable", "Connection"]
+__all__ = ["ClientTable", "Connection", "fit_clients"]
 
 #: One logger for the clients' input and output (:mod:`gateway.runtime.connections`).
 log = logging.getLogger("gateway.runtime.connections")
 
 _SEND_FLAGS = getattr(socket, "MSG_NOSIGNAL", 0)
+
+
+def fit_clients(max_clients: int, headroom: int) -> int:
+    """``max_clients``, or fewer if that many clients would not leave ``headroom`` file
+    descriptors under the soft ``RLIMIT_NOFILE`` -- raised first, as far as the hard limit
+    allows, to ``max_clients + headroom`` (systemd starts services with a soft limit of 1024).
+    """
+    need = max_clients + headroom
+    soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+    if soft == resource.RLIM_INFINITY or soft >= need:
+        return max_clients
+    raised = need if hard == resource.RLIM_INFINITY else min(need, hard)
+    if raised > soft:
+        try:
+            resource.setrlimit(resource.RLIMIT_NOFILE, (raised, hard))
+        except (OSError, ValueError) as err:
+            log.debug("raising RLIMIT_NOFILE from %d to %d failed: %s", soft, raised, err)
+        else:
+            log.debug("RLIMIT_NOFILE raised from %d to %d", soft, raised)
+            soft = raised
+    if soft >= need:
+        return max_clients
+    fitted = max(1, soft - headroom)
+    log.warning("control socket: max_clients %d lowered to %d: the open-file limit "
+                "(RLIMIT_NOFILE) is %d (hard limit %d), and the daemon keeps %d descriptors for "
+                "itself; raise it (LimitNOFILE= in the systemd unit, ulimit -n) for more",
+                max_clients, fitted, soft, hard, headroom)
+    return fitted
 
 
 class Connection:

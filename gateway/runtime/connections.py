@@ -16,9 +16,10 @@ What one client can cost the daemon is bounded:
   :attr:`Connections.RECV_BYTES` are received at a time, and only once every line received
   before has been taken, so a client's framer holds at most that plus one unfinished line;
 * **output**: see :mod:`gateway.runtime.clients`;
-* **time**: a client that stays in the middle of a line for ``partial_timeout_s``, or sends
-  no line for ``idle_timeout_s`` (subscribers excepted: they are dropped if they stop reading),
-  is disconnected by :meth:`Connections._expire`.
+* **time**: a client that stays in the middle of a line for ``partial_timeout_s`` (however
+  fast it sends it: an endless line is cut off too), or sends no line for ``idle_timeout_s``
+  (subscribers excepted: they are dropped if they stop reading), is disconnected by
+  :meth:`Connections._expire`.
 """
 
 from __future__ import annotations
@@ -211,20 +212,25 @@ class Connections(ClientTable):
     def _expire(self, now_s: float) -> None:
         """Close the clients that stalled in the middle of a line or stayed idle too long.
 
-        A client is held to neither while its input waits for a later poll (the server keeps it
-        waiting), nor to the first while it is not read for its queued output."""
+        The partial timeout holds for every client whose unfinished line (held, or skipped as
+        too long) has not ended for ``partial_timeout_s`` -- one that sends an endless line
+        faster than its share of the budget included, though its input always waits for a
+        later poll -- except while the server owes it a turn: a line of it already complete
+        (or a request held back for its op's allowance) waits to be taken, or its queued
+        output keeps it from being read.  The idle timeout holds for no client whose input
+        waits for a later poll (the server keeps it waiting)."""
         partial_s, idle_s = self.partial_timeout_s, self.idle_timeout_s
         limit = self.max_pending_bytes_per_client
         stalled = idle = 0
         for client in list(self._clients.values()):
-            if client.deferred:
-                continue
             if (partial_s is not None and client.partial_since is not None
                     and now_s - client.partial_since > partial_s
+                    and not client.framer.ready and client.held is None
                     and len(client.outbuf) * 2 < limit):
                 self._drop(client, f"in the middle of a line for more than {partial_s:g} s")
                 stalled += 1
-            elif (idle_s is not None and now_s - client.last_active > idle_s
+            elif (idle_s is not None and not client.deferred
+                  and now_s - client.last_active > idle_s
                   and not any(client.cid in ids for ids in self._subscribers.values())):
                 self._drop(client, f"no line for more than {idle_s:g} s")
                 idle += 1

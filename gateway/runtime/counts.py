@@ -30,5 +30,8 @@ class LoopCounts:
     bad_can_twists: int = 0
     #: Errors reported (WG_Error frames, and error events for subscribers).
     errors_reported: int = 0
+    #: Errors whose WG_Error frame was not sent: newer errors took the cycle's frame
+    #: (:data:`gateway.runtime.publish.ERRORS_PER_CYCLE`); each is in the outbox all the same.
+    errors_not_sent: int = 0
     #: Odometry updates skipped: the kinematics refused the wheels' feedback.
     odometry_errors: int = 0

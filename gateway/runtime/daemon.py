@@ -2,7 +2,8 @@
 
 It runs the cycle at absolute deadlines (sleep, then spin for the last ``spin_us``), waits for
 the control socket while it sleeps so a twist is applied at the next cycle, speaks sd_notify
-(READY=1 once the drives are enabled, WATCHDOG=1 from the loop while it is healthy, STATUS=
+(READY=1 at start, once the bus is open and the socket listens -- the drives may still be
+enabling, STATUS= says so --, WATCHDOG=1 from the loop while the bus takes frames, STATUS=
 on every state change, STOPPING=1), and on SIGTERM or SIGINT sends zero and disarm frames
 before it exits 0.  With ``--sim`` every motor gets its device simulator on the same virtual
 bus in the same process.  The requests are answered by :mod:`gateway.runtime.requests`, the
@@ -24,9 +25,8 @@ from typing import TYPE_CHECKING, Any
 import can
 
 from gateway.config import default_socket_path
-from gateway.core.errors import GatewayError
 from gateway.core.settings import FeedbackRecovery
-from gateway.core.types import DriveState, ErrorCode, GatewayState
+from gateway.core.types import DriveState, GatewayState
 from gateway.runtime.latch import EstopLatch, latch_path
 from gateway.runtime.loop import Gateway
 from gateway.runtime.remote import Remote
@@ -37,7 +37,6 @@ from gateway.runtime.server import ControlServer
 from gateway.runtime.timing import MissProbe, Scheduler, realtime_setup
 from gateway.sim.bus import SimulatedControllers
 from gateway.sim.registry import simulators_for
-from gateway.wire.socket import reply_error
 from gateway.wire.socket.events import event_line, event_topic
 
 if TYPE_CHECKING:
@@ -161,17 +160,10 @@ class Daemon:
         self.requests.handle(client, request, now_s)
 
     def handle_safely(self, client: int, request: Request | ProtocolError, now_s: float) -> None:
-        """:meth:`handle`, but a reply that cannot be built becomes an error reply: no client
-        message may stop the loop."""
-        try:
-            self.handle(client, request, now_s)
-        except (GatewayError, ValueError, UnicodeError) as err:
-            log.warning("request from client %d failed: %s", client, err)
-            try:
-                self.server.reply(client, reply_error(
-                    None, ErrorCode.BAD_COMMAND, f"request failed: {err}"))
-            except (GatewayError, ValueError, UnicodeError):
-                log.warning("client %d: no error reply possible", client)
+        """:meth:`handle`, but a reply that cannot be built becomes an error reply
+        (:meth:`RequestHandler.handle_safely
+        <gateway.runtime.requests.RequestHandler.handle_safely>`)."""
+        self.requests.handle_safely(client, request, now_s)
 
     def status(self) -> GatewayStatus:
         """Everything a ``status`` request returns, now."""
@@ -275,7 +267,10 @@ class Daemon:
                                     self.sim is not None, self.socket_path)
                 self._announced_running |= gw.state is GatewayState.RUNNING
                 if line:
-                    self.announce(line)
+                    try:
+                        self.announce(line)
+                    except OSError as err:  # best effort, as logging is: stderr may be gone
+                        log.debug("announcement not written: %s", err)
         if gw.state is GatewayState.RUNNING and not self._ready:
             self._mark_ready()
         if self._watchdog_s is not None and now_s >= self._next_watchdog and self._healthy():

@@ -18,7 +18,9 @@ Each cycle:
    burst, so no two wheels act on commands from different cycles;
 5. odometry integrates the encoder positions exactly (SE(2)), with the steering angles the
    actuators measure (the commanded ones for wheels steered outside the gateway); odometry and
-   status go out on CAN and to socket subscribers at their rates.
+   status go out on CAN and to socket subscribers at their rates, and errors -- the cycle's
+   own and those of the requests served since the last cycle -- at most one ``WG_Error`` a
+   cycle (:mod:`gateway.runtime.publish`), after the burst.
 """
 
 from __future__ import annotations
@@ -27,7 +29,8 @@ import logging
 import time
 from typing import TYPE_CHECKING
 
-from gateway.bus.edge import BusEdge, bus_options
+from gateway.bus.edge import LOG_EVERY_S, BusEdge, bus_options
+from gateway.bus.health import LogThrottle
 from gateway.core.control import Accepted, Rejection, Source, Supervisor
 from gateway.core.errors import EncodeError, GatewayError, KinematicsError
 from gateway.core.kinematics import Odometry, apply_limits
@@ -130,11 +133,14 @@ class Gateway:
         #: WG_Twist_Cmd frames from the bus.
         self.can_twists = CanTwists(self.wg, config.loop, self.supervisor, self.counts,
                                     self.twist, self.report_error)
+        # The log throttles of projected and refused twists, by source and kind.
+        self._twist_logs: dict[str, LogThrottle] = {}
 
     # ----------------------------------------------------------------- inputs
 
     def twist(self, twist: Twist, now_s: float, source: Source) -> Accepted | Rejection:
-        """A twist from any source; infeasible or refused twists are counted and logged.
+        """A twist from any source; infeasible or refused twists are counted and logged (one
+        line per :data:`~gateway.bus.edge.LOG_EVERY_S` and kind, with the count).
 
         The supervisor's feasibility check solves the inverse kinematics from the current
         steering angles, the very solve the next cycle needs: kept for it (:meth:`_solve`).
@@ -144,27 +150,44 @@ class Gateway:
         if isinstance(result, Accepted) and result.ik is not None:
             self._remember(result.twist, steer, result.ik)
         if isinstance(result, Accepted) and result.projected and result.error is not None:
-            log.warning("%s twist projected: %s", source.value, result.error)
+            self._log_twist(logging.WARNING, source, "projected", str(result.error), now_s)
         elif isinstance(result, Rejection):
-            log.info("%s twist refused: %s", source.value, result.message)
+            self._log_twist(logging.INFO, source, "refused", result.message, now_s)
         return result
+
+    def _log_twist(self, level: int, source: Source, what: str, text: str,
+                   now_s: float) -> None:
+        """Log a projected or refused twist, throttled per source and kind: a client that
+        pipelines them costs the loop a line per 5 s, not one per request."""
+        key = f"{source.value} twist {what}"
+        throttle = self._twist_logs.get(key)
+        if throttle is None:
+            throttle = self._twist_logs[key] = LogThrottle(LOG_EVERY_S)
+        count = throttle.note(now_s)
+        if count is not None:
+            log.log(level, "%s: %s%s", key, text,
+                    f" ({count} such twists since the last such line)" if count > 1 else "")
 
     def report_error(
         self,
         code: ErrorCode,
         message: str,
-        out: list[Frame],
         rejection: Rejection | None = None,
         twist_counter: int = NO_TWIST_COUNTER,
         wheel: str | None = None,
     ) -> None:
-        """Put an error on CAN (WG_Error, appended to ``out``) and in the outbox for socket
-        clients.
+        """Report an error: in the outbox for socket clients at once, and on CAN as a
+        ``WG_Error`` with the cycle's reports -- after its burst of commands, untracked; the
+        next cycle's for an error reported between cycles (a request's) -- at most
+        :data:`~gateway.runtime.publish.ERRORS_PER_CYCLE` per cycle, the newest, the others
+        counted (``errors_not_sent``).  Never sends: a request refused between cycles costs
+        the bus nothing until the cycle, whatever the number of requests.
 
         :param wheel: the wheel the error is about, when it is not the rejection's.
         """
         self.counts.errors_reported += 1
-        out.append(self.publisher.error(code, message, rejection, twist_counter, wheel))
+        if self.publisher.error(code, message, rejection, twist_counter, wheel):
+            self.counts.errors_not_sent += 1
 
     # ----------------------------------------------------------------- the cycle
 
@@ -182,17 +205,17 @@ class Gateway:
             for frame in frames:
                 ident, ext = frame.arbitration_id, frame.is_extended_id
                 if ident == twist_id and ext == twist_ext:
-                    self.can_twists.handle(frame, now_s, out)
+                    self.can_twists.handle(frame, now_s)
                 elif (taker := take((ident, ext))) is not None:
                     taker(frame)
                 else:
                     other(frame)
         sup = self.supervisor
         if edge.starved is not None or edge.bus_state_change is not None:
-            self._bus_trouble(out)
+            self._bus_trouble()
         elif (edge.bus_errors.state is BusErrorState.BUS_OFF
               and sup.state in (GatewayState.ENABLING, GatewayState.RUNNING)):
-            self._bus_trouble(out, BusErrorState.BUS_OFF)
+            self._bus_trouble(BusErrorState.BUS_OFF)
         prev = self.prev
         speeds = prev.wheel_rad_s
         if not self._all_driven:
@@ -201,7 +224,7 @@ class Gateway:
         fault = sup.motors(self.drives, now_s, speeds, steer)
         if fault is not None:
             log.error("fault: %s", fault.message)
-            self.report_error(fault.code, fault.message, out,
+            self.report_error(fault.code, fault.message,
                               wheel=sup.faulted[0] if sup.faulted else None)
         if sup.take_enable_request():
             try:
@@ -211,7 +234,7 @@ class Gateway:
                 # names it, never an exception out of the cycle.
                 message = sup.enable_failed(str(err))
                 log.error("fault: %s", message)
-                self.report_error(ErrorCode.MOTOR_FAULT, message, out)
+                self.report_error(ErrorCode.MOTOR_FAULT, message)
         decision = sup.decide(now_s)
         dt = now_s - self._last_cycle_s if self._last_cycle_s is not None else self.period_s
         self._last_cycle_s = now_s
@@ -233,7 +256,7 @@ class Gateway:
             except EncodeError as err:  # e.g. a max_rpm beyond the controller's speed field
                 message = sup.command_failed(str(err))
                 log.error("fault: %s", message)
-                self.report_error(ErrorCode.MOTOR_FAULT, message, out)
+                self.report_error(ErrorCode.MOTOR_FAULT, message)
         elif self._armed:
             self._armed = False
             out.extend(self.drives.disable(now_s))
@@ -245,7 +268,7 @@ class Gateway:
             self.burst_gap_max_s = sent - self.burst_sent_s
         self.burst_sent_s = sent
         self._integrate()
-        if now_s >= self.publisher.next_due_s:
+        if now_s >= self.publisher.next_due_s:  # an error waiting, or odometry or status due
             edge.send(self.publisher.publish(now_s, self.limit_report, edge.errors_recent),
                       now_s, tracked=False)
 
@@ -281,7 +304,7 @@ class Gateway:
             self.counts.odometry_errors += 1
             log.warning("odometry update skipped: %s", err)
 
-    def _bus_trouble(self, out: list[Frame], change: BusErrorState | None = None) -> None:
+    def _bus_trouble(self, change: BusErrorState | None = None) -> None:
         """Act on what the bus reported: bus-off, or a command that does not go out, is a
         fault that names it; leaving bus-off lets the recovery go on."""
         edge = self.edge
@@ -316,8 +339,7 @@ class Gateway:
             fault = sup.bus_fault(message, wheels)
             if fault is not None:
                 log.error("fault: %s", message)
-                self.report_error(fault.code, message, out,
-                                  wheel=wheels[0] if wheels else None)
+                self.report_error(fault.code, message, wheel=wheels[0] if wheels else None)
 
     # ----------------------------------------------------------------- reports
 

@@ -4,11 +4,21 @@
 ``WG_Error`` frames (:mod:`gateway.wire.can`) and puts the same news in the outbox, as typed
 events (:mod:`gateway.core.events`), that the daemon hands to socket subscribers (in their JSON
 form, :mod:`gateway.wire.socket.events`).  :class:`gateway.runtime.loop.Gateway` owns one and
-sends the frames it returns.
+sends the frames it returns after each cycle's burst of commands, untracked (reports, not
+commands: the next one replaces a lost one).
+
+Errors are reports too.  Every error goes to the outbox at once, but on CAN at most
+:data:`ERRORS_PER_CYCLE` ``WG_Error`` frames go out per cycle, the newest: a client that
+pipelines refused twists, whatever their number, costs the bus one frame per cycle, and an
+error of the cycle itself (a fault, a CAN twist refused) is never displaced by the requests
+served before it.  The others are counted (``errors_not_sent``); the frame's ``count`` field
+(every error so far) shows a receiver how many it did not get.
 """
 
 from __future__ import annotations
 
+import math
+from collections import deque
 from typing import TYPE_CHECKING
 
 from gateway.core.events import OdometryEvent, StatusEvent
@@ -26,6 +36,9 @@ if TYPE_CHECKING:
     from gateway.core.types import Frame
     from gateway.runtime.timing import LoopTimer
     from gateway.wire.can import WgCodec
+
+#: Most ``WG_Error`` frames sent per cycle (the newest errors; the others are counted).
+ERRORS_PER_CYCLE = 1
 
 
 class Publisher:
@@ -55,6 +68,8 @@ class Publisher:
         self.next_due_s = 0.0
         self._status_counter = 0
         self._error_count = 0
+        # The errors whose WG_Error goes out with the next reports, the newest last.
+        self._errors: deque[ErrorReport] = deque(maxlen=ERRORS_PER_CYCLE)
         #: News for socket subscribers, oldest first; the daemon empties it every cycle.
         self.outbox: list[OutboxEvent] = []
         #: The last error reported.
@@ -67,16 +82,21 @@ class Publisher:
         rejection: Rejection | None = None,
         twist_counter: int = NO_TWIST_COUNTER,
         wheel: str | None = None,
-    ) -> Frame:
-        """The WG_Error frame of an error (the outbox gets it too).
+    ) -> bool:
+        """Report an error: in the outbox at once, on CAN as a ``WG_Error`` with the next
+        reports (:meth:`publish`), unless newer errors displace it before (see the module's
+        docstring).
 
         :param wheel: the wheel the error is about, when it is not the rejection's.
+        :return: whether an error's frame was displaced by this one (it will not be sent).
         """
         self._error_count += 1
         err = rejection.error if rejection is not None else None
         if err is not None:
             wheel = err.wheel
-        frame = self.wg.encode_error(ErrorReport(
+        errors = self._errors
+        displaced = len(errors) == errors.maxlen
+        errors.append(ErrorReport(
             code=code,
             wheel=NO_WHEEL if wheel is None else self.wheel_of[wheel],
             constraint=ConstraintCode.from_name(err.constraint) if err else ConstraintCode.NONE,
@@ -84,18 +104,23 @@ class Publisher:
             residual_m_s=err.residual_m_s if err else 0.0,
             count=self._error_count,
         ))
+        self.next_due_s = -math.inf  # the reports are due now: this error's frame
         self.last_error = LastError(code, message)
         self.outbox.append(self.last_error)
-        return frame
+        return displaced
 
     def publish(self, now_s: float, limit_report: LimitReport | None,
                 bus_trouble: bool) -> list[Frame]:
-        """The odometry and status frames due at ``now_s`` (the outbox gets their news).
+        """The error frames waiting, and the odometry and status frames due at ``now_s`` (the
+        outbox gets their news).
 
         :param limit_report: the last limits' report (the status's SPEED_LIMITED flag).
         :param bus_trouble: failed bursts or a controller not error-active lately.
         """
         frames: list[Frame] = []
+        if self._errors:
+            frames.extend(self.wg.encode_error(report) for report in self._errors)
+            self._errors.clear()
         if now_s >= self._next_odom_s:
             self._next_odom_s = now_s + self._odom_period_s
             st = self.odometry.state

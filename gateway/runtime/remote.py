@@ -31,7 +31,6 @@ if TYPE_CHECKING:
 
     from gateway.core.events import OutboxEvent
     from gateway.core.status import GatewayStatus
-    from gateway.core.types import Frame
     from gateway.runtime.bridge.bridge import Bridge
     from gateway.runtime.latch import EstopLatch
     from gateway.runtime.loop import Gateway
@@ -147,16 +146,14 @@ class Remote:
             return
         assert self.bridge is not None
         action = self.bridge.settings.deadman
-        out: list[Frame] = []
         if action is DeadmanAction.ESTOP:
             sup.estop(f"commander {name} disappeared (deadman: estop)")
             self.latch.set(sup.reason)
-            gw.report_error(ErrorCode.ESTOP, sup.reason, out)
+            gw.report_error(ErrorCode.ESTOP, sup.reason)
         else:
             sup.stop(now_s)
             gw.report_error(ErrorCode.COMMAND_TIMEOUT, f"commander {name} disappeared (its "
-                            f"liveliness token is gone): stopping", out)
-        gw.edge.send(out)
+                            f"liveliness token is gone): stopping")
         log.warning("bridge: commander %s disappeared while the robot followed it: %s", name,
                     action.value)
 

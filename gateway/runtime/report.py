@@ -95,6 +95,7 @@ def event_counts(loop: LoopCounts, edge: EdgeCounts, sup: SupervisorCounts
         "faults": sup.faults,
         "cmd_timeouts": sup.cmd_timeouts,
         "estops": sup.estops,
+        "errors_not_sent": loop.errors_not_sent,
     })
 
 

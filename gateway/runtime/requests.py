@@ -8,10 +8,12 @@ The daemon (:mod:`gateway.runtime.daemon`) calls it between cycles, from its loo
 
 from __future__ import annotations
 
+import logging
 import time
 from typing import TYPE_CHECKING, Protocol
 
 from gateway.core.control import Accepted, Source
+from gateway.core.errors import GatewayError
 from gateway.core.kinematics.limits import binding_limit
 from gateway.core.settings import EstopRelease
 from gateway.core.types import ErrorCode, GatewayState
@@ -33,12 +35,14 @@ if TYPE_CHECKING:
     from collections.abc import Callable, Iterable
 
     from gateway.core.status import GatewayStatus
-    from gateway.core.types import Frame, Twist
+    from gateway.core.types import Twist
     from gateway.runtime.latch import EstopLatch
     from gateway.runtime.loop import Gateway
     from gateway.wire.socket import Request, Topic
 
 __all__ = ["Replier", "RequestHandler"]
+
+log = logging.getLogger(__name__)
 
 
 class Replier(Protocol):
@@ -101,9 +105,9 @@ class RequestHandler:
                 err = result.error
                 details = {"wheel": err.wheel, "constraint": err.constraint,
                            "residual_m_s": err.residual_m_s, "nearest": err.nearest}
-            out: list[Frame] = []
-            gw.report_error(result.code, result.message, out, result)
-            gw.edge.send(out)
+            # On CAN with the next cycle's reports (at most one WG_Error a cycle, see
+            # Gateway.report_error): a request never sends on the bus itself.
+            gw.report_error(result.code, result.message, rejection=result)
             server.reply(client, reply_error(rid, result.code, result.message, **details))
             return
         if isinstance(request, ResetOdometryRequest):
@@ -116,6 +120,19 @@ class RequestHandler:
             server.reply(client, reply_ok(rid, {"topics": sorted(t.value for t in request.topics)}))
             return
         self._command(client, request, now_s)
+
+    def handle_safely(self, client: int, request: Request | ProtocolError, now_s: float) -> None:
+        """:meth:`handle`, but a reply that cannot be built becomes an error reply: no client
+        message may stop the loop."""
+        try:
+            self.handle(client, request, now_s)
+        except (GatewayError, ValueError, UnicodeError) as err:
+            log.warning("request from client %d failed: %s", client, err)
+            try:
+                self.server.reply(client, reply_error(
+                    None, ErrorCode.BAD_COMMAND, f"request failed: {err}"))
+            except (GatewayError, ValueError, UnicodeError):
+                log.warning("client %d: no error reply possible", client)
 
     def _applied(self, result: Accepted) -> tuple[Twist, str | None]:
         """The twist the wheels will follow once the speed limits have scaled the accepted one

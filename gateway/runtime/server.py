@@ -21,7 +21,9 @@ No client can stall the loop or lock the others out:
 * **Full.**  With ``max_clients`` connected, a new connection closes the client idle longest
   -- first those of which no line was taken yet, oldest first (counted in ``refused``), then
   the least recently active (``evicted``) -- and is served: an ``estop`` on a new connection
-  gets through however many idle connections are held.
+  gets through however many idle connections are held.  The soft ``RLIMIT_NOFILE`` is raised
+  to fit ``max_clients`` (or ``max_clients`` lowered, with a warning), and an ``accept()`` that
+  still fails for want of descriptors (``EMFILE``) closes the client idle longest the same way.
 * **Stalls.**  A client in the middle of a line for ``partial_timeout_s``, or without a line
   for ``idle_timeout_s`` (subscribers excepted), is closed; see
   :class:`gateway.runtime.connections.Connections` for the bounds on each client's memory.
@@ -40,12 +42,15 @@ from __future__ import annotations
 import dataclasses
 import errno
 import logging
+import select
 import selectors
 import time
 from collections import deque
 from pathlib import Path
 from typing import TYPE_CHECKING, ClassVar
 
+from gateway.bus.edge import LOG_EVERY_S
+from gateway.bus.health import LogThrottle
 from gateway.core.errors import ConfigError
 from gateway.core.lifecycle import Closing
 from gateway.core.status import ServerCounters
@@ -58,6 +63,7 @@ from gateway.runtime.access import (
     remove_own_socket,
     remove_stale_socket,
 )
+from gateway.runtime.clients import fit_clients
 from gateway.runtime.connections import Budget, Connection, Connections, Events
 from gateway.wire.socket import MAX_REQUEST_BYTES, Op
 
@@ -69,7 +75,8 @@ __all__ = ["Budget", "ControlServer", "Events", "ServerCounters"]
 
 log = logging.getLogger(__name__)
 
-_RESOURCE_ERRNOS = frozenset({errno.EMFILE, errno.ENFILE, errno.ENOBUFS, errno.ENOMEM})
+_FD_ERRNOS = frozenset({errno.EMFILE, errno.ENFILE})  # a client closed makes room
+_RESOURCE_ERRNOS = _FD_ERRNOS | {errno.ENOBUFS, errno.ENOMEM}  # retried at the next poll
 
 
 class ControlServer(Connections, Closing):
@@ -80,7 +87,8 @@ class ControlServer(Connections, Closing):
     :param max_message_bytes: longest accepted line, newline excluded (longer ones are skipped
         as they come, never held, and answered with one error each).
     :param max_clients: most clients at once; a new connection beyond them closes the client
-        idle longest (see the module's docstring).
+        idle longest (see the module's docstring); lowered, with a warning, to what the
+        open-file limit allows (:func:`~gateway.runtime.clients.fit_clients`).
     :param allowed_uids: uids allowed to connect besides the server's own (Linux only);
         ``None`` leaves access control to the file mode.
     :param max_pending_bytes_per_client: output queued for one client beyond which an event
@@ -117,6 +125,9 @@ class ControlServer(Connections, Closing):
     OP_RATES_PER_S: ClassVar[Mapping[Op, float]] = {Op.STATUS: 200.0, Op.ESTOP: 200.0}
     #: How often the timeouts are checked at most, s (at least twice per timeout).
     SWEEP_S = 0.5
+    #: File descriptors kept beyond one per client: the bus, the listener, the selector, the
+    #: latch file, logs, the Zenoh bridge's sockets (:func:`.clients.fit_clients`).
+    FD_HEADROOM = 64
 
     def __init__(
         self,
@@ -144,7 +155,7 @@ class ControlServer(Connections, Closing):
                                   f"seconds or None, got {timeout}")
         self._allowed = admitted_uids(allowed_uids)
         self.path = Path(path)
-        self.max_clients = max_clients
+        self.max_clients = fit_clients(max_clients, self.FD_HEADROOM)
         self.allowed_uids = None if allowed_uids is None else frozenset(allowed_uids)
         check_socket_path(self.path)
         remove_stale_socket(self.path)
@@ -160,6 +171,9 @@ class ControlServer(Connections, Closing):
         self._accepting = True
         #: Set while ``max_clients`` are connected (logged once per episode).
         self._full = False
+        # Failed accepts and refused uids: a line per LOG_EVERY_S each, with the count.
+        self._accept_log = LogThrottle(LOG_EVERY_S)
+        self._uid_log = LogThrottle(LOG_EVERY_S)
         #: Whether a loop calls begin_cycle (else every poll has a budget of its own).
         self._cycles = False
         self._cycle_requests = self.ROUND_REQUESTS
@@ -313,20 +327,49 @@ class ControlServer(Connections, Closing):
             except (BlockingIOError, InterruptedError):
                 return
             except OSError as err:
+                if err.errno in _FD_ERRNOS and not self._connection_waits():
+                    return  # nothing to accept (accept() fails all the same)
+                self._accept_failed(err, now_s)
+                if err.errno in _FD_ERRNOS and self._clients:
+                    # Out of descriptors below max_clients: the client idle longest makes
+                    # room, as at max_clients, and the accept is tried again.
+                    self._evict(full=False)
+                    continue
                 if err.errno in _RESOURCE_ERRNOS:  # retried at the next poll, not in a spin
                     self._selector.unregister(self._listener)
                     self._accepting = False
-                log.warning("control socket %s: accept failed: %s", self.path, err)
                 return
             self._admit(conn, now_s)
+
+    def _connection_waits(self) -> bool:
+        """Whether a connection waits to be accepted (``accept()`` fails with ``EMFILE`` even
+        when none does: no client is closed for nothing).  ``poll()`` needs no descriptor."""
+        waiting = select.poll()
+        waiting.register(self._listener, select.POLLIN)
+        return bool(waiting.poll(0))
+
+    def _accept_failed(self, err: OSError, now_s: float) -> None:
+        """Log a failed accept: one line per :data:`LOG_EVERY_S`, with the count."""
+        count = self._accept_log.note(now_s)
+        if count is None:
+            return
+        room = (" (out of file descriptors: each new connection closes the client idle "
+                "longest)" if err.errno in _FD_ERRNOS and self._clients else "")
+        log.warning("control socket %s: accept failed with %d clients connected%s: %s%s",
+                    self.path, len(self._clients), room, err,
+                    f" ({count} failed accepts since the last such line)" if count > 1 else "")
 
     def _admit(self, conn: socket.socket, now_s: float) -> None:
         conn.setblocking(False)
         if self._allowed is not None:
             uid = self._peer_uid(conn)
             if uid is None or uid not in self._allowed:
-                log.warning("control socket %s: refused a client with uid %s (allowed: %s)",
-                            self.path, uid, sorted(self._allowed))
+                count = self._uid_log.note(now_s)
+                if count is not None:
+                    log.warning("control socket %s: refused a client with uid %s (allowed: %s)%s",
+                                self.path, uid, sorted(self._allowed),
+                                f" ({count} refused since the last such line)" if count > 1
+                                else "")
                 self._counts = dataclasses.replace(self._counts, refused=self._counts.refused + 1)
                 conn.close()
                 return
@@ -334,12 +377,15 @@ class ControlServer(Connections, Closing):
             self._evict()
         self._add(conn, now_s)
 
-    def _evict(self) -> None:
+    def _evict(self, full: bool = True) -> None:
         """Close the client idle longest to make room: first those of which no line was
-        taken yet, oldest first; else the least recently active."""
+        taken yet, oldest first; else the least recently active.
+
+        :param full: ``max_clients`` are connected (else: out of file descriptors before).
+        """
         silent = next(iter(self._silent), None)
         cid = silent if silent is not None else next(iter(self._recent))
-        if not self._full:
+        if full and not self._full:
             log.warning("control socket %s: %d clients connected (max_clients): each new "
                         "connection now closes the one idle longest", self.path,
                         len(self._clients))
@@ -349,4 +395,5 @@ class ControlServer(Connections, Closing):
             self._counts = dataclasses.replace(counts, refused=counts.refused + 1)
         else:
             self._counts = dataclasses.replace(counts, evicted=counts.evicted + 1)
-        self._drop(self._clients[cid], "closed for a new connection (max_clients reached)")
+        self._drop(self._clients[cid], "closed for a new connection ("
+                   + ("max_clients reached)" if full else "out of file descriptors)"))

@@ -313,7 +313,8 @@ def test_a_config_file_with_dbc_motors_loads_and_builds_the_driver(tmp_path: Pat
     assert [f.arbitration_id for f in drv.command([rpm(15.0), rpm(15.0)], 0.0)] == [0x201, 0x202]
     bad = (tmp_path / "robot.yaml").read_text().replace("velocity_unit: rpm", "velocity_unit: x")
     (tmp_path / "bad.yaml").write_text(bad)
-    with pytest.raises(ConfigError, match=r"bad\.yaml: wheels\[0\]\.motor\.velocity_unit"):
+    with pytest.raises(ConfigError,  # (named once where it is written: in the defaults)
+                       match=r"bad\.yaml: motor_defaults\.velocity_unit: expected one of"):
         load_config(tmp_path / "bad.yaml")
 
 

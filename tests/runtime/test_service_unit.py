@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import inspect
 import re
 import shlex
 import shutil
@@ -13,6 +14,8 @@ from pathlib import Path
 import pytest
 
 from gateway.config import load_config
+from gateway.runtime import daemon
+from gateway.runtime.server import ControlServer
 from tests.conftest import CONFIG_DIR
 
 UNIT = CONFIG_DIR / "wheelgate.service"
@@ -147,6 +150,25 @@ def test_can_link_setup_is_offered_commented_and_privileged(unit: Unit) -> None:
     assert ["link", "set", "can0", "up", "type", "can", "bitrate", bitrate, "restart-ms",
             "100"] in [argv[1:] for argv in argvs]
     assert ["link", "set", "can0", "txqueuelen", "1000"] in [argv[1:] for argv in argvs]
+
+
+def test_open_files_leave_room_for_max_clients(unit: Unit) -> None:
+    """systemd's default soft limit (1024) was max_clients itself: accept() failed with
+    EMFILE before max_clients, and a new connection's estop was not answered."""
+    max_clients = inspect.signature(ControlServer).parameters["max_clients"].default
+    assert int(unit.one("Service", "LimitNOFILE")) >= max_clients + ControlServer.FD_HEADROOM
+
+
+def test_the_notifications_are_described_as_the_daemon_sends_them() -> None:
+    """WATCHDOG=1 depends on the bus taking frames, not on the loop's deadlines; READY=1 is
+    sent at start, not once the drives are enabled (both said so before)."""
+    text = " ".join(UNIT.read_text(encoding="utf-8").replace("#", " ").split())
+    assert "keeps its deadlines" not in text
+    assert "WATCHDOG=1 from the control loop's cycle while the CAN bus takes frames" in text
+    doc = " ".join((daemon.__doc__ or "").split())
+    assert "READY=1 once the drives are enabled" not in doc
+    assert "READY=1 at start, once the bus is open and the socket listens" in doc
+    assert "WATCHDOG=1 from the loop while the bus takes frames" in doc
 
 
 def test_no_end_of_line_comments(unit: Unit) -> None:

@@ -14,6 +14,7 @@ from hypothesis import strategies as st
 from gateway.core.errors import GatewayError
 from gateway.core.kinematics.odometry import Pose
 from gateway.core.types import Twist
+from gateway.wire.can import POSITION_WRAP_M
 from gateway.wire.socket import (
     MAX_MESSAGE_BYTES,
     CommandRequest,
@@ -222,6 +223,32 @@ def test_message_length_limit_counts_bytes_without_the_line_ending() -> None:
     assert str(info.value) == "message too long: expected at most 4096 bytes, got 4097"
     with pytest.raises(ProtocolError, match="expected at most 10 bytes, got 15"):
         parse_request('{"op":"stop"}é', max_bytes=10)  # counted in UTF-8 bytes
+
+
+@pytest.mark.parametrize(
+    ("line", "message"),
+    [
+        (b'{"op": "reset_odometry", "x": 1e308, "id": 1}',
+         "reset_odometry.x: expected a number between -8388.608 and 8388.608, got 1e+308"),
+        (b'{"op": "reset_odometry", "y": -8388.609, "id": 1}',
+         "reset_odometry.y: expected a number between -8388.608 and 8388.608, got -8388.609"),
+        (b'{"op": "reset_odometry", "theta": 1e308, "id": 1}',
+         "reset_odometry.theta: expected a number between -6283.185307 and 6283.185307, got "
+         "1e+308"),
+    ],
+)
+def test_reset_odometry_is_bounded_by_what_can_carries(line: bytes, message: str) -> None:
+    """Before, any finite value was taken: {"op":"reset_odometry","x":1e308} left the pose
+    stuck (no odometry step changes 1e308) and beyond what WG_Odom_Pose carries."""
+    with pytest.raises(ProtocolError) as info:
+        parse_request(line)
+    assert (str(info.value), info.value.request_id) == (message, 1)
+    # The bounds themselves are taken: WG_Odom_Pose's range (i24 mm) and a thousand turns.
+    edge = parse_request(b'{"op": "reset_odometry", "x": -8388.608, "y": 8388.608, '
+                         b'"theta": -6283.185307}')
+    assert isinstance(edge, ResetOdometryRequest)
+    assert (edge.pose.x_m, edge.pose.y_m) == (-POSITION_WRAP_M / 2, POSITION_WRAP_M / 2)
+    assert -math.pi <= edge.pose.theta_rad < math.pi
 
 
 def test_huge_integer_literal_is_a_protocol_error() -> None:

@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import contextlib
 import logging
+import os
+import sys
 import threading
 
 import click
@@ -15,6 +18,21 @@ from gateway.runtime.daemon import Daemon
 from gateway.runtime.report import motors_text
 
 log = logging.getLogger("gateway.run")
+
+
+def tell(line: str) -> None:
+    """A line for the person who started the daemon, on stderr -- best effort, as logging is:
+    a stderr that went away (a pipe whose reader closed, a terminal gone) must not end the
+    daemon, nor fail its exit.  It is then pointed at ``/dev/null`` (the recipe of Python's
+    :mod:`signal` documentation, "Note on SIGPIPE"), so that the lines still queued, the log
+    lines and the interpreter's last flush go nowhere instead of failing."""
+    try:
+        click.echo(line, err=True)
+    except OSError:
+        with contextlib.suppress(OSError, ValueError):
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, sys.stderr.fileno())
+            os.close(devnull)
 
 
 @click.command()
@@ -61,22 +79,19 @@ def command(
         plan = f"{motors} disabled until an enable (gateway.enable_on_start: false)"
     else:
         plan = f"enabling {motors}"
-    click.echo(
-        f"wheelgate: {cfg.name} ({cfg.drive}, {cfg.model.n} wheels) at {cfg.loop.rate_hz:g} "
-        f"Hz: bus {bus.interface} {bus.channel} open"
-        f"{' with simulated controllers' if sim else ''}; {plan}",
-        err=True,
-    )
-    daemon.announce = lambda line: click.echo(line, err=True)
+    tell(f"wheelgate: {cfg.name} ({cfg.drive}, {cfg.model.n} wheels) at {cfg.loop.rate_hz:g} "
+         f"Hz: bus {bus.interface} {bus.channel} open"
+         f"{' with simulated controllers' if sim else ''}; {plan}")
+    daemon.announce = tell
     remote = daemon.remote
     if remote.bridge is not None:
-        click.echo(f"wheelgate: Zenoh bridge on keys {remote.bridge.keys.root}/..., listening "
-                   f"on {', '.join(remote.bridge.settings.zenoh.listen) or 'nothing'}", err=True)
+        tell(f"wheelgate: Zenoh bridge on keys {remote.bridge.keys.root}/..., listening "
+             f"on {', '.join(remote.bridge.settings.zenoh.listen) or 'nothing'}")
     if remote.view is not None:
         parts = [f"Foxglove WebSocket on {remote.view.url}"] if remote.view.url else []
         if remote.view.mcap_path:
             parts.append(f"recording to {remote.view.mcap_path}")
-        click.echo(f"wheelgate: live view: {', '.join(parts)}", err=True)
+        tell(f"wheelgate: live view: {', '.join(parts)}")
     timer = None
     if duration is not None:
         timer = threading.Timer(duration, daemon.request_stop)
@@ -88,5 +103,5 @@ def command(
         if timer is not None:
             timer.cancel()
     why = f" ({daemon.stop_signal})" if daemon.stop_signal else ""
-    click.echo(f"wheelgate: stopped{why}; every motor was sent zero and disarm", err=True)
+    tell(f"wheelgate: stopped{why}; every motor was sent zero and disarm")
     ctx.exit(code)

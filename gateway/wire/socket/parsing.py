@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING, Any
 
 from gateway.core.kinematics.odometry import Pose
 from gateway.core.types import MAX_TWIST_COMPONENT, Twist
+from gateway.wire.can import POSITION_WRAP_M
 from gateway.wire.socket.messages import (
     MAX_ID_CHARS,
     MAX_MESSAGE_BYTES,
@@ -35,6 +36,14 @@ if TYPE_CHECKING:
     from collections.abc import Mapping
 
 _ID_MIN, _ID_MAX = -(2**63), 2**63 - 1
+
+#: Largest ``reset_odometry`` x and y, m: what ``WG_Odom_Pose`` carries (i24 mm, +-8388.608 m)
+#: before it wraps.  Beyond that a pose is meaningless on CAN, and far beyond it stuck: at
+#: 1e308 m no step of the odometry changes it (float precision).
+MAX_RESET_POSITION_M = POSITION_WRAP_M / 2
+#: Largest ``reset_odometry`` theta, rad: a heading may come unwrapped from another source
+#: (turns counted); a thousand turns either way wrap to [-pi, pi) within about 1e-12 rad.
+MAX_RESET_HEADING_RAD = 1000 * math.tau
 
 _KEYS: dict[Op, tuple[str, ...]] = {
     Op.TWIST: ("vx", "vy", "wz"),
@@ -109,7 +118,8 @@ def _number(
         raise ProtocolError(f"{where}: expected a finite number, got {short_json(value)}", rid)
     if limit is not None and abs(value) > limit:
         raise ProtocolError(
-            f"{where}: expected a number between {-limit:g} and {limit:g}, got {short_json(value)}",
+            f"{where}: expected a number between {-limit:.10g} and {limit:.10g}, got "
+            f"{short_json(value)}",
             rid,
         )
     try:
@@ -177,7 +187,8 @@ def parse_request(line: bytes | str, max_bytes: int = MAX_MESSAGE_BYTES) -> Requ
         vx, vy, wz = (_number(obj, op, k, rid, MAX_TWIST_COMPONENT) for k in _KEYS[op])
         return TwistRequest(Twist(vx, vy, wz), rid)
     if op is Op.RESET_ODOMETRY:
-        x, y, theta = (_number(obj, op, k, rid, None) for k in _KEYS[op])
+        x, y = (_number(obj, op, k, rid, MAX_RESET_POSITION_M) for k in ("x", "y"))
+        theta = _number(obj, op, "theta", rid, MAX_RESET_HEADING_RAD)
         return ResetOdometryRequest(Pose(x, y, (theta + math.pi) % (2 * math.pi) - math.pi), rid)
     if op is Op.SUBSCRIBE:
         return SubscribeRequest(_topics(obj, rid), rid)
