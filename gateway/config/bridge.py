@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import ipaddress
 import re
+import socket
 from types import MappingProxyType
 from typing import TYPE_CHECKING
 
@@ -111,15 +112,22 @@ def _endpoints(value: object, where: str) -> tuple[str, ...]:
 
 
 def _everywhere(endpoint: str) -> bool:
-    """Whether an endpoint listens on every interface (``0.0.0.0``, ``[::]`` in any spelling)."""
+    """Whether an endpoint listens on every interface: ``0.0.0.0`` or ``[::]`` in any spelling
+    the resolver takes (``0``, ``000.000.000.000``, ``[0:0::0]``, ``[::ffff:0.0.0.0]``)."""
     m = _ENDPOINT.match(endpoint)
     hp = _HOST_PORT.match(m.group(2)) if m is not None else None
     if hp is None:
         return False
+    host = hp.group(1).strip("[]")
     try:
-        return ipaddress.ip_address(hp.group(1).strip("[]")).is_unspecified
-    except ValueError:  # a host name
-        return False
+        address = ipaddress.ip_address(host)
+    except ValueError:  # a name, or an IPv4 spelling only inet_aton takes ("0", "0.0")
+        try:
+            return socket.inet_aton(host) == bytes(4)
+        except OSError:
+            return False
+    mapped = getattr(address, "ipv4_mapped", None)
+    return address.is_unspecified or (mapped is not None and mapped.is_unspecified)
 
 
 def check_name(value: str, where: str) -> str:

@@ -13,13 +13,17 @@ replies stay bounded; an event that would take a subscriber's queue beyond that 
 clients' beyond :attr:`~ClientTable.MAX_PENDING_BYTES_TOTAL`) disconnects it as too slow
 instead.
 
-:func:`fit_clients` makes room for the clients under the process's open-file limit.
+:func:`fit_clients` makes room for the clients under the process's open-file limit, and
+:class:`SpareFd` keeps one descriptor for the accept that finds none left.
 """
 
 from __future__ import annotations
 
+import contextlib
 import logging
+import os
 import resource
+import select
 import selectors
 import socket
 import time
@@ -27,13 +31,15 @@ from collections import OrderedDict
 from dataclasses import replace
 from typing import TYPE_CHECKING
 
+from gateway.core.errors import ConfigError
 from gateway.core.status import ServerCounters
 from gateway.wire.socket import LineFramer, Request, Topic
 
 if TYPE_CHECKING:
     from collections.abc import Iterable
 
-__all__ = ["ClientTable", "Connection", "fit_clients"]
+__all__ = ["ClientTable", "Connection", "SpareFd", "check_settings", "connection_waits",
+           "fit_clients", "log_failed_accept", "log_refused_uid"]
 
 #: One logger for the clients' input and output (:mod:`gateway.runtime.connections`).
 log = logging.getLogger("gateway.runtime.connections")
@@ -67,6 +73,73 @@ def fit_clients(max_clients: int, headroom: int) -> int:
                 "itself; raise it (LimitNOFILE= in the systemd unit, ulimit -n) for more",
                 max_clients, fitted, soft, hard, headroom)
     return fitted
+
+
+def check_settings(**settings: float | None) -> None:
+    """The control server's sizes (at least 1) and timeouts (positive seconds, or ``None``).
+
+    :raises ConfigError: naming the setting, what was expected and what came.
+    """
+    for name, value in settings.items():
+        if name.endswith("_s"):
+            if value is not None and not value > 0:
+                raise ConfigError(f"control socket {name}: expected a positive number of "
+                                  f"seconds or None, got {value}")
+        elif value is None or value < 1:
+            raise ConfigError(f"control socket {name}: expected at least 1, got {value}")
+
+
+def log_failed_accept(path: object, clients: int, err: OSError, count: int,
+                      evicting: bool) -> None:
+    """The line of a failed accept (``count``: failed since the last line)."""
+    room = (" (out of file descriptors: each new connection closes the client idle longest)"
+            if evicting else "")
+    log.warning("control socket %s: accept failed with %d clients connected%s: %s%s", path,
+                clients, room, err,
+                f" ({count} failed accepts since the last such line)" if count > 1 else "")
+
+
+def log_refused_uid(path: object, uid: int | None, allowed: Iterable[int], count: int) -> None:
+    """The line of a connection refused for its peer's uid (``count``: refused since the
+    last line)."""
+    log.warning("control socket %s: refused a client with uid %s (allowed: %s)%s", path, uid,
+                sorted(allowed),
+                f" ({count} refused since the last such line)" if count > 1 else "")
+
+
+def connection_waits(listener: socket.socket) -> bool:
+    """Whether a connection waits on ``listener`` (``accept()`` fails with ``EMFILE`` even when
+    none does).  ``poll()`` needs no descriptor."""
+    waiting = select.poll()
+    waiting.register(listener, select.POLLIN)
+    return bool(waiting.poll(0))
+
+
+class SpareFd:
+    """One descriptor (``/dev/null``) held in reserve for the accept that finds the process out
+    of descriptors (``EMFILE``): :meth:`release` frees it, the connection is accepted into its
+    place and its peer checked before any client is closed for it, and :meth:`restore` takes
+    it back once a descriptor is free again (the usual remedy, e.g. libuv's and nginx's)."""
+
+    def __init__(self) -> None:
+        self._fd: int | None = None
+        self.restore()
+
+    def release(self) -> bool:
+        """Free the spare; whether there was one."""
+        if self._fd is None:
+            return False
+        os.close(self._fd)
+        self._fd = None
+        return True
+
+    def restore(self) -> None:
+        """Hold a spare again, if a descriptor is free (else later)."""
+        if self._fd is None:
+            with contextlib.suppress(OSError):
+                self._fd = os.open(os.devnull, os.O_RDONLY | os.O_CLOEXEC)
+
+    close = release
 
 
 class Connection:

@@ -7,18 +7,19 @@ form, :mod:`gateway.wire.socket.events`).  :class:`gateway.runtime.loop.Gateway`
 sends the frames it returns after each cycle's burst of commands, untracked (reports, not
 commands: the next one replaces a lost one).
 
-Errors are reports too.  Every error goes to the outbox at once, but on CAN at most
-:data:`ERRORS_PER_CYCLE` ``WG_Error`` frames go out per cycle, the newest: a client that
-pipelines refused twists, whatever their number, costs the bus one frame per cycle, and an
-error of the cycle itself (a fault, a CAN twist refused) is never displaced by the requests
-served before it.  The others are counted (``errors_not_sent``); the frame's ``count`` field
-(every error so far) shows a receiver how many it did not get.
+Errors are reports too.  Every error goes to the outbox at once, but on CAN one ``WG_Error``
+goes out per cycle at most: a client that pipelines refused twists, whatever their number,
+costs the bus one frame per cycle.  Which one: the newest, except that an answer to a request
+(an infeasible twist, a bad command, one refused while not enabled) never displaces a pending
+error of the robot's own state (a fault, an e-stop, a bus error, a lost commander or feedback,
+a wheel not tracking), so a flood of refusals cannot hide a fault from a CAN listener.  The
+others are counted (``errors_not_sent``); the frame's ``count`` field (every error so far)
+shows a receiver how many it did not get.
 """
 
 from __future__ import annotations
 
 import math
-from collections import deque
 from typing import TYPE_CHECKING
 
 from gateway.core.events import OdometryEvent, StatusEvent
@@ -37,8 +38,11 @@ if TYPE_CHECKING:
     from gateway.runtime.timing import LoopTimer
     from gateway.wire.can import WgCodec
 
-#: Most ``WG_Error`` frames sent per cycle (the newest errors; the others are counted).
+#: Most ``WG_Error`` frames sent per cycle (the others are counted).
 ERRORS_PER_CYCLE = 1
+#: The errors that answer a request: never sent in place of a pending error of another code.
+REQUEST_ERRORS = frozenset({ErrorCode.INFEASIBLE_TWIST, ErrorCode.BAD_COMMAND,
+                            ErrorCode.NOT_ENABLED})
 
 
 class Publisher:
@@ -68,8 +72,8 @@ class Publisher:
         self.next_due_s = 0.0
         self._status_counter = 0
         self._error_count = 0
-        # The errors whose WG_Error goes out with the next reports, the newest last.
-        self._errors: deque[ErrorReport] = deque(maxlen=ERRORS_PER_CYCLE)
+        # The error whose WG_Error goes out with the next reports.
+        self._error: ErrorReport | None = None
         #: News for socket subscribers, oldest first; the daemon empties it every cycle.
         self.outbox: list[OutboxEvent] = []
         #: The last error reported.
@@ -84,30 +88,33 @@ class Publisher:
         wheel: str | None = None,
     ) -> bool:
         """Report an error: in the outbox at once, on CAN as a ``WG_Error`` with the next
-        reports (:meth:`publish`), unless newer errors displace it before (see the module's
+        reports (:meth:`publish`) unless another error takes its place (see the module's
         docstring).
 
         :param wheel: the wheel the error is about, when it is not the rejection's.
-        :return: whether an error's frame was displaced by this one (it will not be sent).
+        :return: whether an error's frame will not be sent (this one's, or the one it
+            displaced).
         """
         self._error_count += 1
         err = rejection.error if rejection is not None else None
         if err is not None:
             wheel = err.wheel
-        errors = self._errors
-        displaced = len(errors) == errors.maxlen
-        errors.append(ErrorReport(
+        pending = self._error
+        report = ErrorReport(
             code=code,
             wheel=NO_WHEEL if wheel is None else self.wheel_of[wheel],
             constraint=ConstraintCode.from_name(err.constraint) if err else ConstraintCode.NONE,
             twist_counter=twist_counter,
             residual_m_s=err.residual_m_s if err else 0.0,
             count=self._error_count,
-        ))
-        self.next_due_s = -math.inf  # the reports are due now: this error's frame
+        )
+        if (pending is None or code not in REQUEST_ERRORS
+                or pending.code in REQUEST_ERRORS):
+            self._error = report
+        self.next_due_s = -math.inf  # the reports are due now: the pending error's frame
         self.last_error = LastError(code, message)
         self.outbox.append(self.last_error)
-        return displaced
+        return pending is not None
 
     def publish(self, now_s: float, limit_report: LimitReport | None,
                 bus_trouble: bool) -> list[Frame]:
@@ -118,9 +125,9 @@ class Publisher:
         :param bus_trouble: failed bursts or a controller not error-active lately.
         """
         frames: list[Frame] = []
-        if self._errors:
-            frames.extend(self.wg.encode_error(report) for report in self._errors)
-            self._errors.clear()
+        if self._error is not None:
+            frames.append(self.wg.encode_error(self._error))
+            self._error = None
         if now_s >= self._next_odom_s:
             self._next_odom_s = now_s + self._odom_period_s
             st = self.odometry.state

@@ -116,6 +116,11 @@ class Remote:
             if item is None:
                 return
             if isinstance(item, CommanderEvent):
+                if not item.alive:
+                    # What the commander published before its token went is in the rings by
+                    # now (Zenoh delivers its samples in order): taken before the loss.
+                    for twist in bridge.take_twists():
+                        self._request(twist, now_s)
                 self._commander(item.commander, item.alive, now_s)
             else:
                 self._request(item, now_s)

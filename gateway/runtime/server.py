@@ -42,7 +42,6 @@ from __future__ import annotations
 import dataclasses
 import errno
 import logging
-import select
 import selectors
 import time
 from collections import deque
@@ -51,7 +50,6 @@ from typing import TYPE_CHECKING, ClassVar
 
 from gateway.bus.edge import LOG_EVERY_S
 from gateway.bus.health import LogThrottle
-from gateway.core.errors import ConfigError
 from gateway.core.lifecycle import Closing
 from gateway.core.status import ServerCounters
 from gateway.runtime.access import (
@@ -63,7 +61,14 @@ from gateway.runtime.access import (
     remove_own_socket,
     remove_stale_socket,
 )
-from gateway.runtime.clients import fit_clients
+from gateway.runtime.clients import (
+    SpareFd,
+    check_settings,
+    connection_waits,
+    fit_clients,
+    log_failed_accept,
+    log_refused_uid,
+)
 from gateway.runtime.connections import Budget, Connection, Connections, Events
 from gateway.wire.socket import MAX_REQUEST_BYTES, Op
 
@@ -141,18 +146,9 @@ class ControlServer(Connections, Closing):
         partial_timeout_s: float | None = 5.0,
     ) -> None:
         self._closed = True
-        for name, value in (
-            ("max_message_bytes", max_message_bytes),
-            ("max_clients", max_clients),
-            ("max_pending_bytes_per_client", max_pending_bytes_per_client),
-        ):
-            if value < 1:
-                raise ConfigError(f"control socket {name}: expected at least 1, got {value}")
-        for name, timeout in (("idle_timeout_s", idle_timeout_s),
-                              ("partial_timeout_s", partial_timeout_s)):
-            if timeout is not None and not timeout > 0:
-                raise ConfigError(f"control socket {name}: expected a positive number of "
-                                  f"seconds or None, got {timeout}")
+        check_settings(max_message_bytes=max_message_bytes, max_clients=max_clients,
+                       max_pending_bytes_per_client=max_pending_bytes_per_client,
+                       idle_timeout_s=idle_timeout_s, partial_timeout_s=partial_timeout_s)
         self._allowed = admitted_uids(allowed_uids)
         self.path = Path(path)
         self.max_clients = fit_clients(max_clients, self.FD_HEADROOM)
@@ -174,6 +170,7 @@ class ControlServer(Connections, Closing):
         # Failed accepts and refused uids: a line per LOG_EVERY_S each, with the count.
         self._accept_log = LogThrottle(LOG_EVERY_S)
         self._uid_log = LogThrottle(LOG_EVERY_S)
+        self._spare = SpareFd()  # for the accept that finds no descriptor left
         #: Whether a loop calls begin_cycle (else every poll has a budget of its own).
         self._cycles = False
         self._cycle_requests = self.ROUND_REQUESTS
@@ -287,6 +284,7 @@ class ControlServer(Connections, Closing):
             self._drop(client, "server closing")
         self._selector.close()
         self._listener.close()
+        self._spare.close()
         remove_own_socket(self.path, self._identity)
         log.info("control socket %s closed", self.path)
 
@@ -327,13 +325,16 @@ class ControlServer(Connections, Closing):
             except (BlockingIOError, InterruptedError):
                 return
             except OSError as err:
-                if err.errno in _FD_ERRNOS and not self._connection_waits():
+                if err.errno in _FD_ERRNOS and not connection_waits(self._listener):
                     return  # nothing to accept (accept() fails all the same)
-                self._accept_failed(err, now_s)
-                if err.errno in _FD_ERRNOS and self._clients:
-                    # Out of descriptors below max_clients: the client idle longest makes
-                    # room, as at max_clients, and the accept is tried again.
-                    self._evict(full=False)
+                count = self._accept_log.note(now_s)
+                if count is not None:
+                    log_failed_accept(self.path, len(self._clients), err, count,
+                                      err.errno in _FD_ERRNOS and bool(self._clients))
+                if err.errno in _FD_ERRNOS and self._spare.release():
+                    # Out of descriptors below max_clients: the connection takes the spare's,
+                    # and the client idle longest makes room only for an admitted one.
+                    self._accept_spare(now_s)
                     continue
                 if err.errno in _RESOURCE_ERRNOS:  # retried at the next poll, not in a spin
                     self._selector.unregister(self._listener)
@@ -341,41 +342,41 @@ class ControlServer(Connections, Closing):
                 return
             self._admit(conn, now_s)
 
-    def _connection_waits(self) -> bool:
-        """Whether a connection waits to be accepted (``accept()`` fails with ``EMFILE`` even
-        when none does: no client is closed for nothing).  ``poll()`` needs no descriptor."""
-        waiting = select.poll()
-        waiting.register(self._listener, select.POLLIN)
-        return bool(waiting.poll(0))
-
-    def _accept_failed(self, err: OSError, now_s: float) -> None:
-        """Log a failed accept: one line per :data:`LOG_EVERY_S`, with the count."""
-        count = self._accept_log.note(now_s)
-        if count is None:
+    def _accept_spare(self, now_s: float) -> None:
+        try:
+            conn, _ = self._listener.accept()
+        except OSError:
+            self._spare.restore()
             return
-        room = (" (out of file descriptors: each new connection closes the client idle "
-                "longest)" if err.errno in _FD_ERRNOS and self._clients else "")
-        log.warning("control socket %s: accept failed with %d clients connected%s: %s%s",
-                    self.path, len(self._clients), room, err,
-                    f" ({count} failed accepts since the last such line)" if count > 1 else "")
+        if self._refused(conn, now_s):
+            self._spare.restore()
+            return
+        if self._clients:
+            self._evict(full=False)
+        self._spare.restore()
+        self._admit(conn, now_s, checked=True)
 
-    def _admit(self, conn: socket.socket, now_s: float) -> None:
-        conn.setblocking(False)
-        if self._allowed is not None:
-            uid = self._peer_uid(conn)
-            if uid is None or uid not in self._allowed:
-                count = self._uid_log.note(now_s)
-                if count is not None:
-                    log.warning("control socket %s: refused a client with uid %s (allowed: %s)%s",
-                                self.path, uid, sorted(self._allowed),
-                                f" ({count} refused since the last such line)" if count > 1
-                                else "")
-                self._counts = dataclasses.replace(self._counts, refused=self._counts.refused + 1)
-                conn.close()
-                return
+    def _admit(self, conn: socket.socket, now_s: float, checked: bool = False) -> None:
+        if not checked and self._refused(conn, now_s):
+            return
         while self._clients and len(self._clients) >= self.max_clients:
             self._evict()
         self._add(conn, now_s)
+
+    def _refused(self, conn: socket.socket, now_s: float) -> bool:
+        """Close and count a connection whose peer's uid is not allowed."""
+        conn.setblocking(False)
+        if self._allowed is None:
+            return False
+        uid = self._peer_uid(conn)
+        if uid is not None and uid in self._allowed:
+            return False
+        count = self._uid_log.note(now_s)
+        if count is not None:
+            log_refused_uid(self.path, uid, self._allowed, count)
+        self._counts = dataclasses.replace(self._counts, refused=self._counts.refused + 1)
+        conn.close()
+        return True
 
     def _evict(self, full: bool = True) -> None:
         """Close the client idle longest to make room: first those of which no line was

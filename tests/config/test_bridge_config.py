@@ -151,7 +151,8 @@ def test_an_absolute_topic_is_accepted() -> None:
 
 def test_listening_everywhere_and_multicast_are_warned_about() -> None:
     everywhere = ["tcp/0.0.0.0:7447", "tcp/[::]:7448", "tcp/[0:0:0:0:0:0:0:0]:7449",
-                  "udp/[::0]:7450"]
+                  "udp/[::0]:7450", "tcp/0:7452", "tcp/000.000.000.000:7453",
+                  "tcp/[::ffff:0.0.0.0]:7454"]
     _, warnings = parse(bridge={"zenoh": {"listen": [*everywhere, "tcp/127.0.0.1:7451"],
                                           "multicast_scouting": True}})
     text = "\n".join(warnings)

@@ -172,6 +172,32 @@ def test_a_published_twist_is_taken_before_the_token_events_that_came_after_it(
     assert max(wheel_speeds(r)) < 0.05, wheel_speeds(r)
 
 
+def test_a_twist_published_while_the_loop_drains_the_inbox_is_taken_before_the_loss(
+        rig: tuple[Rig, FakeBridge]) -> None:
+    """The commander's last twist reaches its ring after the loop took the rings this cycle,
+    and its token's loss reaches the inbox right after: the twist is taken before the loss is
+    acted on, so the loss stops the robot for good (a review saw the dead commander's twist
+    taken a cycle later, driving the robot again; with ``cmd_timeout_s`` 30 s here it would
+    have driven on)."""
+    r, fake = rig
+    fake.inbox.append(CommanderEvent("teleop1", True))
+    r.advance(0.1, serve)
+    take = fake.take
+
+    def take_after_the_last_twist() -> Inbound | CommanderEvent | None:
+        item = take()
+        if item == CommanderEvent("teleop1", False):
+            fake.twist = twist_from("teleop1", 0.4)  # arrived just before the loss
+        return item
+
+    fake.take = take_after_the_last_twist  # type: ignore[method-assign]
+    fake.inbox.append(CommanderEvent("teleop1", False))
+    r.advance(r.period, serve)
+    r.advance(1.5, serve)
+    assert r.gw.supervisor.target is ZERO
+    assert max(wheel_speeds(r)) < 0.05, wheel_speeds(r)
+
+
 def test_the_loop_takes_at_least_one_waiting_item_a_cycle_within_its_share(
         rig: tuple[Rig, FakeBridge], monkeypatch: pytest.MonkeyPatch) -> None:
     """With no time to spare (a share of 0), every cycle still takes one query or token

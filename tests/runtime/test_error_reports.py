@@ -1,6 +1,7 @@
 """Errors on CAN (``WG_Error``) under a flood of refused requests: a request never sends on the
 bus itself; its error goes out with the next cycle's reports, untracked, at most one a cycle
-(the newest), the others counted in ``errors_not_sent``; and refused or projected twists log
+(the newest, but never a request's answer in place of an error of the robot's state), the
+others counted in ``errors_not_sent``; and refused or projected twists log
 one line per 5 s, not one each.
 
 On simulated time with the device simulators (the TurtleBot3 at 100 Hz, as the safety tests);
@@ -108,6 +109,30 @@ def test_an_error_of_the_cycle_displaces_the_refused_requests_before_it(
     rig.advance(rig.period)
     reports = errors_on_can(rig)
     assert [(r.code, r.twist_counter) for r in reports] == [(ErrorCode.NOT_ENABLED, counter)]
+    assert rig.gw.counts.errors_not_sent == 5
+
+
+@pytest.mark.parametrize("state_first", [True, False], ids=["state-first", "state-last"])
+def test_refused_requests_never_displace_an_error_of_the_robots_state(
+    rig: Rig, pilot: SocketPilot, state_first: bool
+) -> None:
+    """A lost commander's error (the bridge's deadman, reported between cycles) reaches CAN
+    whether refused twists were served before or after it: an answer to a request never takes
+    the place of a pending error of the robot's own state (a review saw the deadman's error
+    displaced by a planner's refused twist)."""
+    disable(rig, pilot)
+
+    def lost() -> None:
+        rig.gw.report_error(ErrorCode.COMMAND_TIMEOUT, "commander teleop1 disappeared")
+
+    if state_first:
+        lost()
+    pilot.sock.sendall(b'{"op":"twist","vx":0.1}\n' * 5)
+    serve_without_a_cycle(rig, pilot, 5)
+    if not state_first:
+        lost()
+    rig.advance(rig.period)
+    assert [r.code for r in errors_on_can(rig)] == [ErrorCode.COMMAND_TIMEOUT]
     assert rig.gw.counts.errors_not_sent == 5
 
 

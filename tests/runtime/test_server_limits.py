@@ -159,6 +159,40 @@ class ForeignUserServer(ControlServer):
         return 4242
 
 
+class SomeForeignServer(ControlServer):
+    """Sees the first two clients as this user, every later one as uid 4242."""
+
+    seen = 0
+
+    def _peer_uid(self, sock: socket.socket) -> int | None:
+        self.seen += 1
+        return os.getuid() if self.seen <= 2 else 4242
+
+
+def test_out_of_descriptors_a_refused_uid_closes_no_allowed_client(sock_path: Path) -> None:
+    """The connection takes the spare descriptor and its uid is checked before any client is
+    closed for it: a stranger is refused, the allowed clients stay (a review saw an allowed
+    client closed for a stranger that was then refused)."""
+    strangers = [socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) for _ in range(2)]
+    try:
+        with SomeForeignServer(sock_path, allowed_uids=frozenset({1})) as srv, \
+                raw_client(sock_path) as a, raw_client(sock_path) as b:
+            poll_until(srv, accepted(srv, 2), "two allowed clients")
+            with soft_limit(lowest_free_fd()):  # no descriptor free: accept() fails, EMFILE
+                for n, stranger in enumerate(strangers, start=1):
+                    stranger.connect(str(sock_path))
+                    poll_until(srv, refused_count(srv, n), f"stranger {n} refused")
+            counters = srv.counters
+            a.sock.sendall(b'{"op":"stop","id":1}\n')
+            b.sock.sendall(b'{"op":"stop","id":2}\n')
+            got = poll_until(srv, lambda ev: len(ev) == 2, "both allowed clients' lines")
+            assert sorted(str(item.id) for _, item in got) == ["1", "2"]  # type: ignore[union-attr]
+    finally:
+        for stranger in strangers:
+            stranger.close()
+    assert (counters.refused, counters.evicted, counters.clients) == (2, 0, 2)
+
+
 def test_refused_uids_log_a_line_per_5_s_with_the_count(
     sock_path: Path, caplog: pytest.LogCaptureFixture
 ) -> None:

@@ -328,12 +328,18 @@ def _spin(ctx: click.Context, cfg: GatewayConfig, motor: MotorConfig, plan: Spin
                   f"{describe(plan, wheel)}.  "
                   f"{'Any key (Ctrl-Z too) or ' if tty_fd is not None else ''}"
                   f"Ctrl-C stops; the stop is always sent.")
-        with Deadman(tty_fd) as deadman:
-            record = run_spin(bus, plan, deadman, rate_hz=cfg.loop.rate_hz,
-                              enable_timeout_s=cfg.loop.enable_timeout_s,
-                              watchdog=cfg.loop.controller_watchdog,
-                              can_ids=cfg.loop.can_ids, probe=probe, header=header,
-                              announce=lambda line: click.echo(f"spin: {line}", err=True))
+        deadman = Deadman(tty_fd)
+        try:
+            with deadman:
+                record = run_spin(bus, plan, deadman, rate_hz=cfg.loop.rate_hz,
+                                  enable_timeout_s=cfg.loop.enable_timeout_s,
+                                  watchdog=cfg.loop.controller_watchdog,
+                                  can_ids=cfg.loop.can_ids, probe=probe, header=header,
+                                  announce=lambda line: click.echo(f"spin: {line}", err=True))
+        except BaseException:
+            if deadman.suspend_asked:  # a SIGTSTP, then an error: the stop is sent, suspend
+                suspend()
+            raise
     if record.stop:
         click.echo(f"spin: stop sent (zero and disarm) after {record.ended_s:.1f} s"
                    f"{f', stopped by {record.stopped_by}' if record.stopped_by else ''}",

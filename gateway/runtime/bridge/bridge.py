@@ -155,7 +155,9 @@ class Bridge:
                 session = open_session(self.settings.zenoh)
             except BridgeError as err:
                 delay = min(2.0 * delay, CONNECT_MAX_S)
-                log.debug("bridge: %s", err)
+                # (an unreachable router was said at start; anything else is news)
+                log.log(logging.DEBUG if _UNREACHABLE in str(err) else logging.WARNING,
+                        "bridge: %s; trying again in %g s", err, delay)
                 continue
             log.info("bridge: connected to the router after %.0f s",
                      time.monotonic() - since)
@@ -301,7 +303,7 @@ class Bridge:
             self._error.put(event_line(err))
         if news.errors_dropped:
             lost = LastError(ErrorCode.BAD_COMMAND, f"{news.errors_dropped} errors were not "
-                             f"published: the bridge fell behind (a flood of bad requests?)")
+                             f"published: more were waiting for the bridge than it keeps")
             self._error.put(event_line(lost))
             log.warning("bridge: %s", lost.message)
 
