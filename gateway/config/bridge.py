@@ -81,7 +81,8 @@ FOXGLOVE_KEYS: Mapping[str, OptionSpec] = MappingProxyType({
 
 #: A Zenoh locator: protocol, slash, address (host:port, a path for unix sockets), then
 #: optionally Zenoh's ``?metadata`` and ``#config`` parts.
-_ENDPOINT = re.compile(r"^(tcp|udp|tls|quic|ws|unixsock-stream|unixpipe)/([^?#\s]+)\S*$")
+_ENDPOINT = re.compile(r"^(tcp|udp|tls|quic|ws|unixsock-stream|unixpipe)/([^?#\s\x00-\x1f\x7f]+)"
+                       r"[^\s\x00-\x1f\x7f]*$")
 #: The protocols whose address is ``host:port``.
 _IP = frozenset({"tcp", "udp", "tls", "quic", "ws"})
 #: ``host:port``, the host an IPv4 address, a name or a bracketed IPv6 address.
@@ -124,7 +125,7 @@ def _everywhere(endpoint: str) -> bool:
     except ValueError:  # a name, or an IPv4 spelling only inet_aton takes ("0", "0.0")
         try:
             return socket.inet_aton(host) == bytes(4)
-        except OSError:
+        except (OSError, ValueError):  # (ValueError: a NUL in the name)
             return False
     mapped = getattr(address, "ipv4_mapped", None)
     return address.is_unspecified or (mapped is not None and mapped.is_unspecified)

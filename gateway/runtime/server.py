@@ -319,6 +319,7 @@ class ControlServer(Connections, Closing):
             self._full = False
 
     def _accept(self, now_s: float) -> None:
+        self._spare.restore()  # (none held since the last EMFILE: a descriptor may be free now)
         for _ in range(self.ACCEPT_BATCH):
             try:
                 conn, _ = self._listener.accept()
@@ -332,9 +333,11 @@ class ControlServer(Connections, Closing):
                     log_failed_accept(self.path, len(self._clients), err, count,
                                       err.errno in _FD_ERRNOS and bool(self._clients))
                 if err.errno in _FD_ERRNOS and self._spare.release():
-                    # Out of descriptors below max_clients: the connection takes the spare's,
-                    # and the client idle longest makes room only for an admitted one.
+                    # Out of descriptors: accepted into the spare's; room made if admitted.
                     self._accept_spare(now_s)
+                    continue
+                if err.errno in _FD_ERRNOS and self._clients:
+                    self._evict(full=False)  # (no spare: room first, as at max_clients)
                     continue
                 if err.errno in _RESOURCE_ERRNOS:  # retried at the next poll, not in a spin
                     self._selector.unregister(self._listener)
@@ -344,17 +347,14 @@ class ControlServer(Connections, Closing):
 
     def _accept_spare(self, now_s: float) -> None:
         try:
-            conn, _ = self._listener.accept()
+            conn: socket.socket | None = self._listener.accept()[0]
         except OSError:
-            self._spare.restore()
-            return
-        if self._refused(conn, now_s):
-            self._spare.restore()
-            return
-        if self._clients:
-            self._evict(full=False)
+            conn = None
+        if conn is not None and not self._refused(conn, now_s):
+            if self._clients:
+                self._evict(full=False)
+            self._admit(conn, now_s, checked=True)
         self._spare.restore()
-        self._admit(conn, now_s, checked=True)
 
     def _admit(self, conn: socket.socket, now_s: float, checked: bool = False) -> None:
         if not checked and self._refused(conn, now_s):

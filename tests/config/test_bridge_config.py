@@ -106,6 +106,8 @@ def test_the_attachment_of_jazzys_first_rmw_zenoh_releases() -> None:
     ({"zenoh": {"connect": ["udp/10.0.0.2:99999"]}},
      "bridge.zenoh.connect[0]: expected 'udp/<host>:<port>'"),
     ({"zenoh": {"connect": ["tcp/::1:7447"]}}, "bridge.zenoh.connect[0]: expected 'tcp/<host>"),
+    ({"zenoh": {"listen": ["tcp/a\x00b:7447"]}},
+     "bridge.zenoh.listen[0]: expected an endpoint '<protocol>/<address>'"),
     ({"ros2": {"odom": "cmd_vel"}},
      "bridge.ros2.odom: expected a topic other than cmd_vel's, got 'cmd_vel', which is "
      "'/cmd_vel' as cmd_vel is"),

@@ -135,6 +135,33 @@ def test_out_of_descriptors_the_client_idle_longest_makes_room(
     assert "out of file descriptors" in failed[0]
 
 
+def test_the_spare_descriptor_comes_back_after_an_accept_with_no_client_to_close(
+    sock_path: Path
+) -> None:
+    """The first time descriptors run out, no client is connected: the new one takes the
+    spare's descriptor and no other is freed.  Once descriptors are free again the spare is
+    taken back, so the next time an idle client still makes room for an e-stop (a review saw
+    the spare lost for good, and with it the remedy)."""
+    first = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    second = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    try:
+        with ControlServer(sock_path) as srv:
+            with soft_limit(lowest_free_fd()):
+                first.connect(str(sock_path))
+                poll_until(srv, accepted(srv, 1), "the first client, into the spare's place")
+            srv.poll(0.01)  # descriptors free again: the spare is taken back
+            with soft_limit(lowest_free_fd()):
+                second.settimeout(WAIT_S)
+                second.connect(str(sock_path))
+                second.sendall(b'{"op":"estop","id":"e"}\n')
+                events = poll_until(srv, bool, "the second client's estop")
+            assert [item.id for _, item in events] == ["e"]  # type: ignore[union-attr]
+            assert (srv.counters.accepted, srv.counters.refused) == (2, 1)  # the first closed
+    finally:
+        first.close()
+        second.close()
+
+
 def test_accepts_failing_without_a_client_to_close_log_a_line_per_5_s(
     server: ControlServer, sock_path: Path, caplog: pytest.LogCaptureFixture
 ) -> None:

@@ -74,6 +74,10 @@ if TYPE_CHECKING:
     from gateway.core.types import MotorConfig
 
 
+#: ``ctx.meta`` key: a SIGTSTP came during a spin that then failed (suspend after the error).
+_SUSPEND = "wheelgate.spin.suspend"
+
+
 def motors_by_name(cfg: GatewayConfig) -> dict[str, MotorConfig]:
     """Every motor that spin can turn, by the names it takes: a drive motor's wheel, a
     steering actuator's name (``front steering``, also ``front_steering`` and
@@ -337,8 +341,9 @@ def _spin(ctx: click.Context, cfg: GatewayConfig, motor: MotorConfig, plan: Spin
                                   can_ids=cfg.loop.can_ids, probe=probe, header=header,
                                   announce=lambda line: click.echo(f"spin: {line}", err=True))
         except BaseException:
-            if deadman.suspend_asked:  # a SIGTSTP, then an error: the stop is sent, suspend
-                suspend()
+            # A SIGTSTP, then an error: the stop is sent; suspend once the bus is closed and
+            # the error said (_failed).
+            ctx.meta[_SUSPEND] = deadman.suspend_asked
             raise
     if record.stop:
         click.echo(f"spin: stop sent (zero and disarm) after {record.ended_s:.1f} s"
@@ -363,6 +368,8 @@ def _failed(ctx: click.Context, err: GatewayError, as_json: bool) -> NoReturn:
         click.echo(f"Error: {err}", err=True)
     if after:
         click.echo(after, err=True)
+    if ctx.meta.get(_SUSPEND):  # a SIGTSTP came before the error: the stop is sent, suspend
+        suspend()
     if as_json:
         code = ("bus_in_use" if isinstance(cause, BusInUseError) else
                 "not_armed" if isinstance(cause, ArmRefusedError) else
