@@ -167,6 +167,38 @@ def test_sigtstp_stops_the_wheel_then_suspends(runner: CliRunner, channel: str, 
     assert "stopped by SIGTSTP" in result.stderr
 
 
+def test_sigtstp_then_an_error_stops_the_wheel_says_so_then_suspends(
+        runner: CliRunner, channel: str, tmp_path: Path,
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """A SIGTSTP and an error in the same step: the stop goes out, the error is said, then the
+    command suspends (a review saw a failing spin drop the SIGTSTP, then suspend with the bus
+    still open, before the message)."""
+    config = robot_config(tmp_path / "robot.yaml", channel)
+    setpoint = SpinPlan.setpoint
+
+    def broken(self: SpinPlan, t_s: float) -> float:
+        if t_s > 0.3:
+            os.kill(os.getpid(), signal.SIGTSTP)  # taken by the deadman's handler
+            raise EncodeError("broken on purpose")
+        return setpoint(self, t_s)
+
+    monkeypatch.setattr(SpinPlan, "setpoint", broken)
+    unhandled: list[int] = []
+    previous = signal.signal(signal.SIGTSTP, lambda signum, frame: unhandled.append(signum))
+    suspended: list[list[Frame]] = []
+    try:
+        with Shaft(config, "left") as shaft, Listener(channel) as bus:
+            monkeypatch.setattr(spin_command, "suspend", lambda: suspended.append(bus.frames()))
+            result = runner.invoke(main, ["spin", "-c", str(config), "left", "--duration", "10"])
+            assert len(suspended) == 1, result.output
+            assert_stopped(shaft, suspended[0])  # the stop was on the bus before it
+    finally:
+        signal.signal(signal.SIGTSTP, previous)
+    assert unhandled == []
+    assert result.exit_code == 1, result.output
+    assert "Error: broken on purpose" in result.stderr
+
+
 def test_the_deadman_takes_keys_and_signals_and_restores_both() -> None:
     master, slave = os.openpty()
     before = termios.tcgetattr(slave)
