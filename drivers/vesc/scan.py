@@ -113,8 +113,8 @@ class VescProbe(ScanProbe):
                      for k in range(BROADCAST_ID))
 
     def found_by(self, answer: Answer) -> Found | None:
-        pong = _pong(answer)
-        if pong is None or pong.node_id != answer.request.node_id:
+        # (the answer's frame passed PingRequest.answered_by: a PONG of the pinged ID)
+        if answer.request.key != PING or answer.frame is None:
             return None
         return Found(answer.request.node_id, True, "pong")
 

@@ -233,6 +233,12 @@ class BurstTracker:
         return worst
 
 
+def since_last(count: int, what: str) -> str:
+    """The tail of a throttled log line: `` (N <what> since the last such line)`` when more
+    than this one occurred (:meth:`LogThrottle.note`'s count), else nothing."""
+    return f" ({count} {what} since the last such line)" if count > 1 else ""
+
+
 class LogThrottle:
     """At most one log line per ``interval_s`` for one kind of trouble, with the count.
 

@@ -31,6 +31,7 @@ from collections import OrderedDict
 from dataclasses import replace
 from typing import TYPE_CHECKING
 
+from gateway.bus.health import since_last
 from gateway.core.errors import ConfigError
 from gateway.core.status import ServerCounters
 from gateway.wire.socket import LineFramer, Request, Topic
@@ -95,16 +96,14 @@ def log_failed_accept(path: object, clients: int, err: OSError, count: int,
     room = (" (out of file descriptors: each new connection closes the client idle longest)"
             if evicting else "")
     log.warning("control socket %s: accept failed with %d clients connected%s: %s%s", path,
-                clients, room, err,
-                f" ({count} failed accepts since the last such line)" if count > 1 else "")
+                clients, room, err, since_last(count, "failed accepts"))
 
 
 def log_refused_uid(path: object, uid: int | None, allowed: Iterable[int], count: int) -> None:
     """The line of a connection refused for its peer's uid (``count``: refused since the
     last line)."""
     log.warning("control socket %s: refused a client with uid %s (allowed: %s)%s", path, uid,
-                sorted(allowed),
-                f" ({count} refused since the last such line)" if count > 1 else "")
+                sorted(allowed), since_last(count, "refused"))
 
 
 def connection_waits(listener: socket.socket) -> bool:

@@ -30,7 +30,7 @@ import time
 from typing import TYPE_CHECKING
 
 from gateway.bus.edge import LOG_EVERY_S, BusEdge, bus_options
-from gateway.bus.health import LogThrottle
+from gateway.bus.health import LogThrottle, since_last
 from gateway.core.control import Accepted, Rejection, Source, Supervisor
 from gateway.core.errors import EncodeError, GatewayError, KinematicsError
 from gateway.core.kinematics import Odometry, apply_limits
@@ -165,8 +165,7 @@ class Gateway:
             throttle = self._twist_logs[key] = LogThrottle(LOG_EVERY_S)
         count = throttle.note(now_s)
         if count is not None:
-            log.log(level, "%s: %s%s", key, text,
-                    f" ({count} such twists since the last such line)" if count > 1 else "")
+            log.log(level, "%s: %s%s", key, text, since_last(count, "such twists"))
 
     def report_error(
         self,
@@ -178,9 +177,9 @@ class Gateway:
     ) -> None:
         """Report an error: in the outbox for socket clients at once, and on CAN as a
         ``WG_Error`` with the cycle's reports -- after its burst of commands, untracked; the
-        next cycle's for an error reported between cycles (a request's) -- at most
-        :data:`~gateway.runtime.publish.ERRORS_PER_CYCLE` per cycle, the newest, the others
-        counted (``errors_not_sent``).  Never sends: a request refused between cycles costs
+        next cycle's for an error reported between cycles (a request's) -- at most one a cycle
+        (:meth:`~gateway.runtime.publish.Publisher.error` says which), the others counted
+        (``errors_not_sent``).  Never sends: a request refused between cycles costs
         the bus nothing until the cycle, whatever the number of requests.
 
         :param wheel: the wheel the error is about, when it is not the rejection's.

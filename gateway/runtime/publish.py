@@ -38,8 +38,6 @@ if TYPE_CHECKING:
     from gateway.runtime.timing import LoopTimer
     from gateway.wire.can import WgCodec
 
-#: Most ``WG_Error`` frames sent per cycle (the others are counted).
-ERRORS_PER_CYCLE = 1
 #: The errors that answer a request: never sent in place of a pending error of another code.
 REQUEST_ERRORS = frozenset({ErrorCode.INFEASIBLE_TWIST, ErrorCode.BAD_COMMAND,
                             ErrorCode.NOT_ENABLED})

@@ -16,7 +16,6 @@ import time
 from typing import TYPE_CHECKING, Any
 
 from gateway.core.bridge_settings import DeadmanAction, FoxgloveSettings
-from gateway.core.errors import GatewayError
 from gateway.core.events import OdometryEvent, StatusEvent
 from gateway.core.status import LastError
 from gateway.core.supervision import Source
@@ -24,7 +23,6 @@ from gateway.core.types import ErrorCode
 from gateway.runtime.bridge.inbox import CommanderEvent, Inbound
 from gateway.runtime.mailbox import Snapshot, SteerSample, WheelSample
 from gateway.runtime.requests import RequestHandler
-from gateway.wire.socket import reply_error
 
 if TYPE_CHECKING:
     from collections.abc import Callable, Sequence
@@ -108,34 +106,29 @@ class Remote:
         bridge = self.bridge
         if bridge is None:
             return
-        for twist in bridge.take_twists():
-            self._request(twist, now_s)
+        self._take_twists(bridge, now_s)
+        item = bridge.take()
+        if item is None:  # (the common case: no clock read)
+            return
         end = time.perf_counter() + SERVE_SHARE * self.gateway.period_s
         for _ in range(POLL_MAX):
-            item = bridge.take()
-            if item is None:
-                return
             if isinstance(item, CommanderEvent):
                 if not item.alive:
                     # What the commander published before its token went is in the rings by
                     # now (Zenoh delivers its samples in order): taken before the loss.
-                    for twist in bridge.take_twists():
-                        self._request(twist, now_s)
+                    self._take_twists(bridge, now_s)
                 self._commander(item.commander, item.alive, now_s)
             else:
                 self._request(item, now_s)
-            if time.perf_counter() > end:
+            if time.perf_counter() > end or (item := bridge.take()) is None:
                 return
 
+    def _take_twists(self, bridge: Bridge, now_s: float) -> None:
+        for twist in bridge.take_twists():
+            self._request(twist, now_s)
+
     def _request(self, item: Inbound, now_s: float) -> None:
-        assert self.bridge is not None
-        try:
-            self.requests.handle(item.client, item.request, now_s)
-        except (GatewayError, ValueError, UnicodeError) as err:  # never out of the loop
-            log.warning("bridge request failed: %s", err)
-            self.bridge.reply(item.client, reply_error(None, ErrorCode.BAD_COMMAND,
-                                                       f"request failed: {err}"))
-            return
+        self.requests.handle_safely(item.client, item.request, now_s)  # never out of the loop
         accepted = self.requests.last_accepted
         if item.commander is not None and accepted is not None:
             self.deadman.accepted(item.commander, accepted)

@@ -26,8 +26,8 @@ import json
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from gateway.core.errors import ConfigError, DriverNotFoundError
-from gateway.drive.registry import get_driver_class
+from gateway.apps.scan.known import EXTENDED_KEY, extended_spec
+from gateway.core.errors import ConfigError
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -36,7 +36,6 @@ if TYPE_CHECKING:
 
 
 #: The motor-block key that chooses a node's identifier type, for the drivers that have one.
-EXTENDED_KEY = "extended_id"
 
 
 @dataclass(frozen=True, slots=True, order=True)
@@ -208,10 +207,7 @@ def assign(
 def _address(doc: Document, path: KeyPath, driver: str, extended: bool) -> None:
     """Write the node's identifier type into the block at ``path`` when its driver takes one
     (see the module's doc) and the block, or the defaults it takes it from, says another."""
-    try:
-        spec = get_driver_class(driver).OPTIONS.get(EXTENDED_KEY)
-    except DriverNotFoundError:
-        return  # (the loader says why)
+    spec = extended_spec(driver)
     if spec is None:
         return
     block = doc.get(path)

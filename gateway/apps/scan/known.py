@@ -22,6 +22,7 @@ if TYPE_CHECKING:
     from collections.abc import Iterable, Sequence
 
     from gateway.apps.scan.own import MotorClaims
+    from gateway.core.options import OptionSpec
     from gateway.core.types import MotorConfig
 
 #: The motor-block key that chooses the identifier type, for the drivers that have one.
@@ -88,7 +89,7 @@ class KnownMotors:
         if k is None or k.takes(extended):
             return None
         fix = ""
-        if _takes_key(k.motor.driver):
+        if extended_spec(k.motor.driver) is not None:
             fix = f" (set {EXTENDED_KEY}: {'true' if extended else 'false'} in that block)"
         return (f"not the configuration's {k.label()}: this controller answers on "
                 f"{bits(extended)} identifiers{fix}")
@@ -112,9 +113,10 @@ class KnownMotors:
         return out
 
 
-def _takes_key(driver: str) -> bool:
-    """Whether the driver's blocks choose the identifier type (:data:`EXTENDED_KEY`)."""
+def extended_spec(driver: str) -> OptionSpec | None:
+    """The driver's :data:`EXTENDED_KEY` option, when its blocks choose the identifier type
+    (``None``: they do not, or no such driver: the loader says why)."""
     try:
-        return EXTENDED_KEY in get_driver_class(driver).OPTIONS
+        return get_driver_class(driver).OPTIONS.get(EXTENDED_KEY)
     except DriverNotFoundError:
-        return False
+        return None

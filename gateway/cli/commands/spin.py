@@ -74,9 +74,6 @@ if TYPE_CHECKING:
     from gateway.core.types import MotorConfig
 
 
-#: ``ctx.meta`` key: a SIGTSTP came during a spin that then failed (suspend after the error).
-_SUSPEND = "wheelgate.spin.suspend"
-
 
 def motors_by_name(cfg: GatewayConfig) -> dict[str, MotorConfig]:
     """Every motor that spin can turn, by the names it takes: a drive motor's wheel, a
@@ -287,10 +284,7 @@ def command(ctx: click.Context, config_path: str | None, motor_name: str, speed:
             raise
         fail_json_of(ctx, err)
     wheel = next((w for w in cfg.wheels if w.name == motor.wheel), None)
-    try:
-        record = _spin(ctx, cfg, motor, plan, wheel, sim, config_path, socket_path)
-    except GatewayError as err:
-        _failed(ctx, err, as_json)
+    record = _spin(ctx, cfg, motor, plan, wheel, sim, config_path, socket_path, as_json)
     measured = measure(record.plan, record.samples, record.ended_s)
     seen, unchecked = None, ""
     if sim:
@@ -319,32 +313,31 @@ def command(ctx: click.Context, config_path: str | None, motor_name: str, speed:
 
 def _spin(ctx: click.Context, cfg: GatewayConfig, motor: MotorConfig, plan: SpinPlan,
           wheel: Wheel | None, sim: bool, config_path: str | None,
-          socket_path: str | None) -> SpinRecord:
-    """Refuse while a daemon answers, then spin on the bus; the stop line once it is sent."""
-    if not sim:
-        refuse_daemon(socket_for(ctx, config_path, socket_path), cfg.name)
-        if cfg.bus.interface == "virtual":
-            click.echo(f"spin: note: python-can's virtual bus exists only inside this process, "
-                       f"so only simulators in it answer (--sim); {VIRTUAL_HINT}", err=True)
-    tty_fd = _tty_fd()
-    with _bus(cfg, motor, sim) as (bus, probe, where):
-        header = (f"{motor.wheel} ({motor.driver} node {motor.node_id}) on {where}: "
-                  f"{describe(plan, wheel)}.  "
-                  f"{'Any key (Ctrl-Z too) or ' if tty_fd is not None else ''}"
-                  f"Ctrl-C stops; the stop is always sent.")
-        deadman = Deadman(tty_fd)
-        try:
-            with deadman:
+          socket_path: str | None, as_json: bool) -> SpinRecord:
+    """Refuse while a daemon answers, then spin on the bus; the stop line once it is sent (an
+    error: :func:`_failed`, once the bus is closed)."""
+    deadman: Deadman | None = None
+    try:
+        if not sim:
+            refuse_daemon(socket_for(ctx, config_path, socket_path), cfg.name)
+            if cfg.bus.interface == "virtual":
+                click.echo(f"spin: note: python-can's virtual bus exists only inside this "
+                           f"process, so only simulators in it answer (--sim); {VIRTUAL_HINT}",
+                           err=True)
+        tty_fd = _tty_fd()
+        with _bus(cfg, motor, sim) as (bus, probe, where):
+            header = (f"{motor.wheel} ({motor.driver} node {motor.node_id}) on {where}: "
+                      f"{describe(plan, wheel)}.  "
+                      f"{'Any key (Ctrl-Z too) or ' if tty_fd is not None else ''}"
+                      f"Ctrl-C stops; the stop is always sent.")
+            with Deadman(tty_fd) as deadman:
                 record = run_spin(bus, plan, deadman, rate_hz=cfg.loop.rate_hz,
                                   enable_timeout_s=cfg.loop.enable_timeout_s,
                                   watchdog=cfg.loop.controller_watchdog,
                                   can_ids=cfg.loop.can_ids, probe=probe, header=header,
                                   announce=lambda line: click.echo(f"spin: {line}", err=True))
-        except BaseException:
-            # A SIGTSTP, then an error: the stop is sent; suspend once the bus is closed and
-            # the error said (_failed).
-            ctx.meta[_SUSPEND] = deadman.suspend_asked
-            raise
+    except GatewayError as err:  # (a SIGTSTP came first: suspend once the error is said)
+        _failed(ctx, err, as_json, deadman is not None and deadman.suspend_asked)
     if record.stop:
         click.echo(f"spin: stop sent (zero and disarm) after {record.ended_s:.1f} s"
                    f"{f', stopped by {record.stopped_by}' if record.stopped_by else ''}",
@@ -356,10 +349,11 @@ def _spin(ctx: click.Context, cfg: GatewayConfig, motor: MotorConfig, plan: Spin
     return record
 
 
-def _failed(ctx: click.Context, err: GatewayError, as_json: bool) -> NoReturn:
-    """An error of the spin, then whether the stop was sent (a refusal sent nothing); with
-    ``--json`` a JSON error object on stdout (``status --json``'s, whose message says the
-    same).  Exit 1."""
+def _failed(ctx: click.Context, err: GatewayError, as_json: bool,
+            suspend_after: bool) -> NoReturn:
+    """An error of the spin, then whether the stop was sent (a refusal sent nothing), then,
+    when a SIGTSTP came before the error, the suspension; with ``--json`` a JSON error object
+    on stdout (``status --json``'s, whose message says the same).  Exit 1."""
     cause = err.cause if isinstance(err, SpinFailedError) else err
     after = ("spin: stop sent (zero and disarm) after the error"
              if isinstance(err, SpinFailedError) else
@@ -368,7 +362,7 @@ def _failed(ctx: click.Context, err: GatewayError, as_json: bool) -> NoReturn:
         click.echo(f"Error: {err}", err=True)
     if after:
         click.echo(after, err=True)
-    if ctx.meta.get(_SUSPEND):  # a SIGTSTP came before the error: the stop is sent, suspend
+    if suspend_after:
         suspend()
     if as_json:
         code = ("bus_in_use" if isinstance(cause, BusInUseError) else
