@@ -35,9 +35,14 @@ SHUTDOWN at once.
 
 **Controller-side protection** (:mod:`drivers.cia402.protection`): :meth:`~Cia402Driver.poll`
 sends the gateway's heartbeat; the enable sequence writes each drive's heartbeat consumer
-(0x1016:01) and abort connection option code (0x6007) and reads both back before NMT start
+(0x1016:01), abort connection option code (0x6007) and error behaviour (0x1029:01 = 0: NMT
+PRE-OPERATIONAL at the heartbeat event; optional) and reads them back before NMT start
 (:attr:`Cia402Driver.CONFIGURES_PROTECTION`); when that fails,
 :meth:`~gateway.drive.driver.MotorDriver.may_arm` decides whether the drive is enabled anyway.
+It then reads the quick stop option code (0x605A), which :meth:`~Cia402Driver.protection`
+reports as the action (a warning where the motor would coast).  After a heartbeat event the
+drive is PRE-OPERATIONAL: its heartbeat or EMCY ends the armed sequence, and the next
+:meth:`~Cia402Driver.enable` configures it again, ending with NMT start.
 
 Reference: CiA 301 and CiA 402 (https://www.can-cia.org/can-knowledge/cia402-series).
 """
@@ -57,7 +62,7 @@ from drivers.cia402.codec import (
     make_rpdo,
     make_sync,
 )
-from drivers.cia402.enums import CobBase, Controlword, State
+from drivers.cia402.enums import CobBase, Controlword, ObjectIndex, State
 from drivers.cia402.options import Cia402Options, check_steering
 from drivers.cia402.phase import Phase
 from drivers.cia402.protection import FIX, HostHeartbeat, describe, host_settings
@@ -83,6 +88,7 @@ _PDO_SIZE = PDO_STRUCT.size
 _PDO_UNPACK = PDO_STRUCT.unpack
 _POSITION, _VELOCITY = Received.POSITION, Received.VELOCITY
 _ARMED = Phase.ARMED
+_QUICK_STOP_OPTION = (ObjectIndex.QUICK_STOP_OPTION_CODE, 0)
 _RUNNING = State.OPERATION_ENABLED
 
 
@@ -157,10 +163,12 @@ class Cia402Driver(MotorDriver[Cia402Options]):
     # ----------------------------------------------------------------- hooks
 
     def _enable(self, now_s: float) -> list[Frame]:
-        """Start the enable sequence of every node that is not already armed."""
+        """Start the enable sequence of every node that is not armed, or is armed but silent
+        (OFFLINE: a drive whose heartbeat event went unheard is PRE-OPERATIONAL and needs
+        the sequence's NMT start)."""
         out: list[Frame] = []
         for i, axis in enumerate(self._axes):
-            if axis.seq.phase is not Phase.ARMED:
+            if axis.seq.phase is not Phase.ARMED or not self.live.alive(i, now_s):
                 axis.boot_restarts = 0
                 axis.restart_pending = False
                 out += axis.seq.start(now_s)
@@ -342,13 +350,15 @@ class Cia402Driver(MotorDriver[Cia402Options]):
     # ----------------------------------------------------------------- protection
 
     def protection(self, index: int) -> Protection:
-        """:attr:`~gateway.core.protection.Guard.CONFIGURED`: the drive's heartbeat consumer and
-        abort connection option (:mod:`drivers.cia402.protection`)."""
-        return describe(self._axes[index].opts)
+        """:attr:`~gateway.core.protection.Guard.CONFIGURED`: the drive's heartbeat consumer,
+        abort connection option and error behaviour; the action as the quick stop option code
+        read while enabling says (:mod:`drivers.cia402.protection`)."""
+        axis = self._axes[index]
+        return describe(axis.opts, axis.seq.readings.get(_QUICK_STOP_OPTION, (None, None)))
 
     def protection_state(self, index: int) -> ProtectionState:
-        """PENDING until 0x1016:01 and 0x6007 read back as written (CONFIRMED), FAILED if
-        not."""
+        """PENDING until 0x1016:01, 0x6007 and 0x1029:01 read back as written (CONFIRMED),
+        FAILED if not."""
         return self._axes[index].seq.protection
 
     def protection_failure(self, index: int) -> str:

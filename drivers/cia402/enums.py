@@ -183,6 +183,8 @@ class ObjectIndex(enum.IntEnum):
     #: CiA 301: consumer heartbeat time, sub 1..n = watched node (bits 23..16) + ms (15..0).
     CONSUMER_HEARTBEAT_TIME = 0x1016
     PRODUCER_HEARTBEAT_TIME = 0x1017
+    #: CiA 301: error behaviour, sub 1 = the NMT state a communication error leads to.
+    ERROR_BEHAVIOUR = 0x1029
     RPDO_COMMUNICATION = 0x1400
     RPDO_MAPPING = 0x1600
     TPDO_COMMUNICATION = 0x1800

@@ -18,12 +18,21 @@ profile has no command timeout of its own, and a drive at factory settings watch
 * the drive's abort connection option code (CiA 402 object 0x6007: 0 no action, 1 fault
   signal, 2 disable voltage, 3 quick stop; negative values manufacturer-specific) says what a
   connection abort, the heartbeat event among them, does to the drive.  The gateway writes 3
-  (quick stop: the drive stops on the ramp its quick stop option code 0x605A names, by default
-  2, the quick-stop deceleration 0x6085, then SWITCH ON DISABLED) or 2 (disable voltage: the
-  power stage switches off and the motor coasts).
+  (quick stop: what the drive's quick stop option code 0x605A says, which the gateway reads
+  and reports, :mod:`drivers.cia402.quick_stop`; usually a ramp to standstill, then SWITCH ON
+  DISABLED) or 2 (disable voltage: the power stage switches off and the motor coasts);
+* the heartbeat event is also a communication error, after which the drive's NMT state is
+  what its error behaviour says (CiA 301 object 0x1029 sub 1: 0 PRE-OPERATIONAL if
+  OPERATIONAL, the CiA 301 default; 1 no state change; 2 STOPPED).  The gateway writes 0: the
+  drive's PDOs stop with the heartbeat (no TPDO, and no RPDO, a late one of a gateway that
+  comes back included, acts) until the enable sequence's NMT start; a drive left at 1 by its
+  saved configuration would go on taking RPDOs, and with a quick stop option code 5 to 8
+  (staying in QUICK STOP ACTIVE) their ENABLE OPERATION would start the motor again.  The
+  object is optional: a drive without it (SDO abort 0x06020000 or 0x06090011) has the CiA 301
+  default, and its read-back is skipped.
 
-Both objects are written by expedited SDO while enabling, before NMT start and so before any
-controlword, and read back; only then is the protection confirmed and the drive enabled
+The three objects are written by expedited SDO while enabling, before NMT start and so before
+any controlword, and read back; only then is the protection confirmed and the drive enabled
 (:mod:`drivers.cia402.sequence`).  The consumer time is at least two producer periods
 (:data:`~drivers.cia402.options.MIN_TIMEOUT_PERIODS`): CiA 301 leaves the margin to the
 integrator, and a consumer time of 1.5 to 3 producer periods is the usual choice.
@@ -43,6 +52,7 @@ from typing import TYPE_CHECKING
 from drivers.cia402.codec import make_heartbeat
 from drivers.cia402.enums import CobBase, NmtState
 from drivers.cia402.options import DEFAULT_HOST_HEARTBEAT_S, DEFAULT_HOST_NODE_ID
+from drivers.cia402.quick_stop import ABORT_QUICK_STOP, quick_stop_action
 from gateway.core.errors import ConfigError
 from gateway.core.protection import Guard, Protection
 
@@ -52,12 +62,9 @@ if TYPE_CHECKING:
     from drivers.cia402.options import Cia402Options
     from gateway.core.types import Frame, MotorConfig
 
-#: What the drive does when the heartbeat stops, per abort connection option code (0x6007).
-ACTIONS: dict[int, str] = {
-    3: "quick stop (0x605A quick stop option code: by default a quick-stop ramp to standstill, "
-       "then SWITCH ON DISABLED)",
-    2: "disable voltage (the power stage switches off: the motor coasts)",
-}
+#: What the drive does when the heartbeat stops with abort connection option code 2 (0x6007);
+#: for 3 (quick stop), :func:`~drivers.cia402.quick_stop.quick_stop_action`.
+DISABLE_VOLTAGE = "disable voltage (the power stage switches off: the motor coasts)"
 
 #: What to do when a drive does not take the protection.
 FIX = (
@@ -122,15 +129,23 @@ class HostHeartbeat:
         return [self.frame]
 
 
-def describe(opts: Cia402Options) -> Protection:
-    """A drive's protection as the gateway configures it (:attr:`Guard.CONFIGURED`)."""
+def describe(opts: Cia402Options,
+             quick_stop: tuple[int | None, int | None] = (None, None)) -> Protection:
+    """A drive's protection as the gateway configures it (:attr:`Guard.CONFIGURED`).
+
+    :param quick_stop: the drive's quick stop option code 0x605A as read while enabling: the
+        value, or ``None`` and the SDO abort code (``(None, None)``: not read yet).
+    """
     option = opts.abort_connection_option
+    action = (quick_stop_action(*quick_stop)[0] if option == ABORT_QUICK_STOP
+              else DISABLE_VOLTAGE)
     return Protection(
         Guard.CONFIGURED,
         opts.controller_timeout_s,
-        ACTIONS[option],
+        action,
         f"heartbeat consumer 0x1016 watching node {opts.host_node_id} every "
-        f"{opts.consumer_time_ms} ms and abort connection option 0x6007 = {option}, written "
-        "by SDO and read back",
+        f"{opts.consumer_time_ms} ms, abort connection option 0x6007 = {option} and error "
+        "behaviour 0x1029:01 = 0 (NMT PRE-OPERATIONAL, where the drive has the object), "
+        "written by SDO and read back",
         FIX,
     )

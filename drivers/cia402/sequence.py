@@ -2,7 +2,8 @@
 
 :class:`NodeSequencer` runs the configuration steps of :mod:`drivers.cia402.steps` one SDO at
 a time, then walks the CiA 402 state machine to OPERATION ENABLED with controlwords sent in the
-command RPDO, checking the statusword from the feedback TPDOs after each step.  Every wait has
+command RPDO, checking the statusword from the feedback TPDOs after each step (that half, and the
+stop, are :mod:`drivers.cia402.walk`).  Every wait has
 a deadline; a missed deadline or an SDO abort ends in :attr:`Phase.FAILED` with a message
 naming the node, the step and the cause.  Except one: a node that has not answered at all since
 the start (a drive still booting, powered with the gateway's computer) is asked again, the
@@ -17,8 +18,10 @@ drive is enabled on the spot where it stands.  Its stop is SHUTDOWN at once (rel
 stands): statusword bit 12 means "follows the target" in CSP, not "speed 0".
 
 The controller-side protection steps (:func:`~drivers.cia402.steps.protection_steps`: the
-heartbeat consumer 0x1016:01 and the abort connection option code 0x6007, written, then read
-back) come before NMT start, so before any controlword.  :attr:`NodeSequencer.protection` says
+heartbeat consumer 0x1016:01, the abort connection option code 0x6007 and the error behaviour
+0x1029:01, written, then read back; an optional object the drive does not have is skipped) come
+before NMT start, so before any controlword; a read of what the quick stop does (0x605A) follows
+them, kept in :attr:`NodeSequencer.readings`.  :attr:`NodeSequencer.protection` says
 where they stand; when one fails (an abort, no answer within :attr:`NodeSequencer.timeout_s`,
 a read-back other than written) :attr:`NodeSequencer.protection_error` says why, and the
 driver's :meth:`~gateway.drive.driver.MotorDriver.may_arm` decides: if not
@@ -35,18 +38,23 @@ from typing import TYPE_CHECKING
 
 from drivers.cia402.codec import make_nmt
 from drivers.cia402.enums import (
-    NEXT_TOWARD_ENABLED,
-    TRANSITIONS,
     Controlword,
     ServerCommand,
     State,
-    StatuswordBit,
     state_from_statusword,
 )
 from drivers.cia402.faults import sdo_abort_text
-from drivers.cia402.phase import STOP_TARGET, STOPPED, Phase
+from drivers.cia402.phase import Phase
 from drivers.cia402.sdo import make_sdo_download, make_sdo_upload, shown_value
-from drivers.cia402.steps import NmtStep, SdoExpectStep, SdoVerifyStep, SdoWriteStep
+from drivers.cia402.steps import (
+    ABSENT,
+    NmtStep,
+    SdoExpectStep,
+    SdoReadStep,
+    SdoVerifyStep,
+    SdoWriteStep,
+)
+from drivers.cia402.walk import ControlwordWalk
 from gateway.core.errors import DecodeError
 from gateway.core.protection import ProtectionState
 from gateway.core.types import DriveFault
@@ -62,8 +70,9 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 
-class NodeSequencer:
-    """The enable/stop state machine of one node.
+class NodeSequencer(ControlwordWalk):
+    """The enable/stop state machine of one node (the controlword walk and the stop:
+    :class:`~drivers.cia402.walk.ControlwordWalk`).
 
     :param node_id: the node.
     :param label: how messages name it, e.g. ``node 3 ("left")``.
@@ -79,12 +88,6 @@ class NodeSequencer:
 
     #: Pause between reads of an :class:`SdoExpectStep` (s).
     EXPECT_RETRY_S = 0.01
-    #: Controlwords are resent at this period until the statusword follows (s).
-    CW_RESEND_S = 0.02
-    #: Longest wait for speed 0 before SHUTDOWN when stopping (s).
-    STOP_TIMEOUT_S = 1.0
-    #: More state changes than this on the way to OPERATION ENABLED is a failure.
-    MAX_WALK_STEPS = 8
 
     def __init__(self, node_id: int, label: str, codec: Cia402Codec,
                  steps: tuple[Step, ...], *, position: bool = False,
@@ -132,6 +135,11 @@ class NodeSequencer:
         self.halted_by_protection = False
         #: Why the protection failed since the last start ("" if it did not).
         self.protection_error = ""
+        #: What each :class:`SdoReadStep` got since the last start: (index, subindex) ->
+        #: (value, ``None``), or (``None``, the abort code).
+        self.readings: dict[tuple[int, int], tuple[int | None, int | None]] = {}
+        #: The optional objects the drive does not have (their read-back is skipped).
+        self.absent: set[tuple[int, int]] = set()
 
     # ----------------------------------------------------------------- inputs
 
@@ -144,20 +152,10 @@ class NodeSequencer:
             self.protection = ProtectionState.PENDING
         self._i, self._awaiting, self._retry_s, self._step_s = 0, False, now_s, now_s
         self._edge, self._edges, self._answered = None, 0, False
+        self.readings, self.absent = {}, set()
         if self.position:
             self.hold = None  # only a position read after this start counts
         return self._issue(now_s)
-
-    def stop(self, now_s: float) -> list[Frame]:
-        """Begin a controlled stop: target 0, then SHUTDOWN once the speed is 0."""
-        if self.phase in (Phase.ARMED, Phase.AWAIT_STATUS, Phase.WALKING):
-            self.phase = Phase.STOPPING
-            self._step_s = now_s
-            self._cw_sent_s = float("-inf")
-            return self._poll_stop(now_s)
-        if self.phase is Phase.CONFIGURING:
-            self.phase = Phase.IDLE  # pre-operational: no PDO reaches the drive
-        return []
 
     def fail(self, message: str, flags: DriveFault) -> list[Frame]:
         """End the sequence with ``message``; a drive that may be powered gets SHUTDOWN."""
@@ -179,12 +177,16 @@ class NodeSequencer:
         self._answered = True
         step = self.steps[self._i] if self._i < len(self.steps) else None
         if (self.phase is not Phase.CONFIGURING or not self._awaiting
-                or not isinstance(step, (SdoWriteStep, SdoExpectStep, SdoVerifyStep))
+                or isinstance(step, NmtStep) or step is None
                 or (resp.index, resp.subindex) != (step.index, step.subindex)):
             return False
         self._awaiting = False
         where = f"0x{step.index:04X}:{step.subindex:02X} ({step.what})"
-        if resp.command is ServerCommand.ABORT:
+        if isinstance(step, SdoReadStep) or (
+                isinstance(step, SdoWriteStep) and step.optional
+                and resp.command is ServerCommand.ABORT and resp.abort_code in ABSENT):
+            self._noted(step, resp, where, now_s)
+        elif resp.command is ServerCommand.ABORT:
             verb = (f"write of {shown_value(step.value)} to" if isinstance(step, SdoWriteStep)
                     else "read of")
             self._step_failed(step, f"SDO {verb} {where} aborted: "
@@ -210,6 +212,27 @@ class NodeSequencer:
             else:
                 self._retry_s = now_s + self.EXPECT_RETRY_S
         return True
+
+    def _noted(self, step: SdoWriteStep | SdoReadStep, resp: SdoResponse, where: str,
+               now_s: float) -> None:
+        """An answer that only informs: an optional object's absence, or a reading."""
+        key, abort = (step.index, step.subindex), None
+        if resp.command is ServerCommand.ABORT:
+            abort = resp.abort_code
+        if isinstance(step, SdoWriteStep):
+            self.absent.add(key)
+            log.info("%s: %s: the drive has none (%s): CiA 301's default applies", self.label,
+                     where, sdo_abort_text(resp.abort_code))
+        else:
+            try:
+                value = None if abort is not None else resp.value(step.dtype)
+            except DecodeError as err:
+                self._step_failed(step, str(err), DriveFault.COMMUNICATION, now_s)
+                return
+            self.readings[key] = (value, abort)
+            text, doubt = step.explain(value, abort)
+            log.log(logging.WARNING if doubt else logging.INFO, "%s: %s", self.label, text)
+        self._advance(now_s)
 
     def on_sdo_error(self, err: DecodeError, now_s: float) -> None:
         """A malformed SDO response arrived while one was expected."""
@@ -242,10 +265,6 @@ class NodeSequencer:
 
     # ----------------------------------------------------------------- internals
 
-    def _rpdo(self, word: int) -> Frame:
-        self._last_cw = word
-        return self.codec.rpdo(self.node_id, word, 0 if self.hold is None else self.hold)
-
     def _advance(self, now_s: float) -> None:
         self._i += 1
         self._retry_s, self._step_s, self._last_read = now_s, now_s, None
@@ -253,8 +272,7 @@ class NodeSequencer:
                 and getattr(self.steps[self._i - 1], "protection", False)
                 and not any(getattr(st, "protection", False) for st in self.steps[self._i:])):
             self.protection = ProtectionState.CONFIRMED
-            log.info("%s: heartbeat consumer and abort connection option read back as written",
-                     self.label)
+            log.info("%s: the controller-side protection reads back as written", self.label)
 
     def _step_failed(self, step: Step, message: str, flags: DriveFault, now_s: float) -> None:
         """A configuration step failed: the sequence ends, unless it is a protection step
@@ -277,8 +295,10 @@ class NodeSequencer:
         out: list[Frame] = []
         while self._i < len(self.steps):
             step = self.steps[self._i]
-            if isinstance(step, NmtStep):
-                out.append(make_nmt(step.command, self.node_id))
+            if isinstance(step, NmtStep) or (isinstance(step, SdoVerifyStep)
+                                             and (step.index, step.subindex) in self.absent):
+                if isinstance(step, NmtStep):
+                    out.append(make_nmt(step.command, self.node_id))
                 self._advance(now_s)
                 continue
             if isinstance(step, SdoWriteStep):
@@ -324,63 +344,3 @@ class NodeSequencer:
         if now_s >= self._retry_s:
             return self._issue(now_s)
         return []
-
-    def _poll_walk(self, now_s: float) -> list[Frame]:
-        state = self.state
-        if state is State.OPERATION_ENABLED:
-            self.phase = Phase.ARMED
-            log.info("%s: OPERATION ENABLED", self.label)
-            return []
-        if state is not None:
-            edge = (state, NEXT_TOWARD_ENABLED[state])
-            if edge != self._edge:
-                self._edge, self._step_s, self._cw_sent_s = edge, now_s, float("-inf")
-                self._edges += 1
-                if self._edges > self.MAX_WALK_STEPS:
-                    return self.fail(f"no OPERATION ENABLED after {self.MAX_WALK_STEPS} "
-                                     "state changes", DriveFault.CONTROLLER)
-        if self._edge is None:  # only invalid statuswords so far
-            return []
-        current, target = self._edge
-        word = TRANSITIONS.get(self._edge)
-        if now_s - self._step_s > self.timeout_s:
-            if self.hold is None:
-                return self.fail(
-                    f"no position actual value (0x6064) in a TPDO within "
-                    f"{self.timeout_s:g} s; a cyclic synchronous position drive is only "
-                    f"enabled with its target set to where it stands", DriveFault.COMMUNICATION)
-            how = "on its own" if word is None else f"after controlword 0x{word:04X}"
-            return self.fail(
-                f"no transition {current.label} -> {target.label} within "
-                f"{self.timeout_s:g} s {how} (statusword 0x{self.statusword or 0:04X})",
-                DriveFault.CONTROLLER)
-        if word is None or now_s - self._cw_sent_s < self.CW_RESEND_S or self.hold is None:
-            return []  # (no hold position yet: a CSP drive would run to target 0)
-        self._cw_sent_s = now_s
-        if word is Controlword.FAULT_RESET and (self._last_cw is None or self._last_cw & 0x80):
-            return [self._rpdo(Controlword.DISABLE_VOLTAGE)]  # bit 7 low first: a rising edge
-        return [self._rpdo(word)]
-
-    def _poll_stop(self, now_s: float) -> list[Frame]:
-        state = self.state
-        if state in STOPPED:
-            self.phase = Phase.IDLE
-            return []
-        if now_s - self._step_s > self.STOP_TIMEOUT_S + self.timeout_s:
-            log.warning("%s: stop not confirmed by the statusword (0x%04X)",
-                        self.label, self.statusword or 0)
-            self.phase = Phase.IDLE
-            return []
-        moving = (not self.position and self.statusword is not None
-                  and not self.statusword & StatuswordBit.SPEED_ZERO)
-        if (state is State.OPERATION_ENABLED and moving
-                and now_s - self._step_s < self.STOP_TIMEOUT_S):
-            word: int = Controlword.ENABLE_OPERATION
-        elif state is not None and state in STOP_TARGET:
-            word = TRANSITIONS[(state, STOP_TARGET[state])]
-        else:
-            word = Controlword.SHUTDOWN
-        if word == self._last_cw and now_s - self._cw_sent_s < self.CW_RESEND_S:
-            return []
-        self._cw_sent_s = now_s
-        return [self._rpdo(word)]

@@ -29,9 +29,13 @@ master writes a consumer entry, the drive watches that node's heartbeat (0x700 +
 first one after the write; when it is missing for longer than the consumer time, it sends EMCY
 0x8130 and acts on its abort connection option code 0x6007 (factory value 1): 1 fault (the
 motor coasts), 2 disable voltage (SWITCH ON DISABLED: the motor coasts), 3 quick stop (as
-0x605A says; from READY TO SWITCH ON or SWITCHED ON: SWITCH ON DISABLED), 0 nothing.  The NMT
-state does not change (0x1029 error behaviour, not modelled, as "no state change"), so TPDOs on
-SYNC go on showing the stop.
+0x605A says; from READY TO SWITCH ON or SWITCHED ON: SWITCH ON DISABLED), 0 nothing.  The
+heartbeat event is also a communication error (CiA 301), and the NMT state follows the error
+behaviour 0x1029:01 (factory value 0, the CiA 301 default, also without the object): 0
+PRE-OPERATIONAL if OPERATIONAL, 1 no state change, 2 STOPPED (no EMCY goes out there).  Both
+happen: the drive stops on its own (0x6007) while its PDOs stop (0x1029): no TPDO shows the stop,
+RPDOs are ignored, and one received before is dropped (CANopenNode ``301/CO_PDO.c``,
+``CO_RPDO_process``), until a master sends NMT start again.
 
 Reference: CiA 301 and CiA 402 (https://www.can-cia.org/can-knowledge/cia402-series).
 """
@@ -68,7 +72,7 @@ from drivers.cia402.sim_control import (
     Timing,
 )
 from drivers.cia402.sim_device import POWERED, DriveControl
-from drivers.cia402.sim_od import SimObjectDictionary
+from drivers.cia402.sim_od import FACTORY_ERROR_BEHAVIOUR, SimObjectDictionary
 from drivers.cia402.sim_pdo import PdoExchange
 from gateway.core.errors import DecodeError
 from gateway.sim.device import DeviceSimulator
@@ -280,11 +284,11 @@ class Cia402Simulator(PdoExchange, DriveControl, DeviceSimulator):
             return []
         log.debug("simulated node %d: NMT %s", self.node_id, command.name)
         if command is NmtCommand.START:
-            self.nmt = NmtState.OPERATIONAL
+            self._set_nmt(NmtState.OPERATIONAL)
         elif command is NmtCommand.STOP:
-            self.nmt = NmtState.STOPPED
+            self._set_nmt(NmtState.STOPPED)
         elif command is NmtCommand.ENTER_PRE_OPERATIONAL:
-            self.nmt = NmtState.PRE_OPERATIONAL
+            self._set_nmt(NmtState.PRE_OPERATIONAL)
         elif command is NmtCommand.RESET_NODE:
             self._power_on()
             self.model.armed = False
@@ -293,6 +297,19 @@ class Cia402Simulator(PdoExchange, DriveControl, DeviceSimulator):
             self._reset_comm_state()
             self.nmt, self._boot_pending = NmtState.PRE_OPERATIONAL, True
         return []
+
+    def _set_nmt(self, state: NmtState) -> None:
+        self.nmt = state
+        if state is not NmtState.OPERATIONAL:
+            self._pending.clear()  # (no RPDO is kept for later outside OPERATIONAL)
+
+    def _communication_error(self) -> None:
+        """A heartbeat event: the NMT state as 0x1029:01 says (see the module)."""
+        behaviour = self.od.get(ObjectIndex.ERROR_BEHAVIOUR, 1, default=FACTORY_ERROR_BEHAVIOUR)
+        if behaviour == 0 and self.nmt is NmtState.OPERATIONAL:
+            self._set_nmt(NmtState.PRE_OPERATIONAL)
+        elif behaviour == 2:  # (1: no state change)
+            self._set_nmt(NmtState.STOPPED)
 
     def _on_sdo(self, frame: Frame) -> list[Frame]:
         n = self.node_id
@@ -364,7 +381,8 @@ class Cia402Simulator(PdoExchange, DriveControl, DeviceSimulator):
             self._boot_pending = False
             out.append(make_heartbeat(self.node_id, NmtState.BOOT_UP))
         if self.consumer.expired(now_s):
-            self._connection_lost()
+            self._connection_lost()  # CiA 402: 0x6007
+            self._communication_error()  # CiA 301: 0x1029:01
         self._step_states()
         if self.nmt is not NmtState.STOPPED:
             out += self._emcy_out

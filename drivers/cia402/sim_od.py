@@ -1,19 +1,25 @@
 """The object dictionary of the simulated CiA 402 drive, with CiA 301 write rules.
 
 It holds the objects the gateway and ``wheelgate scan`` touch (0x1000, 0x1001, 0x1016, 0x1017,
-0x1018, PDO parameters 0x1400-0x1403 / 0x1600-0x1603 / 0x1800-0x1803 / 0x1A00-0x1A03, and
+0x1018, 0x1029, PDO parameters 0x1400-0x1403 / 0x1600-0x1603 / 0x1800-0x1803 / 0x1A00-0x1A03, and
 0x6007, 0x6040, 0x6041, 0x605A, 0x6060, 0x6061, 0x6064, 0x606C, 0x607A, 0x6084, 0x6085, 0x60FF,
 0x6502) and refuses what a real device refuses, with the SDO abort code CiA 301 gives: unknown
 object or subindex, read-only, wrong length, a mapping change while the PDO is valid or before
 its count is cleared, an unmappable object or more than 64 bits, a COB-ID change of a valid
 PDO, an unsupported mode of operation, a heartbeat consumer entry with reserved bits or a node
-ID beyond 127, an abort connection option or quick stop option code the device does not have
-(0x06090030 "value range of parameter exceeded"), a deceleration of 0 (0x06090032).
+ID beyond 127, an abort connection option, quick stop option code or error behaviour the device
+does not have (0x06090030 "value range of parameter exceeded"), a deceleration of 0 (0x06090032).
 
 Factory values of the protection objects:
 
 * 0x1016 consumer heartbeat time: one entry (sub 0 = 1), sub 1 = 0, "not used" (CiA 301):
   the drive watches nobody until a master writes it;
+* 0x1029 error behaviour: sub 0 = 1, sub 1 (communication error: a heartbeat event, bus off) =
+  0, "switch to NMT PRE-OPERATIONAL if OPERATIONAL", the CiA 301 default (CiA 301 7.5.2.32;
+  1 = no state change, 2 = STOPPED; 3..127 reserved, 128..255 manufacturer-specific, which this
+  drive has none of).  CANopenNode does the same by default (``301/CO_NMT_Heartbeat.c``,
+  ``CO_NMT_process``: a heartbeat consumer error in OPERATIONAL leads to PRE-OPERATIONAL, or to
+  STOPPED with ``CO_NMT_ERR_TO_STOPPED``);
 * 0x6007 abort connection option code: 1, fault signal, the CiA 402 profile's default (as,
   e.g., Bonfiglioli's "Vectron Active Cube CM-CAN" manual, chapter "Operational behavior on
   bus failure", gives it: "1 - Error ... (factory setting)");
@@ -58,6 +64,11 @@ QUICK_STOP_OPTIONS = range(9)
 FACTORY_ABORT_OPTION = 1
 #: Factory value of 0x605A: 2, quick-stop ramp, then SWITCH ON DISABLED.
 FACTORY_QUICK_STOP_OPTION = 2
+#: Error behaviours (0x1029:01) the simulated drive has: 0 PRE-OPERATIONAL (if OPERATIONAL),
+#: 1 no state change, 2 STOPPED (CiA 301).
+ERROR_BEHAVIOURS = range(3)
+#: Factory value of 0x1029:01: 0, PRE-OPERATIONAL (the CiA 301 default).
+FACTORY_ERROR_BEHAVIOUR = 0
 
 #: The identity object 0x1018 (CiA 301: every device has one, at least its vendor-ID):
 #: vendor-ID 0 (CiA assigns none to a simulator), product code 0x402, revision number 1.0
@@ -111,6 +122,8 @@ class SimObjectDictionary:
             (0x1016, 1): Entry(_U32, 0),
             (0x1017, 0): Entry(_U16, self.heartbeat_ms),
             (0x1018, 0): Entry(_U8, 4, writable=False),
+            (0x1029, 0): Entry(_U8, 1, writable=False),
+            (0x1029, 1): Entry(_U8, FACTORY_ERROR_BEHAVIOUR),
             (0x6007, 0): Entry(_I16, FACTORY_ABORT_OPTION),
             (0x6040, 0): Entry(_U16, 0, mappable=True),
             (0x6041, 0): Entry(_U16, 0, writable=False, mappable=True),
@@ -203,6 +216,8 @@ class SimObjectDictionary:
             return None if value in ABORT_OPTIONS else SdoAbortCode.INVALID_VALUE
         if index == ObjectIndex.QUICK_STOP_OPTION_CODE:
             return None if value in QUICK_STOP_OPTIONS else SdoAbortCode.INVALID_VALUE
+        if index == ObjectIndex.ERROR_BEHAVIOUR:
+            return None if value in ERROR_BEHAVIOURS else SdoAbortCode.INVALID_VALUE
         if index in (ObjectIndex.PROFILE_DECELERATION, ObjectIndex.QUICK_STOP_DECELERATION):
             return SdoAbortCode.VALUE_TOO_LOW if value == 0 else None
         if index == ObjectIndex.MODES_OF_OPERATION:

@@ -4,8 +4,9 @@
 and the two feedback TPDOs remapped by SDO, each switched off through COB-ID bit 31 while its
 mapping changes; the unused TPDOs switched off; transmission types (1 = every SYNC, or 255 =
 event-driven with an event timer); the producer heartbeat time (0x1017); the controller-side
-protection (the heartbeat consumer 0x1016:01 and the abort connection option code 0x6007,
-written and then read back, :mod:`drivers.cia402.protection`); the mode of operation
+protection (the heartbeat consumer 0x1016:01, the abort connection option code 0x6007 and the
+error behaviour 0x1029:01, written and then read back, then, for a quick stop, a read of the
+quick stop option code 0x605A, :mod:`drivers.cia402.protection`); the mode of operation
 (3, profile velocity, for a drive motor; 8, cyclic synchronous position, for a steering actuator)
 and a read-back of 0x6061 until it says so (``canopen``'s ``op_mode`` setter only logs a failed
 switch); NMT start.  A steering actuator's command RPDO carries the target position (0x607A)
@@ -38,8 +39,12 @@ from drivers.cia402.enums import (
     rpdo_cob_id,
     tpdo_cob_id,
 )
+from drivers.cia402.faults import SdoAbortCode
+from drivers.cia402.quick_stop import ABORT_QUICK_STOP, quick_stop_action
 
 if TYPE_CHECKING:
+    from collections.abc import Callable
+
     from drivers.cia402.options import Cia402Options
 
 
@@ -63,6 +68,8 @@ class SdoWriteStep:
 
     :param protection: part of the controller-side protection: a failure is reported as
         such (:class:`~drivers.cia402.sequence.NodeSequencer` and ``controller_watchdog``).
+    :param optional: an object CiA 301 makes optional, whose default is what the write asks
+        for: an abort in :data:`ABSENT` is no failure, and the read-back is skipped.
     """
 
     index: int
@@ -71,6 +78,7 @@ class SdoWriteStep:
     dtype: DataType
     what: str
     protection: bool = False
+    optional: bool = False
 
 
 @dataclass(frozen=True, slots=True)
@@ -97,7 +105,26 @@ class SdoVerifyStep:
     protection: bool = True
 
 
-Step = NmtStep | SdoWriteStep | SdoExpectStep | SdoVerifyStep
+@dataclass(frozen=True, slots=True)
+class SdoReadStep:
+    """Read one object once by SDO upload, to report what the drive does; an abort is no
+    failure.  ``explain`` turns the value (``None`` if aborted) and the abort code (``None``
+    if answered) into a text for the log and whether it deserves a warning."""
+
+    index: int
+    subindex: int
+    dtype: DataType
+    what: str
+    explain: Callable[[int | None, int | None], tuple[str, bool]]
+
+
+Step = NmtStep | SdoWriteStep | SdoExpectStep | SdoVerifyStep | SdoReadStep
+
+#: The SDO aborts of an object or subindex the device does not have (CiA 301).
+ABSENT = frozenset({SdoAbortCode.OBJECT_DOES_NOT_EXIST, SdoAbortCode.SUBINDEX_DOES_NOT_EXIST})
+#: 0x1029:01 (error behaviour, communication error) as the gateway writes it: 0, NMT
+#: PRE-OPERATIONAL (CiA 301 7.5.2.32; 1 would be no state change, 2 STOPPED).
+ERROR_BEHAVIOUR_PRE_OPERATIONAL = 0
 
 
 def _pdo_steps(
@@ -133,19 +160,29 @@ def consumer_entry(host_node_id: int, time_ms: int) -> int:
 
 
 def protection_steps(opts: Cia402Options) -> list[Step]:
-    """The controller-side protection: 0x1016:01 (watch the gateway's heartbeat) and 0x6007
-    (abort connection option code) written by expedited SDO, then both read back."""
+    """The controller-side protection: 0x1016:01 (watch the gateway's heartbeat), 0x6007
+    (abort connection option code) and 0x1029:01 (error behaviour: PRE-OPERATIONAL at the
+    heartbeat event; optional, absent is the CiA 301 default) written by expedited SDO, then
+    read back; for a quick stop (0x6007 = 3), 0x605A (quick stop option code) read."""
     entry = consumer_entry(opts.host_node_id, opts.consumer_time_ms)
     consumer = (ObjectIndex.CONSUMER_HEARTBEAT_TIME, 1, entry, DataType.UNSIGNED32,
                 "heartbeat consumer time")
     option = (ObjectIndex.ABORT_CONNECTION_OPTION_CODE, 0, opts.abort_connection_option,
               DataType.INTEGER16, "abort connection option code")
-    return [
+    behaviour = (ObjectIndex.ERROR_BEHAVIOUR, 1, ERROR_BEHAVIOUR_PRE_OPERATIONAL,
+                 DataType.UNSIGNED8, "error behaviour, communication error")
+    steps: list[Step] = [
         SdoWriteStep(*consumer, protection=True),
         SdoWriteStep(*option, protection=True),
+        SdoWriteStep(*behaviour, protection=True, optional=True),
         SdoVerifyStep(*consumer),
         SdoVerifyStep(*option),
+        SdoVerifyStep(*behaviour),
     ]
+    if opts.abort_connection_option == ABORT_QUICK_STOP:
+        steps.append(SdoReadStep(ObjectIndex.QUICK_STOP_OPTION_CODE, 0, DataType.INTEGER16,
+                                 "quick stop option code", quick_stop_action))
+    return steps
 
 
 def configuration_steps(

@@ -10,7 +10,8 @@ commented example and ODrive's official ``odrive-cansimple.dbc``
 (https://github.com/odriverobotics/ODrive/blob/master/tools/odrive-cansimple.dbc) works too.
 
 Modules: :mod:`~drivers.dbc.options` (the protocol keys), :mod:`~drivers.dbc.units` (unit
-conversions), :mod:`~drivers.dbc.binding` (names -> cantools messages and signals),
+conversions), :mod:`~drivers.dbc.database` (the DBC files, loaded once),
+:mod:`~drivers.dbc.binding` (names -> cantools messages and signals),
 :mod:`~drivers.dbc.frames` and :mod:`~drivers.dbc.codec` (the pure :class:`DbcCodec`),
 :mod:`~drivers.dbc.axis` (one motor's state) and :mod:`~drivers.dbc.driver`
 (:class:`DbcDriver`).  The device simulator, :mod:`drivers.dbc.sim`, is for tests and

@@ -1,33 +1,36 @@
 """Binds a motor block's names to the messages and signals of its DBC file.
 
-:func:`bind_motor` loads the DBC (through a :class:`DatabaseCache`, so motors that share a
-file parse it once), looks up every configured message and signal, computes the frame IDs on
-the wire from the node ID, and the range each signal can carry.  Names that do not exist raise
-:class:`~gateway.core.errors.ConfigError` listing the names that do.  The result is a frozen
-:class:`MotorBinding`, the only input the pure codec needs.
+:func:`bind_motor` loads the DBC (through a :class:`~drivers.dbc.database.DatabaseCache`, so
+motors that share a file parse it once), looks up every configured message and signal, computes
+the frame IDs on the wire from the node ID, and the range each signal can carry.  Names that do
+not exist raise :class:`~gateway.core.errors.ConfigError` listing the names that do; so do
+signals the driver cannot use: a scale of zero, a velocity command too narrow for the motor's
+``max_rpm`` (:func:`check_command`), position signals too narrow for a steering actuator's
+travel (:func:`check_travel`).  The result is a frozen :class:`MotorBinding`, the only input the
+pure codec needs.
 """
 
 from __future__ import annotations
 
-import logging
-import os
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-import cantools
-
+from drivers.dbc.database import resolve_path
 from drivers.dbc.units import UnitConversion
 from gateway.core.errors import ConfigError
 from gateway.core.types import MAX_EXTENDED_ID, MAX_STANDARD_ID
+from gateway.drive.setpoints import bounds
 
 if TYPE_CHECKING:
+    from drivers.dbc.database import DatabaseCache
     from drivers.dbc.options import DbcOptions
     from gateway.core.types import MotorConfig
 
-log = logging.getLogger(__name__)
-
 #: Largest finite IEEE-754 float32.
 FLOAT32_MAX = 3.4028234663852886e38
+#: Share of a command signal's range edge by which a command value may pass it: the rounding of
+#: the unit conversions and of the speed limits (the codec sends such a value as the edge).
+ROUNDING = 1e-6
 
 
 @dataclass(frozen=True, slots=True)
@@ -112,40 +115,6 @@ class MotorBinding:
         return self.target is not None
 
 
-class DatabaseCache:
-    """Loads DBC files once per resolved path (one cache per driver, never global)."""
-
-    def __init__(self) -> None:
-        self._dbs: dict[str, Any] = {}
-
-    def load(self, path: str, where: str) -> Any:
-        """The cantools database in ``path``.
-
-        :raises ConfigError: if the file cannot be read or is not a valid DBC file.
-        """
-        if path not in self._dbs:
-            try:
-                self._dbs[path] = cantools.database.load_file(
-                    path, database_format="dbc", strict=True
-                )
-            except OSError as err:
-                raise ConfigError(
-                    f"{where}.dbc: cannot read DBC file {path!r}: {err.strerror or err}"
-                ) from err
-            except (cantools.database.errors.Error, ValueError) as err:
-                raise ConfigError(f"{where}.dbc: {path!r} is not a valid DBC file: {err}") from err
-            log.debug("loaded DBC %s", path)
-        return self._dbs[path]
-
-
-def resolve_path(opts: DbcOptions) -> str:
-    """The DBC path: absolute as given, else relative to ``config_dir`` (or the cwd)."""
-    path = os.path.expanduser(opts.dbc)
-    if not os.path.isabs(path) and opts.config_dir:
-        path = os.path.join(opts.config_dir, path)
-    return os.path.normpath(path)
-
-
 def signal_range(signal: Any) -> tuple[float, float]:
     """The physical range a signal can carry: its DBC range within what its bits can hold."""
     if signal.is_float:
@@ -163,6 +132,12 @@ def signal_range(signal: Any) -> tuple[float, float]:
     if signal.maximum is not None:
         hi = min(hi, float(signal.maximum))
     return lo, hi
+
+
+def command_range(ref: SignalRef) -> tuple[float, float]:
+    """The command values the codec takes for ``ref``: its range with each edge widened by
+    :data:`ROUNDING` of itself (a value beyond an edge, but within that, is sent as the edge)."""
+    return ref.minimum - abs(ref.minimum) * ROUNDING, ref.maximum + abs(ref.maximum) * ROUNDING
 
 
 def _known(names: list[str]) -> str:
@@ -203,6 +178,13 @@ def _signal(
             f"{where}.{keys[1]}: signal {sig_name!r} of {msg_name!r} is multiplexed or in a "
             "container message, which this driver does not support"
         )
+    for each in (sig, *msg.signals):  # cantools divides by it to encode (the whole message)
+        if each.scale == 0:
+            key, beside = (keys[1], "") if each is sig else (keys[0], f" (beside {sig_name!r})")
+            raise ConfigError(
+                f"{where}.{key}: expected a non-zero scale for signal {each.name!r}{beside} of "
+                f"message {msg_name!r} in {path}, got {each.scale:g}"
+            )
     frame_id = int(msg.frame_id)
     if opts.node_id_in_frame == "add":
         frame_id += motor.node_id << opts.node_id_shift
@@ -228,8 +210,10 @@ def bind_motor(
     :param where: file and key path of the block for messages.
     :raises ConfigError: for a missing or invalid file, an unknown message or signal (the
         message lists the known names), a frame ID out of range, a position signal that
-        cannot wrap as configured, a value that does not fit its signal, or (a steering
-        actuator) position signals too small for its travel (:func:`check_travel`).
+        cannot wrap as configured, a value that does not fit its signal, a signal of a bound
+        message with a scale of zero, a velocity command too narrow for ``max_rpm``
+        (:func:`check_command`), or (a steering actuator) position signals too small for its
+        travel (:func:`check_travel`).
     """
     path = resolve_path(opts)
     db = cache.load(path, where)
@@ -295,6 +279,8 @@ def bind_motor(
                 f"{sig.minimum:g} and {sig.maximum:g} for signal {sig.name!r} of message "
                 f"{sig.message_name!r} in {path}, got {value!r}"
             )
+    if command is not None:
+        check_command(motor, opts, command, path, where)
     if target is not None:
         check_travel(motor, opts, target, position, path, where)
     return MotorBinding(
@@ -310,6 +296,42 @@ def bind_motor(
         target=target,
         mode=mode,
     )
+
+
+def check_command(
+    motor: MotorConfig, opts: DbcOptions, command: SignalRef, path: str, where: str
+) -> None:
+    """Check that a drive motor's velocity command signal carries every speed up to ``max_rpm``.
+
+    The driver takes wheel speeds up to :func:`gateway.drive.setpoints.bounds` (``max_rpm``
+    through the gear ratio, with a rounding slack) and sends each as
+    :meth:`UnitConversion.wheel_to_command`, which the codec takes within :func:`command_range`;
+    the conversion is monotonic, so both ends of the speeds decide for all of them.
+
+    :raises ConfigError: naming the key, the signal, its message and the DBC file, what the
+        signal carries and what ``max_rpm`` needs.
+    """
+    units = UnitConversion.build(motor, opts)
+    (top,) = bounds((motor,))
+    low, high = command_range(command)
+    if all(low <= units.wheel_to_command(w) <= high for w in (-top, top)):
+        return
+    edge = motor.max_wheel_rad_s  # shown without the slack
+    need = sorted(units.wheel_to_command(w) for w in (-edge, edge))
+    unit = f" {command.signal.unit}" if command.signal.unit else ""
+    raise ConfigError(
+        f"{where}.command_signal: signal {command.name!r} of message {command.message_name!r} "
+        f"in {path} carries {command.minimum:g} to {command.maximum:g}{unit}, but max_rpm "
+        f"{motor.max_rpm:g} needs {_shown(need[0], command.minimum)} to "
+        f"{_shown(need[1], command.maximum)}{unit} (command_unit {opts.command_unit}); use a "
+        "wider signal or DBC range, or a lower max_rpm"
+    )
+
+
+def _shown(value: float, edge: float) -> str:
+    """``value`` for a message, with the digits that tell it from ``edge``."""
+    text = f"{value:g}"
+    return f"{value:.12g}" if text == f"{edge:g}" and value != edge else text
 
 
 def check_travel(

@@ -140,7 +140,9 @@ class DbcCodec:
             velocity command of a drive motor, the position command of a steering actuator.
         :param armed: per motor, whether it is armed: sets enable signals that share the
             command message (``None``: their default).
-        :raises EncodeError: for a value that is not finite or outside the signal's range.
+        :raises EncodeError: for a value that is not finite or outside the signal's range (a
+            value beyond an edge by rounding, :func:`~drivers.dbc.binding.command_range`, is
+            sent as the edge).
         """
         return self._frames(self._command, values, armed)
 
@@ -275,9 +277,9 @@ class DbcCodec:
                 else:
                     value = values[m.index]
                     if value is not None:
-                        if not m.low <= value <= m.high:  # also false for NaN
+                        if not m.take_low <= value <= m.take_high:  # also false for NaN
                             raise range_error(value, m, group)
-                        data[m.name] = value
+                        data[m.name] = min(max(value, m.low), m.high)  # (rounding)
             frames.append(group.frame(data))
         return frames
 

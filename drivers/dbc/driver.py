@@ -82,8 +82,9 @@ import logging
 from typing import TYPE_CHECKING, ClassVar
 
 from drivers.dbc.axis import Axis
-from drivers.dbc.binding import DatabaseCache, bind_motor
+from drivers.dbc.binding import bind_motor
 from drivers.dbc.codec import DbcCodec, describe_fault
+from drivers.dbc.database import DatabaseCache
 from drivers.dbc.options import DbcOptions, motor_where, parse_options
 from gateway.core.errors import EncodeError
 from gateway.core.types import WheelFeedback

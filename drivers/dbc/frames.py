@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Any
 
 import cantools
 
-from drivers.dbc.binding import signal_range
+from drivers.dbc.binding import command_range, signal_range
 from gateway.core.errors import DecodeError, EncodeError
 from gateway.core.types import Frame
 
@@ -98,11 +98,18 @@ class Member:
     #: The physical range the signal carries (``ref.minimum``, ``ref.maximum``).
     low: float = field(init=False)
     high: float = field(init=False)
+    #: The command values the codec takes (``binding.command_range``: the range, widened for
+    #: rounding; sent clamped into the range).
+    take_low: float = field(init=False)
+    take_high: float = field(init=False)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "name", self.ref.name)
         object.__setattr__(self, "low", self.ref.minimum)
         object.__setattr__(self, "high", self.ref.maximum)
+        take_low, take_high = command_range(self.ref)
+        object.__setattr__(self, "take_low", take_low)
+        object.__setattr__(self, "take_high", take_high)
 
 
 @dataclass(frozen=True, slots=True)

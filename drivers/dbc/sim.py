@@ -34,8 +34,9 @@ from __future__ import annotations
 import logging
 from typing import TYPE_CHECKING
 
-from drivers.dbc.binding import DatabaseCache, bind_motor
+from drivers.dbc.binding import bind_motor
 from drivers.dbc.codec import DbcCodec, DbcReading, Role
+from drivers.dbc.database import DatabaseCache
 from drivers.dbc.options import motor_where, parse_options
 from drivers.dbc.units import UnitConversion
 from gateway.core.errors import DecodeError

@@ -25,7 +25,7 @@ import logging
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, ClassVar
 
-from drivers.odrive.enums import AxisState, ControlMode, InputMode
+from drivers.odrive.enums import AxisState, ControlMode, InputMode, ProcedureResult
 from gateway.core.errors import IllegalTransitionError
 
 if TYPE_CHECKING:
@@ -84,6 +84,11 @@ class Axis:
     error_detail: str = ""
     #: A Get_Error (0.6) / Get_Motor_Error (0.5) request is due at the next poll.
     error_request_due: bool = False
+    #: The last heartbeat's procedure result (0.6; ``SUCCESS`` in 0.5).
+    procedure: ProcedureResult | int = ProcedureResult.SUCCESS
+    #: Why the last enable gave up with the axis idle and error-free ("" otherwise): a fault
+    #: of the motor until the next enable (:meth:`refused`).
+    refusal: str = ""
 
     # ----------------------------------------------------------------- the sequence
 
@@ -112,7 +117,7 @@ class Axis:
         self.enabling = True
         self.enable_sent_s = now_s
         self.attempts = 1
-        self.error_detail = ""
+        self.error_detail = self.refusal = ""
         wd = self.watchdog
         self.arm_waits = wd is not None
         return arm if wd is None else wd.start(now_s)
@@ -150,16 +155,30 @@ class Axis:
             return ()  # not answering yet, or busy: wait without using up an attempt
         m = self.motor
         if self.attempts >= self.ENABLE_ATTEMPTS:
-            log.warning(
-                'ODrive node %d ("%s") stayed in IDLE after %d enable attempts; giving up',
-                m.node_id, m.wheel, self.attempts,
-            )
+            self.refusal = self.refused()
+            log.warning('ODrive node %d ("%s"): %s; giving up', m.node_id, m.wheel, self.refusal)
             self.enabling = False
             return ()
         self.attempts += 1
         self.enable_sent_s = now_s
         log.info('ODrive node %d ("%s"): enable attempt %d', m.node_id, m.wheel, self.attempts)
         return self.arm(codec, alive)
+
+    def refused(self) -> str:
+        """Why the axis stayed idle, error-free, through every enable attempt: what its last
+        heartbeat's procedure result says (0.6), and what to do about a calibration."""
+        text = (f"stayed in IDLE after {self.attempts} CLOSED_LOOP_CONTROL requests without an "
+                f"error")
+        result = self.procedure
+        if result == ProcedureResult.SUCCESS:
+            return text
+        name = result.name if isinstance(result, ProcedureResult) else str(int(result))
+        text += f"; procedure result {name}"
+        if result == ProcedureResult.NOT_CALIBRATED:
+            text += (" (the motor or encoder is not calibrated: with odrivetool, request "
+                     "FULL_CALIBRATION_SEQUENCE, then keep the result with pre_calibrated and "
+                     "save_configuration(), as ODrive's Getting Started guide does)")
+        return text
 
     def disarm(self, codec: OdriveCodec) -> tuple[Frame, ...]:
         """Set_Input_Vel 0 and Set_Axis_State IDLE (allowed from any state)."""

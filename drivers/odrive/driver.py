@@ -196,7 +196,10 @@ class OdriveDriver(MotorDriver[OdriveOptions]):
         arm = [ax.arm(self.codec, alive(ax.index, now_s)) for ax in self._axes]  # may raise
         frames: list[Frame] = []
         for ax, frames_of in zip(self._axes, arm, strict=True):
+            refused = ax.refusal
             frames.extend(ax.start(frames_of, now_s))
+            if refused:  # the last enable's refusal goes (a heartbeat re-asserts real faults)
+                self._publish_fault(ax, DriveFault.NONE)
         return frames
 
     def disable(self, now_s: float) -> list[Frame]:
@@ -247,6 +250,8 @@ class OdriveDriver(MotorDriver[OdriveOptions]):
                 frames.extend(
                     ax.retry(codec, now_s, self.live.alive(i, now_s), bool(self.faults(i)))
                 )
+                if ax.refusal:  # it gave up: a fault that says why, until the next enable
+                    self._publish_fault(ax, self.faults(i))
         return frames
 
     def _watchdog_step(self, ax: Axis, now_s: float) -> list[Frame]:
@@ -359,12 +364,14 @@ class OdriveDriver(MotorDriver[OdriveOptions]):
     def _on_heartbeat(self, ax: Axis, hb: Heartbeat, t: float) -> None:
         i = ax.index
         self.heard(i, 1, t)
+        ax.procedure = hb.procedure_result
         if not (hb.axis_error or hb.motor_error or hb.encoder_error or hb.controller_error):
             # A healthy axis, nearly every heartbeat: the state the general path below ends in
             # for no error, without its flag mapping and string work.
             ax.error_detail = ax.axis_detail = ""
             ax.error_request_due = False
-            self.set_fault(i, DriveFault.NONE)
+            # (_publish_fault of no fault: the refusal of the last enable, if any, stays)
+            self.set_fault(i, DriveFault.CONTROLLER if ax.refusal else DriveFault.NONE, ax.refusal)
             self.set_armed(i, ax.armed_by(hb.axis_state))
             return
         fw = self.codec.firmware
@@ -386,5 +393,7 @@ class OdriveDriver(MotorDriver[OdriveOptions]):
         self._publish_fault(ax, self.faults(ax.index))
 
     def _publish_fault(self, ax: Axis, faults: DriveFault) -> None:
-        detail = "; ".join(p for p in (ax.axis_detail, ax.error_detail) if p)
+        if ax.refusal:  # (Axis.refused: the axis stayed idle through every enable attempt)
+            faults |= DriveFault.CONTROLLER
+        detail = "; ".join(p for p in (ax.axis_detail, ax.error_detail, ax.refusal) if p)
         self.set_fault(ax.index, faults, detail if faults else "")

@@ -24,6 +24,15 @@ if TYPE_CHECKING:
     from drivers.odrive.messages import Heartbeat, MotorErrorStatus
 
 
+#: What 0.5's INVALID_STATE means after the gateway's CLOSED_LOOP_CONTROL request (axis.cpp,
+#: ``run_state_machine_loop``: a closed-loop request without a calibrated motor and encoder).
+INVALID_STATE_HINT = (
+    "the axis refused the state requested: for CLOSED_LOOP_CONTROL most often a motor or "
+    "encoder not calibrated (with odrivetool: request FULL_CALIBRATION_SEQUENCE, set "
+    "motor.config.pre_calibrated and encoder.config.pre_calibrated, save_configuration())"
+)
+
+
 def heartbeat_faults(firmware: Firmware, hb: Heartbeat) -> tuple[DriveFault, str]:
     """The faults a heartbeat reports, and their text for the motor's status detail.
 
@@ -40,6 +49,8 @@ def heartbeat_faults(firmware: Firmware, hb: Heartbeat) -> tuple[DriveFault, str
     if hb.axis_error:
         names = flag_names(error_class(firmware), hb.axis_error)
         parts.append(f"axis error {hb.axis_error:#010x}: {names}")
+        if firmware is Firmware.V0_5 and hb.axis_error & AxisError05.INVALID_STATE:
+            parts.append(INVALID_STATE_HINT)
     for flag, fault, name in (
         (hb.motor_error, DriveFault.MOTOR, "motor"),
         (hb.encoder_error, DriveFault.ENCODER, "encoder"),

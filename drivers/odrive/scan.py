@@ -7,11 +7,14 @@ identifiers, when byte 4 is an axis state.  Bytes 0..4 (axis error, axis state) 
 
 **One request per axis: Get_Version** (command 0x00) as an RTR frame, the way the protocol asks
 for any ``Get_*`` message (ODrive CAN protocol, docs.odriverobotics.com, can-protocol: "Get_Version
-... RTR").  It reads and changes nothing, and it does not feed the axis watchdog (0.6 feeds it
-only with Set_Input_* and Set_Axis_State; :mod:`drivers.odrive.sim`).  Firmware 0.6 answers with
-its firmware and hardware versions; 0.5 has no Get_Version (command 0x00 is reserved for CANopen
-NMT there, ``Firmware/communication/can/can_simple.cpp``) and stays silent, so an axis that does
-not answer is reported as probably 0.5, with its error word in hex (the flags' names differ
+... RTR").  It reads and changes nothing but the axis watchdog: 0.6 feeds it only with
+Set_Input_* and Set_Axis_State (as :mod:`drivers.odrive.sim` reads it), but 0.5 feeds it with any
+frame addressed to the axis, this one included (``do_command`` calls ``axis.watchdog_feed()``
+before its switch, odriverobotics/ODrive ``Firmware/communication/can/can_simple.cpp``); a feed
+clears nothing (a WATCHDOG_TIMER_EXPIRED already latched stays in the heartbeat).  Firmware 0.6
+answers with its firmware and hardware versions; 0.5 has no Get_Version (command 0x00 is
+reserved for CANopen NMT there, in the same ``can_simple.cpp``) and stays silent, so an axis that
+does not answer is reported as probably 0.5, with its error word in hex (the flags' names differ
 between the families).  A running gateway's ODrive driver ignores the version answers unless it
 is arming that axis, when the answer is the same one it asked for.
 """

@@ -1,30 +1,41 @@
 """Simulated ODrive axis: the device side of CANSimple, for tests and ``--sim``.
 
-Reference: the 0.5.x firmware's `can_simple.cpp <https://github.com/odriverobotics/ODrive/
-blob/master/Firmware/communication/can/can_simple.cpp>`_ (``do_command``, ``service_stack``,
-``send_heartbeat``) and the `ODrive CAN protocol
+Reference: the 0.5.6 firmware's `can_simple.cpp <https://github.com/odriverobotics/ODrive/
+blob/fw-v0.5.6/Firmware/communication/can/can_simple.cpp>`_ (``do_command``,
+``service_stack``, ``send_heartbeat``), ``Firmware/MotorControl/axis.cpp`` and ``main.cpp`` of
+odriverobotics/ODrive, and the `ODrive CAN protocol
 <https://docs.odriverobotics.com/v/latest/manual/can-protocol.html>`_.
 
 Modelled behaviour:
 
 * heartbeat every ``heartbeat_period_s`` (firmware default 100 ms), encoder estimates every
   ``encoder_period_s`` (default 10 ms; 0 turns the cyclic stream off), answers to RTR requests
-  (0.5 also answers DLC 0 data frames) for the heartbeat, encoder estimates and Get_Error /
-  Get_Motor_Error;
+  (0.5 also answers DLC 0 data frames) for the encoder estimates and Get_Error /
+  Get_Motor_Error, and in 0.6 (unverified) for the heartbeat; 0.5 ignores a heartbeat request
+  (``do_command``: "We don't currently do anything to respond to ODrive heartbeat messages");
 * axis states IDLE <-> CLOSED_LOOP_CONTROL through Set_Axis_State; arming is refused while an
-  error is latched; other requested states are ignored;
+  error is latched, and by an axis built with ``calibrated=False`` (see the class); other
+  requested states are ignored;
 * the speed follows Set_Input_Vel only in velocity control, ramped at
   ``vel_ramp_rate_turns_s2`` in VEL_RAMP input mode; in position control (the firmware default)
   the axis follows Set_Input_Pos with its speed feed-forward (the model's position loop) and,
   when armed, first holds where it stands (0.5 ``Axis::run_closed_loop_control_loop`` sets the
   input position to the estimate);
+* non-finite inputs as the 0.5.6 controller takes them (:mod:`drivers.odrive.sim_rules`): a
+  NaN the armed controller uses latches MOTOR_FAILED with the motor error MODULATION_IS_NAN
+  and disarms; an infinity runs the axis at the factory ``vel_limit``.  0.6 (closed firmware,
+  behaviour not published) is assumed to fault the same way, with SYSTEM_LEVEL;
 * watchdog: **off, as from the factory** (``axis.config.enable_watchdog`` false), unless the
   simulator is built with ``watchdog_timeout_s`` (a device configured and saved with
-  odrivetool) or the gateway enables it over CAN (0.6).  0.5: any frame addressed to the axis
-  feeds it (``do_command`` calls ``watchdog_feed()`` first); 0.6 (closed firmware): only
-  Set_Input_Pos/Vel/Torque and Set_Axis_State feed it, the stricter reading of the official
-  ``can_watchdog.py`` example.  Expired in CLOSED_LOOP_CONTROL, it latches
-  WATCHDOG_TIMER_EXPIRED and disarms (the motor coasts);
+  odrivetool) or the gateway enables it over CAN (0.6); fed at start (boot,
+  ``Axis::apply_config``).  0.5: any frame addressed to the axis feeds it (``do_command``
+  calls ``watchdog_feed()`` first), and ``main.cpp`` runs ``Axis::watchdog_check`` every control
+  loop **in every state**: once expired it latches WATCHDOG_TIMER_EXPIRED, in IDLE too, so a
+  saved-watchdog axis nobody talks to reports 0x800 in its heartbeat (Clear_Errors feeds it
+  before it clears).  0.6 (closed firmware): only Set_Input_Pos/Vel/Torque and Set_Axis_State
+  feed it, the stricter reading of the official ``can_watchdog.py`` example, and it is
+  checked in CLOSED_LOOP_CONTROL only (what 0.6 does in IDLE is not published).  Expired in
+  CLOSED_LOOP_CONTROL it disarms (the motor coasts);
 * 0.6 Get_Version requests (RTR or DLC 0) are answered, as the firmware answers any ``Get_*``
   request, with the endpoints' firmware and hardware version, or :data:`FACTORY_VERSION`
   without endpoints; 0.5 has no Get_Version (command 0x00 is CANopen NMT's there) and ignores
@@ -38,12 +49,10 @@ Modelled behaviour:
 * the position is reported as float32 turns (quantised like the firmware), starting at
   ``initial_position_turns`` so tests can check the precision far from zero.
 """
-
 from __future__ import annotations
 
 import logging
 import math
-import struct
 from typing import TYPE_CHECKING
 
 from drivers.odrive.codec import OdriveCodec
@@ -70,30 +79,26 @@ from drivers.odrive.enums import (
 )
 from drivers.odrive.messages import ErrorStatus, Heartbeat, MotorErrorStatus
 from drivers.odrive.options import OdriveOptions
-from drivers.odrive.watchdog import (
-    OPCODE_READ,
-    OPCODE_WRITE,
-    RX_SDO,
-    TX_SDO,
-    endpoints_from_options,
-    parse_sdo,
-    version_reply,
+from drivers.odrive.sim_rules import (
+    FACTORY_VERSION,
+    limited,
+    nan_reaches_output,
+    parameter_access,
 )
+from drivers.odrive.watchdog import RX_SDO, endpoints_from_options
 from gateway.core.errors import DecodeError
-from gateway.core.types import Frame
 from gateway.sim.device import DeviceSimulator, SimFault
 
 if TYPE_CHECKING:
     from drivers.odrive.watchdog import WatchdogEndpoints
-    from gateway.core.types import MotorConfig
+    from gateway.core.types import Frame, MotorConfig
     from gateway.sim.device import MotorModel
+
+__all__ = ["FACTORY_VERSION", "OdriveSimulator", "simulator_for"]
 
 log = logging.getLogger(__name__)
 
 TAU = 2.0 * math.pi
-#: ``(firmware, hardware)`` version a 0.6 axis without watchdog endpoints reports in
-#: Get_Version: 0.0.0, which no real ODrive reports (the demo's endpoints name it too).
-FACTORY_VERSION = ("0.0.0", "")
 
 
 class OdriveSimulator(DeviceSimulator):
@@ -109,6 +114,13 @@ class OdriveSimulator(DeviceSimulator):
     :param encoder_period_s: encoder-estimates period (s); 0 disables the cyclic stream.
     :param initial_position_turns: position estimate at start (turns).
     :param vel_ramp_rate_turns_s2: ramp rate of the VEL_RAMP input mode (turns/s^2).
+    :param calibrated: the motor and encoder calibrated (default), as a robot builder leaves an
+        axis after odrivetool's calibration with ``motor.config.pre_calibrated`` and
+        ``encoder.config.pre_calibrated`` saved.  **The factory axis is not calibrated**
+        (``pre_calibrated`` false): ``False`` models it, and a CLOSED_LOOP_CONTROL request
+        then leaves the axis in IDLE, 0.5 latching INVALID_STATE (``axis.cpp``
+        ``run_state_machine_loop``: ``!motor_.is_calibrated_`` goes to
+        ``invalid_state_label``), 0.6 reporting the procedure result NOT_CALIBRATED.
     """
 
     def __init__(
@@ -122,6 +134,7 @@ class OdriveSimulator(DeviceSimulator):
         encoder_period_s: float = 0.01,
         initial_position_turns: float = 0.0,
         vel_ramp_rate_turns_s2: float = 20.0,
+        calibrated: bool = True,
     ) -> None:
         super().__init__(motor, model)
         self.codec = OdriveCodec.from_options(motor.options)
@@ -133,6 +146,7 @@ class OdriveSimulator(DeviceSimulator):
         self.encoder_period_s = encoder_period_s
         self.initial_position_turns = initial_position_turns
         self.vel_ramp_rate_turns_s2 = vel_ramp_rate_turns_s2
+        self.calibrated = calibrated
         #: Device state, inspectable by tests.
         self.axis_state = AxisState.IDLE
         self.axis_error = 0
@@ -144,6 +158,10 @@ class OdriveSimulator(DeviceSimulator):
         self.input_vel_turns_s = 0.0
         self.input_pos_turns = self.position_turns
         self.input_vel_ff_turns_s = 0.0
+        #: The firmware's ``input_vel_`` and ``input_torque_``, which Set_Input_Vel and
+        #: Set_Input_Pos both write, for the non-finite check.
+        self.input_vel_reg = 0.0
+        self.input_torque_nm = 0.0
         self.setpoint_turns_s = 0.0
         self._last_fed_s: float | None = None
         self._next_heartbeat_s: float | None = None
@@ -179,10 +197,12 @@ class OdriveSimulator(DeviceSimulator):
             log.debug("simulated ODrive %d ignores %s: %s", self.node_id, frame.to_cansend(), err)
             return []
         if isinstance(cmd, SetInputVel):
-            self.input_vel_turns_s = cmd.vel_turns_s
+            self.input_vel_turns_s = self.input_vel_reg = cmd.vel_turns_s
+            self.input_torque_nm = cmd.torque_ff_nm
         elif isinstance(cmd, SetInputPos):
             self.input_pos_turns = cmd.pos_turns
-            self.input_vel_ff_turns_s = cmd.vel_ff_turns_s
+            self.input_vel_ff_turns_s = self.input_vel_reg = cmd.vel_ff_turns_s
+            self.input_torque_nm = cmd.torque_ff_nm
         elif isinstance(cmd, SetAxisState):
             self._request_state(cmd.state)
         elif isinstance(cmd, SetControllerMode):
@@ -199,14 +219,21 @@ class OdriveSimulator(DeviceSimulator):
         dt = 0.0 if self._last_tick_time_s is None else now_s - self._last_tick_time_s
         self._last_tick_time_s = now_s
         closed_loop = self.axis_state == AxisState.CLOSED_LOOP_CONTROL
-        fed = self._last_fed_s
+        if self._last_fed_s is None:
+            self._last_fed_s = now_s  # fed at boot
         if (
-            closed_loop
-            and self.watchdog_enabled
-            and fed is not None
-            and now_s - fed > self.watchdog_timeout_s
+            self.watchdog_enabled
+            and (closed_loop or self.codec.firmware is Firmware.V0_5)
+            and now_s - self._last_fed_s > self.watchdog_timeout_s
         ):
             self._latch(AxisError.WATCHDOG_TIMER_EXPIRED, AxisError05.WATCHDOG_TIMER_EXPIRED)
+        if self.axis_state == AxisState.CLOSED_LOOP_CONTROL and nan_reaches_output(
+            self.control_mode, self.input_mode, self.input_pos_turns, self.input_vel_reg,
+            self.input_torque_nm,
+        ):
+            if self.codec.firmware is Firmware.V0_5:
+                self.motor_error |= MotorError05.MODULATION_IS_NAN
+            self._latch(AxisError.SYSTEM_LEVEL, AxisError05.MOTOR_FAILED)
         self._update_setpoint(dt)
         out: list[Frame] = []
         if self._next_heartbeat_s is None or now_s >= self._next_heartbeat_s:
@@ -229,9 +256,19 @@ class OdriveSimulator(DeviceSimulator):
     # ----------------------------------------------------------------- behaviour
 
     def _request_state(self, state: AxisState | int) -> None:
+        v05 = self.codec.firmware is Firmware.V0_5
+        if v05:
+            self.axis_error &= ~AxisError05.INVALID_STATE  # auto-cleared by a new request
         if state == AxisState.IDLE:
             self._disarm()
         elif state == AxisState.CLOSED_LOOP_CONTROL:
+            if not self.calibrated:
+                log.debug("simulated ODrive %d refuses to arm: not calibrated", self.node_id)
+                if v05:
+                    self.axis_error |= AxisError05.INVALID_STATE
+                self.procedure_result = ProcedureResult.NOT_CALIBRATED
+                self._disarm()
+                return
             if self.axis_error or self.motor_error:
                 log.debug("simulated ODrive %d refuses to arm: errors latched", self.node_id)
                 self.procedure_result = ProcedureResult.DISARMED
@@ -267,14 +304,19 @@ class OdriveSimulator(DeviceSimulator):
     def _update_setpoint(self, dt: float) -> None:
         armed = self.axis_state == AxisState.CLOSED_LOOP_CONTROL
         model = self.model
-        if self.control_mode == ControlMode.POSITION_CONTROL:
-            model.target_position_rad = (self.input_pos_turns - self.initial_position_turns) * TAU
-            model.velocity_ff_rad_s = self.input_vel_ff_turns_s * TAU
-            self.setpoint_turns_s = self.input_vel_ff_turns_s if armed else 0.0
+        pos, mode = self.input_pos_turns, self.control_mode
+        if mode == ControlMode.POSITION_CONTROL:
+            ff = self.input_vel_ff_turns_s
+            model.target_position_rad = (pos - self.initial_position_turns) * TAU
+            if math.isinf(pos):  # the position loop saturates at vel_limit
+                model.target_position_rad, ff = None, limited(pos)
+            model.velocity_ff_rad_s = ff * TAU
+            self.setpoint_turns_s = ff if armed else 0.0
+            model.target_rad_s = self.setpoint_turns_s * TAU
             return
         model.target_position_rad = None
-        target = self.input_vel_turns_s if armed else 0.0
-        if self.control_mode != ControlMode.VELOCITY_CONTROL:
+        target = limited(self.input_vel_turns_s) if armed else 0.0
+        if mode != ControlMode.VELOCITY_CONTROL:
             target = 0.0
         if self.input_mode == InputMode.VEL_RAMP:
             step = self.vel_ramp_rate_turns_s2 * dt
@@ -305,48 +347,13 @@ class OdriveSimulator(DeviceSimulator):
             self.node_id, self.position_turns, self.model.velocity_rad_s / TAU
         )
 
-    def _version(self, frame: Frame) -> list[Frame]:
-        """Get_Version (0.6): the endpoints' versions, else :data:`FACTORY_VERSION`."""
-        if frame.dlc != 0:
-            return []  # not a request
-        ep = self.endpoints
-        fw, hw = FACTORY_VERSION if ep is None else (ep.fw_version, ep.hw_version)
-        arb = self.codec.arbitration_id(self.node_id, CmdId.GET_VERSION)
-        return [Frame(arb, version_reply(fw, hw), self.codec.extended_id)]
-
     def _parameter_access(self, frame: Frame, cmd: int) -> list[Frame]:
-        """Get_Version, and RxSdo for the watchdog's endpoints (0.6)."""
-        if cmd == CmdId.GET_VERSION:
-            return self._version(frame)
-        ep = self.endpoints
-        assert ep is not None
-        arb = self.codec.arbitration_id
-        ext = self.codec.extended_id
-        sdo = parse_sdo(frame.data)
-        if sdo is None:
-            return []
-        opcode, endpoint, value = sdo
-        if endpoint not in (ep.enable_id, ep.timeout_id):
-            return []
-        fmt = "<?" if endpoint == ep.enable_id else "<f"
-        if opcode == OPCODE_WRITE:
-            if len(value) < struct.calcsize(fmt):
-                return []
-            (x,) = struct.unpack_from(fmt, value)
-            if endpoint == ep.enable_id:
-                self.watchdog_enabled = bool(x)
-            else:
-                self.watchdog_timeout_s = float(x)
-            return []
-        if opcode != OPCODE_READ:
-            return []
-        current = self.watchdog_enabled if endpoint == ep.enable_id else self.watchdog_timeout_s
-        head = struct.pack("<BHB", OPCODE_READ, endpoint, 0)
-        return [Frame(arb(self.node_id, TX_SDO), head + struct.pack(fmt, current), ext)]
+        """Get_Version, and RxSdo for the watchdog's endpoints (0.6; :mod:`.sim_rules`)."""
+        return parameter_access(self, frame, cmd)
 
     def _answer(self, cmd: CmdId) -> list[Frame]:
-        if cmd == CmdId.HEARTBEAT:
-            return [self._heartbeat()]
+        if cmd == CmdId.HEARTBEAT:  # 0.5 ignores it (see the module)
+            return [self._heartbeat()] if self.codec.firmware is Firmware.V0_6 else []
         if cmd == CmdId.GET_ENCODER_ESTIMATES:
             return [self._estimates()]
         if cmd == CmdId.GET_ERROR:

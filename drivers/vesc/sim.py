@@ -15,13 +15,25 @@ override them):
   ``APPCONF_TIMEOUT_MSEC``) releases the motor, which coasts (``timeout_brake_current`` 0 A:
   ``timeout_thread`` calls ``mc_interface_release_motor_override`` and a brake current below
   ``cc_min_current``).
+* **Speed ramp** (``ramp_erpm_s``, ``s_pid_ramp_erpms_s``, 25000 ERPM/s from the factory,
+  ``MCCONF_S_PID_RAMP_ERPMS_S``): SET_RPM does not set the speed loop's set point, it only
+  stores the command (``mcpwm_foc_set_pid_speed`` in ``motor/mcpwm_foc.c``: the set point is
+  first taken from the measured speed when the motor was not already speed-controlled).  Every
+  period of the speed loop (``pid_thread``, ``sp_pid_loop_rate`` 1000 Hz from the factory) the
+  set point steps toward the command by ``s_pid_ramp_erpms_s * dt``, up and down alike
+  (``utils_step_towards`` in ``foc_run_pid_control_speed``, ``motor/foc_math.c``), and the
+  motor follows the set point with the model's dynamics.  A ramp of 0 sets the set point to
+  the command at once, as the firmware does then.  A release (timeout, fault, SET_CURRENT 0)
+  or a current or brake command leaves speed control: no ramp, and the next SET_RPM starts
+  its set point from the measured speed again.
 * **Minimum ERPM** (``min_erpm``, ``s_pid_min_erpm``, 900 from the factory): SET_RPM below it
-  does not start a stopped motor (``mcpwm_foc_set_pid_speed``), and a running motor is held at
-  duty 0, phases shorted, until it stands (``"Brake when set ERPM is below min ERPM"`` in
-  ``mcpwm_foc.c``; :mod:`drivers.vesc.min_erpm`).  Modelled simply: the motor brakes to zero
-  at once with the speed loop's own dynamics (the model's time constant and acceleration
-  limit), without the firmware's set-point ramp (``s_pid_ramp_erpms_s``) down to the
-  threshold first; a real shorted-phase brake is weaker at low speed.
+  does not start a stopped motor (``mcpwm_foc_set_pid_speed``).  A running motor whose
+  *ramped* set point is below it is held at duty 0, phases shorted (``"Brake when set ERPM is
+  below min ERPM"`` in ``mcpwm_foc.c``; :mod:`drivers.vesc.min_erpm`): a stop command first
+  ramps the set point down to ``min_erpm`` under speed control, and only then brakes; a start
+  from standstill is held at duty 0 until the set point has ramped up to ``min_erpm``.  The
+  brake is modelled simply, with the speed loop's own dynamics (the model's time constant and
+  acceleration limit); a real shorted-phase brake is weaker at low speed.
 * The tachometer counts 60-degree steps of the electrical angle (6 per electrical revolution),
   is an int32 that wraps, and starts at ``initial_tacho`` so tests can begin near the wrap.
 * SET_CURRENT and SET_CURRENT_BRAKE below ``min_current_a`` (``cc_min_current``, 0.05 A)
@@ -82,6 +94,10 @@ log = logging.getLogger(__name__)
 
 _MAX_CURRENT_A = 3276.7  # int16 / 10
 _MAX_ERPM = 2**31 - 1
+#: ``s_pid_ramp_erpms_s`` from the factory (``MCCONF_S_PID_RAMP_ERPMS_S``, eRPM/s).
+FACTORY_RAMP_ERPM_S = 25000.0
+#: The speed loop's period, in which the set point ramps (``sp_pid_loop_rate``: 1000 Hz).
+PID_PERIOD_S = 0.001
 
 
 class SimMode(enum.IntEnum):
@@ -91,15 +107,20 @@ class SimMode(enum.IntEnum):
     SPEED = 1
     CURRENT = 2
     BRAKE = 3
-    #: SET_RPM below ``min_erpm`` on a running motor: duty 0, phases shorted, braking.
+    #: Speed control with its ramped set point below ``min_erpm``: duty 0, phases shorted,
+    #: braking (a stop, or a start until the set point has ramped up to ``min_erpm``).
     BELOW_MIN_ERPM = 4
+
+
+#: The modes in which the speed loop runs (``CONTROL_MODE_SPEED`` on a running motor).
+_SPEED_MODES = (SimMode.SPEED, SimMode.BELOW_MIN_ERPM)
 
 
 def simulator_for(motor: MotorConfig) -> VescSimulator:
     """A :class:`VescSimulator` for ``motor``, as the motor block says the device was set up
     in VESC Tool: its stated timeout (``controller_timeout_s``, else the factory 1 s), status
     messages (STATUS and STATUS_5 at ``status_rate_hz``, else none, as from the factory) and
-    ``min_erpm``.
+    ``min_erpm``.  The speed ramp is the factory's: no key of the block states it.
 
     :raises ConfigError: for a motor block the driver would refuse.
     """
@@ -126,12 +147,14 @@ class VescSimulator(DeviceSimulator):
     :param initial_tacho: tachometer value at the start (int32).
     :param timeout_s: the device's command timeout, ``timeout_msec`` (s; 0: never).
     :param min_erpm: ``s_pid_min_erpm``: SET_RPM below it is not speed-controlled (eRPM).
+    :param ramp_erpm_s: ``s_pid_ramp_erpms_s``: how fast the speed set point follows SET_RPM
+        (eRPM/s; 0: at once).
     :param fault_stop_s: how long an injected FAULT lasts before it clears itself (s).
     :param v_in_v: input voltage reported in STATUS_5 (V).
     :param min_current_a: current commands below this release the motor (A).
     :param accel_per_a_rad_s2: motor acceleration per ampere in current and brake mode.
     :raises ConfigError: if ``pole_pairs`` is missing or not a positive int, or a rate, a
-        timeout or ``min_erpm`` is negative.
+        timeout, ``min_erpm`` or ``ramp_erpm_s`` is negative.
     """
 
     def __init__(
@@ -144,6 +167,7 @@ class VescSimulator(DeviceSimulator):
         initial_tacho: int = 0,
         timeout_s: float = FACTORY_TIMEOUT_S,
         min_erpm: float = FACTORY_MIN_ERPM,
+        ramp_erpm_s: float = FACTORY_RAMP_ERPM_S,
         fault_stop_s: float = 0.5,
         v_in_v: float = 24.0,
         min_current_a: float = 0.05,
@@ -156,7 +180,8 @@ class VescSimulator(DeviceSimulator):
                 f"motor {motor.wheel!r}.pole_pairs: expected int >= 1, got {pole_pairs!r}"
             )
         for name, value in (
-            ("status_rate_hz", status_rate_hz), ("timeout_s", timeout_s), ("min_erpm", min_erpm)
+            ("status_rate_hz", status_rate_hz), ("timeout_s", timeout_s),
+            ("min_erpm", min_erpm), ("ramp_erpm_s", ramp_erpm_s),
         ):
             if not value >= 0.0:
                 raise ConfigError(
@@ -169,6 +194,7 @@ class VescSimulator(DeviceSimulator):
         self.status_period_s = 1.0 / status_rate_hz if status_rate_hz > 0.0 else math.inf
         self.timeout_s = timeout_s
         self.min_erpm = min_erpm
+        self.ramp_erpm_s = ramp_erpm_s
         self.fault_stop_s = fault_stop_s
         self.v_in_v = v_in_v
         self.min_current_a = min_current_a
@@ -181,6 +207,10 @@ class VescSimulator(DeviceSimulator):
         self._steps0 = self._steps_now()
         self._speed_accel = self.model.max_accel_rad_s2
         self._current_a = 0.0
+        #: The speed loop: the last SET_RPM (``m_speed_command_rpm``) and the ramped set point
+        #: (``m_speed_pid_set_rpm``), in eRPM.
+        self.command_erpm = 0.0
+        self.set_point_erpm = 0.0
         self._last_cmd_s: float | None = None
         self._fault_since_s: float | None = None
         self._next_status_s: float | None = None
@@ -191,6 +221,11 @@ class VescSimulator(DeviceSimulator):
     def node_id(self) -> int:
         """This controller's ID."""
         return self.motor.node_id
+
+    @property
+    def erpm(self) -> float:
+        """The motor's true speed in eRPM (what STATUS reports, before truncation)."""
+        return self.model.velocity_rad_s * RPM_PER_RAD_S * self.pole_pairs
 
     @property
     def tachometer(self) -> int:
@@ -225,18 +260,16 @@ class VescSimulator(DeviceSimulator):
     def _apply(self, cmd: VescCommand) -> None:
         model = self.model
         if cmd.packet == CanPacketId.SET_RPM:
-            if abs(cmd.value) < self.min_erpm:
-                # mcpwm_foc_set_pid_speed starts a stopped motor only at s_pid_min_erpm or
-                # above; a running one is braked at duty 0 (see the module docstring).
-                if self.mode != SimMode.RELEASED:
-                    self.mode = SimMode.BELOW_MIN_ERPM
-                    model.max_accel_rad_s2 = self._speed_accel
-                    model.target_rad_s = 0.0
-                return
-            self.mode = SimMode.SPEED
+            if self.mode == SimMode.RELEASED and abs(cmd.value) < self.min_erpm:
+                return  # mcpwm_foc_set_pid_speed starts a stopped motor only at min ERPM
+            if self.mode not in _SPEED_MODES:
+                self.set_point_erpm = self.erpm  # the ramp starts from the measured speed
+            self.command_erpm = cmd.value
+            if self.ramp_erpm_s <= 0.0:
+                self.set_point_erpm = cmd.value
             model.max_accel_rad_s2 = self._speed_accel
-            model.target_rad_s = cmd.value / self.pole_pairs / RPM_PER_RAD_S
             model.armed = True
+            self._follow_set_point()
             return
         if abs(cmd.value) < self.min_current_a:
             self._release()
@@ -251,6 +284,41 @@ class VescSimulator(DeviceSimulator):
             self.mode = SimMode.BRAKE
             self._current_a = abs(cmd.value)
             model.target_rad_s = 0.0
+
+    def _follow_set_point(self) -> None:
+        """Speed control toward the set point, or duty 0 below ``min_erpm`` (the FOC ISR)."""
+        if abs(self.set_point_erpm) < self.min_erpm:
+            self.mode = SimMode.BELOW_MIN_ERPM
+            self.model.target_rad_s = 0.0
+        else:
+            self.mode = SimMode.SPEED
+            self.model.target_rad_s = self.set_point_erpm / self.pole_pairs / RPM_PER_RAD_S
+
+    def _ramp(self, dt_s: float) -> None:
+        """``utils_step_towards`` the command by ``s_pid_ramp_erpms_s * dt``."""
+        if self.mode not in _SPEED_MODES or self.set_point_erpm == self.command_erpm:
+            return
+        step = self.ramp_erpm_s * dt_s
+        sp, cmd = self.set_point_erpm, self.command_erpm
+        self.set_point_erpm = min(sp + step, cmd) if sp < cmd else max(sp - step, cmd)
+        self._follow_set_point()
+
+    def tick(self, now_s: float) -> list[Frame]:
+        """Advance the motor to ``now_s``, the speed set point ramping every
+        :data:`PID_PERIOD_S` on the way; return the periodic frames due."""
+        last = self._last_tick_s
+        if last is not None and now_s > last:
+            t = last
+            while self.mode in _SPEED_MODES and self.set_point_erpm != self.command_erpm and (
+                now_s - t > PID_PERIOD_S * (1.0 + 1e-9)
+            ):
+                self._ramp(PID_PERIOD_S)  # the speed loop steps its set point, then runs
+                if not self.faults & SimFault.STALL:  # (the base holds a stalled shaft)
+                    self.model.step(PID_PERIOD_S)
+                t += PID_PERIOD_S
+            self._last_tick_s = t
+            self._ramp(now_s - t)
+        return super().tick(now_s)
 
     def _release(self) -> None:
         self.mode = SimMode.RELEASED
@@ -299,7 +367,7 @@ class VescSimulator(DeviceSimulator):
         prev, self._prev = self._prev, (now_s, v)
         if self.mode == SimMode.RELEASED:
             return 0.0
-        if self.mode not in (SimMode.SPEED, SimMode.BELOW_MIN_ERPM):
+        if self.mode not in _SPEED_MODES:
             return self._current_a
         if prev is None or now_s <= prev[0]:
             return 0.0
@@ -307,8 +375,7 @@ class VescSimulator(DeviceSimulator):
         return accel / self.accel_per_a_rad_s2
 
     def _status_frames(self, current_a: float) -> list[Frame]:
-        erpm = self.model.velocity_rad_s * RPM_PER_RAD_S * self.pole_pairs
-        erpm = min(max(erpm, -_MAX_ERPM), _MAX_ERPM)
+        erpm = min(max(self.erpm, -_MAX_ERPM), _MAX_ERPM)
         max_erpm = self.motor.max_rpm * self.pole_pairs
         # Duty 0 when released, and while braking below min ERPM (phases shorted).
         idle = self.mode in (SimMode.RELEASED, SimMode.BELOW_MIN_ERPM)

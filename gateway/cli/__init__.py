@@ -171,13 +171,24 @@ def check_interface(interface: str, hint: str) -> None:
             f"got {interface!r}", param_hint=hint)
 
 
+class FilePath(click.Path):
+    """:class:`click.Path` that refuses an empty string (which click takes as a path: an
+    empty ``--socket ''`` would quietly mean the default)."""
+
+    def convert(self, value: Any, param: click.Parameter | None,
+                ctx: click.Context | None) -> Any:
+        if isinstance(value, str) and not value:
+            self.fail("expected a path, got an empty string", param, ctx)
+        return super().convert(value, param, ctx)
+
+
 def config_option(func: Callable[..., Any]) -> Callable[..., Any]:
     """The ``-c/--config FILE`` option shared by subcommands (embedded default if omitted)."""
     return click.option(
         "-c",
         "--config",
         "config_path",
-        type=click.Path(dir_okay=False),
+        type=FilePath(dir_okay=False),
         default=None,
         help="Robot configuration (YAML). Default: the embedded demo robot.",
     )(func)

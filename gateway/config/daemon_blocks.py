@@ -71,6 +71,12 @@ def parse_loop(raw: object, source: str) -> LoopConfig:
             f"{source}: gateway.odom_rate_hz: expected at most rate_hz ({v['rate_hz']}), "
             f"got {v['odom_rate_hz']}"
         )
+    state_file = str(v["state_file"])
+    if state_file and os.path.isdir(state_file):
+        raise ConfigError(
+            f"{source}: gateway.state_file: expected the path of the e-stop latch file, got "
+            f"{state_file!r}, a directory (the e-stop would not survive a restart)"
+        )
     for key, kind in LOOP_CHOICES.items():
         v[key] = choice(kind, v[key], f"{source}: gateway.{key}")
     fields = {k: x for k, x in v.items() if k not in ("can_ids", "socket_uids")}

@@ -47,20 +47,30 @@ TOP_KEYS = frozenset(
     {"name", "drive", "geometry", "wheels", "motors", "motor_defaults", "steering",
      "steering_defaults", "limits", "kinematics", "bus", "gateway", "bridge", "foxglove"}
 )
+#: The bounds of a robot's lengths (m): a wheel radius, a track, a mounting distance.  Far
+#: wider than any wheeled robot; what they catch is a unit slip (mm for m) or a typo's exponent.
+MIN_LENGTH_M, MAX_LENGTH_M = 1e-3, 100.0
+#: The bounds of a gear ratio (motor turns per wheel turn): a gearbox reduces at most this much
+#: (or steps up at most as much).
+MAX_GEAR_RATIO = 1e4
+#: The highest motor speed a configuration may name (RPM at the motor).
+MAX_MOTOR_RPM = 100_000.0
 #: The keys of a motor block that every driver takes (``motor_defaults:`` is merged in first);
 #: any other key is a protocol key of the driver.
 MOTOR_KEYS: Mapping[str, OptionSpec] = MappingProxyType({
     "driver": OptionSpec(str, help="driver name, e.g. odrive"),
     "node_id": OptionSpec(int, help="the controller's node ID"),
-    "gear_ratio": OptionSpec(float, 1.0, above=0.0, help="motor turns per wheel turn"),
+    "gear_ratio": OptionSpec(float, 1.0, minimum=1 / MAX_GEAR_RATIO, maximum=MAX_GEAR_RATIO,
+                             help="motor turns per wheel turn"),
     "invert": OptionSpec(bool, False),
-    "max_rpm": OptionSpec(float, above=0.0, help="motor speed limit in RPM at the motor"),
+    "max_rpm": OptionSpec(float, above=0.0, maximum=MAX_MOTOR_RPM,
+                          help="motor speed limit in RPM at the motor"),
 })
 #: The keys of a steering actuator's block (``steering:``, with ``steering_defaults:`` merged
 #: in first) that every driver takes; any other key is a protocol key of the driver.
 STEERING_KEYS: Mapping[str, OptionSpec] = MappingProxyType({
     **MOTOR_KEYS,
-    "gear_ratio": OptionSpec(float, 1.0, above=0.0,
+    "gear_ratio": OptionSpec(float, 1.0, minimum=1 / MAX_GEAR_RATIO, maximum=MAX_GEAR_RATIO,
                              help="motor turns per turn of the wheel's plane"),
     "zero_rad": OptionSpec(float, 0.0, help="motor position (rad, the controller's frame) "
                                              "with the wheels at their neutral angle"),
@@ -79,11 +89,13 @@ WHEEL_KEYS: Mapping[str, OptionSpec] = MappingProxyType({
     "name": OptionSpec(str),
     "type": OptionSpec(str, choices=tuple(t.value for t in WheelType)),
     "alpha": OptionSpec(float, help="polar angle of the mounting point, rad"),
-    "l": OptionSpec(float, minimum=0.0, help="distance from the body origin, m"),
+    "l": OptionSpec(float, minimum=0.0, maximum=MAX_LENGTH_M, unit=" m",
+                    help="distance from the body origin, m"),
     "beta": OptionSpec(float, help="plane angle, rad"),
-    "radius": OptionSpec(float, above=0.0, help="wheel radius, m"),
+    "radius": OptionSpec(float, minimum=MIN_LENGTH_M, maximum=MAX_LENGTH_M, unit=" m",
+                         help="wheel radius, m"),
     "gamma": OptionSpec(float, 0.0),
-    "d": OptionSpec(float, 0.0, minimum=0.0),
+    "d": OptionSpec(float, 0.0, minimum=0.0, maximum=MAX_LENGTH_M, unit=" m"),
     "steer_min": OptionSpec(float, -math.pi),
     "steer_max": OptionSpec(float, math.pi),
     "max_steer_rate": OptionSpec(float, math.inf, above=0.0),
@@ -118,7 +130,7 @@ KINEMATICS_KEYS: Mapping[str, OptionSpec] = MappingProxyType({
 GATEWAY_KEYS: Mapping[str, OptionSpec] = MappingProxyType({
     "rate_hz": OptionSpec(float, 200.0, minimum=50.0, maximum=1000.0,
                           help="control loop rate"),
-    "cmd_timeout_s": OptionSpec(float, 0.5, minimum=0.0,
+    "cmd_timeout_s": OptionSpec(float, 0.5, minimum=0.0, maximum=60.0,
                                 help="no valid twist for this long ramps the wheels to zero; 0 "
                                      "disables"),
     "infeasible_policy": OptionSpec(str, _DEFAULTS.infeasible_policy.value,

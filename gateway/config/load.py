@@ -86,6 +86,8 @@ __all__ = [
     "parse_config",
 ]
 
+#: The longest robot name (it names the e-stop latch file and the status).
+MAX_NAME = 64
 #: Name shown for the configuration embedded in the package.
 DEFAULT_NAME = "<embedded default>"
 
@@ -190,6 +192,9 @@ def parse_config(
     name = raw.get("name", Path(source).stem if source != DEFAULT_NAME else "default")
     if not isinstance(name, str):
         found.add(f"{source}: name: expected str, got {name!r}")
+    elif "name" in raw and (not 0 < len(name) <= MAX_NAME or not name.isprintable()):
+        found.add(f"{source}: name: expected 1 to {MAX_NAME} printable characters, got "
+                  f"{name!r}")
     bridge = foxglove = None
     bridge_said: list[str] = []
     if "bridge" in raw or "foxglove" in raw:
@@ -219,7 +224,10 @@ def parse_config(
     )
     from gateway.drive.driveset import DriveSet  # noqa: PLC0415 - the drivers load after the config
 
-    drives = DriveSet(config)
+    try:  # (what only a driver can check: a DBC file, an endpoints file; after the rest)
+        drives = DriveSet(config)
+    except ConfigError as err:
+        raise ConfigError(f"{source}: {err}") from err
     _check_own_ids(config, drives)
     more = _check_protection(config, drives) + [f"{source}: {d}" for d in drives.doubts()]
     return dataclasses.replace(config, warnings=(*config.warnings, *more)) if more else config

@@ -4,8 +4,9 @@ generic``'s ``wheels:`` list (read by :func:`gateway.config.load.parse_config`).
 from __future__ import annotations
 
 import difflib
+import math
 
-from gateway.config.keys import WHEEL_KEYS
+from gateway.config.keys import MAX_LENGTH_M, MIN_LENGTH_M, WHEEL_KEYS
 from gateway.core.errors import ConfigError, KinematicsError
 from gateway.core.kinematics import PRESETS, Wheel, WheelType
 from gateway.core.kinematics.model import validate_wheel
@@ -15,9 +16,14 @@ from gateway.core.options import OptionSpec, validate_block
 MAX_WHEELS = 64
 
 
-#: The geometry keys that are lengths a robot cannot have as 0 (or less).
+#: The geometry keys that are lengths a robot cannot have as 0 (or less): from
+#: :data:`~gateway.config.keys.MIN_LENGTH_M` to :data:`~gateway.config.keys.MAX_LENGTH_M`.
 LENGTHS = frozenset(("wheel_radius", "track", "wheelbase", "wheel_distance"))
 _ANGLES = frozenset(("first_wheel_angle",))
+#: Lengths that may be 0 (bounded above only).
+_EXTRA_LENGTHS = frozenset(("effective_track",))
+#: Steering limits: at most half a turn either way.
+_STEER_ANGLES = frozenset(("max_steer",))
 
 
 def _geometry_specs(drive: str) -> dict[str, OptionSpec]:
@@ -28,9 +34,11 @@ def _geometry_specs(drive: str) -> dict[str, OptionSpec]:
             str if key in preset.choices else type(default) if default is not None else float,
             default,
             choices=tuple(preset.choices.get(key, ())),
-            minimum=None if key in preset.choices or key in _ANGLES or key in LENGTHS else 0.0,
-            above=0.0 if key in LENGTHS else None,
-            unit=" m" if key in LENGTHS else "",
+            minimum=(MIN_LENGTH_M if key in LENGTHS
+                     else None if key in preset.choices or key in _ANGLES else 0.0),
+            maximum=(MAX_LENGTH_M if key in LENGTHS or key in _EXTRA_LENGTHS
+                     else math.pi if key in _STEER_ANGLES else None),
+            unit=" m" if key in LENGTHS or key in _EXTRA_LENGTHS else "",
         )
         for key, default in preset.params.items()
     }

@@ -208,6 +208,14 @@ class Supervisor:
         hold): FAULT with ``why``; none of the cycle's commands went out."""
         return self._refused(Event.COMMAND_FAILED, f"command not sent: {why}")
 
+    def poll_failed(self, why: str) -> str:
+        """A drive's housekeeping step raised (e.g. an axis found calibrating when its
+        controller-side protection was set up): FAULT with ``why``; an enable under way is
+        refused, as when a drive refuses the enable itself."""
+        if self.state is GatewayState.ENABLING:
+            return self.enable_failed(why)
+        return self._refused(Event.COMMAND_FAILED, f"housekeeping failed: {why}")
+
     def _refused(self, event: Event, reason: str) -> str:
         self.counts.faults += 1
         self._go(event)

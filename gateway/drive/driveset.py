@@ -16,6 +16,7 @@ which the odometry uses in place of the commanded one (:meth:`DriveSet.measured_
 
 from __future__ import annotations
 
+import logging
 from typing import TYPE_CHECKING, Any, TypeVar
 
 from gateway.core.errors import GatewayError
@@ -32,6 +33,7 @@ if TYPE_CHECKING:
     from gateway.drive.driver import MotorDriver
     from gateway.drive.filters import CanFilter
 
+log = logging.getLogger(__name__)
 _T = TypeVar("_T")
 
 
@@ -152,8 +154,21 @@ class DriveSet:
         return out
 
     def disable(self, now_s: float) -> list[Frame]:
-        """Zero-speed and disarm frames of every driver."""
-        return [f for drv, _ in self.groups for f in drv.disable(now_s)]
+        """Zero-speed and disarm frames of every driver.
+
+        The stop is the one step that must reach every motor it can: a driver that fails to
+        build its frames (a defect, whatever it raises) is logged with the wheels it leaves
+        without a stop, and the other drivers' frames still go out.
+        """
+        out: list[Frame] = []
+        for drv, _ in self.groups:
+            try:
+                out.extend(drv.disable(now_s))
+            except Exception:  # see the docstring; logged with its traceback
+                log.exception("%s could not build the stop of %s; the other drivers' stop "
+                              "goes out", type(drv).__name__,
+                              ", ".join(repr(m.wheel) for m in drv.motors))
+        return out
 
     def command(
         self,

@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING, Any
 import can
 
 from gateway.config import default_socket_path
+from gateway.core.errors import GatewayError
 from gateway.core.settings import FeedbackRecovery
 from gateway.core.types import DriveState, GatewayState
 from gateway.runtime.latch import EstopLatch, latch_path
@@ -372,17 +373,21 @@ class Daemon:
             return
         gw = self.gateway
         self.notifier.stopping("sending zero and disarm")
-        gw.supervisor.shutdown()
-        now = time.monotonic()
-        gw.edge.send(gw.drives.disable(now))
-        end = now + SHUTDOWN_GRACE_S
-        while time.monotonic() < end:
-            time.sleep(0.01)
-            t = time.monotonic()
-            for frame in gw.edge.receive(t):
-                gw.drives.on_frame(frame)
-            gw.edge.send(gw.drives.poll(t))
-        self.close()
+        try:
+            gw.supervisor.shutdown()
+            now = time.monotonic()
+            gw.edge.send(gw.drives.disable(now))
+            end = now + SHUTDOWN_GRACE_S
+            while time.monotonic() < end:
+                time.sleep(0.01)
+                t = time.monotonic()
+                for frame in gw.edge.receive(t):
+                    gw.drives.on_frame(frame)
+                gw.edge.send(gw.drives.poll(t))
+        except GatewayError as err:  # (the stop went out first: DriveSet.disable)
+            log.error("shutdown after the stop: %s", err)
+        finally:
+            self.close()
 
     def close(self) -> None:
         """Release every resource (reverse order of creation)."""

@@ -14,6 +14,7 @@ the directory), so a crash leaves the old latch or the new one, never half of on
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import os
@@ -86,6 +87,8 @@ class EstopLatch:
         except OSError as err:
             log.error("e-stop latch %s could not be written (%s): the e-stop holds until this "
                       "process ends, but not across a restart", self.path, err)
+            with contextlib.suppress(OSError):
+                tmp.unlink(missing_ok=True)  # (no half-written file left beside it)
             return False
         return True
 

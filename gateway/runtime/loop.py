@@ -42,6 +42,7 @@ from gateway.drive.ownership import gateway_filters
 from gateway.runtime.can_twist import CanTwists
 from gateway.runtime.counts import LoopCounts
 from gateway.runtime.publish import Publisher
+from gateway.runtime.rejections import RejectionLog
 from gateway.runtime.timing import LoopTimer
 from gateway.wire.can import NO_TWIST_COUNTER, StatusReport, WgCodec
 
@@ -133,6 +134,8 @@ class Gateway:
         #: WG_Twist_Cmd frames from the bus.
         self.can_twists = CanTwists(self.wg, config.loop, self.supervisor, self.counts,
                                     self.twist, self.report_error)
+        #: The log lines of the frames the drivers rejected.
+        self.rejections = RejectionLog(self.drives.groups)
         # The log throttles of projected and refused twists, by source and kind.
         self._twist_logs: dict[str, LogThrottle] = {}
 
@@ -259,7 +262,12 @@ class Gateway:
         elif self._armed:
             self._armed = False
             out.extend(self.drives.disable(now_s))
-        out.extend(self.drives.poll(now_s))
+        try:
+            out.extend(self.drives.poll(now_s))
+        except GatewayError as err:  # a step a drive refuses now: a fault, never an exit
+            message = sup.poll_failed(str(err))
+            log.error("fault: %s", message)
+            self.report_error(ErrorCode.MOTOR_FAULT, message)
         self.prev = result
         edge.send(out, now_s)
         sent = time.perf_counter()
@@ -268,6 +276,7 @@ class Gateway:
         self.burst_sent_s = sent
         self._integrate()
         if now_s >= self.publisher.next_due_s:  # an error waiting, or odometry or status due
+            self.rejections.check(now_s)
             edge.send(self.publisher.publish(now_s, self.limit_report, edge.errors_recent),
                       now_s, tracked=False)
 

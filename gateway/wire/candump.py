@@ -54,6 +54,20 @@ class LogEntry:
     is_rx: bool
 
 
+#: CAN_ERR_FLAG of SocketCAN, which candump and python-can write into an error frame's ID.
+CAN_ERR_FLAG = 0x20000000
+
+
+def is_error_frame_line(line: str) -> bool:
+    """Whether a candump line carries an error frame (CAN_ERR_FLAG in its 8-digit ID)."""
+    parts = line.split()
+    ident = parts[2].partition("#")[0] if len(parts) >= 3 else ""
+    try:
+        return len(ident) == 8 and bool(int(ident, 16) & CAN_ERR_FLAG)
+    except ValueError:
+        return False
+
+
 def parse_line(line: str, line_number: int) -> LogEntry:
     """Read one log line.
 

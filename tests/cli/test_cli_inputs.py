@@ -64,3 +64,17 @@ def test_ik_loads_nothing_it_does_not_use() -> None:
                 "gateway.config.bridge", "gateway.core.bridge_settings", "gateway.runtime",
                 "importlib.resources", "zipfile", "tempfile"}
     assert not unwanted & loaded, sorted(unwanted & loaded)
+
+
+@pytest.mark.parametrize("args", [
+    ["status", "--socket", ""], ["twist", "--socket", ""], ["check", "-c", ""],
+    ["run", "--sim", "--record", ""], ["odom", "--csv", "", "x.log"],
+])
+def test_an_empty_path_is_a_usage_error_naming_the_option(
+        runner: CliRunner, args: list[str]) -> None:
+    # (click takes '' as a path: an empty --socket quietly meant the default socket.)
+    result = runner.invoke(main, args)
+    assert result.exit_code == 2, result.output
+    option = args[args.index("") - 1]
+    assert f"'{option}'" in result.output and "expected a path, got an empty string" in \
+        result.output

@@ -48,7 +48,7 @@ def bad(tmp_path: Path) -> str:
 ])
 def test_a_configuration_it_cannot_load(runner: CliRunner, bad: str, args: list[str]) -> None:
     plain = runner.invoke(main, [args[0], "-c", bad, *args[1:]])
-    said = f"{bad}: geometry.track: expected more than 0 m, got -1.0"
+    said = f"{bad}: geometry.track: expected at least 0.001 m, got -1.0"
     assert (plain.exit_code, plain.stdout, plain.stderr) == (2, "", f"Error: {said}\n")
     result = runner.invoke(main, [args[0], "-c", bad, *args[1:], "--json"])
     assert (result.exit_code, result.stderr) == (2, "")

@@ -80,6 +80,26 @@ def test_log_once_json_is_the_state_at_the_end_of_the_log(runner: CliRunner,
     assert doc["load"]["worst_percent"] == pytest.approx(4 * 310 * 135 / 1e4, rel=0.01)
 
 
+def test_a_file_without_a_readable_line_is_refused(runner: CliRunner, tmp_path: Path) -> None:
+    # (An empty log is a recording of nothing: test_empty_log.)
+    path = tmp_path / "not.log"
+    path.write_text("# a comment\ngarbage\nmore garbage\n")
+    result = monitor(runner, "--log", str(path), "--once")
+    assert result.exit_code == 2, result.output
+    assert result.stdout == ""
+    assert result.stderr.endswith(
+        f"Error: {path}: no readable frames in the log (2 unreadable lines); expected a "
+        f"candump log (candump -l, wheelgate run --record)\n")
+
+
+def test_a_log_of_error_frames_only_is_shown(runner: CliRunner, tmp_path: Path) -> None:
+    path = tmp_path / "errors.log"
+    path.write_text("(1.0) vcan0 20000004#0000000000000000\n")
+    result = monitor(runner, "--log", str(path), "--once")
+    assert result.exit_code == 0, result.output
+    assert "bus error frames 1" in result.stdout
+
+
 def test_log_once_text(runner: CliRunner, log_file: Path) -> None:
     result = monitor(runner, "--log", str(log_file), "--once", "--window", "1")
     assert result.exit_code == 0, result.output

@@ -91,8 +91,8 @@ def with_(path: str, value: object) -> dict[str, object]:
                           "drive, foxglove, gateway, "),
         ("drive", "hovercraft", "robot.yaml: drive: expected one of ackermann, differential, "),
         ("geometry.track", "wide", "robot.yaml: geometry.track: expected float, got 'wide'"),
-        ("geometry.track", -0.3, "robot.yaml: geometry.track: expected more than 0 m, got -0.3"),
-        ("geometry.track", 0.0, "robot.yaml: geometry.track: expected more than 0 m, got 0.0"),
+        ("geometry.track", -0.3, "robot.yaml: geometry.track: expected at least 0.001 m, got -0.3"),
+        ("geometry.track", 0.0, "robot.yaml: geometry.track: expected at least 0.001 m, got 0.0"),
         ("geometry.track", math.inf, "robot.yaml: geometry.track: expected a finite number, "
                                      "got inf"),
         ("geometry.track", ..., "robot.yaml: geometry.track: required key is missing"),
@@ -114,8 +114,19 @@ def with_(path: str, value: object) -> dict[str, object]:
                                            "'tesla'; expected one of: "),
         ("motor_defaults.gear_ratio", "FILL", "robot.yaml: motor_defaults.gear_ratio: expected "
                                               "float, got 'FILL'"),
-        ("motors.left.gear_ratio", 0, "robot.yaml: motors.left.gear_ratio: expected more than "
-                                      "0, got 0.0"),
+        ("motors.left.gear_ratio", 0, "robot.yaml: motors.left.gear_ratio: expected at least "
+                                      "0.0001, got 0.0"),
+        ("motors.left.gear_ratio", 1e308, "robot.yaml: motors.left.gear_ratio: expected at most "
+                                          "10000, got 1e+308"),
+        ("motors.left.max_rpm", 1e6, "robot.yaml: motors.left.max_rpm: expected at most 100000, "
+                                     "got 1000000.0"),
+        ("geometry.wheel_radius", 1e300, "robot.yaml: geometry.wheel_radius: expected at most "
+                                         "100 m, got 1e+300"),
+        ("name", "", "robot.yaml: name: expected 1 to 64 printable characters, got ''"),
+        ("name", "bot\u202e\x00", "robot.yaml: name: expected 1 to 64 printable characters, "
+                                  "got 'bot\\u202e\\x00'"),
+        ("gateway.cmd_timeout_s", 1e300, "robot.yaml: gateway.cmd_timeout_s: expected at most 60, "
+                                         "got 1e+300"),
         ("motors.left.max_rpm", -5, "robot.yaml: motors.left.max_rpm: expected more than 0, got "
                                     "-5.0"),
         ("motor_defaults.max_rpm", ..., "robot.yaml: motors.left.max_rpm: required key is missing"),
@@ -141,7 +152,7 @@ GENERIC_WHEEL = {"name": "a", "type": "fixed", "alpha": 1.5707963, "l": 0.2, "be
     ("change", "message"),
     [
         ({"type": "hover"}, "robot.yaml: wheels[0].type: expected one of 'fixed', 'steerable'"),
-        ({"radius": 0.0}, "robot.yaml: wheels[0].radius: expected more than 0, got 0.0"),
+        ({"radius": 0.0}, "robot.yaml: wheels[0].radius: expected at least 0.001 m, got 0.0"),
         ({"gamma": 0.5}, "robot.yaml: wheels[0]: wheel 'a': gamma applies to Swedish wheels"),
         ({"type": "castor"}, "robot.yaml: wheels[0]: wheel 'a': expected castor offset d > 0 m"),
         ({"type": "swedish", "gamma": 1.5707963267948966},

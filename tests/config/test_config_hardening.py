@@ -273,7 +273,7 @@ motors: {left: {node_id: 1}, right: {node_id: 2, max_rpm: 0}}
     with pytest.raises(ConfigError) as info:
         load_config(write(tmp_path, yaml.safe_dump(raw)))
     assert [p.partition(": ")[2] for p in info.value.problems] == [
-        "steering_defaults.gear_ratio: expected more than 0, got 0.0"], info.value.problems
+        "steering_defaults.gear_ratio: expected at least 0.0001, got 0.0"], info.value.problems
     # A key of the defaults that only a block's own driver does not take is that block's; a
     # gateway key in steering_defaults says so.
     raw = yaml.safe_load((CONFIG_DIR / "swerve.yaml").read_text())

@@ -28,6 +28,16 @@ def test_speed_limit_scales_whole_twist_and_reports() -> None:
     assert report.requested == Twist(2.0, 0.0, 2.0)
 
 
+def test_speed_limit_caps_reverse_wheel_speeds_too() -> None:
+    # A fixed example of what the property tests find only by chance: the cap holds for
+    # |speed|, so a reversing turn is scaled like a forward one.
+    m = model("differential", wheel_radius=0.1, track=0.4)
+    out, report = apply_limits(m, m.ik(Twist(-2.0, 0.0, -2.0)), Limits((12.0, 12.0)))
+    assert report.speed_scale == pytest.approx(0.5)
+    assert out.wheel_rad_s == pytest.approx((-8.0, -12.0))
+    assert out.twist == Twist(-1.0, 0.0, -1.0)
+
+
 def test_untouched_command_reports_nothing() -> None:
     m = model("differential", wheel_radius=0.1, track=0.4)
     res = m.ik(Twist(0.1, 0.0, 0.0))

@@ -76,3 +76,17 @@ def test_compose_is_group_composition() -> None:
     c, s = math.cos(a.theta_rad), math.sin(a.theta_rad)
     assert ab.x_m == pytest.approx(a.x_m + c * b.x_m - s * b.y_m)
     assert ab.y_m == pytest.approx(a.y_m + s * b.x_m + c * b.y_m)
+
+
+def test_published_twist_has_the_sign_of_the_motion() -> None:
+    # The rates published in WG_Odom_Velocity, the status and ROS 2 odometry: REP-103, a
+    # counter-clockwise turn is +wz, a forward move +vx.
+    m = model("differential", wheel_radius=0.1, track=0.4)
+    for twist in (Twist(0.0, 0.0, 1.0), Twist(0.0, 0.0, -1.0), Twist(0.5, 0.0, 0.0)):
+        odo = Odometry(m)
+        w = m.ik(twist).wheel_rad_s
+        odo.update([0.0, 0.0], 0.0)
+        st = odo.update([w[0] * 0.1, w[1] * 0.1], 0.1)
+        assert st.pose.theta_rad == pytest.approx(0.1 * twist.wz_rad_s)
+        assert (st.twist.vx_m_s, st.twist.wz_rad_s) == pytest.approx(
+            (twist.vx_m_s, twist.wz_rad_s))

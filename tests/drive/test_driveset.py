@@ -42,3 +42,20 @@ def test_enable_failed_is_given_in_status_order(monkeypatch: pytest.MonkeyPatch)
     monkeypatch.setattr(odrive, "enable_failed", lambda: [0, 1])
     assert [drives.status(0.0)[i].name for i in drives.enable_failed()] == [
         "front_right", "rear_left", "rear_right"]
+
+
+def test_a_driver_that_cannot_build_its_stop_leaves_the_others_stop(
+    monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    drives = DriveSet(load_config(CONFIG_DIR / "ackermann.yaml"))
+    (vesc, _), (odrive, _) = drives.groups
+    own = odrive.disable(0.0)
+    assert own
+
+    def broken(now_s: float) -> list[object]:
+        raise ZeroDivisionError("float divmod()")  # a defect, not a GatewayError
+
+    monkeypatch.setattr(vesc, "disable", broken)
+    assert drives.disable(0.0) == own
+    assert "VescDriver could not build the stop of 'rear_left', 'rear_right'" in caplog.text
+    assert "ZeroDivisionError: float divmod()" in caplog.text

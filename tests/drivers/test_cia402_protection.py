@@ -1,13 +1,15 @@
 """Controller-side protection of CiA 402 drives, the gateway's side
 (:mod:`drivers.cia402.protection`): why (a factory-default drive keeps turning when its master
 falls silent); the gateway sends its own heartbeat, writes each drive's
-heartbeat consumer (CiA 301 0x1016:01) and abort connection option code (CiA 402 0x6007),
-reads both back and only then enables the drive; what it does when that fails, under
-``gateway.controller_watchdog: required`` and ``warn``; and the keys that configure it.  What
-the drive then does when the gateway stops: ``test_cia402_drive_stops``.
+heartbeat consumer (CiA 301 0x1016:01), abort connection option code (CiA 402 0x6007) and error
+behaviour (CiA 301 0x1029:01), reads them back and only then enables the drive (then it reads the
+quick stop option code 0x605A: ``test_cia402_protection_reads``); what it does when that fails,
+under ``gateway.controller_watchdog: required`` and ``warn``; and the keys that configure it.
+What the drive then does when the gateway stops: ``test_cia402_drive_stops``.
 
 Golden frames follow CiA 301 (expedited SDO: ``23`` write 4 bytes, ``2B`` write 2 bytes,
-``40`` read, ``60`` write confirmed, ``43``/``4B`` 4/2 bytes read; heartbeat: 0x700 + node,
+``2F`` write 1 byte, ``40`` read, ``60`` write confirmed, ``43``/``4B``/``4F`` 4/2/1 bytes read;
+heartbeat: 0x700 + node,
 one byte NMT state, 0x05 OPERATIONAL) and are cross-checked with canopen's SDO constants.
 """
 
@@ -50,9 +52,9 @@ def bench(channel: str) -> Iterator[Callable[..., Bench]]:
 
 
 def protection_sdos(frames: list[Frame], cob: int) -> list[Frame]:
-    """The SDO frames on ``cob`` that address 0x1016 or 0x6007, in order."""
+    """The SDO frames on ``cob`` that address 0x1016, 0x6007, 0x1029 or 0x605A, in order."""
     return [f for f in frames if f.arbitration_id == cob
-            and int.from_bytes(f.data[1:3], "little") in (0x1016, 0x6007)]
+            and int.from_bytes(f.data[1:3], "little") in (0x1016, 0x6007, 0x1029, 0x605A)]
 
 
 # ----------------------------------------------------------------------------- golden frames
@@ -78,35 +80,41 @@ def test_the_gateway_heartbeat_golden_and_on_its_grid() -> None:
 
 def test_protection_sdos_golden(bench: Callable[..., Bench]) -> None:
     """Node 3, host 127, 200 ms, quick stop: what the gateway writes and reads, and what the
-    drive answers."""
+    drive answers (its 0x605A is the factory 2)."""
     b = bench([LEFT])
     assert b.enable([0.0])
     assert protection_sdos(b.sent, 0x603) == [
         Frame(0x603, hexb("23 16 10 01 C8 00 7F 00")),  # 0x1016:01 = 0x007F00C8
         Frame(0x603, hexb("2B 07 60 00 03 00 00 00")),  # 0x6007 = 3 (INTEGER16)
+        Frame(0x603, hexb("2F 29 10 01 00 00 00 00")),  # 0x1029:01 = 0 (UNSIGNED8)
         Frame(0x603, hexb("40 16 10 01 00 00 00 00")),  # read 0x1016:01
         Frame(0x603, hexb("40 07 60 00 00 00 00 00")),  # read 0x6007
+        Frame(0x603, hexb("40 29 10 01 00 00 00 00")),  # read 0x1029:01
+        Frame(0x603, hexb("40 5A 60 00 00 00 00 00")),  # read 0x605A
     ]
     assert [f.data for f in protection_sdos(b.seen, 0x583)] == [
         hexb("60 16 10 01 00 00 00 00"), hexb("60 07 60 00 00 00 00 00"),
-        hexb("43 16 10 01 C8 00 7F 00"), hexb("4B 07 60 00 03 00 00 00"),
+        hexb("60 29 10 01 00 00 00 00"), hexb("43 16 10 01 C8 00 7F 00"),
+        hexb("4B 07 60 00 03 00 00 00"), hexb("4F 29 10 01 00 00 00 00"),
+        hexb("4B 5A 60 00 02 00 00 00"),
     ]
     assert (127 << 16 | 200) == 0x007F00C8
-    # canopen's reading of the command bytes: expedited, size given, 4 and 2 bytes
-    for frame, size in zip(protection_sdos(b.sent, 0x603)[:2], (4, 2), strict=True):
+    # canopen's reading of the command bytes: expedited, size given, 4, 2 and 1 bytes
+    for frame, size in zip(protection_sdos(b.sent, 0x603)[:3], (4, 2, 1), strict=True):
         command = frame.data[0]
         assert command & 0xE0 == sdo_constants.REQUEST_DOWNLOAD
         assert command & sdo_constants.EXPEDITED and command & sdo_constants.SIZE_SPECIFIED
         assert 4 - ((command >> 2) & 3) == size
-    reads = protection_sdos(b.sent, 0x603)[2:]
+    reads = protection_sdos(b.sent, 0x603)[3:]
     assert all(f.data[0] == sdo_constants.REQUEST_UPLOAD for f in reads)
     sim = b.sims[0]
     assert (sim.object_value(0x1016, 1), sim.object_value(0x6007)) == (0x007F00C8, 3)
+    assert sim.object_value(0x1029, 1) == 0
     assert b.drv.protection_state(0) is ProtectionState.CONFIRMED
 
 
 def test_the_drive_is_not_enabled_before_the_read_back(bench: Callable[..., Bench]) -> None:
-    """NMT start and the first controlword go out only after the drive has answered both
+    """NMT start and the first controlword go out only after the drive has answered the
     read-backs; until then the protection is PENDING."""
     b = bench([LEFT])
     b.send(b.drv.enable(b.t))
@@ -120,8 +128,9 @@ def test_the_drive_is_not_enabled_before_the_read_back(bench: Callable[..., Benc
         if b.state() is DriveState.ENABLED:
             break
     assert b.state() is DriveState.ENABLED
-    answered = max(f.timestamp_s for f in protection_sdos(b.seen, 0x583))  # the last answer
-    assert protection_sdos(b.seen, 0x583)[-1].data == hexb("4B 07 60 00 03 00 00 00")
+    readbacks = [f for f in protection_sdos(b.seen, 0x583) if f.data[0] != 0x60][:3]
+    answered = readbacks[-1].timestamp_s  # the last read-back's answer
+    assert readbacks[-1].data == hexb("4F 29 10 01 00 00 00 00")
     nmt_start = next(t for t, f in sent if f == make_nmt(NmtCommand.START, 3))
     first_cw = next(t for t, f in sent if f.arbitration_id == 0x503)
     assert answered <= nmt_start < first_cw
@@ -129,7 +138,7 @@ def test_the_drive_is_not_enabled_before_the_read_back(bench: Callable[..., Benc
     assert {p for t, p in states if t >= answered} == {ProtectionState.CONFIRMED}
     between = {parse_sdo_request(f).index for t, f in sent if answered <= t < nmt_start
                and f.arbitration_id == 0x603}
-    assert between <= {0x6060, 0x6061}  # only the mode's SDOs after the read-back
+    assert between <= {0x605A, 0x6060, 0x6061}  # what the quick stop does, the mode
 
 
 # ----------------------------------------------------------------------------- the finding
@@ -260,8 +269,11 @@ def test_protection_as_the_driver_states_it() -> None:
     assert (quick.guard, quick.timeout_s, coast.timeout_s) == (Guard.CONFIGURED, 0.2, 0.5)
     assert quick.action.startswith("quick stop (0x605A quick stop option code")
     assert coast.action == "disable voltage (the power stage switches off: the motor coasts)"
-    assert quick.how == ("heartbeat consumer 0x1016 watching node 127 every 200 ms and abort "
-                         "connection option 0x6007 = 3, written by SDO and read back")
+    assert quick.how == ("heartbeat consumer 0x1016 watching node 127 every 200 ms, abort "
+                         "connection option 0x6007 = 3 and error behaviour 0x1029:01 = 0 (NMT "
+                         "PRE-OPERATIONAL, where the drive has the object), written by SDO and "
+                         "read back")
+    assert "not read yet; assumed 2" in quick.action  # (until the enable reads 0x605A)
     assert "0x6007 = 2" in coast.how and "every 500 ms" in coast.how
     assert drv.protection_state(0) is ProtectionState.PENDING
     seq = NodeSequencer(3, "node 3", drv.codec, ())  # no protection steps: not applicable

@@ -91,8 +91,11 @@ def run_sim(sim: VescSimulator, start: float, stop: float, dt: float = 0.001) ->
 def test_sim_releases_motor_after_its_timeout() -> None:
     sim = sim_for(timeout_s=0.5)
     sim.handle(make_set_rpm(23, ERPM), 0.0)
-    assert mode_of(sim) == SimMode.SPEED
+    # Started, but held at duty 0 until the set point has ramped up to s_pid_min_erpm
+    # (900 eRPM at 25000 eRPM/s: 36 ms).
+    assert mode_of(sim) == SimMode.BELOW_MIN_ERPM
     run_sim(sim, 0.0, 0.5)
+    assert mode_of(sim) == SimMode.SPEED
     assert sim.model.armed
     run_sim(sim, 0.5, 0.51)
     assert mode_of(sim) == SimMode.RELEASED
@@ -158,6 +161,7 @@ def test_sim_fault_ignores_commands_then_clears_itself() -> None:
     assert not sim.faults & SimFault.FAULT  # cleared itself after fault_stop_s
     assert mode_of(sim) == SimMode.RELEASED  # until the next command
     sim.handle(make_set_rpm(23, ERPM), t)
+    run_sim(sim, t, t + 0.05)  # the set point ramps up past s_pid_min_erpm (36 ms)
     assert mode_of(sim) == SimMode.SPEED
 
 
@@ -173,7 +177,7 @@ def test_sim_tachometer_wraps() -> None:
     sim = sim_for(initial_tacho=2**31 - 3)
     assert sim.tachometer == 2**31 - 3
     sim.handle(make_set_rpm(23, ERPM), 0.0)
-    run_sim(sim, 0.0, 0.1)
+    run_sim(sim, 0.0, 0.2)  # (held 36 ms at duty 0 while the set point ramps to min ERPM)
     assert sim.tachometer < 0  # wrapped through 0x80000000
     revs = sim.model.position_rad / (2 * math.pi)
     assert wrap_int32(sim.tachometer - (2**31 - 3)) == math.floor(revs * 6 * PP)

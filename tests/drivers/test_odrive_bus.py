@@ -108,6 +108,12 @@ def test_bus_rtr_encoder_requests(channel: str, request_mode: str, expected: boo
 
 
 def test_bus_extended_ids_and_vel_ramp(channel: str) -> None:
+    """Needs a kinder device than the factory's: it commands 10 turn/s and expects them
+    reached, while the 0.5 factory ``controller.config.vel_limit`` is 2 turn/s (and
+    ``vel_ramp_rate`` 1 turn/s^2), in odriverobotics/ODrive
+    ``Firmware/MotorControl/controller.hpp``.  A real robot's are set with odrivetool; the
+    simulator limits no finite speed and ramps at its own ``vel_ramp_rate_turns_s2`` (20
+    turn/s^2 by default)."""
     sim = OdriveSimulator(motor(0xFEDCBA, extended_id=True, input_mode=2))
     with rig(channel, [sim]) as r:
         r.send(r.drv.enable(r.t))

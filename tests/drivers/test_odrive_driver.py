@@ -290,7 +290,13 @@ def test_enable_retries_then_gives_up() -> None:
         assert frames in ([], arm)
         sent += bool(frames)
     assert sent == Axis.ENABLE_ATTEMPTS
-    assert drv.state(0, t) is DriveState.DISABLED
+    # A fault that says why (the heartbeats report no error and no procedure result), until
+    # the next enable.
+    assert drv.state(0, t) is DriveState.FAULT
+    assert drv.detail(0) == (
+        "stayed in IDLE after 3 CLOSED_LOOP_CONTROL requests without an error")
+    drv.enable(t)
+    assert drv.state(0, t) is DriveState.ENABLING
 
 
 def test_enable_grace_for_stale_error_heartbeat() -> None:

@@ -6,6 +6,7 @@ from __future__ import annotations
 import re
 import shutil
 from typing import TYPE_CHECKING
+from unittest import mock
 
 from gateway.core.types import ErrorCode, GatewayState, Twist
 from tests.conftest import CONFIG_DIR
@@ -20,14 +21,18 @@ def test_a_speed_beyond_the_controllers_field_faults_instead_of_crashing(
 ) -> None:
     # The example controller's Target_Velocity holds +-10000 rpm (its DBC's signal range); a
     # max_rpm of 12000 lets the limits pass 11000 rpm, which the codec refuses to encode.
+    # Binding refuses such a configuration (drivers.dbc.binding.check_command): this test
+    # needs the check off, as a driver without one would be, to reach the loop's safety net.
     shutil.copy(CONFIG_DIR / "example_controller.dbc", tmp_path)
     text = (CONFIG_DIR / "example_dbc.yaml").read_text().replace("max_rpm: 4000",
                                                                  "max_rpm: 12000")
     text = re.sub(r"^limits:\n(  .*\n)*", "", text, flags=re.MULTILINE)  # replaced below
     path = tmp_path / "robot.yaml"
     path.write_text(text + "limits: {max_linear_m_s: 10.0, max_wheel_accel_rad_s2: 100000.0}\n")
-    cfg = virtual_config(path, channel, rate_hz=100.0)
-    with Rig(cfg) as rig:
+    with mock.patch("drivers.dbc.binding.check_command"):
+        cfg = virtual_config(path, channel, rate_hz=100.0)
+        rig = Rig(cfg)
+    with rig:
         rig.enable()
         rig.send_can_twist(Twist(1.0, 0.0, 0.0))
         rig.advance(0.3)

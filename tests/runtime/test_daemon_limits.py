@@ -133,3 +133,23 @@ def test_an_announcement_that_cannot_be_written_does_not_stop_the_loop(
         rig.gw.supervisor.disable()
         rig.advance(0.05)
         assert rig.gw.state is GatewayState.DISABLED
+
+
+def test_a_drive_failing_in_the_shutdown_grace_still_closes_the_daemon(
+    channel: str, sock_path: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The stop goes out first; a drive's step that raises while the shutdown waits for the
+    replies is logged and the daemon still closes (its socket file goes)."""
+    from gateway.core.errors import IllegalTransitionError
+
+    def refuse(now_s: float) -> list[object]:
+        raise IllegalTransitionError("axis calibrating")
+
+    with Rig(virtual_config(TB3, channel, rate_hz=100.0), sock_path) as rig:
+        assert rig.daemon is not None
+        rig.enable()
+        monkeypatch.setattr(rig.gw.drives, "poll", refuse)
+        assert os.path.exists(sock_path)
+        rig.daemon.shutdown()
+        assert not os.path.exists(sock_path)
+        rig.daemon.shutdown()  # (twice: nothing left to do)

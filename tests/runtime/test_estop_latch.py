@@ -55,6 +55,27 @@ def test_a_damaged_or_unreadable_latch_still_holds(tmp_path: Path) -> None:
     latch.clear()  # twice is fine
 
 
+def test_a_latch_that_cannot_be_written_leaves_no_temporary_file(tmp_path: Path) -> None:
+    (tmp_path / "estop").mkdir()  # the latch's place taken by a directory
+    latch = EstopLatch(tmp_path / "estop")
+    assert not latch.set("e-stop requested on the socket")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["estop"]
+
+
+def test_a_state_file_that_is_a_directory_is_a_config_error(tmp_path: Path) -> None:
+    from gateway.config import load_config
+    from gateway.core.errors import ConfigError
+
+    robot = tmp_path / "robot.yaml"
+    robot.write_text((CONFIG_DIR / "turtlebot3_burger.yaml").read_text()
+                     + f"gateway: {{state_file: {tmp_path}}}\n")
+    with pytest.raises(ConfigError) as err:
+        load_config(robot)
+    assert str(err.value) == (
+        f"{robot}: gateway.state_file: expected the path of the e-stop latch file, got "
+        f"'{tmp_path}', a directory (the e-stop would not survive a restart)")
+
+
 def test_socket_estop_survives_a_restart_and_enable_on_start(channel: str, sock_path: str) -> None:
     cfg = virtual_config(TB3, channel, rate_hz=100.0)
     with Rig(cfg, sock_path) as rig:

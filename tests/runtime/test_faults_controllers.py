@@ -309,3 +309,24 @@ def test_enable_while_an_odrive_axis_calibrates_keeps_the_loop_alive(run: Run) -
     run.drive(0.1)
     assert run.rig.gw.supervisor.state is GatewayState.FAULT
     assert run.victim.motor.wheel in run.rig.gw.supervisor.reason
+
+
+@pytest.mark.parametrize("run", ["odrive"], indirect=True)
+def test_an_axis_found_calibrating_when_its_watchdog_setup_ends_is_a_fault(run: Run) -> None:
+    # The embedded robot's ODrive 0.6 axes arm only once their watchdog is read back: the
+    # arming request comes from the drivers' poll, which meets the calibrating axis there.
+    run.streaming = False
+    run.pilot.send(op="disable")
+    run.drive(0.5)
+    node = run.victim.motor.node_id
+    heartbeat = bytes([0, 0, 0, 0, AxisState.MOTOR_CALIBRATION, 0, 0, 0])  # no error
+    run.pilot.send(op="enable")
+    run.drive(2 / RATE_HZ)  # the enable taken, the setup under way
+    assert run.rig.gw.supervisor.state is GatewayState.ENABLING
+    for _ in range(round(0.5 * RATE_HZ)):
+        send_frames(run.rig.pilot, [Frame(node << 5 | CmdId.HEARTBEAT, heartbeat)])
+        run.drive(1 / RATE_HZ)
+    sup = run.rig.gw.supervisor
+    assert sup.state is GatewayState.FAULT
+    assert sup.reason.startswith("enable refused: ")
+    assert run.victim.motor.wheel in sup.reason and "MOTOR_CALIBRATION" in sup.reason

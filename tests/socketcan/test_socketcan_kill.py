@@ -10,9 +10,10 @@ with the protocol's driver: every wheel must be at zero within the controller's 
 margin, and stay there.
 
 The DJI C620/C610 has no known timeout: the test shows what the configuration acknowledges,
-the wheels keep turning.  CiA 402 drives send their feedback (TPDOs) on SYNC, which died with
-the gateway: this process then sends SYNC as a bus monitor would (SYNC feeds no heartbeat
-consumer).
+the wheels keep turning.  A CiA 402 drive whose heartbeat consumer fires quick-stops and, by
+its 0x1029:01 (CiA 301 7.5.2.32: 0, PRE-OPERATIONAL, which the gateway writes), sends no more
+TPDOs: its stop is read from the simulators' own state, polled, and the bus must show each
+drive's heartbeat-consumer EMCY (0x8130) and its PRE-OPERATIONAL heartbeat (0x7F).
 
 The emulated VM runs about 14 times slower than a host: the controller timeouts here are 1 s
 (the gateway's cycles there are late by tens of milliseconds at times), and the margin covers
@@ -108,6 +109,28 @@ def wheel_speeds(frames: list[Frame], config: Path) -> list[tuple[float, list[fl
     return out
 
 
+def truth_series(session: Session, seconds: float) -> list[tuple[float, list[float | None]]]:
+    """The simulators' true wheel speeds (rad/s), polled every 0.1 s for ``seconds``."""
+    out: list[tuple[float, list[float | None]]] = []
+    end = time.time() + seconds
+    while time.time() < end:
+        devices = session.truth()["devices"]
+        out.append((time.time(), [d["wheel_rad_s"] for d in devices
+                                  if d["wheel_rad_s"] is not None]))
+        time.sleep(0.1)
+    return out
+
+
+def consumer_fired(frames: list[Frame], nodes: list[int], t_kill: float) -> list[int]:
+    """The CiA 402 nodes that, after ``t_kill``, sent both the heartbeat-consumer EMCY (error
+    code 0x8130) and a PRE-OPERATIONAL heartbeat (0x7F)."""
+    after = [f for f in frames if f.timestamp_s > t_kill and not f.is_extended_id]
+    return [node for node in nodes
+            if any(f.arbitration_id == 0x080 + node and f.data[:2] == b"\x30\x81"
+                   for f in after)
+            and any(f.arbitration_id == 0x700 + node and f.data[:1] == b"\x7f" for f in after)]
+
+
 def stop_time(series: list[tuple[float, list[float | None]]], t_kill: float) -> float | None:
     """Seconds from the kill until every wheel reports at most :data:`STOPPED_RAD_S` for good,
     or ``None`` if some wheel never does."""
@@ -132,7 +155,7 @@ def test_kill_9_the_controllers_stop_the_wheels(
     raw["motor_defaults"].update(robot.get("motor", {}))
     config.write_text(yaml.safe_dump(raw, sort_keys=False))
     recorder = Recorder(vcan)
-    sync = None
+    series: list[tuple[float, list[float | None]]] = []
     try:
         with Session(config, vcan, str(sock_dir / "wg.sock"),
                      sim_rate_hz=robot.get("sim_rate", 1000.0)) as session:
@@ -147,20 +170,19 @@ def test_kill_9_the_controllers_stop_the_wheels(
             os.kill(session.procs["run"].pid, signal.SIGKILL)
             session.procs["run"].wait(timeout=30)
             if protocol == "cia402":
-                sync = can.Bus(interface="socketcan", channel=vcan)
-                task = sync.send_periodic(can.Message(arbitration_id=0x080, data=b"",
-                                                      is_extended_id=False), 0.1)
-            time.sleep(WATCH_S)
+                series = truth_series(session, WATCH_S)
+            else:
+                time.sleep(WATCH_S)
             after = session.truth()
-            if sync is not None:
-                task.stop()
     finally:
         recorder.close()
-        if sync is not None:
-            sync.shutdown()
     moving = [abs(d["wheel_rad_s"]) for d in before["devices"] if d["wheel_rad_s"] is not None]
     assert min(moving) > 0.5, f"the wheels were not all turning before the kill: {before}"
-    series = wheel_speeds(recorder.frames, config)
+    if protocol == "cia402":
+        nodes = [m.node_id for m in load_config(config).motors if m is not None]
+        assert consumer_fired(recorder.frames, nodes, t_kill) == nodes
+    else:
+        series = wheel_speeds(recorder.frames, config)
     assert series and series[-1][0] > t_kill + WATCH_S - 1.0, "no feedback after the kill"
     still = [abs(d["wheel_rad_s"]) for d in after["devices"] if d["wheel_rad_s"] is not None]
     stopped_after = stop_time(series, t_kill)

@@ -36,6 +36,7 @@ from gateway.core.status import BusErrorState, fault_names, state_name
 from gateway.core.types import DriveState
 from gateway.drive.driveset import DriveSet
 from gateway.drive.labels import FrameLabel, FrameLabeler
+from gateway.drive.rejections import LISTENER_REJECTIONS  # (not counted: no bus errors)
 from gateway.wire.busload import bus_load, frame_bits
 
 if TYPE_CHECKING:
@@ -50,10 +51,6 @@ _RPM_PER_RAD_S = 60.0 / (2.0 * math.pi)
 #: state).  For the others "armed" is the sending gateway's intent, which a listener cannot
 #: see, so an answering motor shows as ``online`` rather than ``disabled``.
 ARMING_ON_BUS = frozenset({"odrive"})
-#: Rejection reasons that only mean the listener did not send the request itself (a CiA 402
-#: SDO response answers the gateway's SDO request, which the monitor's drivers never sent):
-#: they are no errors on the bus and are not counted.
-LISTENER_REJECTIONS = frozenset({"unexpected SDO response"})
 #: The daemon's event counters shown as errors.
 _DAEMON_ERRORS = ("send_failures", "frames_unsent", "receive_failures", "bus_reopens",
                   "bad_can_twists", "fd_frames_ignored")

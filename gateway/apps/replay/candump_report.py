@@ -13,6 +13,11 @@ angles came from) it judges the replay by what else the log holds:
   send :data:`FOREIGN_SHARE` of the controllers' frames or more, the log is probably another
   robot's (a mecanum log replayed with a two-wheeled configuration takes two of its four
   wheels and reports a path that never was).
+
+What the replay went on without is counted in the summary and named in the warnings, as the
+unreadable lines are: the lines out of time and the breaks in the log's time
+(:mod:`gateway.apps.replay.timeline`), and the motors' frames their drivers rejected
+(:mod:`gateway.drive.rejections`; what they carried is missing from the odometry).
 """
 
 from __future__ import annotations
@@ -39,6 +44,10 @@ POSE_TOLERANCE_RATIO = 0.02
 FOREIGN_SHARE = 0.25
 
 
+def _many(n: int, thing: str) -> str:
+    return f"{n:,} {thing}{'' if n == 1 else 's'}"
+
+
 def _factor(s: ReplaySummary, wall_s: float) -> float | None:
     return s.duration_s / wall_s if wall_s > 0 and s.duration_s > 0 else None
 
@@ -47,12 +56,19 @@ def summary_lines(cfg: GatewayConfig, log_path: str, s: ReplaySummary, wall_s: f
                   min_interval_s: float) -> list[str]:
     """The summary, line by line."""
     factor = _factor(s, wall_s)
+    rejected = s.rejected_frames
     lines = [
         f"robot: {cfg.name} ({cfg.drive}, {cfg.model.n} wheels); log: {log_path}",
         f"frames: {s.entries:,} read ({s.received:,} received, {s.entries - s.received:,} "
-        f"sent), {s.motor_frames:,} of the motors; {s.corrupt_lines:,} unreadable lines skipped",
+        f"sent), {s.motor_frames:,} of the motors"
+        + (f" ({rejected:,} rejected by their drivers)" if rejected else "")
+        + f"; {s.corrupt_lines:,} unreadable lines skipped"
+        + (f", {_many(s.out_of_time_lines, 'line')} out of time skipped"
+           if s.out_of_time_lines else ""),
         f"time: {s.duration_s:.3f} s of log replayed in {wall_s:.3f} s"
-        + (f" ({factor:.1f}x real time)" if factor is not None else ""),
+        + (f" ({factor:.1f}x real time)" if factor is not None else "")
+        + (f"; {_many(s.breaks, 'break')} in the log's time" if s.breaks else "")
+        + (f" ({fixed(s.gap_s, 3)} s of gaps left out)" if s.gap_s else ""),
         f"odometry: {s.updates:,} updates, at most one per {short(min_interval_s * 1e3, 3)} ms "
         f"of log time",
         f"final pose: {pose_text(s.pose)}",
@@ -83,6 +99,16 @@ def summary_json(cfg: GatewayConfig, log_path: str, s: ReplaySummary, wall_s: fl
         "unreadable_lines": s.corrupt_lines,
         "unreadable": [{"line": e.line_number, "message": str(e)}
                        for e in replay.errors[:MAX_REPORTED]],
+        "out_of_time_lines": s.out_of_time_lines,
+        "out_of_time": [{"line": e.line_number, "time_s": e.time_s, "previous_s": e.previous_s,
+                         "message": str(e)} for e in replay.timeline.bad[:MAX_REPORTED]],
+        "time_breaks": s.breaks,
+        "breaks": [{"line": b.line_number, "time_s": b.time_s, "previous_s": b.previous_s,
+                    "message": str(b)} for b in replay.timeline.breaks[:MAX_REPORTED]],
+        "gap_s": s.gap_s,
+        "rejected_frames": s.rejected_frames,
+        "rejected": [{"driver": r.driver, "reason": r.reason, "frames": r.frames,
+                      "last": r.last} for r in s.rejections],
         "updates": s.updates,
         "skipped_updates": s.skipped_updates,
         "min_interval_s": replay.min_interval_s,
@@ -139,7 +165,10 @@ def foreign_controllers(cfg: GatewayConfig, replay: Replay,
 
 def warnings(cfg: GatewayConfig, s: ReplaySummary, foreign: Foreign | None = None) -> list[str]:
     """What the reader of the summary should not miss."""
-    out = []
+    out = [f"{r.driver} rejected {_many(r.frames, 'frame')} of the motors, the replay went on "
+           f"without {'it' if r.frames == 1 else 'them'} ({r.reason}"
+           + (f"; the last: {r.last}" if r.last else "") + ")"
+           for r in s.rejections]
     if foreign is not None and foreign.share >= FOREIGN_SHARE:
         named = ", ".join(f"{title} node {node}" for title, node, _ in foreign.devices[:8])
         more = f" and {len(foreign.devices) - 8} more" if len(foreign.devices) > 8 else ""

@@ -20,6 +20,10 @@ When the odometry is updated
     that changes within an interval costs a second-order error (``tools/bench_replay.py``
     measures it).  Whatever is pending is integrated at the end of the log.
 
+When the log's time jumps
+    A line out of time with the lines around it is skipped and reported; a jump the log goes
+    on from (a break) is bridged: :mod:`gateway.apps.replay.timeline`.
+
 Steering angles come from the steering actuators' feedback in the log when every steered
 wheel has one.  Otherwise the wheels were steered outside the gateway and the log holds no
 angles: robots with steered wheels take them from the source that
@@ -35,13 +39,14 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from gateway.apps.replay.gateway_pose import GatewayPoses
+from gateway.apps.replay.timeline import MAX_GAP_S, Timeline
 from gateway.core.errors import DecodeError, KinematicsError
 from gateway.core.kinematics import Odometry
 from gateway.core.odom_feed import OdomFeed
 from gateway.core.steer_log import SteeringSource, fixed_subset, reconstruct_steer
 from gateway.drive.driveset import DriveSet
+from gateway.drive.rejections import LISTENER_REJECTIONS, rejected_frames
 from gateway.wire.can import WgCodec
-from gateway.wire.candump import read_lines
 
 if TYPE_CHECKING:
     from collections.abc import Iterable, Iterator, Sequence
@@ -50,6 +55,7 @@ if TYPE_CHECKING:
     from gateway.core.kinematics import OdometryState, Pose
     from gateway.core.settings import GatewayConfig
     from gateway.core.types import Frame, Twist, WheelFeedback
+    from gateway.drive.rejections import RejectedFrames
     from gateway.wire.candump import CandumpError, LogEntry
 
 __all__ = [
@@ -75,7 +81,7 @@ _STAMP_SLACK_S = 1e-6
 class Sample:
     """The odometry after one update.
 
-    :param time_s: log time of the newest feedback, s.
+    :param time_s: log time of the newest feedback, s (the replay's clock after a step back).
     :param pose: integrated pose.
     :param twist: body twist over the last interval.
     :param slip_m_s: RMS residual of the forward kinematics over the last interval, m/s.
@@ -107,7 +113,8 @@ class ReplaySummary:
     :param updates: odometry updates.
     :param corrupt_lines: lines that could not be read (skipped).
     :param start_s: time stamp of the first entry, s (``None`` for an empty log).
-    :param end_s: time stamp of the last entry, s.
+    :param end_s: time stamp of the last entry, s (after a step back of the log's time, on
+        the replay's clock: :mod:`gateway.apps.replay.timeline`).
     :param steering: where the steering angles came from.
     :param skipped_updates: intervals the forward kinematics could not solve (too few wheels
         with feedback); their motion is lost.
@@ -116,6 +123,11 @@ class ReplaySummary:
         steering actuators with none (their wheels are then replayed at the neutral angle).
     :param pose_check: the replay against the log's own ``WG_Odom_Pose`` frames (a
         ``wheelgate run --record`` log has them), ``None`` without two of them.
+    :param out_of_time_lines: lines whose time stamp does not follow the lines around them
+        (skipped).
+    :param breaks: jumps of the log's time that the log goes on from (bridged).
+    :param gap_s: log time the breaks forward jump over, s (not in :attr:`duration_s`).
+    :param rejections: the motors' frames their drivers rejected, by driver and reason.
     """
 
     pose: Pose
@@ -131,13 +143,22 @@ class ReplaySummary:
     skipped_updates: int = 0
     silent_wheels: tuple[str, ...] = ()
     pose_check: PoseCheck | None = None
+    out_of_time_lines: int = 0
+    breaks: int = 0
+    gap_s: float = 0.0
+    rejections: tuple[RejectedFrames, ...] = ()
 
     @property
     def duration_s(self) -> float:
-        """Log time covered, s."""
+        """Log time covered (the breaks' gaps left out), s."""
         if self.start_s is None or self.end_s is None:
             return 0.0
-        return self.end_s - self.start_s
+        return self.end_s - self.start_s - self.gap_s
+
+    @property
+    def rejected_frames(self) -> int:
+        """The motors' frames their drivers rejected."""
+        return sum(r.frames for r in self.rejections)
 
 
 
@@ -149,8 +170,10 @@ class Replay:
         control period of the configuration (``gateway.rate_hz``), the gateway's own cadence.
     :param max_interval_s: log time after which the odometry is updated even though some
         driven wheel has no new sample (a wheel that fell silent), s.
+    :param max_gap_s: the largest step forward of the log's time that is no jump, s
+        (:mod:`gateway.apps.replay.timeline`).
     :raises DriverNotFoundError: if a driver cannot be loaded.
-    :raises ValueError: if an interval is negative or not finite.
+    :raises ValueError: if an interval is negative or not finite, or ``max_gap_s`` not positive.
     """
 
     def __init__(
@@ -158,6 +181,7 @@ class Replay:
         config: GatewayConfig,
         min_interval_s: float | None = None,
         max_interval_s: float = DEFAULT_MAX_INTERVAL_S,
+        max_gap_s: float = MAX_GAP_S,
     ) -> None:
         if min_interval_s is None:
             min_interval_s = 1.0 / config.loop.rate_hz
@@ -172,6 +196,8 @@ class Replay:
         self.max_interval_s = max_interval_s
         #: Lines that could not be read, in order (filled by :meth:`feed_lines`).
         self.errors: list[CandumpError] = []
+        #: The log's time line: lines out of time, breaks (kept by :meth:`feed_lines`).
+        self.timeline = Timeline(max_gap_s)
         #: Frames no driver took, by (identifier, extended): how many, and the last.
         self.unclaimed: dict[tuple[int, bool], tuple[int, Frame]] = {}
         covered = {name for a in config.steering for name in a.steers}
@@ -218,9 +244,10 @@ class Replay:
 
     def feed_lines(self, lines: Iterable[str]) -> Iterator[Sample]:
         """Every update from the lines of a candump log (unreadable lines are appended to
-        :attr:`errors` and skipped), the final one included."""
+        :attr:`errors` and skipped, the log's time is checked by :attr:`timeline`), the final
+        one included."""
         feed = self.feed
-        for entry in read_lines(lines, self.errors):
+        for entry in self.timeline.read(lines, self.errors):
             sample = feed(entry)
             if sample is not None:
                 yield sample
@@ -357,6 +384,10 @@ class Replay:
             steering=self.steering,
             skipped_updates=self._skipped,
             pose_check=self._poses.check(),
+            out_of_time_lines=len(self.timeline.bad),
+            breaks=len(self.timeline.breaks),
+            gap_s=self.timeline.gap_s,
+            rejections=rejected_frames(self.drives.groups, LISTENER_REJECTIONS),
             silent_wheels=(
                 *(self.model.names[i] for i in self._needed if feedback[i] is None),
                 *(a.wheel for a, fb in zip(self.config.steering, self.drives.steer_feedback(),

@@ -35,7 +35,7 @@ from gateway.apps.jog.keys import STOP, JogState, Request, jog_limits, split_key
 from gateway.apps.jog.screen import Screen, read_status, render, reply_error
 from gateway.apps.keyboard import read_keys
 from gateway.apps.layout import steering_of, wants_colour
-from gateway.cli import UsageExit, config_option
+from gateway.cli import FilePath, UsageExit, config_option
 from gateway.cli.commands import _common as common
 from gateway.cli.commands._guards import caught_signals
 from gateway.runtime.client import ClientError, ControlClient
@@ -296,7 +296,7 @@ def _session(fd_in: int, wake_fd: int, caught: list[str], term: _Terminal, link:
 
 @click.command()
 @config_option
-@click.option("--socket", "socket_path", type=click.Path(dir_okay=False), default=None,
+@click.option("--socket", "socket_path", type=FilePath(dir_okay=False), default=None,
               help="Control socket of the running daemon.")
 @click.option("--standalone", is_flag=True,
               help="Own the bus: run the daemon in this process on a private socket.")
@@ -312,7 +312,7 @@ def _session(fd_in: int, wake_fd: int, caught: list[str], term: _Terminal, link:
 @click.option("--turn", type=float, default=None,
               help=f"First angular speed of the keys, rad/s, at most the robot's limit "
                    f"(teleop_twist_keyboard's turn; default {keys.DEFAULT_ANGULAR_RAD_S:g}).")
-@click.option("--log", "log_path", type=click.Path(dir_okay=False, writable=True), default=None,
+@click.option("--log", "log_path", type=FilePath(dir_okay=False, writable=True), default=None,
               help="Write every twist and stop sent, with its reply, as JSON lines.")
 @click.pass_context
 def command(

@@ -51,12 +51,12 @@ from gateway.apps.monitor.view import ERROR_FRAMES, error_class_counter
 from gateway.bus.can_bus import open_bus, to_frame
 from gateway.bus.edge import bus_options
 from gateway.bus.health import CLASS_COUNTERS, ErrorFrame
-from gateway.cli import config_option, json_option
+from gateway.cli import FilePath, UsageExit, config_option, json_option
 from gateway.cli.commands._common import load, socket_for
 from gateway.cli.commands._guards import fail_json_of
 from gateway.core.errors import GatewayError
 from gateway.runtime.client import ClientError, ControlClient
-from gateway.wire.candump import CandumpError, parse_line
+from gateway.wire.candump import CandumpError, is_error_frame_line, parse_line
 from gateway.wire.socket.status import status_from_json
 
 if TYPE_CHECKING:
@@ -73,8 +73,6 @@ MAX_WINDOW_S = 3600.0
 PIPE_WIDTH = 1000
 #: ANSI: cursor home, clear screen.
 CLEAR = "\x1b[H\x1b[2J"
-#: CAN_ERR_FLAG of SocketCAN, which candump and python-can write into an error frame's ID.
-CAN_ERR_FLAG = 0x20000000
 #: Keys of the live view: quit, next and previous page of frame IDs (Page Down, Page Up).
 QUIT_KEYS = frozenset({"q", "Q", "\x1b"})  # Esc alone (an escape sequence is one key)
 NEXT_KEYS = frozenset({" ", "n", "\x1b[6~"})
@@ -191,18 +189,20 @@ class Screen:
 
 @click.command()
 @config_option
-@click.option("--socket", "socket_path", type=click.Path(dir_okay=False), default=None,
+@click.option("--socket", "socket_path", type=FilePath(dir_okay=False), default=None,
               help="Control socket of the daemon to watch (the default source).")
 @click.option("--bus", "use_bus", is_flag=True,
               help="Listen on the configured bus directly (read-only: sends nothing).")
-@click.option("--log", "log_path", type=click.Path(exists=True, dir_okay=False), default=None,
+@click.option("--log", "log_path", type=FilePath(exists=True, dir_okay=False), default=None,
               help="Replay a candump log (e.g. from `wheelgate run --record`).")
 @click.option("--fast", is_flag=True, help="With --log: replay as fast as possible.")
 @click.option("--refresh", type=float, default=5.0, show_default=True,
-              callback=_positive(MAX_REFRESH_HZ, "Hz"), help="Screen updates per second.")
+              callback=_positive(MAX_REFRESH_HZ, "Hz"),
+              help=f"Screen updates per second, above 0 and at most {MAX_REFRESH_HZ:g}.")
 @click.option("--window", type=float, default=WINDOW_S, show_default=True,
               callback=_positive(MAX_WINDOW_S, "s"),
-              help="Rates and bus load average over this many seconds.")
+              help=f"Rates and bus load average over this many seconds, above 0 and at "
+                   f"most {MAX_WINDOW_S:g}.")
 @click.option("--once", is_flag=True, help="Print one snapshot and exit.")
 @json_option
 @click.pass_context
@@ -254,16 +254,6 @@ def _client(ctx: click.Context, config_path: str | None, socket_path: str | None
         raise click.ClickException(f"{err}{hint}") from err
 
 
-def _is_error_frame(line: str) -> bool:
-    """Whether a candump line carries an error frame (CAN_ERR_FLAG in its 8-digit ID)."""
-    parts = line.split()
-    ident = parts[2].partition("#")[0] if len(parts) >= 3 else ""
-    try:
-        return len(ident) == 8 and bool(int(ident, 16) & CAN_ERR_FLAG)
-    except ValueError:
-        return False
-
-
 def watch_log(cfg: GatewayConfig, path: str, screen: Screen, period: float, window: float,
               fast: bool, once: bool) -> None:
     """Replay a candump log through a :class:`BusMonitor` on the log's clock."""
@@ -280,7 +270,7 @@ def watch_log(cfg: GatewayConfig, path: str, screen: Screen, period: float, wind
             try:
                 entry = parse_line(line, number)
             except CandumpError as err:
-                if _is_error_frame(line):
+                if is_error_frame_line(line):
                     mon.count(ERROR_FRAMES)
                 else:
                     mon.count("unreadable lines")
@@ -299,6 +289,10 @@ def watch_log(cfg: GatewayConfig, path: str, screen: Screen, period: float, wind
             if not once and number & 0xFF == 0 and (now := time.monotonic()) >= next_draw:
                 screen.show(mon.snapshot(t))
                 next_draw = max(next_draw + period, now)
+    bad = mon.counters["unreadable lines"]
+    if bad and t is None and not mon.counters[ERROR_FRAMES]:  # (an empty log shows no frames)
+        raise UsageExit(f"{path}: no readable frames in the log ({bad:,} unreadable lines); "
+                        f"expected a candump log (candump -l, wheelgate run --record)")
     screen.final(mon.snapshot(0.0 if t is None else t))
 
 

@@ -1,11 +1,20 @@
 """``wheelgate odom``: replay a candump log or a live-view recording through the odometry.
 
 The log is read line by line (a line that cannot be read is reported with its number and
-skipped), every frame goes to the drivers the configuration names, stamped with its recorded
-time, and the odometry integrates the wheels' positions as the gateway does
-(:mod:`gateway.apps.replay.replay`).  Prints the final pose, the distance, what was read and how
-fast;
-``--csv`` writes the trajectory, ``--plot`` draws it (needs ``wheelgate[plot]``).
+skipped, as is a line whose time stamp is out of time with the lines around it; a jump of the
+log's time that the log goes on from is bridged and reported:
+:mod:`gateway.apps.replay.timeline`), every frame goes to the drivers the configuration names,
+stamped with its recorded time, and the odometry integrates the wheels' positions as the
+gateway does (:mod:`gateway.apps.replay.replay`).  Prints the final pose, the distance, what
+was read and how fast; ``--csv`` writes the trajectory, ``--plot`` draws it (needs
+``wheelgate[plot]``).
+
+Exit status: 0 the replay is printed, also when it went on without something: unreadable
+lines, lines out of time, breaks in the log's time and the frames the drivers rejected are
+counted in the summary and named in warnings on stderr (``--json`` holds them too), as bad
+data in a log that still replays; 2 bad usage, a log that gives no odometry (no readable frame,
+or none that the configuration's motors can use: the error says why, the rejected frames
+included) or ``--plot`` without matplotlib.
 
 An MCAP file (``wheelgate run --record-mcap``; told by its ``.mcap`` suffix or its magic bytes)
 is replayed from its ``/wheels`` and ``/steering`` channels instead
@@ -30,7 +39,7 @@ from gateway.apps.replay import candump_report, mcap_report
 from gateway.apps.replay.candump_report import MAX_REPORTED
 from gateway.apps.replay.mcap_source import McapMissingError, McapReplay, RecordingError, is_mcap
 from gateway.apps.replay.replay import Replay
-from gateway.cli import UsageExit, config_option, json_option
+from gateway.cli import FilePath, UsageExit, config_option, json_option
 from gateway.cli.commands._common import check_finite, load
 from gateway.cli.commands._guards import fail_json
 
@@ -138,15 +147,16 @@ def _row(sample: Sample) -> list[str]:
 @click.command()
 @config_option
 @click.argument("log_path", metavar="LOG",
-                type=click.Path(exists=True, dir_okay=False, readable=True))
-@click.option("--csv", "csv_path", type=click.Path(dir_okay=False), default=None,
-              help="Write the trajectory: time_s (the log's time stamp), x_m, y_m, "
+                type=FilePath(exists=True, dir_okay=False, readable=True))
+@click.option("--csv", "csv_path", type=FilePath(dir_okay=False), default=None,
+              help="Write the trajectory: time_s (the log's time stamp; where the log's "
+                   "clock was set back, it goes on from the time before), x_m, y_m, "
                    "theta_rad, vx_m_s, vy_m_s, wz_rad_s, slip_m_s, then every wheel's speed "
                    "(rad/s).")
 @click.option("--every", type=click.IntRange(min=1, max=MAX_EVERY), default=1,
               show_default=True,
               help="Keep every Nth odometry update (and the last) for --csv and --plot.")
-@click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None,
+@click.option("--plot", "plot_path", type=FilePath(dir_okay=False), default=None,
               help="Draw the trajectory to this image (PNG); needs wheelgate[plot].")
 @click.option("--robots", type=click.IntRange(min=0, max=MAX_ROBOTS), default=8,
               show_default=True,
@@ -158,7 +168,8 @@ def _row(sample: Sample) -> list[str]:
 @click.option("--progress", is_flag=True,
               help="Show a progress bar on stderr even when it is not a terminal.")
 @click.option("-q", "--quiet", is_flag=True,
-              help="No progress bar and no line-by-line list of unreadable lines.")
+              help="No progress bar and no line-by-line list of unreadable lines, lines out "
+                   "of time and breaks in the log's time (the summary counts them).")
 @json_option
 @click.pass_context
 def command(
@@ -183,7 +194,11 @@ def command(
 
     A LOG.mcap (wheelgate run --record-mcap) is replayed from its /wheels angles (and
     /steering) and compared with its own /odom; --min-interval-ms and --progress do not apply
-    to it."""
+    to it.
+
+    Exit 0: the replay, also with unreadable lines, lines out of time, breaks in the log's time
+    or frames the drivers rejected (counted in the summary, named in warnings); 2: bad usage,
+    or a log that gives no odometry."""
     if min_interval_ms is not None:
         check_finite(**{"min-interval-ms": min_interval_ms})
     plotting, no_plot = _plotting() if plot_path is not None else (None, None)
@@ -282,6 +297,10 @@ def _no_odometry(cfg: GatewayConfig, log_path: str, summary: ReplaySummary,
            f"belong to {cfg.name}'s motors"
            + (f", none from {', '.join(summary.silent_wheels)}"
               if summary.silent_wheels else ""))
+    if summary.rejections:
+        why += f"; their drivers rejected {summary.rejected_frames:,} of them (" + "; ".join(
+            f"{r.driver}, {r.reason}" + (f": {r.last}" if r.last else "")
+            for r in summary.rejections) + ")"
     if foreign is not None:
         named = ", ".join(f"{title} node {node}" for title, node, _ in foreign.devices[:8])
         why += f"; the log's controllers are ones {cfg.name}'s configuration does not name " \
@@ -349,11 +368,14 @@ class _Sink:
 
 
 def _report_errors(replay: Replay, quiet: bool) -> None:
-    errors = replay.errors
-    if not errors or quiet:
+    """The lines the replay skipped or bridged, the first :data:`MAX_REPORTED` of each kind."""
+    if quiet:
         return
-    for err in errors[:MAX_REPORTED]:
-        click.echo(f"warning: skipped {err}", err=True)
-    if len(errors) > MAX_REPORTED:
-        click.echo(f"warning: ... and {len(errors) - MAX_REPORTED:,} more unreadable lines",
-                   err=True)
+    timeline = replay.timeline
+    for items, prefix, what in ((replay.errors, "skipped ", "unreadable lines"),
+                                (timeline.bad, "skipped ", "lines out of time"),
+                                (timeline.breaks, "", "breaks in the log's time")):
+        for item in items[:MAX_REPORTED]:
+            click.echo(f"warning: {prefix}{item}", err=True)
+        if len(items) > MAX_REPORTED:
+            click.echo(f"warning: ... and {len(items) - MAX_REPORTED:,} more {what}", err=True)

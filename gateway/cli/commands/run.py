@@ -10,7 +10,7 @@ import threading
 
 import click
 
-from gateway.cli import config_option
+from gateway.cli import FilePath, config_option
 from gateway.cli.commands._common import check_finite, load
 from gateway.cli.commands._guards import MAX_DURATION_S
 from gateway.drive.driveset import DriveSet
@@ -39,11 +39,13 @@ def tell(line: str) -> None:
 @config_option
 @click.option("--sim", is_flag=True,
               help="Simulate every motor controller on a virtual bus in this process.")
-@click.option("--record", type=click.Path(dir_okay=False, writable=True), default=None,
+@click.option("--record", type=FilePath(dir_okay=False, writable=True), default=None,
               help="Log every frame sent and received, candump format (.log).")
-@click.option("--socket", "socket_path", type=click.Path(dir_okay=False), default=None,
-              help="Control socket path (default: the config's, else /run/wheelgate/...).")
-@click.option("--record-mcap", type=click.Path(dir_okay=False, writable=True), default=None,
+@click.option("--socket", "socket_path", type=FilePath(dir_okay=False), default=None,
+              help="Control socket path (default: the config's gateway.socket, else "
+                   "$WHEELGATE_SOCKET, else /run/wheelgate/wheelgate.sock when that directory "
+                   "is writable, else $XDG_RUNTIME_DIR/wheelgate.sock, else one in /tmp).")
+@click.option("--record-mcap", type=FilePath(dir_okay=False, writable=True), default=None,
               help="Record odometry, transforms, wheel speeds, state and errors to an MCAP "
                    "file (needs wheelgate[foxglove]; `wheelgate odom FILE.mcap` replays it).")
 @click.option("--duration", type=click.FloatRange(min=0.0, min_open=True, max=MAX_DURATION_S),

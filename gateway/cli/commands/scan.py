@@ -72,7 +72,8 @@ def nothing_found_hint(interface: str, channel: str) -> str:
 @config_option
 @click.option("--timeout", "timeout_s", type=float, default=DEFAULT_TIMEOUT_S,
               show_default=True, callback=_timeout,
-              help="Seconds to listen and ask (the first quarter only listens).")
+              help=f"Seconds to listen and ask, above 0 and at most {MAX_TIMEOUT_S:g} (the "
+                   f"first quarter only listens).")
 @json_option
 @click.pass_context
 def command(ctx: click.Context, config_path: str | None, timeout_s: float,

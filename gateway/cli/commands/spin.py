@@ -52,7 +52,7 @@ from gateway.apps.spin.plan import (
 from gateway.apps.spin.runner import ArmRefusedError, BusInUseError, SpinFailedError, run_spin
 from gateway.bus.can_bus import open_bus
 from gateway.bus.edge import bus_options
-from gateway.cli import config_option, json_option
+from gateway.cli import FilePath, config_option, json_option
 from gateway.cli.commands._common import VIRTUAL_HINT, check_finite, load, socket_for
 from gateway.cli.commands._guards import fail_json, fail_json_of
 from gateway.core.errors import DriveFaultError, GatewayError, GatewayTimeoutError
@@ -252,7 +252,7 @@ def _truth_seen(record: SpinRecord, measured: Measured | None) -> float | None:
 @click.option("--sim", is_flag=True,
               help="Spin the motor's simulated controller on a virtual bus in this process "
                    "(the simulator then says what the wheel did).")
-@click.option("--socket", "socket_path", type=click.Path(dir_okay=False), default=None,
+@click.option("--socket", "socket_path", type=FilePath(dir_okay=False), default=None,
               help="The daemon's control socket to check (default: the configuration's).")
 @click.option("--ask/--no-ask", default=True, show_default=True,
               help="Ask what the wheel did (the only check of invert and gear_ratio).  "
@@ -269,7 +269,8 @@ def command(ctx: click.Context, config_path: str | None, motor_name: str, speed:
     Lift the wheel off the ground.  Any key (Ctrl-Z too) or Ctrl-C stops; the stop (zero and
     disarm) is always sent.  Exit 0: it agrees; 4: something to fix; 1: an error, or no answer
     to the question without --no-ask; 2: bad usage, or a configuration that leaves no spin
-    possible; 130: Ctrl-C.  With --json, "ok" is true exactly when the exit status is 0.
+    possible; 130: Ctrl-C; 131: Ctrl-\\ (SIGQUIT).  With --json, "ok" is true exactly when
+    the exit status is 0.
     """
     try:
         check_finite(duration=duration, **({} if speed is None else {"speed": speed}))

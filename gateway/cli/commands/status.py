@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 
 import click
 
-from gateway.cli import config_option, json_option
+from gateway.cli import FilePath, config_option, json_option
 from gateway.cli.commands._common import daemon_runs, socket_for
 from gateway.cli.commands._guards import fail_json_of
 from gateway.core.errors import GatewayError
@@ -24,7 +24,7 @@ if TYPE_CHECKING:
 
 @click.command()
 @config_option
-@click.option("--socket", "socket_path", type=click.Path(dir_okay=False), default=None,
+@click.option("--socket", "socket_path", type=FilePath(dir_okay=False), default=None,
               help="Control socket of the daemon.")
 @json_option
 @click.pass_context

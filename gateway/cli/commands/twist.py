@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 
 import click
 
-from gateway.cli import EXIT_INFEASIBLE, config_option
+from gateway.cli import EXIT_INFEASIBLE, FilePath, config_option
 from gateway.cli.commands._common import (
     check_finite,
     refuse_other_robot,
@@ -38,7 +38,7 @@ SIGNAL_LATENCY_S = 0.05
                    f"stop (0: send once).  Ctrl-C, SIGTERM or SIGHUP end it early, with stop.")
 @click.option("--rate", type=click.FloatRange(min=1.0, max=100.0), default=10.0,
               show_default=True, help="How often to send while --duration lasts (Hz).")
-@click.option("--socket", "socket_path", type=click.Path(dir_okay=False), default=None,
+@click.option("--socket", "socket_path", type=FilePath(dir_okay=False), default=None,
               help="Control socket of the daemon.")
 @click.pass_context
 def command(
