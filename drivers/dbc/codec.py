@@ -277,9 +277,11 @@ class DbcCodec:
                 else:
                     value = values[m.index]
                     if value is not None:
-                        if not m.take_low <= value <= m.take_high:  # also false for NaN
-                            raise range_error(value, m, group)
-                        data[m.name] = min(max(value, m.low), m.high)  # (rounding)
+                        if not m.low <= value <= m.high:  # (nearly always in range)
+                            if not m.take_low <= value <= m.take_high:  # also false for NaN
+                                raise range_error(value, m, group)
+                            value = m.low if value < m.low else m.high  # (rounding)
+                        data[m.name] = value
             frames.append(group.frame(data))
         return frames
 
