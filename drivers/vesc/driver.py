@@ -7,17 +7,19 @@ converted per motor by :mod:`drivers.vesc.axis`.
 Behaviour that follows from the protocol:
 
 * **No enable or arm state.**  A VESC drives the motor on any valid command.  :meth:`enable`
-  therefore only starts the command stream (SET_RPM 0 to every motor) and marks the driver
-  enabled; :meth:`disable` sends SET_CURRENT 0, which releases the motor (below
-  ``cc_min_current`` the firmware stops switching), and stops the stream.  A motor reads
-  ENABLING after :meth:`enable` until both status frames have arrived again, then ENABLED.
-* **Controller-side protection (stated).**  The VESC releases the motor, which coasts, when no
-  command arrives for its app configuration's ``timeout_msec`` (VESC Tool: App Settings >
-  General > Timeout; 1000 ms from the factory, ``applications/appconf_default.h``; brake
-  current ``timeout_brake_current``, 0 A; ``timeout.c``).  It is written only with the whole
-  app configuration, not by a simple CAN command, so wheelgate can neither set nor read it:
-  the configuration states it as ``controller_timeout_s`` (:meth:`protection`: STATED, or
-  UNSTATED with a warning when 0, the default).
+  reads every VESC's timeout back (below), and arms each motor -- starts its command stream,
+  SET_RPM 0 -- once its read ended and :meth:`may_arm`; :meth:`disable` sends SET_CURRENT 0,
+  which releases the motor (below ``cc_min_current`` the firmware stops switching), and stops
+  the streams.  A motor reads ENABLING after :meth:`enable` until it is armed and both status
+  frames have arrived again, then ENABLED.
+* **Controller-side protection (stated, read back).**  The VESC releases the motor, which
+  coasts, when no command arrives for its app configuration's ``timeout_msec`` (VESC Tool: App
+  Settings > General > Timeout; 1000 ms from the factory, ``applications/appconf_default.h``;
+  brake current ``timeout_brake_current``, 0 A; ``timeout.c``).  It is written only with the
+  whole app configuration, so wheelgate does not set it: the configuration states it as
+  ``controller_timeout_s`` (:meth:`protection`: STATED, or UNSTATED with a warning when 0, the
+  default), and :meth:`enable` reads it back with COMM_GET_APPCONF (:mod:`drivers.vesc.appconf`)
+  and checks it (:mod:`drivers.vesc.readback`, which says the policy).
 * **Keep-alive.**  :meth:`command` sends SET_RPM on every call.  :meth:`poll` resends the last
   command once ``command_period_s`` has passed since the last send, so a caller that ticks
   :meth:`poll` at :attr:`VescDriver.keepalive_period_s` keeps the motor running even when
@@ -55,21 +57,28 @@ import logging
 import math
 from typing import TYPE_CHECKING, ClassVar
 
+from drivers.vesc.appconf import HOST_ID
 from drivers.vesc.axis import Axis
 from drivers.vesc.codec import (
-    CanPacketId,
     arbitration_id,
-    decode,
     make_set_current,
     make_set_rpm,
     unpack_status,
 )
-from drivers.vesc.min_erpm import BELOW_MIN_ERPM, BandWatch, uncontrolled_band
+from drivers.vesc.frames import (
+    RECEIVED,
+    STATUS,
+    STATUS_5,
+    UNUSED,
+    claims,
+    message_name,
+    pong_is_ours,
+)
+from drivers.vesc.min_erpm import BELOW_MIN_ERPM, BandWatch, doubt, uncontrolled_band
+from drivers.vesc.readback import Outcome, TimeoutReadback, Wanted, read_protection
 from drivers.vesc.settings import TIMEOUT_ACTION, TIMEOUT_FIX, UNSTATED_HOW, VescOptions
-from gateway.core.errors import DecodeError
-from gateway.core.protection import Guard, Protection
+from gateway.core.protection import Guard, Protection, ProtectionState
 from gateway.core.types import DriveState, WheelFeedback
-from gateway.drive.claims import FrameClaim
 from gateway.drive.driver import MotorDriver
 
 if TYPE_CHECKING:
@@ -77,26 +86,9 @@ if TYPE_CHECKING:
 
     from drivers.vesc.codec import VescStatus, VescStatus5
     from gateway.core.types import Frame, MotorConfig
+    from gateway.drive.claims import FrameClaim
 
 log = logging.getLogger(__name__)
-
-#: The liveness streams (:attr:`VescDriver.LIVENESS_STREAMS`), by index.
-_STATUS, _STATUS_5 = 0, 1
-#: Status packets of our VESCs that :meth:`VescDriver.on_frame` takes without decoding.
-_UNUSED = 2
-#: Every status packet :meth:`VescDriver.on_frame` takes, in packet order, with its use.
-_RECEIVED = (
-    (CanPacketId.STATUS, _STATUS),
-    (CanPacketId.STATUS_2, _UNUSED),
-    (CanPacketId.STATUS_3, _UNUSED),
-    (CanPacketId.STATUS_4, _UNUSED),
-    (CanPacketId.STATUS_5, _STATUS_5),
-    (CanPacketId.STATUS_6, _UNUSED),
-)
-#: Every PONG, whatever pinger's ID is in its low byte.
-_PONGS = FrameClaim(CanPacketId.PONG << 8, 0x1FFFFF00, True)
-#: The commands the driver sends.
-_SENT = (CanPacketId.SET_CURRENT, CanPacketId.SET_RPM)
 
 
 class VescDriver(MotorDriver[VescOptions]):
@@ -118,6 +110,8 @@ class VescDriver(MotorDriver[VescOptions]):
     TIMEOUT_FIX: ClassVar[str] = TIMEOUT_FIX
     #: Seconds between two log lines about commands below ``min_erpm``.
     BAND_LOG_EVERY_S: ClassVar[float] = 5.0
+    #: The timeout is read back while enabling, and a wrong one is a failed protection.
+    CONFIGURES_PROTECTION: ClassVar[bool] = True
 
     def __init__(self, motors: Sequence[MotorConfig]) -> None:
         super().__init__(motors)
@@ -126,14 +120,18 @@ class VescDriver(MotorDriver[VescOptions]):
             for i, (m, o, s) in enumerate(zip(self.motors, self.opts, self.motor_scale,
                                               strict=True))
         )
-        #: Identifier of a status frame of ours -> (its motor, its stream or _UNUSED).
+        #: Identifier of a status frame of ours -> (its motor, its stream or UNUSED).
         self._routes = {
             arbitration_id(packet, a.node_id): (a, use)
-            for a in self._axes for packet, use in _RECEIVED
+            for a in self._axes for packet, use in RECEIVED
         }
-        self._enabled = False
+        self._enabled = self._settling = False
         self._enabled_at_s: float | None = None
         self._band_watch = BandWatch(self.BAND_LOG_EVERY_S)
+        #: The timeout reads; none when a VESC has the gateway's own ID (its replies' ID).
+        self.readback = None if HOST_ID in self._index else TimeoutReadback(
+            [Wanted(a.node_id, o.controller_timeout_s, o.command_period_s)
+             for a, o in zip(self._axes, self.opts, strict=True)])
         for a in self._axes:
             self.set_fault(a.index, self.faults(a.index), a.missing())
 
@@ -155,30 +153,29 @@ class VescDriver(MotorDriver[VescOptions]):
 
     def protection(self, index: int) -> Protection:
         """STATED from ``controller_timeout_s``; else UNSTATED, saying what is known (the
-        factory timeout, which wheelgate cannot read) and how to state it."""
+        factory timeout) and how to state it; with what the last enable read back."""
         prot = super().protection(index)
-        if prot.guard is not Guard.UNSTATED:
-            return prot
-        return dataclasses.replace(prot, how=UNSTATED_HOW)
+        if prot.guard is Guard.UNSTATED:
+            prot = dataclasses.replace(prot, how=UNSTATED_HOW)
+        rb, stated = self.readback, self.opts[index].controller_timeout_s
+        return prot if rb is None else read_protection(prot, rb.results[index], stated)
+
+    def protection_state(self, index: int) -> ProtectionState:
+        """PENDING until the timeout was read back (or the read gave up: NOT_APPLICABLE);
+        CONFIRMED as stated; FAILED when it differs (:mod:`drivers.vesc.readback`)."""
+        rb = self.readback
+        return ProtectionState.NOT_APPLICABLE if rb is None else rb.results[index].state
+
+    def protection_failure(self, index: int) -> str:
+        """What the VESC's timeout read back as, against what it must be."""
+        why = self.readback.results[index].why if self.readback is not None else ""
+        return why or super().protection_failure(index)
 
     def doubts(self) -> tuple[str, ...]:
-        """A motor whose VESC speed-controls none of the speeds it may be commanded: ``max_rpm``
-        at the wheel is inside the band below ``min_erpm`` (:meth:`uncontrolled_band`), so the
-        wheel can only stop or brake -- ``spin`` has no speed to try, a twist no speed to
-        follow."""
-        out = []
-        for i, m in enumerate(self.motors):
-            band = self.uncontrolled_band(i)
-            if band is not None and not m.steering and m.max_wheel_rad_s <= band[1]:
-                o = self.opts[i]
-                out.append(
-                    f"motor {m.wheel!r}: its VESC speed-controls no speed it may be commanded: "
-                    f"max_rpm {m.max_rpm:g} is {m.max_wheel_rad_s:.3g} rad/s at the wheel, and "
-                    f"below {band[1]:.3g} rad/s (min_erpm {o.min_erpm:g} with pole_pairs "
-                    f"{o.pole_pairs} and gear_ratio {m.gear_ratio:g}) the VESC does not run its "
-                    f"speed controller; lower s_pid_min_erpm on the VESC (VESC Tool) and "
-                    f"min_erpm here, or check pole_pairs, gear_ratio and max_rpm")
-        return tuple(out)
+        """A motor whose VESC speed-controls none of the speeds it may be commanded
+        (:func:`drivers.vesc.min_erpm.doubt`)."""
+        return tuple(d for i, (m, o) in enumerate(zip(self.motors, self.opts, strict=True))
+                     if (d := doubt(m, o.min_erpm, o.pole_pairs, self.uncontrolled_band(i))))
 
     def uncontrolled_band(self, index: int) -> tuple[float, float] | None:
         """The wheel speeds (rad/s) motor ``index``'s VESC does not speed-control: ``(0.0,
@@ -206,20 +203,60 @@ class VescDriver(MotorDriver[VescOptions]):
     # ----------------------------------------------------------------- commands
 
     def _enable(self, now_s: float) -> list[Frame]:
-        """Start the command stream: SET_RPM 0 to every motor (VESC has no arm state)."""
+        """Read the timeouts back (the first request), or, when the gateway's ID is a VESC's,
+        start every command stream at once: SET_RPM 0 (VESC has no arm state)."""
         self._enabled = True
         self._enabled_at_s = now_s
         for a in self._axes:
             a.erpm = 0
-            a.sent_s = now_s
+            a.sent_s = None
             a.hinted = False
-            self.set_armed(a.index, True)
-        return [make_set_rpm(a.node_id, 0) for a in self._axes]
+            self.set_armed(a.index, False)
+        if self.readback is None:
+            log.warning("VESC: a motor has ID %d, the gateway's own: the VESCs' timeouts are "
+                        "not read back", HOST_ID)
+            return [f for a in self._axes for f in self._arm(a, now_s)]
+        self._settling = True
+        return self.readback.start(now_s)
+
+    def _arm(self, a: Axis, now_s: float) -> list[Frame]:
+        """Arm motor ``a``: start its command stream with SET_RPM 0."""
+        self.set_armed(a.index, True)
+        a.sent_s = now_s
+        return [make_set_rpm(a.node_id, 0)]
+
+    def _settle(self, now_s: float) -> list[Frame]:
+        """Arm each motor whose read ended, if :meth:`may_arm` (the base reports a failure)."""
+        rb, out = self.readback, []
+        assert rb is not None
+        for a in self._axes:
+            r = rb.results[a.index]
+            if self.is_armed(a.index) or r.outcome is Outcome.PENDING or not self.may_arm(a.index):
+                continue
+            if r.outcome is Outcome.NOT_READ:
+                log.warning("VESC %d (%r): timeout not read back, arming it as stated: %s",
+                            a.node_id, a.wheel, r.why)
+            else:
+                log.info("VESC %d (%r): timeout_msec read back: %s ms (%s); arming",
+                         a.node_id, a.wheel, r.read_ms, r.outcome.value)
+            out += self._arm(a, now_s)
+        self._settling = any(r.outcome is Outcome.PENDING for r in rb.results)
+        return out
+
+    def preview_command(self, setpoints: Sequence[float]) -> list[Frame]:
+        """The frames of :meth:`command` from a fresh driver whose timeouts read back as
+        stated (every motor armed)."""
+        fresh = type(self)(self.motors)
+        fresh.enable(0.0)
+        _ = [fresh._arm(a, 0.0) for a in fresh._axes]
+        return fresh.command(setpoints, 0.0)
 
     def disable(self, now_s: float) -> list[Frame]:
         """SET_CURRENT 0 to every motor, which releases it, and stop the command stream."""
         self._enabled = False
         self._enabled_at_s = None
+        if self.readback is not None:  # (no read under way)
+            self.readback.stop()
         for a in self._axes:
             a.erpm = 0
             a.sent_s = None
@@ -227,11 +264,14 @@ class VescDriver(MotorDriver[VescOptions]):
         return [make_set_current(a.node_id, 0.0) for a in self._axes]
 
     def _command(self, setpoints: Sequence[float], now_s: float) -> list[Frame]:
-        """SET_RPM for every motor; nothing while disabled."""
+        """SET_RPM for every armed motor; nothing while disabled."""
         if not self._enabled:
             return []
         out = []
+        armed = self._armed
         for a, wheel_rad_s in zip(self._axes, setpoints):  # noqa: B905 - the base checked
+            if not armed[a.index]:
+                continue
             erpm = round(wheel_rad_s * a.erpm_per_rad_s)  # erpm_for, inlined (every cycle)
             if erpm and -a.min_erpm < erpm < a.min_erpm:  # min_erpm.in_band, inlined
                 self._below_min_erpm(a, erpm, now_s)
@@ -248,12 +288,19 @@ class VescDriver(MotorDriver[VescOptions]):
             log.warning("%s", line)
 
     def _poll(self, now_s: float) -> list[Frame]:
-        """Resend the last command to every motor not commanded for ``command_period_s``."""
+        """The timeout reads' requests, then arming; resend the last command to every armed
+        motor not commanded for ``command_period_s``."""
         out: list[Frame] = []
         if not self._enabled:
             return out
+        rb = self.readback
+        if rb is not None and self._settling:  # (until every read ended: not every cycle)
+            out += rb.poll(now_s)
+            out += self._settle(now_s)
         for a in self._axes:
-            if a.sent_s is None or now_s - a.sent_s >= a.command_period_s:
+            if a.sent_s is None:
+                continue  # not armed
+            if now_s - a.sent_s >= a.command_period_s:
                 a.sent_s = now_s
                 out.append(make_set_rpm(a.node_id, a.erpm))
             if not a.hinted and (a.status_s is None or a.status5_s is None):
@@ -278,31 +325,12 @@ class VescDriver(MotorDriver[VescOptions]):
     # ----------------------------------------------------------------- frames
 
     def claims(self) -> tuple[FrameClaim, ...]:
-        """The frames of our VESCs, as 29-bit identifiers (``packet << 8 | controller ID``):
-        per controller, STATUS and STATUS_5 (used) and STATUS_2/3/4/6 (taken, unused), exact;
-        every PONG, whatever pinger's ID is in its low byte (the answering controller is in the
-        payload, so the identifier cannot tell ours from another's; PONGs answer a PING, which
-        the gateway never sends, so they are rare); and the commands sent (SET_CURRENT,
-        SET_RPM), for the labels.  A command another master sends one of our controllers is
-        not taken."""
-        return (
-            *(FrameClaim.exact(arbitration_id(packet, a.node_id), True, a.index)
-              for a in self._axes for packet, _ in _RECEIVED),
-            _PONGS,
-            *(FrameClaim.exact(arbitration_id(packet, a.node_id), True, a.index, receive=False)
-              for a in self._axes for packet in _SENT),
-        )
+        """The frames of our VESCs (:func:`drivers.vesc.frames.claims`)."""
+        return claims([a.node_id for a in self._axes], self.readback is not None)
 
     def message_name(self, arbitration_id: int, is_extended_id: bool) -> str | None:
-        """The ``CAN_PACKET_ID`` name of a VESC frame (``STATUS_5``), ``packet N`` for one
-        this driver does not know; ``None`` for an 11-bit frame (never VESC's)."""
-        if not is_extended_id:
-            return None
-        packet = (arbitration_id >> 8) & 0xFF
-        try:
-            return CanPacketId(packet).name
-        except ValueError:
-            return f"packet {packet}"
+        """The ``CAN_PACKET_ID`` name of a VESC frame (:func:`drivers.vesc.frames.message_name`)."""
+        return message_name(arbitration_id, is_extended_id)
 
     def _on_frame(self, frame: Frame) -> bool:
         """Take the frames our VESCs send: STATUS and STATUS_5 (used), STATUS_2/3/4/6 and a
@@ -313,19 +341,20 @@ class VescDriver(MotorDriver[VescOptions]):
         """
         route = self._routes.get(frame.arbitration_id)
         if route is None or not frame.is_extended_id:
-            return self._on_pong(frame)
+            rb = self.readback
+            return (rb is not None and rb.on_frame(frame)) or pong_is_ours(frame, self.index_of)
         a, stream = route
-        if stream == _UNUSED:
+        if stream == UNUSED:
             return True  # ours, but nothing the gateway uses
         fields = unpack_status(frame)
         t = frame.timestamp_s
         i = a.index
         heard = self.live.heard
-        if stream == _STATUS:
+        if stream == STATUS:
             first = a.status_s is None
             a.status, a.status_s = fields, t
             a.velocity_rad_s = fields[0] * a.rad_s_per_erpm
-            heard(i, _STATUS, t)
+            heard(i, STATUS, t)
             other = a.status5_s
         else:
             first = a.status5_s is None
@@ -333,7 +362,7 @@ class VescDriver(MotorDriver[VescOptions]):
                 a.steps += (fields[0] - a.status5[0] + 0x80000000) % 0x100000000 - 0x80000000
                 a.position_rad = a.steps * a.rad_per_step
             a.status5, a.status5_s = fields, t
-            heard(i, _STATUS_5, t)
+            heard(i, STATUS_5, t)
             other = a.status_s
         if other is None:  # one stream only: no feedback yet
             if first:
@@ -348,19 +377,6 @@ class VescDriver(MotorDriver[VescOptions]):
             self.set_fault(i, self.faults(i), a.missing())
         return True
 
-    def _on_pong(self, frame: Frame) -> bool:
-        """A PONG that names one of our VESCs is ours (proof of life, but liveness is defined
-        by the status streams); so is a malformed PONG to one of our IDs."""
-        if not frame.is_extended_id or frame.arbitration_id >> 8 != CanPacketId.PONG:
-            return False
-        try:
-            msg = decode(frame)
-        except DecodeError:
-            if self.index_of(frame.arbitration_id & 0xFF) is None:
-                return False
-            raise
-        return msg is not None and self.index_of(msg.node_id) is not None
-
     # ----------------------------------------------------------------- state
 
     def _ready_state(self, index: int) -> DriveState:
@@ -368,6 +384,8 @@ class VescDriver(MotorDriver[VescOptions]):
         ENABLED; DISABLED when not enabled.  Never FAULT (see the module)."""
         if not self._enabled:
             return DriveState.DISABLED
+        if not self._armed[index]:
+            return DriveState.ENABLING  # its timeout is being read back
         since, oldest = self._enabled_at_s, self.live.oldest[index]
         if since is not None and oldest is not None and oldest < since:
             return DriveState.ENABLING

@@ -25,8 +25,12 @@ Pure: no I/O, no clock (the caller passes the time).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 from drivers.vesc.codec import RPM_PER_RAD_S
+
+if TYPE_CHECKING:
+    from gateway.core.types import MotorConfig
 
 __all__ = [
     "FACTORY_MIN_ERPM",
@@ -119,3 +123,19 @@ class BandWatch:
             f"a running one brakes to a stop"
             + (f" ({more} more such commands since the last line)" if more else "")
         )
+
+
+def doubt(m: MotorConfig, min_erpm: float, pole_pairs: int,
+          band: tuple[float, float] | None) -> str:
+    """Why motor ``m``'s VESC speed-controls none of the speeds it may be commanded, or "":
+    ``max_rpm`` at the wheel is inside the band below ``min_erpm`` (``band``), so the wheel can
+    only stop or brake -- ``spin`` has no speed to try, a twist no speed to follow."""
+    if band is None or m.steering or m.max_wheel_rad_s > band[1]:
+        return ""
+    return (
+        f"motor {m.wheel!r}: its VESC speed-controls no speed it may be commanded: "
+        f"max_rpm {m.max_rpm:g} is {m.max_wheel_rad_s:.3g} rad/s at the wheel, and "
+        f"below {band[1]:.3g} rad/s (min_erpm {min_erpm:g} with pole_pairs "
+        f"{pole_pairs} and gear_ratio {m.gear_ratio:g}) the VESC does not run its "
+        f"speed controller; lower s_pid_min_erpm on the VESC (VESC Tool) and "
+        f"min_erpm here, or check pole_pairs, gear_ratio and max_rpm")

@@ -1,10 +1,10 @@
-"""What a configuration states about a VESC's own settings, which wheelgate cannot read.
+"""What a configuration states about a VESC's own settings, which wheelgate cannot write.
 
 A VESC's command timeout, its CAN status messages and its minimum ERPM live in its app and
 motor configurations, written as a whole by VESC Tool (``COMM_SET_APPCONF`` and
 ``COMM_SET_MCCONF``, ``comm/commands.c`` in https://github.com/vedderb/bldc, read at
 ``b9d287b3``), not by a simple CAN command.  The motor block states them
-(:class:`VescOptions`):
+(:class:`VescOptions`); the timeout is read back while enabling (:mod:`drivers.vesc.readback`):
 
 * ``controller_timeout_s``: App Settings > General > Timeout (``timeout_msec``; 1000 ms from
   the factory), after which ``timeout_thread`` (``timeout.c``) releases the motor and brakes
@@ -94,8 +94,8 @@ class VescOptions(StatedTimeout):
         dataclasses.replace(
             CONTROLLER_TIMEOUT_OPTION,
             help="the VESC's own command timeout as set in VESC Tool, App Settings > General > "
-            "Timeout (s; 1 s from the factory), after which it releases the motor; not "
-            "readable over CAN; 0: not stated",
+            "Timeout (s; 1 s from the factory), after which it releases the motor; read back "
+            "over CAN while enabling; 0: not stated",
         )
     )
     pole_pairs: int = option(
@@ -194,7 +194,7 @@ TIMEOUT_FIX = (
 #: What is known of an unstated timeout.
 UNSTATED_HOW = (
     "not stated: a VESC releases its motor after App Settings > General > Timeout (1000 ms "
-    "from the factory, 0: never), which wheelgate cannot read over CAN"
+    "from the factory, 0: never), which wheelgate reads back from the VESC while enabling"
 )
 
 

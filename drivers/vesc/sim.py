@@ -42,12 +42,13 @@ override them):
   ampere (the model has no torque physics).
 * Status fields are truncated toward zero, as the firmware's casts are (:func:`make_status`).
 * PING is answered with a PONG carrying the ID the PING was addressed to (the firmware's
-  choice, so a broadcast PING gets 255), HW_TYPE_VESC.
-* An injected :attr:`~gateway.sim.device.SimFault.FAULT` releases the motor; commands are ignored
-  for
-  ``fault_stop_s`` (``m_fault_stop_time_ms``, 500 ms by default) and then the fault clears
-  itself.  The motor stays released until the next command.  Status frames and PONGs go on
-  meanwhile and carry no fault code, as on the device.
+  choice, so a broadcast PING gets 255), HW_TYPE_VESC; COMM_GET_APPCONF in a
+  PROCESS_SHORT_BUFFER as firmware 6.00 answers it (:mod:`drivers.vesc.sim_appconf`;
+  ``appconf`` says whether and how).
+* An injected :attr:`~gateway.sim.device.SimFault.FAULT` releases the motor; commands are
+  ignored for ``fault_stop_s`` (``m_fault_stop_time_ms``, 500 ms by default) and then the
+  fault clears itself.  The motor stays released until the next command.  Status frames and
+  PONGs go on meanwhile and carry no fault code, as on the device.
 
 :func:`simulator_for` builds one as a configuration says the device was set up (its
 ``controller_timeout_s``, ``status_rate_hz``, ``min_erpm``); :data:`drivers.BUILTIN_SIMULATORS`
@@ -61,6 +62,7 @@ import logging
 import math
 from typing import TYPE_CHECKING
 
+from drivers.vesc.appconf import BufferPacket
 from drivers.vesc.codec import (
     BROADCAST_ID,
     RPM_PER_RAD_S,
@@ -83,6 +85,7 @@ from drivers.vesc.settings import (
     STATUS_5,
     VescOptions,
 )
+from drivers.vesc.sim_appconf import AppconfResponder
 from gateway.core.errors import ConfigError, DecodeError
 from gateway.sim.device import DeviceSimulator, SimFault
 
@@ -153,6 +156,7 @@ class VescSimulator(DeviceSimulator):
     :param v_in_v: input voltage reported in STATUS_5 (V).
     :param min_current_a: current commands below this release the motor (A).
     :param accel_per_a_rad_s2: motor acceleration per ampere in current and brake mode.
+    :param appconf: how COMM_GET_APPCONF is answered (as firmware 6.00 from the factory).
     :raises ConfigError: if ``pole_pairs`` is missing or not a positive int, or a rate, a
         timeout, ``min_erpm`` or ``ramp_erpm_s`` is negative.
     """
@@ -172,6 +176,7 @@ class VescSimulator(DeviceSimulator):
         v_in_v: float = 24.0,
         min_current_a: float = 0.05,
         accel_per_a_rad_s2: float = 50.0,
+        appconf: AppconfResponder | None = None,
     ) -> None:
         super().__init__(motor, model)
         pole_pairs = motor.options.get("pole_pairs")
@@ -199,6 +204,7 @@ class VescSimulator(DeviceSimulator):
         self.v_in_v = v_in_v
         self.min_current_a = min_current_a
         self.accel_per_a_rad_s2 = accel_per_a_rad_s2
+        self.appconf = appconf or AppconfResponder()
         #: What the controller is doing.
         self.mode = SimMode.RELEASED
         #: Frames addressed to this VESC that it could not parse.
@@ -240,6 +246,11 @@ class VescSimulator(DeviceSimulator):
 
     def _on_frame(self, frame: Frame, now_s: float) -> list[Frame]:
         self._now_s = now_s
+        eid = frame.arbitration_id
+        if frame.is_extended_id and eid >> 8 == BufferPacket.PROCESS_SHORT_BUFFER:
+            ours = eid & 0xFF in (self.node_id, BROADCAST_ID)  # (no status: rate 0.0)
+            return self.appconf.answer(frame, self.node_id, self.timeout_s, 1.0 /
+                                       self.status_period_s, self.status_msgs) if ours else []
         try:
             msg = decode_command(frame)
         except DecodeError as err:

@@ -9,6 +9,7 @@ from __future__ import annotations
 import errno
 import inspect
 import logging
+import math
 import time
 from typing import TYPE_CHECKING, Any
 
@@ -151,6 +152,7 @@ def drain(
     limit: int = 10_000,
     timestamp_s: float | None = None,
     odd: list[can.Message] | None = None,
+    since_s: float = -math.inf,
 ) -> list[Frame]:
     """Every frame waiting in ``bus``'s receive queue.
 
@@ -162,6 +164,10 @@ def drain(
         time on socketcan), moved from the wall clock onto ``time.monotonic()`` so it compares
         with the loop's clock; a stamp more than a second away from the wall clock (an
         interface with its own epoch) is replaced by the time of receipt.
+    :param since_s: when the previous drain began (monotonic): no frame waiting now arrived
+        before it, nor after now.  A stamp moved onto the monotonic clock outside that span is
+        put at its edge: the wall clock stepped (NTP) between the kernel's stamp and this
+        drain, which would make a fresh frame look as old as the step, or as new.
 
     :raises BusError: if receiving fails.
     """
@@ -188,6 +194,10 @@ def drain(
                 stamp = timestamp_s
             elif abs(msg.timestamp - wall) <= _PLAUSIBLE_S:
                 stamp = msg.timestamp + offset
+                if stamp < since_s:
+                    stamp = since_s
+                elif stamp > mono:
+                    stamp = mono
             else:
                 stamp = time.monotonic()
             # to_frame, inlined (the per-frame cost of receiving).

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import collections
 import logging
+import math
 import operator
 import time
 from dataclasses import dataclass
@@ -178,6 +179,7 @@ class BusEdge:
         self._reopen_log = LogThrottle(LOG_EVERY_S)
         self._error_log = LogThrottle(LOG_EVERY_S)
         self._odd: list[can.Message] = []
+        self._drained_s = -math.inf  # the last receive's time: drain's since_s
         self._messages = MessagePool()
         self._last_send_error = ""
         self._bus_failures = 0
@@ -301,8 +303,9 @@ class BusEdge:
         """Everything waiting on the bus, stamped with its receive time (monotonic)."""
         odd = self._odd
         try:
+            since, self._drained_s = self._drained_s, now_s
             frames = drain(self.bus, timestamp_s=now_s if self.stamp_with_cycle_time else None,
-                           odd=odd)
+                           odd=odd, since_s=since)
         except BusError as err:
             self.counts.receive_failures += 1
             note = self._recv_log.note(now_s)

@@ -205,7 +205,7 @@ class MotorDriver(abc.ABC, Generic[OptT]):
         frames = self._enable(now_s)  # may raise before anything is forgotten
         for i in range(len(self.motors)):
             self.clear_protection_fault(i)
-            self._failed.reported[i] = False
+        self._failed.restart()
         return frames
 
     @abc.abstractmethod
@@ -224,14 +224,11 @@ class MotorDriver(abc.ABC, Generic[OptT]):
 
     def poll(self, now_s: float) -> list[Frame]:
         """Housekeeping frames due at ``now_s`` (requests, sequence steps, SYNC); a protection
-        that failed since the last call is reported (:meth:`protection_fault`), once per enable."""
+        that failed is reported (:meth:`protection_fault`), once per enable (``guard``)."""
         frames = self._poll(now_s)
         if self.CONFIGURES_PROTECTION:
-            reported = self._failed.reported
-            for i in range(len(self.motors)):
-                if not reported[i] and self.protection_state(i) is ProtectionState.FAILED:
-                    reported[i] = True
-                    self.protection_fault(i, self.protection_failure(i))
+            for i in self._failed.newly_failed(now_s, self.protection_state):
+                self.protection_fault(i, self.protection_failure(i))
         return frames
 
     def _poll(self, now_s: float) -> list[Frame]:

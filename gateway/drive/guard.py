@@ -5,8 +5,13 @@ per-motor record of protections that failed."""
 from __future__ import annotations
 
 import logging
+import math
+from typing import TYPE_CHECKING
 
 from gateway.core.protection import Guard, Protection, ProtectionState, WatchdogPolicy
+
+if TYPE_CHECKING:
+    from collections.abc import Callable
 
 log = logging.getLogger("gateway.drive.driver")
 
@@ -45,19 +50,51 @@ def fault_text(wheel: str, protocol: str, node_id: int, why: str, fix: str) -> s
     )
 
 
+#: How often the drivers' protection states are looked at for a failure to report (s).
+CHECK_EVERY_S = 0.02
+
+
 class FailedProtections:
     """Per motor, why its controller-side protection failed under
     :attr:`~gateway.core.protection.WatchdogPolicy.REQUIRED` (``""``: it did not), and
-    whether this enable's failure has been reported (once per enable).
+    whether this enable's failure has been reported (once per enable): looked for every cycle
+    while a protection is pending, then every :data:`CHECK_EVERY_S` (a setup that starts again
+    by itself, a CiA 402 node's boot-up, is pending again at the next look).
 
     :param n: the number of motors.
     """
 
-    __slots__ = ("reported", "why")
+    __slots__ = ("next_check_s", "reported", "why")
 
     def __init__(self, n: int) -> None:
         self.why: list[str] = [""] * n
         self.reported: list[bool] = [False] * n
+        self.next_check_s = -math.inf
+
+    def restart(self) -> None:
+        """A new enable: every failure is to be reported again, the first look at once."""
+        self.reported = [False] * len(self.reported)
+        self.next_check_s = -math.inf
+
+    def newly_failed(
+        self, now_s: float, state: Callable[[int], ProtectionState]
+    ) -> list[int]:
+        """The motors whose protection (``state`` of each) failed and was not reported yet in
+        this enable, now marked reported; ``[]`` when no look is due at ``now_s``."""
+        if now_s < self.next_check_s:
+            return []
+        out, pending, reported = [], False, self.reported
+        for i, done in enumerate(reported):
+            if done:
+                continue
+            s = state(i)
+            if s is ProtectionState.FAILED:
+                reported[i] = True
+                out.append(i)
+            elif s is ProtectionState.PENDING:
+                pending = True
+        self.next_check_s = -math.inf if pending else now_s + CHECK_EVERY_S
+        return out
 
     def merged(self, index: int, detail: str) -> str:
         """Motor ``index``'s fault text with its protection failure first."""

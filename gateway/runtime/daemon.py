@@ -98,8 +98,9 @@ class Daemon:
         self.announce: Callable[[str], None] | None = None  #: lines for the person (run)
         self._announced_running = False
         self._stop = False
-        #: The name of the signal that stopped the daemon, if one did.
-        self.stop_signal = ""
+        #: The name of the signal that stopped the daemon, if one did; whether the shutdown's
+        #: zero and disarm went out (every frame of it: the bus took them).
+        self.stop_signal, self.stop_sent = "", False
         self._closers: list[Any] = []
         self.writer: can.Listener | None = None
         try:
@@ -156,14 +157,12 @@ class Daemon:
     # ----------------------------------------------------------------- requests
 
     def handle(self, client: int, request: Request | ProtocolError, now_s: float) -> None:
-        """Answer one socket request (:meth:`RequestHandler.handle
-        <gateway.runtime.requests.RequestHandler.handle>`)."""
+        """Answer one socket request (:meth:`.RequestHandler.handle`)."""
         self.requests.handle(client, request, now_s)
 
     def handle_safely(self, client: int, request: Request | ProtocolError, now_s: float) -> None:
         """:meth:`handle`, but a reply that cannot be built becomes an error reply
-        (:meth:`RequestHandler.handle_safely
-        <gateway.runtime.requests.RequestHandler.handle_safely>`)."""
+        (:meth:`.RequestHandler.handle_safely`)."""
         self.requests.handle_safely(client, request, now_s)
 
     def status(self) -> GatewayStatus:
@@ -376,7 +375,9 @@ class Daemon:
         try:
             gw.supervisor.shutdown()
             now = time.monotonic()
-            gw.edge.send(gw.drives.disable(now))
+            if not (sent := gw.edge.send(gw.drives.disable(now))):  # (run's last line says)
+                log.error("the zero and disarm did not all go out: the bus refused them")
+            self.stop_sent = sent
             end = now + SHUTDOWN_GRACE_S
             while time.monotonic() < end:
                 time.sleep(0.01)

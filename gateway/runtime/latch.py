@@ -47,6 +47,9 @@ class EstopLatch:
 
     def __init__(self, path: Path) -> None:
         self.path = path
+        #: The reason last written by :meth:`set` (``None`` after :meth:`clear`): the same
+        #: e-stop is written once, however many paths report it.
+        self._written: str | None = None
 
     def read(self) -> str | None:
         """The reason of a latched e-stop, ``None`` when there is none.
@@ -70,11 +73,13 @@ class EstopLatch:
         return f"{reason} (latched since {since}, kept across restarts)"
 
     def set(self, reason: str) -> bool:
-        """Write the latch.
+        """Write the latch (once for one e-stop: again only after :meth:`clear`).
 
         :return: whether it was written (a failure is logged: the e-stop itself holds in
             memory regardless).
         """
+        if reason == self._written:
+            return True
         tmp = self.path.with_name(self.path.name + ".tmp")
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
@@ -84,6 +89,7 @@ class EstopLatch:
                 os.fsync(f.fileno())
             tmp.replace(self.path)
             self._sync_dir()
+            self._written = reason
         except OSError as err:
             log.error("e-stop latch %s could not be written (%s): the e-stop holds until this "
                       "process ends, but not across a restart", self.path, err)
@@ -94,6 +100,7 @@ class EstopLatch:
 
     def clear(self) -> None:
         """Remove the latch (an explicit enable released the e-stop)."""
+        self._written = None
         try:
             self.path.unlink(missing_ok=True)
             self._sync_dir()

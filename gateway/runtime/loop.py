@@ -238,8 +238,11 @@ class Gateway:
                 log.error("fault: %s", message)
                 self.report_error(ErrorCode.MOTOR_FAULT, message)
         decision = sup.decide(now_s)
-        dt = now_s - self._last_cycle_s if self._last_cycle_s is not None else self.period_s
-        self._last_cycle_s = now_s
+        # The limits' interval: at most two periods.  Through a stalled cycle the controllers
+        # held the last command, so the wheels are where it left them: the next may not step
+        # them by the acceleration of the whole stall at once.
+        last, self._last_cycle_s = self._last_cycle_s, now_s
+        dt = self.period_s if last is None else min(now_s - last, 2.0 * self.period_s)
         result = self._solve(decision.twist)
         if not decision.ramp:
             self._prev_limited = False
@@ -279,6 +282,14 @@ class Gateway:
             self.rejections.check(now_s)
             edge.send(self.publisher.publish(now_s, self.limit_report, edge.errors_recent),
                       now_s, tracked=False)
+
+    def stop_now(self, now_s: float) -> None:
+        """An e-stop taken between cycles (a socket or bridge request): the zero and disarm go
+        out now, not at the next cycle, which an enable handled first would turn into an
+        ENABLING that never disarms."""
+        if self._armed:
+            self._armed = False
+            self.edge.send(self.drives.disable(now_s), now_s)
 
     def _solve(self, twist: Twist) -> IkResult:
         """Inverse kinematics of the target (zero if infeasible), remembered while the target

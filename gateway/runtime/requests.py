@@ -155,6 +155,7 @@ class RequestHandler:
             sup.stop(now_s)
         elif request.op is Op.ESTOP:
             sup.estop(f"e-stop requested on {self.origin}")
+            self.gateway.stop_now(now_s)  # (before the latch's disk write, and any enable)
             self.latch.set(sup.reason)
         elif request.op is Op.ENABLE:
             if (sup.state is GatewayState.ESTOP and self.source is not Source.SOCKET
@@ -164,7 +165,10 @@ class RequestHandler:
                     f"control socket (gateway.estop_release: socket); the enable from "
                     f"{self.origin} was refused", state=sup.state))
                 return
+            was_estop = sup.state is GatewayState.ESTOP
             sup.enable(now_s)
+            if was_estop and sup.state is not GatewayState.ESTOP:
+                self.latch.clear()  # (released here: the next cycle may never see ESTOP)
         elif request.op is Op.DISABLE:
             sup.disable()
         elif request.op is Op.UNSUBSCRIBE:

@@ -4,13 +4,14 @@ and never one message twice in a burst or in the hands of a recorder."""
 from __future__ import annotations
 
 import errno
+import time
 
 import can
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from gateway.bus.can_bus import MessagePool, open_bus, to_message
+from gateway.bus.can_bus import MessagePool, drain, open_bus, to_message
 from gateway.core.errors import BusError
 from gateway.core.types import Frame
 
@@ -76,3 +77,27 @@ def test_a_socketcan_bus_that_cannot_open_says_what_to_do(
     text = str(info.value)
     assert text.startswith("Cannot open CAN bus socketcan:can7: cannot open")
     assert (says in text) if says else text.endswith("cannot open"), text
+
+
+@pytest.mark.parametrize("step_s", [0.6, -0.6])
+def test_a_wall_clock_step_before_the_drain_makes_a_frame_neither_old_nor_new(
+    step_s: float, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """NTP steps the wall clock between the kernel's stamp (wall time) and the drain, which
+    moves stamps onto the monotonic clock by the wall clock it reads: the frame would look
+    0.6 s old (a motor "stopped answering") or 0.6 s from the future.  It is put within
+    [the previous drain, now]."""
+    rx = can.Bus(interface="virtual", channel="wall-step", receive_own_messages=False)
+    tx = can.Bus(interface="virtual", channel="wall-step", receive_own_messages=False)
+    try:
+        since = time.monotonic()
+        tx.send(can.Message(arbitration_id=0x029, data=bytes(8), is_extended_id=False))
+        real = time.time
+        monkeypatch.setattr(time, "time", lambda: real() + step_s)
+        (frame,) = drain(rx, since_s=since)
+        assert since <= frame.timestamp_s <= time.monotonic()
+        if step_s > 0:
+            assert frame.timestamp_s == since  # (not 0.6 s before it)
+    finally:
+        rx.shutdown()
+        tx.shutdown()

@@ -31,6 +31,9 @@ if TYPE_CHECKING:
         *(f"0000{packet:02X}{node:02X}/1FFFFFFFx" for node in (1, 2, 3, 4)
           for packet in (9, 14, 15, 16, 27, 58)),
         "00001200/1FFFFF00x",
+        # The app configuration's read-back (FILL_RX_BUFFER, _LONG, PROCESS_RX_BUFFER,
+        # PROCESS_SHORT_BUFFER) to the gateway's own ID 254.
+        *(f"00000{packet}FE/1FFFFFFFx" for packet in (5, 6, 7, 8)),
     ]),
     ("synchro.yaml", [f"{base + node:03X}/7FF" for base in (0x80, 0x380, 0x480, 0x580, 0x700)
                       for node in (1, 2, 3, 4)]),

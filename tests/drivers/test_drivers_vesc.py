@@ -17,6 +17,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from drivers.vesc import VescDriver
+from drivers.vesc.appconf import make_get_appconf
 from drivers.vesc.codec import (
     make_set_rpm,
     make_status,
@@ -28,6 +29,7 @@ from gateway.core.types import DriveState, Frame, MotorConfig
 from gateway.drive.registry import get_driver_class
 from tests import factories
 from tests.drivers.test_vesc_codec import I32, ext
+from tests.drivers.test_vesc_helpers import answer_reads, enabled
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -142,7 +144,7 @@ def test_each_vesc_keeps_its_own_liveness() -> None:
 def test_command_converts_wheel_speed_to_erpm() -> None:
     # 100 rpm at the motor, 7 pole pairs -> 700 eRPM (spec worked example).
     drv = VescDriver([motor(23), motor(24, wheel="right", gear_ratio=2.0, invert=True)])
-    drv.enable(0.0)
+    enabled(drv, 0.0)
     speeds = [rpm_to_rad_s(100.0), rpm_to_rad_s(50.0)]
     assert drv.command(speeds, 0.01) == [ext(0x317, "000002BC"), ext(0x318, "FFFFFD44")]
     # round(), not int(): 0.6 eRPM is 1, -0.6 is -1.
@@ -172,7 +174,7 @@ def test_enable_disable_frames_and_keepalive() -> None:
     assert drv.keepalive_period_s == 0.02
     assert drv.command([1.0, 1.0], 0.0) == []  # disabled: nothing goes out
     assert drv.poll(0.0) == []
-    assert drv.enable(1.0) == [make_set_rpm(23, 0), make_set_rpm(24, 0)]
+    assert enabled(drv, 1.0) == [make_set_rpm(23, 0), make_set_rpm(24, 0)]
     sent = drv.command([rpm_to_rad_s(100.0), 0.0], 1.0)
     assert sent == [make_set_rpm(23, 700), make_set_rpm(24, 0)]
     assert drv.poll(1.019) == []
@@ -284,7 +286,7 @@ def test_state_derivation(
 ) -> None:
     drv = VescDriver([motor(23)])
     if enabled_at is not None:
-        drv.enable(enabled_at)
+        enabled(drv, enabled_at)
     if status_s is not None:
         drv.on_frame(make_status(23, 0, 0.0, 0.0).stamped(status_s))
     if status5_s is not None:
@@ -299,7 +301,8 @@ def test_state_walk_through_every_reachable_state() -> None:
     feed(drv, status_pair(23, 0, 0, 0.1))
     seen.append(drv.state(0, 0.1))
     drv.enable(0.15)
-    seen.append(drv.state(0, 0.15))
+    seen.append(drv.state(0, 0.15))  # reading the timeout back
+    answer_reads(drv, [make_get_appconf(23)], 0.15)
     feed(drv, status_pair(23, 0, 0, 0.2))
     seen.append(drv.state(0, 0.2))
     seen.append(drv.state(0, 0.46))  # silence
@@ -314,7 +317,7 @@ def test_state_walk_through_every_reachable_state() -> None:
 
 def test_missing_status_frames_log_a_hint_once(caplog: pytest.LogCaptureFixture) -> None:
     drv = VescDriver([motor(23)])
-    drv.enable(0.0)
+    enabled(drv, 0.0)
     with caplog.at_level(logging.WARNING, logger="drivers.vesc.driver"):
         drv.poll(0.5)
         assert not caplog.records
@@ -359,13 +362,17 @@ def test_claims_and_message_names() -> None:
         (packet << 8 | node, i) for i, node in enumerate((23, 24))
         for packet in (9, 14, 15, 16, 27, 58)
     ]
-    (pongs,) = (c for c in claims if c.motor is None)
+    pongs, *replies = (c for c in claims if c.motor is None)
     assert (pongs.can_id, pongs.mask, pongs.extended, pongs.receive) == (
         0x1200, 0x1FFFFF00, True, True
     )
+    # The buffer protocol's frames to the gateway's ID 254 (the COMM_GET_APPCONF replies).
+    assert [(c.can_id, c.mask, c.receive) for c in replies] == [
+        (packet << 8 | 0xFE, 0x1FFFFFFF, True) for packet in (5, 6, 7, 8)]
     sent = {(c.can_id, c.motor) for c in claims if not c.receive}
-    assert sent == {(0x117, 0), (0x317, 0), (0x118, 1), (0x318, 1)}
-    frames = drv.enable(0.0) + drv.command([1.0, 1.0], 0.0) + drv.disable(0.1)
+    assert sent == {(0x117, 0), (0x317, 0), (0x118, 1), (0x318, 1), (0x817, 0), (0x818, 1)}
+    frames = [make_get_appconf(23), make_get_appconf(24), *enabled(drv, 0.0),
+              *drv.command([1.0, 1.0], 0.0), *drv.disable(0.1)]
     assert all(any(c.matches(f.arbitration_id, True) for c in claims) for f in frames)
     assert all(c.extended for c in claims)
     names = {arb: drv.message_name(arb, True) for arb in (0x917, 0x1B17, 0x1018, 0x1201, 0x317,
@@ -373,4 +380,5 @@ def test_claims_and_message_names() -> None:
     assert names == {0x917: "STATUS", 0x1B17: "STATUS_5", 0x1018: "STATUS_4", 0x1201: "PONG",
                      0x317: "SET_RPM", 0x117: "SET_CURRENT", 0x3A17: "STATUS_6"}
     assert drv.message_name(0x3D17, True) == "packet 61"  # not in CanPacketId
+    assert drv.message_name(0x5FE, True) == "FILL_RX_BUFFER"  # the buffer protocol's
     assert drv.message_name(0x117, False) is None  # an 11-bit frame is never VESC's

@@ -359,6 +359,7 @@ def test_keepalive_and_device_timeout(channel: str) -> None:
     sim = simulator_for(left)
     with rig(channel, [left], [sim]) as r:
         r.send(r.drv.enable(r.t))
+        r.run(0.01, None)  # the timeout read back (a round trip), then armed
         r.send(r.drv.command([5.0], r.t))
         r.run(1.5, None)  # command() never again; poll() resends the last command
         assert mode_of(sim) == SimMode.SPEED

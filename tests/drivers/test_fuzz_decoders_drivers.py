@@ -27,6 +27,7 @@ from drivers.cia402.enums import CobBase
 from drivers.odrive import OdriveDriver
 from drivers.odrive.enums import AxisState, CmdId
 from drivers.vesc import VescDriver
+from drivers.vesc.appconf import HOST_ID
 from gateway.config import parse_config
 from gateway.core.types import Frame
 from gateway.drive.driveset import DriveSet
@@ -57,7 +58,8 @@ def claimable_ids(drv: MotorDriver[Any]) -> frozenset[int]:
         return frozenset(n << 5 | cmd for n in nodes for cmd in range(32))
     if isinstance(drv, VescDriver):
         status = {p << 8 | n for n in nodes for p in (9, 14, 15, 16, 27, 58)}
-        return frozenset(status | {18 << 8 | x for x in range(256)})  # a PONG names its sender
+        replies = {p << 8 | HOST_ID for p in (5, 6, 7, 8)}  # the app config's read-back
+        return frozenset(status | {18 << 8 | x for x in range(256)} | replies)  # (PONG: any)
     return frozenset(o.arbitration_id for o in own_feedback(drv))
 
 

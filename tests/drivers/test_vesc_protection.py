@@ -24,11 +24,12 @@ from drivers.vesc.min_erpm import describe_band, in_band
 from drivers.vesc.settings import STATUS_1, STATUS_5, TIMEOUT_FIX
 from drivers.vesc.sim import SimMode, VescSimulator, simulator_for
 from gateway.config import parse_config
-from gateway.core.protection import Guard
+from gateway.core.protection import Guard, ProtectionState
 from gateway.core.types import DriveState
 from gateway.drive.driveset import DriveSet
 from tests.conftest import CONFIG_DIR
 from tests.drivers.test_drivers_vesc import PP, motor
+from tests.drivers.test_vesc_helpers import enabled
 
 if TYPE_CHECKING:
     from gateway.core.types import Frame
@@ -79,7 +80,9 @@ def test_a_stated_status_rate_is_what_the_simulator_sends(rate: float, msgs: int
 def test_a_silent_vesc_is_offline_and_its_detail_says_how_to_enable_status() -> None:
     drv = VescDriver([motor(23)])
     sim = VescSimulator(motor(23))  # factory
-    drv.enable(0.0)
+    for f in drv.enable(0.0):
+        for r in sim.handle(f, 0.0):
+            drv.on_frame(r.stamped(0.0))
     for k in range(100):
         t = k * 0.01
         for f in drv.poll(t):
@@ -116,8 +119,13 @@ def test_the_wheel_coasts_only_after_the_vesc_timeout(stated: float, timeout_s: 
     drv, sim = VescDriver([m]), simulator_for(m)
     speed = 3000 / ERPM_PER_RAD_S  # wheel rad/s
     t, dt = 0.0, 0.002
-    for f in drv.enable(t):
-        sim.handle(f, t)
+    for f in drv.enable(t):  # the request of its timeout; the reply
+        for r in sim.handle(f, t):
+            drv.on_frame(r.stamped(t))
+    # Read back: as stated (CONFIRMED), or, not stated, shown as read.
+    assert drv.protection_state(0) is (
+        ProtectionState.CONFIRMED if stated else ProtectionState.NOT_APPLICABLE)
+    assert drv.protection(0).timeout_s == timeout_s
     while t < 1.0:  # the gateway commands, then dies at t = 1.0
         t += dt
         for f in drv.poll(t) + drv.command([speed], t):
@@ -196,7 +204,7 @@ def test_a_kinder_vesc_speed_controls_500_erpm() -> None:
 
 def test_commands_in_the_band_go_out_as_they_are_and_are_counted() -> None:
     drv = VescDriver([motor(23), motor(24, wheel="right", min_erpm=0.0)])
-    drv.enable(0.0)
+    enabled(drv, 0.0)
     w500 = 500 / ERPM_PER_RAD_S
     assert drv.command([w500, w500], 0.01) == [make_set_rpm(23, 500), make_set_rpm(24, 500)]
     assert drv.command_counts["below_min_erpm"] == 1  # not the right one: it states 0
@@ -211,7 +219,7 @@ def test_commands_in_the_band_go_out_as_they_are_and_are_counted() -> None:
 
 def test_the_band_is_logged_at_most_once_per_5_s(caplog: pytest.LogCaptureFixture) -> None:
     drv = VescDriver([motor(23)])
-    drv.enable(0.0)
+    enabled(drv, 0.0)
     w500 = 500 / ERPM_PER_RAD_S
     with caplog.at_level(logging.WARNING, logger="drivers.vesc.driver"):
         for k in range(1000):  # 10 s at 100 Hz
@@ -295,7 +303,7 @@ def test_an_unstated_timeout_is_unstated_with_a_warning_and_a_stated_one_is_stat
     warned = [w for w in cfg.warnings if "controller watchdog" in w]
     assert len(warned) == 2  # one per wheel
     assert "1000 ms from the factory" in warned[0]
-    assert "which wheelgate cannot read over CAN" in warned[0]
+    assert "which wheelgate reads back from the VESC while enabling" in warned[0]
     assert warned[0].endswith(f"fix: {TIMEOUT_FIX}")
     assert "App Settings > General > Timeout in VESC Tool" in TIMEOUT_FIX
     drv = VescDriver([motor(23)])

@@ -153,3 +153,21 @@ def test_a_drive_failing_in_the_shutdown_grace_still_closes_the_daemon(
         rig.daemon.shutdown()
         assert not os.path.exists(sock_path)
         rig.daemon.shutdown()  # (twice: nothing left to do)
+
+
+@pytest.mark.parametrize("bus_takes_it", [True, False])
+def test_the_shutdown_says_whether_its_stop_went_out(
+    channel: str, sock_path: str, monkeypatch: pytest.MonkeyPatch,
+    caplog: pytest.LogCaptureFixture, bus_takes_it: bool,
+) -> None:
+    """``run``'s last line says "every motor was sent zero and disarm" only when the bus took
+    every frame of it (a bus gone at SIGTERM took none, and the line said it anyway)."""
+    with Rig(virtual_config(TB3, channel, rate_hz=100.0), sock_path) as rig:
+        assert rig.daemon is not None
+        rig.enable()
+        if not bus_takes_it:
+            monkeypatch.setattr(rig.gw.edge, "send", lambda *a, **k: False)
+        rig.daemon.shutdown()
+        assert rig.daemon.stop_sent is bus_takes_it
+        said = "the zero and disarm did not all go out: the bus refused them" in caplog.text
+        assert said is not bus_takes_it

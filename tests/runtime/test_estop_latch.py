@@ -62,6 +62,26 @@ def test_a_latch_that_cannot_be_written_leaves_no_temporary_file(tmp_path: Path)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["estop"]
 
 
+def test_one_estop_is_written_once(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # The socket's request and the cycle that sees ESTOP both set the latch: one write (two
+    # fsyncs, the file's and the folder's, each a stall of the loop on a slow card).
+    syncs: list[int] = []
+    real = os.fsync
+
+    def counted(fd: int) -> None:
+        syncs.append(fd)
+        real(fd)
+
+    monkeypatch.setattr(os, "fsync", counted)
+    latch = EstopLatch(tmp_path / "estop")
+    assert latch.set("e-stop requested on the control socket")
+    assert latch.set("e-stop requested on the control socket")
+    assert len(syncs) == 2
+    latch.clear()
+    assert latch.set("e-stop requested on the control socket")  # a new e-stop: written
+    assert latch.path.exists() and len(syncs) == 5
+
+
 def test_a_state_file_that_is_a_directory_is_a_config_error(tmp_path: Path) -> None:
     from gateway.config import load_config
     from gateway.core.errors import ConfigError
@@ -74,6 +94,39 @@ def test_a_state_file_that_is_a_directory_is_a_config_error(tmp_path: Path) -> N
     assert str(err.value) == (
         f"{robot}: gateway.state_file: expected the path of the e-stop latch file, got "
         f"'{tmp_path}', a directory (the e-stop would not survive a restart)")
+
+
+def test_an_estop_and_an_enable_handled_before_a_cycle_still_stop_and_release(
+    channel: str, sock_path: str
+) -> None:
+    """Two clients: one e-stops, the other enables right after, both handled between two
+    cycles.  The e-stop's zero and disarm still reach every controller (before, the next
+    cycle saw only ENABLING and nothing was disarmed), and the release removes the latch (it
+    was left behind: the next start came up e-stopped)."""
+    import can
+
+    cfg = virtual_config(TB3, channel, rate_hz=100.0)
+    with Rig(cfg, sock_path) as rig:
+        rig.enable()
+        assert rig.daemon is not None
+        a, b = SocketPilot(sock_path), SocketPilot(sock_path)
+        a.send(op="twist", vx=0.2)
+        rig.advance(0.3)
+        spy = can.Bus(interface="virtual", channel=channel)
+        try:
+            a.send(op="estop", id="A")
+            b.send(op="enable", id="B")
+            rig.advance(rig.period)
+            seen = [(m.arbitration_id, bytes(m.data)) for m in iter(lambda: spy.recv(0.0), None)]
+        finally:
+            spy.shutdown()
+        idle = b"\x01" + bytes(7)  # Set_Axis_State (0x07) IDLE
+        for node in (1, 2):
+            assert (node << 5 | 0x07, idle) in seen, seen
+        assert not rig.daemon.latch.path.exists()
+        assert state(rig) in (GatewayState.ENABLING, GatewayState.RUNNING)
+        a.sock.close()
+        b.sock.close()
 
 
 def test_socket_estop_survives_a_restart_and_enable_on_start(channel: str, sock_path: str) -> None:

@@ -50,6 +50,28 @@ def test_command_timeout_ramps_to_zero_within_deceleration(rig: Rig, pilot: Sock
     assert rig.gw.supervisor.counts.cmd_timeouts == 1
 
 
+def test_a_stalled_cycle_does_not_step_the_wheels_past_the_acceleration_limit(
+    rig: Rig, pilot: SocketPilot
+) -> None:
+    # The loop stalls 0.15 s (a GC pause, a slow disk; shorter than the controllers' own
+    # timeout) while the controllers go on holding the last command: the first cycle after
+    # it may not step the wheels by the acceleration of the whole stall.
+    step = rig.config.limits.max_wheel_accel_rad_s2 * rig.period
+    pilot.send(op="twist", vx=0.2)
+    rig.advance(3 * rig.period)  # the ramp has begun
+    before = commanded(rig)
+    assert 0.0 < min(before) < 5.0
+    end = rig.t + 0.15
+    while rig.t < end:  # the loop stalled; the controllers not
+        rig.ctl.step(rig.t)
+        rig.t += rig.period / 2
+    rig.advance(rig.period)
+    after = commanded(rig)
+    assert state(rig) is GatewayState.RUNNING
+    assert all(0.0 < a - b <= 2 * step * (1 + 1e-6) for a, b in zip(after, before, strict=True)), (
+        before, after, step)
+
+
 @pytest.mark.parametrize("rig", [{"cmd_timeout_s": 0.0}], indirect=True)
 def test_zero_command_timeout_keeps_the_last_twist(rig: Rig, pilot: SocketPilot) -> None:
     pilot.send(op="twist", vx=0.2)

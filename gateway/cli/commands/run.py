@@ -2,20 +2,23 @@
 
 from __future__ import annotations
 
-import contextlib
 import logging
-import os
 import sys
 import threading
+from typing import TYPE_CHECKING
 
 import click
 
 from gateway.cli import FilePath, config_option
 from gateway.cli.commands._common import check_finite, load
 from gateway.cli.commands._guards import MAX_DURATION_S
+from gateway.cli.stderr import point_at_devnull, pump_logging
 from gateway.drive.driveset import DriveSet
 from gateway.runtime.daemon import Daemon
 from gateway.runtime.report import motors_text
+
+if TYPE_CHECKING:
+    from collections.abc import Callable
 
 log = logging.getLogger("gateway.run")
 
@@ -29,10 +32,7 @@ def tell(line: str) -> None:
     try:
         click.echo(line, err=True)
     except OSError:
-        with contextlib.suppress(OSError, ValueError):
-            devnull = os.open(os.devnull, os.O_WRONLY)
-            os.dup2(devnull, sys.stderr.fileno())
-            os.close(devnull)
+        point_at_devnull(sys.stderr)
 
 
 @click.command()
@@ -66,6 +66,19 @@ def command(
     it, leaving every motor at zero and disarmed)."""
     if duration is not None:
         check_finite(duration=duration)
+    pump = pump_logging()  # (the loop never waits for a stderr nobody reads)
+    try:
+        _run(ctx, config_path, sim, record, socket_path, record_mcap, duration,
+             pump.put if pump is not None else tell)
+    finally:
+        if pump is not None:
+            pump.close()
+
+
+def _run(ctx: click.Context, config_path: str | None, sim: bool, record: str | None,
+         socket_path: str | None, record_mcap: str | None, duration: float | None,
+         tell: Callable[[str], None]) -> None:
+    """:func:`command`, saying its lines with ``tell``."""
     cfg = load(ctx, config_path)
     for warning in cfg.warnings:
         log.warning("%s", warning)
@@ -105,5 +118,8 @@ def command(
         if timer is not None:
             timer.cancel()
     why = f" ({daemon.stop_signal})" if daemon.stop_signal else ""
-    tell(f"wheelgate: stopped{why}; every motor was sent zero and disarm")
+    tell(f"wheelgate: stopped{why}; " + (
+        "every motor was sent zero and disarm" if daemon.stop_sent else
+        "the zero and disarm did NOT all go out: only the controllers' own timeouts stop the "
+        "motors (see the log)"))
     ctx.exit(code)
