@@ -182,6 +182,9 @@ class BusEdge:
         self._drained_s = -math.inf  # the last receive's time: drain's since_s
         self._messages = MessagePool()
         self._last_send_error = ""
+        #: The last failed burst's error when it was not a full transmit queue (an interface
+        #: down or gone), ``None`` when it was: what a starved command's fault says.
+        self.send_gone: str | None = None
         self._bus_failures = 0
         self._since_reopen = 0
         # Frames by _SHAPE: received ([0]) and sent ([1]).
@@ -290,6 +293,7 @@ class BusEdge:
             self._bus_failures += 1
             self._since_reopen += 1
         self._last_send_error = str(err)
+        self.send_gone = None if _no_room(err) else str(err)
         note = self._send_log.note(now_s)
         if note is not None:
             log.warning("CAN send failed: %d bursts cut short since the last report (%d in a "

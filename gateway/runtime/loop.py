@@ -349,11 +349,13 @@ class Gateway:
 
                 self._labeler = FrameLabeler(self.config)
             label = self._labeler.label_id(can_id, extended)
+            why = (f"sending fails ({edge.send_gone}): check that {bus.channel} is up (ip link "
+                   f"show {bus.channel})" if edge.send_gone else
+                   "the CAN transmit queue stays full (the bus is slower than the commands: "
+                   "check the bitrate, the interface's txqueuelen and the bus load)")
             messages.append((
-                f"the frame {label.text} (ID 0x{can_id:X}) has not gone out for {n} cycles: the "
-                f"CAN transmit queue stays full (the bus is slower than the commands: check the "
-                f"bitrate, the interface's txqueuelen and the bus load)",
-                tuple(w for w in label.wheels if w in self._wheel_of)))
+                f"the frame {label.text} (ID 0x{can_id:X}) has not gone out for {n} cycles: "
+                f"{why}", tuple(w for w in label.wheels if w in self._wheel_of)))
         for message, wheels in messages:
             fault = sup.bus_fault(message, wheels)
             if fault is not None:

@@ -19,7 +19,7 @@ from gateway.config import load_config
 from gateway.runtime.daemon import Daemon
 from gateway.runtime.sdnotify import SystemdNotifier
 from gateway.runtime.timing import MissCause, MissProbe, Scheduler
-from gateway.runtime.timing.misses import REPORT_INTERVAL_S, SchedStat
+from gateway.runtime.timing.misses import RECENT, REPORT_INTERVAL_S, SchedStat
 from tests.runtime.timing_helpers import FakeClock
 
 if TYPE_CHECKING:
@@ -127,6 +127,24 @@ def test_reports_come_at_once_then_at_most_every_interval() -> None:
     assert second.startswith("4 late starts (on CPU 1, runnable 0, asleep 3; worst ")
     assert second.endswith(f"; {sched.timer.missed} deadlines skipped since start-up")
     assert probe.report(clock.now + 2 * REPORT_INTERVAL_S) is None  # nothing new
+
+
+def test_the_report_names_the_worst_start_even_among_many() -> None:
+    """A freeze of seconds followed by more small late starts than the probe keeps: the next
+    line's "worst" is the freeze (it was the worst of the last 64 only, and said 25 ms)."""
+    clock = FakeClock(oversleep=0.025)
+    thread = FakeThread()
+    sched, probe = loop(clock, thread)
+    next_cycle(sched, probe)
+    assert probe.report(clock.now) is not None  # the first line, at once
+    clock.oversleep = 2.0  # SIGSTOP for two seconds
+    next_cycle(sched, probe)
+    clock.oversleep = 0.025
+    for _ in range(2 * RECENT):
+        next_cycle(sched, probe)
+    line = probe.report(clock.now + REPORT_INTERVAL_S)
+    assert line is not None and "; worst 1999.8 ms late)" in line, line
+    assert int(line.split()[0]) > RECENT  # (more than the probe keeps)
 
 
 def test_the_daemon_logs_the_reports(daemon: Daemon, monkeypatch: pytest.MonkeyPatch,

@@ -141,6 +141,7 @@ def test_commands_that_do_not_go_out_are_a_fault_naming_the_wheel(
     assert sup.faulted == (first.wheel,)
     assert f"Set_Input_Vel ({first.wheel})" in sup.reason
     assert f"has not gone out for {UNSENT_FAULT_CYCLES} cycles" in sup.reason
+    assert "the CAN transmit queue stays full" in sup.reason
     plan.room = None  # room again: the fault and the zero reach the bus
     rig.advance(0.2, plan.cycle)
     states = [r.state for r in map(rig.gw.wg.decode_status, drain(rig.pilot)) if r is not None]
@@ -167,6 +168,11 @@ def test_a_bus_that_stays_down_is_reopened_with_backoff_and_recovers(
     assert rig.gw.edge.counts.receive_failures >= 250
     assert not rig.gw.edge.bus_healthy
     assert state(rig) is GatewayState.FAULT
+    # Said as it is: the interface is down, not a transmit queue that stays full.
+    channel = rig.config.bus.channel
+    assert rig.gw.supervisor.reason.endswith(
+        f"sending fails (Failed to transmit: Network is down [Error Code 100]): check that "
+        f"{channel} is up (ip link show {channel})")
     # One line per kind of trouble per five seconds (send, receive, reopen, the fault).
     assert len(caplog.records) <= 6, [r.getMessage() for r in caplog.records]
     plan.down = False

@@ -158,6 +158,9 @@ class MissProbe:
         self.worst = (0.0, 0.0, 0.0)
         #: Late starts classified so far.
         self.count = 0
+        #: The latest start since the last :meth:`report` (s late: of all of them, not only the
+        #: last :data:`RECENT`: a freeze of seconds among many small ones is its worst).
+        self._worst_since = 0.0
         self._reported = 0
         self._reported_by = dict(scheduler.timer.late_by_cause)
         self._next_report_s = -math.inf
@@ -187,6 +190,7 @@ class MissProbe:
             self.recent.append(Miss(late, skipped, on_cpu, runnable, cause))
             w = self.worst
             self.worst = (max(w[0], late), max(w[1], on_cpu), max(w[2], runnable))
+            self._worst_since = max(self._worst_since, late)
         self._woke = now
 
     def report(self, now_s: float) -> str | None:
@@ -198,8 +202,7 @@ class MissProbe:
         new = self.count - self._reported
         by = self._sched.timer.late_by_cause
         delta = {key: by[key] - self._reported_by.get(key, 0) for key in by}
-        latest = list(self.recent)[-min(new, len(self.recent)):]
-        worst = max((m.late_s for m in latest), default=0.0)
+        worst, self._worst_since = self._worst_since, 0.0
         self._reported, self._reported_by = self.count, dict(by)
         self._next_report_s = now_s + REPORT_INTERVAL_S
         return (f"{new} late start{'s' if new != 1 else ''} (on CPU {delta['on_cpu']}, runnable "
