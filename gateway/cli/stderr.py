@@ -42,6 +42,8 @@ class LinePump:
         self._lock = threading.Lock()
         #: Lines dropped since the last one written (the queue was full).
         self.dropped = 0
+        #: What :func:`pump_logging` moved: the root logger's handler before and after.
+        self.moved: tuple[logging.Handler, logging.Handler] | None = None
         self._thread = threading.Thread(target=self._run, name="wheelgate-stderr", daemon=True)
         self._thread.start()
 
@@ -60,9 +62,17 @@ class LinePump:
     def close(self, timeout_s: float = 1.0) -> None:
         """Write what is queued, and how many were dropped since, waiting at most about
         ``timeout_s`` for room; then stop the thread."""
+        if self.moved is not None:  # later lines go to stderr directly again
+            before, after = self.moved
+            root = logging.getLogger()
+            root.removeHandler(after)
+            root.addHandler(before)
+            self.moved = None
         with contextlib.suppress(queue.Full):
-            if self.dropped:
-                self._queue.put(self._note(), timeout=timeout_s)
+            with self._lock:
+                note = self._note() if self.dropped else None
+            if note is not None:
+                self._queue.put(note, timeout=timeout_s)
             self._queue.put(None, timeout=timeout_s)
         self._thread.join(timeout_s)
 
@@ -119,5 +129,6 @@ def pump_logging() -> LinePump | None:
             moved.setLevel(handler.level)
             root.removeHandler(handler)
             root.addHandler(moved)
+            pump.moved = (handler, moved)
             return pump
     return None

@@ -173,7 +173,7 @@ class Supervisor:
             self.counts.estops += 1
         self._go(Event.ESTOP)
         self.reason = reason
-        self.target = ZERO
+        self.target, self._pending_enable = ZERO, False  # (an enable not yet taken: off)
 
     def enable(self, now_s: float) -> None:
         """Start (or restart) the enable sequence; also the way out of ESTOP and FAULT."""
@@ -192,12 +192,12 @@ class Supervisor:
     def disable(self) -> None:
         """Ramp to zero and disarm (an e-stop stays latched: only enable releases it)."""
         self._go(Event.DISABLE)
-        self.target = ZERO
+        self.target, self._pending_enable = ZERO, False  # (an enable not yet taken: off)
 
     def shutdown(self) -> None:
         """The process is stopping: zero and disarm for good."""
         self._go(Event.SHUTDOWN)
-        self.target = ZERO
+        self.target, self._pending_enable = ZERO, False  # (an enable not yet taken: off)
 
     def enable_failed(self, why: str) -> str:
         """The drives refused the enable sequence: FAULT with ``why`` as the reason."""

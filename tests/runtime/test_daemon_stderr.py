@@ -81,3 +81,26 @@ def test_a_stderr_nobody_reads_does_not_stall_the_loop(sock_path: str, tmp_path:
             proc.wait()
         assert proc.stderr is not None
         proc.stderr.close()
+
+
+def test_the_close_gives_the_log_its_stderr_handler_back() -> None:
+    """After ``run`` the root logger writes to stderr itself again (before, its handler fed a
+    queue nobody emptied any more: later lines were lost)."""
+    import logging
+    import sys
+
+    from gateway.cli.stderr import PumpHandler, pump_logging
+
+    root = logging.getLogger()
+    original = logging.StreamHandler(sys.stderr)
+    root.addHandler(original)
+    try:
+        pump = pump_logging()
+        assert pump is not None
+        assert original not in root.handlers
+        assert any(isinstance(h, PumpHandler) for h in root.handlers)
+        pump.close()
+        assert original in root.handlers
+        assert not any(isinstance(h, PumpHandler) for h in root.handlers)
+    finally:
+        root.removeHandler(original)

@@ -129,6 +129,37 @@ def test_an_estop_and_an_enable_handled_before_a_cycle_still_stop_and_release(
         b.sock.close()
 
 
+@pytest.mark.parametrize("then", ["estop", "disable"])
+def test_an_enable_then_an_estop_or_disable_before_a_cycle_enables_nothing(
+    channel: str, sock_path: str, then: str
+) -> None:
+    """The other order: an enable, then an e-stop (or a disable) from another client, both
+    handled between two cycles.  Before, the next cycle still took the enable and armed the
+    axes while the state said ESTOP."""
+    import can
+
+    cfg = virtual_config(TB3, channel, rate_hz=100.0)
+    with Rig(cfg, sock_path) as rig:
+        rig.enable()
+        rig.gw.supervisor.disable()
+        rig.advance(0.2)
+        assert state(rig) is GatewayState.DISABLED
+        a, b = SocketPilot(sock_path), SocketPilot(sock_path)
+        spy = can.Bus(interface="virtual", channel=channel)
+        try:
+            a.send(op="enable", id="A")
+            b.send(op=then, id="B")
+            rig.advance(0.5)
+            seen = [(m.arbitration_id, bytes(m.data)) for m in iter(lambda: spy.recv(0.0), None)]
+        finally:
+            spy.shutdown()
+        closed_loop = b"\x08" + bytes(7)  # Set_Axis_State (0x07) CLOSED_LOOP_CONTROL
+        assert not [f for f in seen if f[0] & 0x1F == 0x07 and f[1] == closed_loop], seen
+        assert state(rig) is (GatewayState.ESTOP if then == "estop" else GatewayState.DISABLED)
+        a.sock.close()
+        b.sock.close()
+
+
 def test_socket_estop_survives_a_restart_and_enable_on_start(channel: str, sock_path: str) -> None:
     cfg = virtual_config(TB3, channel, rate_hz=100.0)
     with Rig(cfg, sock_path) as rig:
