@@ -137,6 +137,22 @@ def make_nmt(command: NmtCommand, node_id: int = 0) -> Frame:
     return Frame(CobBase.NMT, bytes((NmtCommand(command), node_id)))
 
 
+def cob_name(cob_id: int) -> str | None:
+    """The CiA 301 name of a COB-ID's function code (``NMT``, ``SYNC``, ``EMCY``, ``TPDO3``,
+    ``RPDO4``, ``SDO_TX``, ``SDO_RX``, ``HEARTBEAT``); ``None`` for an unknown one."""
+    if cob_id == CobBase.NMT:
+        return "NMT"
+    if cob_id == CobBase.SYNC:
+        return "SYNC"
+    base = cob_id & 0x780
+    if base == CobBase.EMCY:
+        return "EMCY"  # (the same function code as SYNC, with a node ID)
+    try:
+        return CobBase(base).name
+    except ValueError:
+        return None
+
+
 def make_sync(counter: int | None = None) -> Frame:
     """SYNC frame (COB-ID 0x080): DLC 0, or DLC 1 with a counter 1..240 (0x1019 set)."""
     if counter is None:

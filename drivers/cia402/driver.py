@@ -59,6 +59,7 @@ from drivers.cia402.codec import (
     Emergency,
     Heartbeat,
     Received,
+    cob_name,
     make_rpdo,
     make_sync,
 )
@@ -163,17 +164,21 @@ class Cia402Driver(MotorDriver[Cia402Options]):
     # ----------------------------------------------------------------- hooks
 
     def _enable(self, now_s: float) -> list[Frame]:
-        """Start the enable sequence of every node that is not armed, or is armed but silent
-        (OFFLINE: a drive whose heartbeat event went unheard is PRE-OPERATIONAL and needs
-        the sequence's NMT start)."""
+        """Start the enable sequence of every node not armed, or armed but silent (OFFLINE:
+        a drive whose heartbeat event went unheard is PRE-OPERATIONAL and needs the NMT
+        start); QUICK STOP (and a SYNC) first to a node that may be enabled."""
+        stops: list[Frame] = []
         out: list[Frame] = []
         for i, axis in enumerate(self._axes):
             if axis.seq.phase is not Phase.ARMED or not self.live.alive(i, now_s):
                 axis.boot_restarts = 0
                 axis.restart_pending = False
+                stops += axis.seq.quick_stop()
                 out += axis.seq.start(now_s)
             self._refresh(i)
-        return out
+        if stops and self.sync_enabled:
+            stops.append(self._sync(now_s))
+        return stops + out
 
     def disable(self, now_s: float) -> list[Frame]:
         """Target 0 with ENABLE OPERATION now; :meth:`poll` sends SHUTDOWN at speed 0."""
@@ -330,22 +335,8 @@ class Cia402Driver(MotorDriver[Cia402Options]):
         return (*taken, *sent)
 
     def message_name(self, arbitration_id: int, is_extended_id: bool) -> str | None:
-        """The CiA 301 name of a COB-ID's function code (``NMT``, ``SYNC``, ``EMCY``,
-        ``TPDO3``, ``RPDO4``, ``SDO_TX``, ``SDO_RX``, ``HEARTBEAT``); ``None`` for a 29-bit
-        identifier or an unknown one."""
-        if is_extended_id:
-            return None
-        if arbitration_id == CobBase.NMT:
-            return "NMT"
-        if arbitration_id == CobBase.SYNC:
-            return "SYNC"
-        base = arbitration_id & 0x780
-        if base == CobBase.EMCY:
-            return "EMCY"  # (the same function code as SYNC, with a node ID)
-        try:
-            return CobBase(base).name
-        except ValueError:
-            return None
+        """:func:`~drivers.cia402.codec.cob_name` of an 11-bit COB-ID; ``None`` for 29-bit."""
+        return None if is_extended_id else cob_name(arbitration_id)
 
     # ----------------------------------------------------------------- protection
 

@@ -68,9 +68,10 @@ DISABLE_VOLTAGE = "disable voltage (the power stage switches off: the motor coas
 
 #: What to do when a drive does not take the protection.
 FIX = (
-    "use a drive with a heartbeat consumer (CiA 301 object 0x1016) and the abort connection "
-    "option code (CiA 402 object 0x6007), see its EDS file; or set a command timeout with the "
-    "vendor's tool and gateway.controller_watchdog: warn"
+    "use a drive with a heartbeat consumer (CiA 301 object 0x1016), the abort connection "
+    "option code (CiA 402 object 0x6007) and, if it has the error behaviour object 0x1029, "
+    "its value 0 (PRE-OPERATIONAL) in 0x1029:01, see its EDS file; or set a command timeout "
+    "with the vendor's tool and gateway.controller_watchdog: warn"
 )
 
 

@@ -114,6 +114,8 @@ class SdoResponse:
         or ``ABORT``.
     :param data: the bytes read (upload), empty otherwise.
     :param abort_code: the code of an abort, else 0.
+    :param sized: whether the upload indicated its size (CiA 301 7.2.4.3.3, ``s``); an
+        expedited upload without it carries "an unspecified number of bytes" in all four.
     """
 
     node_id: int
@@ -122,13 +124,20 @@ class SdoResponse:
     subindex: int
     data: bytes = b""
     abort_code: int = 0
+    sized: bool = True
 
     def value(self, dtype: DataType) -> int:
-        """The uploaded value as ``dtype``.
+        """The uploaded value as ``dtype``: of more bytes than the object has, its first bytes
+        when the upload did not indicate its size, or when the rest are zero (some devices
+        send every value as 32 bits; the python ``canopen`` client, ``SdoClient.upload``,
+        truncates the same way).
 
-        :raises DecodeError: if the server sent a different number of bytes.
+        :raises DecodeError: if the server sent fewer bytes, or more that are not zero.
         """
-        if len(self.data) != dtype.size:
+        data, size = self.data, dtype.size
+        if len(data) > size and (not self.sized or not any(data[size:])):
+            return int(dtype.codec.unpack(data[:size])[0])
+        if len(data) != size:
             raise DecodeError(
                 f"Expected {dtype.size} bytes ({dtype.name}) in the SDO upload of "
                 f"0x{self.index:04X}:{self.subindex:02X} from node {self.node_id}, "
@@ -178,7 +187,8 @@ def parse_sdo_response(frame: Frame) -> SdoResponse:
         return SdoResponse(node_id, command, index, subindex)
     if command is ServerCommand.INITIATE_UPLOAD:
         data = _expedited_data(first, payload, "response", node_id)
-        return SdoResponse(node_id, command, index, subindex, data)
+        return SdoResponse(node_id, command, index, subindex, data,
+                           sized=bool(first & SdoFlag.SIZE_INDICATED))
     if command is ServerCommand.ABORT:
         code = _SDO_U32.unpack(frame.data)[3]
         return SdoResponse(node_id, command, index, subindex, abort_code=code)

@@ -157,6 +157,16 @@ class NodeSequencer(ControlwordWalk):
             self.hold = None  # only a position read after this start counts
         return self._issue(now_s)
 
+    def quick_stop(self) -> list[Frame]:
+        """QUICK STOP for a node that may be in OPERATION ENABLED (armed, or on its way),
+        else nothing: before a restart of the sequence, whose NMT PRE-OPERATIONAL turns the
+        PDOs off, so that a drive only unheard (its transmissions lost, or the gateway's
+        reception) does not keep its last target out of reach of any later stop.  A drive
+        already PRE-OPERATIONAL ignores it."""
+        if self.phase in (Phase.ARMED, Phase.STOPPING, Phase.AWAIT_STATUS, Phase.WALKING):
+            return [self._rpdo(Controlword.QUICK_STOP)]
+        return []
+
     def fail(self, message: str, flags: DriveFault) -> list[Frame]:
         """End the sequence with ``message``; a drive that may be powered gets SHUTDOWN."""
         was = self.phase

@@ -48,7 +48,8 @@ TOP_KEYS = frozenset(
      "steering_defaults", "limits", "kinematics", "bus", "gateway", "bridge", "foxglove"}
 )
 #: The bounds of a robot's lengths (m): a wheel radius, a track, a mounting distance.  Far
-#: wider than any wheeled robot; what they catch is a unit slip (mm for m) or a typo's exponent.
+#: wider than any wheeled robot; what they catch is a typo's exponent, or a unit slip (mm for
+#: m) of a length above 100 mm (a 33 mm radius written as 33 passes: no bound can tell).
 MIN_LENGTH_M, MAX_LENGTH_M = 1e-3, 100.0
 #: The bounds of a gear ratio (motor turns per wheel turn): a gearbox reduces at most this much
 #: (or steps up at most as much).

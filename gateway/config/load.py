@@ -192,9 +192,9 @@ def parse_config(
     name = raw.get("name", Path(source).stem if source != DEFAULT_NAME else "default")
     if not isinstance(name, str):
         found.add(f"{source}: name: expected str, got {name!r}")
-    elif "name" in raw and (not 0 < len(name) <= MAX_NAME or not name.isprintable()):
-        found.add(f"{source}: name: expected 1 to {MAX_NAME} printable characters, got "
-                  f"{name!r}")
+    elif not 0 < len(name) <= MAX_NAME or not name.isprintable():
+        found.add(f"{source}: name{'' if 'name' in raw else ' (the file name: state name:)'}: "
+                  f"expected 1 to {MAX_NAME} printable characters, got {name!r}")
     bridge = foxglove = None
     bridge_said: list[str] = []
     if "bridge" in raw or "foxglove" in raw:

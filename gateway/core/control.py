@@ -109,8 +109,9 @@ class Supervisor:
         #: Whether the bus can carry frames (``False`` from bus-off until the controller
         #: reports that it is back): automatic recovery waits for it.
         self.bus_ok = True
-        self._timed_out = False
-        self._pending_enable = False
+        #: An e-stop whose zero and disarm the loop has not sent yet (its ``stop_now``).
+        self.estop_owed = False
+        self._timed_out = self._pending_enable = False
         self._fault_s = 0.0
         self._now_hint = 0.0
         self._auto_attempts = 0
@@ -174,6 +175,7 @@ class Supervisor:
         self._go(Event.ESTOP)
         self.reason = reason
         self.target, self._pending_enable = ZERO, False  # (an enable not yet taken: off)
+        self.estop_owed = True
 
     def enable(self, now_s: float) -> None:
         """Start (or restart) the enable sequence; also the way out of ESTOP and FAULT."""

@@ -23,9 +23,9 @@ The table, by event (``*``: from every state)::
     SHUTDOWN        * -> STOPPING
 
 ``ENABLE_REFUSED`` comes from the loop, which takes an enable request in the cycle after it
-was made (it sends the drives' enable frames then): an e-stop, a disable, a shutdown, a fault
-or every motor reporting enabled in between does not withdraw the request, so the drives'
-refusal can come in any state.
+was made (it sends the drives' enable frames then): an e-stop, a disable or a shutdown in
+between withdraws the request; a fault or every motor reporting enabled does not, so the
+drives' refusal can come in FAULT or RUNNING too (the table takes it in any state).
 """
 
 from __future__ import annotations

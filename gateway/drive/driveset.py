@@ -87,6 +87,8 @@ class DriveSet:
             else None
             for a, ix in zip(config.steering, self.steered_by, strict=True)
         )
+        #: The wheels the last :meth:`disable` could not build a stop for (a driver failed).
+        self.unstopped: tuple[str, ...] = ()
         #: Whether any driver closes its speed loop on the host (see MotorDriver).
         self.host_speed_loop = any(drv.HOST_SPEED_LOOP for drv, _ in self.groups)
         flat = [i for _, idx in self.groups for i in idx]
@@ -158,9 +160,11 @@ class DriveSet:
 
         The stop is the one step that must reach every motor it can: a driver that fails to
         build its frames (a defect, whatever it raises) is logged with the wheels it leaves
-        without a stop, and the other drivers' frames still go out.
+        without a stop (kept in :attr:`unstopped`), and the other drivers' frames still go
+        out.
         """
         out: list[Frame] = []
+        unstopped: list[str] = []
         for drv, _ in self.groups:
             try:
                 out.extend(drv.disable(now_s))
@@ -168,6 +172,8 @@ class DriveSet:
                 log.exception("%s could not build the stop of %s; the other drivers' stop "
                               "goes out", type(drv).__name__,
                               ", ".join(repr(m.wheel) for m in drv.motors))
+                unstopped.extend(m.wheel for m in drv.motors)
+        self.unstopped = tuple(unstopped)
         return out
 
     def command(

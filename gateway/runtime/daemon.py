@@ -99,7 +99,7 @@ class Daemon:
         self._announced_running = False
         self._stop = False
         #: The name of the signal that stopped the daemon, if one did; whether the shutdown's
-        #: zero and disarm went out (every frame of it: the bus took them).
+        #: zero and disarm went out (every motor's, and the bus took every frame of it).
         self.stop_signal, self.stop_sent = "", False
         self._closers: list[Any] = []
         self.writer: can.Listener | None = None
@@ -215,7 +215,7 @@ class Daemon:
             if latched is not None:
                 # Never out of an e-stop by a restart: only an explicit enable releases it.
                 self.gateway.supervisor.estop(latched)
-                self._state = GatewayState.ESTOP
+                self._state, self.latch.counted = GatewayState.ESTOP, 1  # (the file holds it)
                 log.warning("starting e-stopped: %s; send enable to release it (%s)", latched,
                             self.latch.path)
             elif self.config.loop.enable_on_start:
@@ -253,10 +253,10 @@ class Daemon:
                 server.publish(topic, event_line(news))
         self.remote.post(gw.outbox)
         gw.outbox.clear()
+        sup = gw.supervisor
+        self.latch.track(sup.counts.estops, sup.reason if gw.state is GatewayState.ESTOP else None)
         if gw.state is not self._state:
-            if gw.state is GatewayState.ESTOP:
-                self.latch.set(gw.supervisor.reason)  # from CAN, or anything but the socket
-            elif self._state is GatewayState.ESTOP:
+            if self._state is GatewayState.ESTOP:
                 self.latch.clear()  # only an explicit enable leaves ESTOP
             before, self._state = self._state, gw.state
             text = self._status_text()
@@ -377,7 +377,7 @@ class Daemon:
             now = time.monotonic()
             if not (sent := gw.edge.send(gw.drives.disable(now))):  # (run's last line says)
                 log.error("the zero and disarm did not all go out: the bus refused them")
-            self.stop_sent = sent
+            self.stop_sent = sent and not gw.drives.unstopped
             end = now + SHUTDOWN_GRACE_S
             while time.monotonic() < end:
                 time.sleep(0.01)

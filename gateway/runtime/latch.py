@@ -50,6 +50,9 @@ class EstopLatch:
         #: The reason last written by :meth:`set` (``None`` after :meth:`clear`): the same
         #: e-stop is written once, however many paths report it.
         self._written: str | None = None
+        #: The supervisor's e-stop count at the last :meth:`track` (an e-stop the daemon
+        #: restored from this file counts as tracked: it is on disk already).
+        self.counted = 0
 
     def read(self) -> str | None:
         """The reason of a latched e-stop, ``None`` when there is none.
@@ -71,6 +74,19 @@ class EstopLatch:
         except (ValueError, KeyError, TypeError, OverflowError, OSError):
             return f"e-stop latch {self.path} exists but is damaged; treated as latched"
         return f"{reason} (latched since {since}, kept across restarts)"
+
+    def track(self, estops: int, reason: str | None) -> None:
+        """Write the latch for every e-stop counted since the last call, whichever path took
+        it (the socket, CAN, the bridge), even one after an enable the caller never saw.
+
+        :param estops: the supervisor's e-stop count.
+        :param reason: its reason while the state is ESTOP, else ``None`` (an e-stop already
+            released: nothing to write).
+        """
+        if estops != self.counted:
+            self.counted = estops
+            if reason is not None:
+                self.set(reason)
 
     def set(self, reason: str) -> bool:
         """Write the latch (once for one e-stop: again only after :meth:`clear`).

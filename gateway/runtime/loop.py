@@ -31,7 +31,7 @@ from typing import TYPE_CHECKING
 
 from gateway.bus.edge import LOG_EVERY_S, BusEdge, bus_options
 from gateway.bus.health import LogThrottle, since_last
-from gateway.core.control import Accepted, Rejection, Source, Supervisor
+from gateway.core.control import ZERO, Accepted, Rejection, Source, Supervisor
 from gateway.core.errors import EncodeError, GatewayError, KinematicsError
 from gateway.core.kinematics import Odometry, apply_limits
 from gateway.core.odom_feed import OdomFeed
@@ -213,6 +213,8 @@ class Gateway:
                 else:
                     other(frame)
         sup = self.supervisor
+        if sup.estop_owed:
+            self.stop_now(now_s)
         if edge.starved is not None or edge.bus_state_change is not None:
             self._bus_trouble()
         elif (edge.bus_errors.state is BusErrorState.BUS_OFF
@@ -284,9 +286,16 @@ class Gateway:
                       now_s, tracked=False)
 
     def stop_now(self, now_s: float) -> None:
-        """An e-stop taken between cycles (a socket or bridge request): the zero and disarm go
-        out now, not at the next cycle, which an enable handled first would turn into an
-        ENABLING that never disarms."""
+        """Act on an e-stop not acted on yet (``Supervisor.estop_owed``): the zero and disarm
+        go out now, and the limits start again from zero.  Called where the e-stop is taken
+        (a socket or bridge request) and by the cycle after its frames (CAN): an enable
+        handled after it, before the cycle's decision, would otherwise make an ENABLING that
+        never disarmed, whose ramp resumed the speed of before the e-stop."""
+        sup = self.supervisor
+        if not sup.estop_owed:
+            return
+        sup.estop_owed = False
+        self.prev, self._prev_limited = self._solve(ZERO), False
         if self._armed:
             self._armed = False
             self.edge.send(self.drives.disable(now_s), now_s)

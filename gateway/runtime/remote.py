@@ -111,7 +111,7 @@ class Remote:
         if item is None:  # (the common case: no clock read)
             return
         end = time.perf_counter() + SERVE_SHARE * self.gateway.period_s
-        for _ in range(POLL_MAX):
+        for left in range(POLL_MAX - 1, -1, -1):
             if isinstance(item, CommanderEvent):
                 if not item.alive:
                     # What the commander published before its token went is in the rings by
@@ -120,7 +120,8 @@ class Remote:
                 self._commander(item.commander, item.alive, now_s)
             else:
                 self._request(item, now_s)
-            if time.perf_counter() > end or (item := bridge.take()) is None:
+            # (Nothing taken past the limit: a taken item must be handled.)
+            if not left or time.perf_counter() > end or (item := bridge.take()) is None:
                 return
 
     def _take_twists(self, bridge: Bridge, now_s: float) -> None:
@@ -146,6 +147,7 @@ class Remote:
         action = self.bridge.settings.deadman
         if action is DeadmanAction.ESTOP:
             sup.estop(f"commander {name} disappeared (deadman: estop)")
+            gw.stop_now(now_s)  # (before the latch's disk write, and any enable)
             self.latch.set(sup.reason)
             gw.report_error(ErrorCode.ESTOP, sup.reason)
         else:

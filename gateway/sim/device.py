@@ -105,6 +105,9 @@ class SimFault(enum.IntFlag):
     #: The wheel is blocked: the shaft stands still whatever the command, while the device
     #: keeps reporting healthy (no fault code, still armed).
     STALL = enum.auto()
+    #: Every frame the device sends is lost (a broken transmit path), while it still hears
+    #: and acts on everything (``SILENT`` is a dead device: it hears nothing either).
+    MUTE = enum.auto()
 
 
 class DeviceSimulator(abc.ABC):
@@ -144,7 +147,11 @@ class DeviceSimulator(abc.ABC):
         if self.faults & SimFault.SILENT:
             self._held.clear()
             return []
-        return self._emit(self._on_frame(frame, now_s), now_s)
+        out = self._on_frame(frame, now_s)
+        if self.faults & SimFault.MUTE:
+            self._held.clear()
+            return []
+        return self._emit(out, now_s)
 
     def tick(self, now_s: float) -> list[Frame]:
         """Advance the motor to ``now_s``; return the periodic frames due."""
@@ -155,7 +162,7 @@ class DeviceSimulator(abc.ABC):
                 self.model.step(now_s - self._last_tick_s)
         self._last_tick_s = now_s
         out = self._on_tick(now_s)
-        if self.faults & SimFault.SILENT:
+        if self.faults & (SimFault.SILENT | SimFault.MUTE):
             self._held.clear()
             return []
         return self._emit(out, now_s)

@@ -266,6 +266,21 @@ def test_a_log_of_another_robot_is_warned_about(
     assert json.loads(run(runner, str(s.log), "--json").stdout)["foreign_controllers"] is None
 
 
+def test_a_robots_own_commands_are_not_taken_for_another_robots_controllers(
+    sessions: Callable[[str], Session], runner: CliRunner,
+) -> None:
+    """The DBC robot commands its wheels on 0x201 and 0x202, where DJI ESCs send their
+    feedback: its own log, replayed with its own configuration, was said to be 64 % another
+    robot's (DJI nodes 1 and 2).  Frames a driver of the robot sends are the robot's."""
+    s = sessions("example_dbc")
+    result = run(runner, "-c", str(CONFIG_DIR / "example_dbc.yaml"), str(s.log))
+    assert result.exit_code == 0, result.stderr
+    assert "does not name" not in result.stderr, result.stderr
+    report = json.loads(run(runner, "-c", str(CONFIG_DIR / "example_dbc.yaml"), str(s.log),
+                            "--json").stdout)
+    assert report["foreign_controllers"] is None
+
+
 def test_a_replay_that_departs_from_the_gateways_pose_is_warned_about(
     sessions: Callable[[str], Session], runner: CliRunner, tmp_path: Path,
 ) -> None:

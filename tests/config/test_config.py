@@ -245,3 +245,15 @@ def test_an_unknown_motor_key_suggests_the_nearest_and_lists_every_motor_key() -
     raw["motors"]["front_left"] = {"node_id": 1, "colour": "red"}
     with pytest.raises(ConfigError, match=r"colour: unknown key \(known motor keys"):
         parse_config(raw, "robot.yaml")  # nothing close: no suggestion
+
+
+def test_a_name_taken_from_the_file_name_is_bounded_too() -> None:
+    """A file without ``name:`` takes its file name; an 80-character one was taken as it was
+    (the bound applied only to a stated name)."""
+    raw = yaml.safe_load(yaml.safe_dump(BASE))
+    stem = "r" * 80
+    with pytest.raises(ConfigError) as info:
+        parse_config(raw, f"{stem}.yaml")
+    assert (f"{stem}.yaml: name (the file name: state name:): expected 1 to 64 printable "
+            f"characters, got '{stem}'") in str(info.value)
+    assert parse_config(raw, f"{'r' * 64}.yaml").name == "r" * 64

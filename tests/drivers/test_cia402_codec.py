@@ -51,6 +51,7 @@ from drivers.cia402.sdo import (
     parse_sdo_response,
 )
 from drivers.cia402.targets import wrap_delta
+from gateway.core.errors import DecodeError
 from gateway.core.types import DriveFault, Frame
 from tests import factories
 from tests.drivers.cia402_bench import TWO_PI, hexb
@@ -124,6 +125,25 @@ def test_golden_decodes() -> None:
     assert (ack.command, ack.index, ack.subindex) == (ServerCommand.INITIATE_DOWNLOAD, 0x6040, 0)
     assert codec.decode(Frame(0x080)) is None  # SYNC is nobody's feedback
     assert codec.decode(Frame(0x384, hexb("37 02 C0 1D FE FF"))) is None  # another node
+
+
+def test_an_upload_of_more_bytes_than_the_object_takes_its_first_when_that_is_safe() -> None:
+    """An expedited upload without its size (0x42: "an unspecified number of bytes", CiA 301)
+    or with zero bytes beyond the object (a device that sends every value as 32 bits) gives
+    the object's first bytes, as ``canopen``'s ``SdoClient.upload`` does; a sized one whose
+    extra bytes are not zero would change the value, and is refused (before, both failed
+    the enable: "Expected 2 bytes (INTEGER16) in the SDO upload of 0x605A:00 ...")."""
+    unsized = parse_sdo_response(Frame(0x583, hexb("42 5A 60 00 02 00 00 00")))
+    assert unsized.value(DataType.INTEGER16) == 2
+    padded = parse_sdo_response(Frame(0x583, hexb("43 5A 60 00 FE FF 00 00")))
+    assert padded.value(DataType.INTEGER16) == -2
+    wide = parse_sdo_response(Frame(0x583, hexb("43 5A 60 00 02 00 01 00")))
+    with pytest.raises(DecodeError, match=r"Expected 2 bytes \(INTEGER16\) in the SDO upload "
+                                          r"of 0x605A:00 from node 3, but got 4"):
+        wide.value(DataType.INTEGER16)
+    short = parse_sdo_response(Frame(0x583, hexb("4B 5A 60 00 02 00 00 00")))  # 2 bytes
+    with pytest.raises(DecodeError, match="but got 2"):
+        short.value(DataType.UNSIGNED32)
 
 
 # ===================================================================== hypothesis round trips

@@ -149,6 +149,32 @@ def test_a_lost_heartbeat_stops_the_drive_and_its_pdos(
     assert sim.wheel_velocity_rad_s == pytest.approx(10.0, abs=0.01)
 
 
+@pytest.mark.parametrize("speed", [10.0, 0.0])
+def test_a_restart_of_an_unheard_drive_stops_it_before_its_pdos_go_off(
+    bench: Callable[..., Bench], speed: float
+) -> None:
+    """A running drive whose frames no longer reach the gateway (its transmissions lost) but
+    that still hears the bus: an enable restarts its sequence, whose NMT PRE-OPERATIONAL turns
+    its PDOs off.  QUICK STOP goes first, so the drive stops (as 0x605A says) and does not keep
+    its last target out of reach of the disable that follows (it kept turning at 10 rad/s,
+    in OPERATION ENABLED, with the driver's phase IDLE)."""
+    b = bench([LEFT])
+    assert b.enable([0.0])
+    b.run(0.3, [10.0])
+    sim = b.sims[0]
+    sim.inject(SimFault.MUTE)  # it sends nothing more, and hears everything
+    b.run(0.5, [speed])  # 0.0: the loop's FAULT zero (fault_action: zero)
+    assert b.drv.status(b.t)[0].state is DriveState.OFFLINE
+    b.send(b.drv.enable(b.t))
+    b.run(0.5, [speed])
+    assert sim.nmt is NmtState.PRE_OPERATIONAL
+    assert sim.state is State.SWITCH_ON_DISABLED
+    assert abs(sim.wheel_velocity_rad_s) < 0.01
+    b.send(b.drv.disable(b.t))
+    b.run(1.0, None)
+    assert sim.state is State.SWITCH_ON_DISABLED and abs(sim.wheel_velocity_rad_s) < 0.01
+
+
 def drive_with_consumer(
     quick_stop_option: int, error_behaviour: int | None = None, *, start: bool = False
 ) -> tuple[Cia402Simulator, list[float], list[Frame]]:

@@ -202,9 +202,11 @@ def test_required_a_refused_write_is_a_fault_and_no_enable(bench: Callable[..., 
         "motor 'left' (CiA 402 node 3): controller watchdog not confirmed: SDO write of "
         "8323272 (0x007F00C8) to 0x1016:01 (heartbeat consumer time) aborted: 0x06020000 "
         "Object does not "
-        "exist; fix: use a drive with a heartbeat consumer (CiA 301 object 0x1016) and the "
-        "abort connection option code (CiA 402 object 0x6007), see its EDS file; or set a "
-        "command timeout with the vendor's tool and gateway.controller_watchdog: warn")
+        "exist; fix: use a drive with a heartbeat consumer (CiA 301 object 0x1016), the "
+        "abort connection option code (CiA 402 object 0x6007) and, if it has the error "
+        "behaviour object 0x1029, its value 0 (PRE-OPERATIONAL) in 0x1029:01, see its EDS "
+        "file; or set a command timeout with the vendor's tool and "
+        "gateway.controller_watchdog: warn")
     assert b.drv.protection_state(0) is ProtectionState.FAILED
     assert controlwords(b) == []  # no controlword reached the drive, and no NMT start
     assert make_nmt(NmtCommand.START, 3) not in b.sent

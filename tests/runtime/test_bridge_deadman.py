@@ -210,3 +210,17 @@ def test_the_loop_takes_at_least_one_waiting_item_a_cycle_within_its_share(
     for _ in range(4):
         serve(r)
     assert [c for c, _ in fake.replies] == [1, 2, 3, 4, 5] and fake.inbox == []
+
+
+def test_the_loop_loses_no_item_at_its_limit(
+        rig: tuple[Rig, FakeBridge], monkeypatch: pytest.MonkeyPatch) -> None:
+    """At most POLL_MAX items a cycle, and the one after the limit waits for the next cycle
+    (it was taken from the inbox and dropped: an e-stop, an enable or a commander's loss)."""
+    r, fake = rig
+    monkeypatch.setattr(remote_module, "SERVE_SHARE", 1e6)  # only the count limits
+    n = remote_module.POLL_MAX + 5
+    fake.inbox += [Inbound(k, CommandRequest(Op.STATUS)) for k in range(1, n + 1)]
+    serve(r)
+    assert [c for c, _ in fake.replies] == list(range(1, remote_module.POLL_MAX + 1))
+    serve(r)
+    assert [c for c, _ in fake.replies] == list(range(1, n + 1)) and fake.inbox == []

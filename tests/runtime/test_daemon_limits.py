@@ -14,7 +14,10 @@ from typing import TYPE_CHECKING
 
 import can
 import pytest
+from click.testing import CliRunner
 
+from drivers.odrive.driver import OdriveDriver
+from gateway.cli import main
 from gateway.core.types import GatewayState
 from gateway.runtime.client import ControlClient
 from tests.e2e_helpers import Rig, virtual_config
@@ -171,3 +174,39 @@ def test_the_shutdown_says_whether_its_stop_went_out(
         assert rig.daemon.stop_sent is bus_takes_it
         said = "the zero and disarm did not all go out: the bus refused them" in caplog.text
         assert said is not bus_takes_it
+
+
+def test_the_shutdown_does_not_say_sent_when_a_driver_built_no_stop(
+    channel: str, sock_path: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A driver that fails to build its stop (a defect) leaves its wheels without one: the
+    shutdown says so (``stop_sent`` false, the wheels in ``drives.unstopped``), though the bus
+    took every frame that was built."""
+    with Rig(virtual_config(TB3, channel, rate_hz=100.0), sock_path) as rig:
+        assert rig.daemon is not None
+        rig.enable()
+        (drv, _), = rig.gw.drives.groups
+
+        def broken(now_s: float) -> list[object]:
+            raise ZeroDivisionError("float divmod()")
+
+        monkeypatch.setattr(drv, "disable", broken)
+        rig.daemon.shutdown()
+        assert rig.daemon.stop_sent is False
+        assert rig.gw.drives.unstopped == tuple(m.wheel for m in drv.motors)
+
+
+def test_runs_last_line_names_the_wheels_without_a_stop(
+    sock_path: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``run``'s last line names the wheels whose driver built no stop, not "every motor was
+    sent zero and disarm" (it said so whatever the drivers did)."""
+    def broken(self: OdriveDriver, now_s: float) -> list[object]:
+        raise ZeroDivisionError("float divmod()")
+
+    monkeypatch.setattr(OdriveDriver, "disable", broken)
+    result = CliRunner().invoke(main, ["run", "--sim", "--socket", sock_path, "--duration",
+                                       "0.5"])
+    assert result.exit_code == 0, result.output
+    assert ("stopped; no stop could be built for 'front_left', 'front_right', 'rear_left', "
+            "'rear_right': only their controllers' own timeouts stop them") in result.stderr

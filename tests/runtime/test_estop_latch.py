@@ -160,6 +160,46 @@ def test_an_enable_then_an_estop_or_disable_before_a_cycle_enables_nothing(
         b.sock.close()
 
 
+def handle_one(rig: Rig) -> None:
+    """Wait for one request on the control socket and handle it, between cycles."""
+    assert rig.daemon is not None
+    end = time.monotonic() + 5.0
+    while time.monotonic() < end:
+        for client, request in rig.daemon.server.poll(0.01):
+            rig.daemon.handle(client, request, rig.t)
+            return
+    raise AssertionError("no request came")
+
+
+def test_a_can_estop_after_a_socket_release_is_latched(channel: str, sock_path: str) -> None:
+    """A cycle sees ESTOP; before the next, a socket enable releases it (the latch goes) and a
+    CAN ESTOP frame arrives, drained by that next cycle: the state is ESTOP at both steps, no
+    change, and the CAN e-stop was not written (a restart came up without it)."""
+    cfg = virtual_config(TB3, channel, rate_hz=100.0)
+    with Rig(cfg, sock_path) as rig:
+        assert rig.daemon is not None
+        rig.enable()
+        pilot = SocketPilot(sock_path)
+        pilot.send(op="estop", id="1")
+        handle_one(rig)
+        rig.advance(rig.period)
+        latch = rig.daemon.latch
+        assert state(rig) is GatewayState.ESTOP and latch.path.exists()
+        pilot.send(op="enable", id="2")
+        handle_one(rig)  # between cycles: ENABLING, the latch gone
+        assert state(rig) is GatewayState.ENABLING and not latch.path.exists()
+        rig.send_can_twist(Twist(), TwistFlags.ESTOP)  # drained by the next cycle
+        rig.advance(rig.period)
+        assert state(rig) is GatewayState.ESTOP
+        assert rig.gw.supervisor.reason == "e-stop requested on CAN"
+        assert latch.path.exists()
+        pilot.close()
+    with Rig(cfg, f"{sock_path}2") as rig:
+        assert rig.daemon is not None
+        rig.daemon.run(max_cycles=3)
+        assert rig.gw.supervisor.reason.startswith("e-stop requested on CAN (latched since")
+
+
 def test_socket_estop_survives_a_restart_and_enable_on_start(channel: str, sock_path: str) -> None:
     cfg = virtual_config(TB3, channel, rate_hz=100.0)
     with Rig(cfg, sock_path) as rig:

@@ -149,11 +149,15 @@ def foreign_controllers(cfg: GatewayConfig, replay: Replay,
     from gateway.apps.scan.registry import load_probes  # noqa: PLC0415
     from gateway.drive.scan import Heard  # noqa: PLC0415
 
-    if not replay.unclaimed:
+    # The frames this robot's drivers send (their commands) are its own, not a controller's
+    # (a DBC robot's command on 0x201 looked like a DJI ESC's feedback).
+    sent = [c for drv, _ in replay.drives.groups for c in drv.claims() if not c.receive]
+    unclaimed = {key: v for key, v in replay.unclaimed.items()
+                 if not any(c.matches(*key) for c in sent)}
+    if not unclaimed:
         return None
     duration = max(replay.summary().duration_s, 1e-9)
-    heard = [Heard(i, ext, n, n / duration, last)
-             for (i, ext), (n, last) in replay.unclaimed.items()]
+    heard = [Heard(i, ext, n, n / duration, last) for (i, ext), (n, last) in unclaimed.items()]
     found = classify(load_probes(), heard, own_messages(cfg, drivers=False)).devices
     if not found:
         return None

@@ -118,8 +118,11 @@ def _run(ctx: click.Context, config_path: str | None, sim: bool, record: str | N
         if timer is not None:
             timer.cancel()
     why = f" ({daemon.stop_signal})" if daemon.stop_signal else ""
+    unstopped = daemon.gateway.drives.unstopped
     tell(f"wheelgate: stopped{why}; " + (
         "every motor was sent zero and disarm" if daemon.stop_sent else
+        f"no stop could be built for {', '.join(map(repr, unstopped))}: only their "
+        "controllers' own timeouts stop them (see the log)" if unstopped else
         "the zero and disarm did NOT all go out: only the controllers' own timeouts stop the "
         "motors (see the log)"))
     ctx.exit(code)
