@@ -4,10 +4,12 @@
 motors that share a file parse it once), looks up every configured message and signal, computes
 the frame IDs on the wire from the node ID, and the range each signal can carry.  Names that do
 not exist raise :class:`~gateway.core.errors.ConfigError` listing the names that do; so do
-signals the driver cannot use: a scale of zero, a velocity command too narrow for the motor's
-``max_rpm`` (:func:`check_command`), position signals too narrow for a steering actuator's
-travel (:func:`check_travel`).  The result is a frozen :class:`MotorBinding`, the only input the
-pure codec needs.
+signals the driver cannot use: a multiplexed signal, a scale of zero or one too large for a
+float (:mod:`drivers.dbc.signals`), an enable, disable or mode value between two steps of its
+signal, a velocity command too narrow for the motor's ``max_rpm`` (:func:`check_command`),
+position signals too narrow for a steering actuator's travel (:func:`check_travel`).  The
+result is a frozen :class:`MotorBinding`, the only input the pure codec needs; the codec then
+encodes each message it sends once (:meth:`drivers.dbc.codec.DbcCodec._try_sends`).
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from drivers.dbc.database import resolve_path
+from drivers.dbc.signals import check_enable_values, check_value, checked_range, multiplexing
 from drivers.dbc.units import UnitConversion
 from gateway.core.errors import ConfigError
 from gateway.core.types import MAX_EXTENDED_ID, MAX_STANDARD_ID
@@ -26,8 +29,6 @@ if TYPE_CHECKING:
     from drivers.dbc.options import DbcOptions
     from gateway.core.types import MotorConfig
 
-#: Largest finite IEEE-754 float32.
-FLOAT32_MAX = 3.4028234663852886e38
 #: Share of a command signal's range edge by which a command value may pass it: the rounding of
 #: the unit conversions and of the speed limits (the codec sends such a value as the edge).
 ROUNDING = 1e-6
@@ -95,6 +96,8 @@ class MotorBinding:
     :param disable_value: value of ``enable`` that disarms.
     :param target: the position command signal (a steering actuator), else ``None``.
     :param mode: the signals that select position control, each with the value that does.
+    :param where: file and key path of the motor block, for messages.
+    :param path: the DBC file, for messages.
     """
 
     node_id: int
@@ -108,30 +111,13 @@ class MotorBinding:
     disable_value: float = 0.0
     target: SignalRef | None = None
     mode: tuple[tuple[SignalRef, float], ...] = ()
+    where: str = ""
+    path: str = ""
 
     @property
     def steering(self) -> bool:
         """Whether this motor is commanded in position (a steering actuator)."""
         return self.target is not None
-
-
-def signal_range(signal: Any) -> tuple[float, float]:
-    """The physical range a signal can carry: its DBC range within what its bits can hold."""
-    if signal.is_float:
-        top = FLOAT32_MAX if signal.length == 32 else float("inf")
-        raw_lo, raw_hi = -top, top
-    elif signal.is_signed:
-        raw_lo, raw_hi = -(2 ** (signal.length - 1)), 2 ** (signal.length - 1) - 1
-    else:
-        raw_lo, raw_hi = 0, 2**signal.length - 1
-    a = float(signal.conversion.raw_to_scaled(raw_lo, False))
-    b = float(signal.conversion.raw_to_scaled(raw_hi, False))
-    lo, hi = min(a, b), max(a, b)
-    if signal.minimum is not None:
-        lo = max(lo, float(signal.minimum))
-    if signal.maximum is not None:
-        hi = min(hi, float(signal.maximum))
-    return lo, hi
 
 
 def command_range(ref: SignalRef) -> tuple[float, float]:
@@ -173,18 +159,24 @@ def _signal(
             f"{where}.{keys[1]}: message {msg_name!r} has no signal {sig_name!r}; "
             f"known signals: {known} (in {path})"
         ) from None
-    if msg.is_container or sig.multiplexer_ids:
+    how = multiplexing(msg, sig)
+    if how is not None:
         raise ConfigError(
-            f"{where}.{keys[1]}: signal {sig_name!r} of {msg_name!r} is multiplexed or in a "
-            "container message, which this driver does not support"
+            f"{where}.{keys[1]}: expected a signal that is not multiplexed, got signal "
+            f"{sig_name!r} of message {msg_name!r} in {path}, {how}; this driver does not "
+            "support multiplexed messages"
         )
+    ranges: dict[str, tuple[float, float]] = {}
     for each in (sig, *msg.signals):  # cantools divides by it to encode (the whole message)
+        key, beside = (keys[1], "") if each is sig else (keys[0], f" (beside {sig_name!r})")
         if each.scale == 0:
-            key, beside = (keys[1], "") if each is sig else (keys[0], f" (beside {sig_name!r})")
             raise ConfigError(
                 f"{where}.{key}: expected a non-zero scale for signal {each.name!r}{beside} of "
                 f"message {msg_name!r} in {path}, got {each.scale:g}"
             )
+        ranges[each.name] = checked_range(
+            each, f"{each.name!r}{beside}", msg_name, key, path, where
+        )
     frame_id = int(msg.frame_id)
     if opts.node_id_in_frame == "add":
         frame_id += motor.node_id << opts.node_id_shift
@@ -195,8 +187,7 @@ def _signal(
             f"{msg_name!r} (0x{msg.frame_id:X}) with node {motor.node_id}, "
             f"got 0x{frame_id:X}"
         )
-    lo, hi = signal_range(sig)
-    return SignalRef(msg, sig, frame_id, lo, hi)
+    return SignalRef(msg, sig, frame_id, *ranges[sig.name])
 
 
 def bind_motor(
@@ -210,8 +201,10 @@ def bind_motor(
     :param where: file and key path of the block for messages.
     :raises ConfigError: for a missing or invalid file, an unknown message or signal (the
         message lists the known names), a frame ID out of range, a position signal that
-        cannot wrap as configured, a value that does not fit its signal, a signal of a bound
-        message with a scale of zero, a velocity command too narrow for ``max_rpm``
+        cannot wrap as configured, a multiplexed signal, a value that does not fit its signal
+        or is between two of its steps, enable and disable values that go out alike, a signal
+        of a bound message with a scale of zero or too large for a float (whose physical
+        values are not all finite), a velocity command too narrow for ``max_rpm``
         (:func:`check_command`), or (a steering actuator) position signals too small for its
         travel (:func:`check_travel`).
     """
@@ -262,23 +255,12 @@ def bind_motor(
         if opts.enable_message
         else None
     )
-    if enable is not None:
-        for key, value in (
-            ("enable_value", opts.enable_value),
-            ("disable_value", opts.disable_value),
-        ):
-            if not enable.minimum <= value <= enable.maximum:
-                raise ConfigError(
-                    f"{where}.{key}: expected a value between {enable.minimum:g} and "
-                    f"{enable.maximum:g} for signal {enable.name!r}, got {value!r}"
-                )
+    if enable is not None:  # in range, on a step, and not the same on the wire
+        values = (opts.enable_value, opts.disable_value)
+        check_enable_values(enable.signal, enable.message_name, values, path, where)
     for sig, value in mode:
-        if not sig.minimum <= value <= sig.maximum:
-            raise ConfigError(
-                f"{where}.position_mode_values.{sig.name}: expected a value between "
-                f"{sig.minimum:g} and {sig.maximum:g} for signal {sig.name!r} of message "
-                f"{sig.message_name!r} in {path}, got {value!r}"
-            )
+        key = f"position_mode_values.{sig.name}"
+        check_value(sig.signal, sig.message_name, key, value, path, where)
     if command is not None:
         check_command(motor, opts, command, path, where)
     if target is not None:
@@ -295,6 +277,8 @@ def bind_motor(
         disable_value=opts.disable_value,
         target=target,
         mode=mode,
+        where=where,
+        path=path,
     )
 
 

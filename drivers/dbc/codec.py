@@ -54,13 +54,22 @@ _SHAREABLE = (Role.ENABLE, Role.FAULT, Role.MODE)
 #: The command messages one operation sends (enable, mode, command), in configuration order.
 _Plan = tuple[Group, ...]
 
+#: The key of the motor block that names the message of a signal of each role.
+_MESSAGE_KEYS = {
+    Role.COMMAND: "command_message",
+    Role.POSITION_COMMAND: "position_command_message",
+    Role.MODE: "position_mode_message",
+    Role.ENABLE: "enable_message",
+}
+
 
 class DbcCodec:
     """Encoder and decoder for the signals the motor blocks name.
 
     :param bindings: one per motor, from :func:`drivers.dbc.binding.bind_motor`.
     :raises ConfigError: if two motors put different messages on one frame ID, configure the
-        same command or feedback signal, or a frame ID is used in both directions.
+        same command or feedback signal, a frame ID is used in both directions, or a command
+        message cannot be encoded (:meth:`_try_sends`).
     """
 
     def __init__(self, bindings: Sequence[MotorBinding]) -> None:
@@ -94,6 +103,7 @@ class DbcCodec:
         self._command = self._plan(COMMANDS)
         self._enable = self._plan((Role.ENABLE,))
         self._mode = self._plan((Role.MODE,))
+        self._try_sends()
 
     @staticmethod
     def _add(
@@ -124,6 +134,52 @@ class DbcCodec:
                 )
         enable = (b.enable_value, b.disable_value) if role == Role.ENABLE else None
         group.members.append(Member(index, b.node_id, role, ref, b.label, fixed, enable))
+
+    def _try_sends(self) -> None:
+        """Encode once every command message, as the driver sends it: the commands at rest
+        (zero, within the signal's range) armed and disarmed, the arming and disarming frames,
+        the mode frames.  A message cantools cannot encode (an unconfigured signal whose
+        initial value is outside its range, a multiplexer that no value selects) is refused
+        here, with the configuration, and not when the driver first sends it (at run time
+        only the command values change, and they are checked against their signal's range).
+
+        :raises ConfigError: naming the key of the first motor in the message, the message, the
+            DBC file and the signal and value that cantools refuses.
+        """
+        rest = [_rest(b.command if b.target is None else b.target) for b in self.bindings]
+        hold = [v if steer else None for v, steer in zip(rest, self._steering, strict=True)]
+        drive = [0.0 if h is None else h for h in hold]  # as encode_enable
+        n = len(rest)
+        trials: list[tuple[_Plan, list[float | None], list[bool] | None, str]] = [
+            (self._command, [*rest], [True] * n, "commands at rest, armed"),
+            (self._command, [*rest], [False] * n, "commands at rest, disarmed"),
+            (self._enable, [*drive], [True] * n, "arming"),
+            (self._enable, [*drive], [False] * n, "disarming"),
+            (self._mode, hold, None, "position mode"),
+        ]
+        for plan, values, armed, what in trials:
+            for group in plan:
+                try:
+                    self._frames((group,), values, armed)
+                except EncodeError as err:
+                    raise self._refusal(group, what, err) from err
+
+    def _refusal(self, group: Group, what: str, err: EncodeError) -> ConfigError:
+        first = group.members[0]
+        b = self.bindings[first.index]
+        head = (
+            f"{b.where}.{_MESSAGE_KEYS[first.role]}: cannot send message "
+            f"{group.message.name!r} of {b.path}"
+        )
+        stray = group.stray_default()
+        if stray is None:
+            return ConfigError(f"{head} ({what}): {err}")
+        signal, value, low, high = stray
+        return ConfigError(
+            f"{head}: signal {signal.name!r}, which no key configures, goes out with its "
+            f"initial value (GenSigStartValue); expected a value between {low:g} and "
+            f"{high:g}, got {value:g}"
+        )
 
     def _plan(self, roles: tuple[Role, ...]) -> _Plan:
         """The command messages that carry a signal of ``roles``."""
@@ -284,6 +340,11 @@ class DbcCodec:
                         data[m.name] = value
             frames.append(group.frame(data))
         return frames
+
+
+def _rest(ref: SignalRef | None) -> float | None:
+    """A command signal's value at rest: zero, or the edge of its range nearest to zero."""
+    return None if ref is None else min(max(0.0, ref.minimum), ref.maximum)
 
 
 def describe_fault(signal: Any, raw: int) -> tuple[DriveFault, str]:

@@ -19,7 +19,8 @@ from typing import TYPE_CHECKING, Any
 
 import cantools
 
-from drivers.dbc.binding import command_range, signal_range
+from drivers.dbc.binding import command_range
+from drivers.dbc.signals import signal_range
 from gateway.core.errors import DecodeError, EncodeError
 from gateway.core.types import Frame
 
@@ -148,6 +149,18 @@ class Group:
         self.slots: tuple[FeedbackSlot, ...] = ()
         #: The float signals :meth:`read` checks: (name, scale, offset, member).
         self._checks: tuple[tuple[str, Any, Any, Member], ...] = ()
+
+    def stray_default(self) -> tuple[Any, float, float, float] | None:
+        """The first signal no member sets whose initial value is outside its range (which
+        makes cantools refuse every frame), as (signal, value, low, high); else ``None``."""
+        if not self.strict:
+            return None
+        members = {m.name for m in self.members}
+        for s in self.message.signals:
+            value = self.defaults[s.name]
+            if s.name not in members and not _carries(s, value):
+                return (s, value, *signal_range(s))
+        return None
 
     def describe(self) -> str:
         return f'message "{self.message.name}" (0x{self.frame_id:X})'

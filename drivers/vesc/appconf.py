@@ -165,34 +165,55 @@ def parse_appconf(payload: bytes, node_id: int) -> AppconfTimeout:
     return AppconfTimeout(signature, controller_id, timeout_msec)
 
 
+def _continues(packet: int, data: bytes) -> bool:
+    """Whether a frame of the buffer protocol continues a reply (FILL at an offset other than
+    0, or the end), rather than starting one (FILL at offset 0, or a PROCESS_SHORT_BUFFER)."""
+    if packet == BufferPacket.FILL_RX_BUFFER:
+        return data[:1] != b"\0"
+    if packet == BufferPacket.FILL_RX_BUFFER_LONG:
+        return data[:2] != b"\0\0"
+    return packet == BufferPacket.PROCESS_RX_BUFFER
+
+
 class Reassembly:
     """The host side of ``comm_can_send_buffer``: FILL_RX_BUFFER(_LONG) frames into a buffer,
     returned when PROCESS_RX_BUFFER gives its length and CRC (or a PROCESS_SHORT_BUFFER
     reply, whole).  Offset 0 starts a new buffer; a frame at any other offset must continue
-    the bytes so far (a lost frame leaves a gap)."""
+    the bytes so far.  A reply that went wrong (a lost frame leaves a gap) is one error, the
+    first: the rest of that reply, its FILL frames up to its PROCESS_RX_BUFFER, is dropped
+    without another (until that end or the next offset 0), as it cannot be whole."""
 
-    __slots__ = ("_buf",)
+    __slots__ = ("_buf", "_lost")
 
     def __init__(self) -> None:
         self._buf = bytearray()
+        #: A frame of the reply under way went wrong: drop the rest of it.
+        self._lost = False
 
     def reset(self) -> None:
         """Forget the bytes so far."""
         self._buf.clear()
+        self._lost = False
 
     def feed(self, frame: Frame) -> BufferReply | None:
         """Take a frame of the buffer protocol (the caller checks its identifier).
 
-        :return: the whole buffer once it is complete, else ``None``.
+        :return: the whole buffer once it is complete, else ``None`` (also for the rest of a
+            reply that went wrong, up to its end or the next offset 0).
         :raises DecodeError: for a remote frame, a frame too short, an offset that does not
             continue the buffer, or an end whose length or CRC does not match (the bytes so
-            far are dropped).
+            far are dropped, and the rest of the reply with them).
         """
         packet, data = frame.arbitration_id >> 8, bytes(frame.data)
+        end = packet == BufferPacket.PROCESS_RX_BUFFER
+        if self._lost and _continues(packet, data):
+            self._lost = not end  # after its end, the next reply's frames count again
+            return None  # the rest of a reply that went wrong
         try:
             return self._feed(BufferPacket(packet), data, frame.is_remote_frame)
         except DecodeError:
             self._buf.clear()
+            self._lost = not end  # an end that went wrong leaves nothing of its reply to come
             raise
 
     def _feed(self, packet: BufferPacket, data: bytes, remote: bool) -> BufferReply | None:
@@ -227,6 +248,7 @@ class Reassembly:
             offset, chunk = (data[0] << 8) | data[1], data[2:]
         if offset == 0:
             self._buf.clear()
+            self._lost = False
         if offset != len(self._buf):
             raise DecodeError(
                 f"{packet.name}: expected offset {len(self._buf)} (the bytes so far), got "

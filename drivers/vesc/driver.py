@@ -157,12 +157,12 @@ class VescDriver(MotorDriver[VescOptions]):
         prot = super().protection(index)
         if prot.guard is Guard.UNSTATED:
             prot = dataclasses.replace(prot, how=UNSTATED_HOW)
-        rb, stated = self.readback, self.opts[index].controller_timeout_s
-        return prot if rb is None else read_protection(prot, rb.results[index], stated)
+        rb = self.readback
+        return prot if rb is None else read_protection(prot, rb.results[index], rb.wanted[index])
 
     def protection_state(self, index: int) -> ProtectionState:
-        """PENDING until the timeout was read back (or the read gave up: NOT_APPLICABLE);
-        CONFIRMED as stated; FAILED when it differs (:mod:`drivers.vesc.readback`)."""
+        """PENDING until the timeout was read back (the read gave up: NOT_APPLICABLE); CONFIRMED
+        as stated; FAILED when it differs; kept over a disable (:mod:`drivers.vesc.readback`)."""
         rb = self.readback
         return ProtectionState.NOT_APPLICABLE if rb is None else rb.results[index].state
 
@@ -255,7 +255,7 @@ class VescDriver(MotorDriver[VescOptions]):
         """SET_CURRENT 0 to every motor, which releases it, and stop the command stream."""
         self._enabled = False
         self._enabled_at_s = None
-        if self.readback is not None:  # (no read under way)
+        if self.readback is not None:  # (cancels a read under way; the reads done stand)
             self.readback.stop()
         for a in self._axes:
             a.erpm = 0

@@ -13,7 +13,12 @@ times, :attr:`RETRY_S` apart, and all within :attr:`BUDGET_S` of the enable (the
   warning);
 * nothing is stated and the timeout read is usable: READ, armed, and the protection shows it;
 * no reply, a malformed one, or a reply of another layout: NOT_READ, armed as before this read
-  existed (the timeout stays what the configuration states), with a warning saying why.
+  existed (the timeout stays what the configuration states), with a warning saying why (the
+  first thing that went wrong in the VESC's replies).
+
+A disable cancels the read under way (its VESCs not read yet are as never read); the reads that
+ended stand until the next enable, as the driver contract wants a protection's state to
+(:class:`~gateway.core.protection.ProtectionState`; the ODrive's watchdog setup does the same).
 """
 
 from __future__ import annotations
@@ -52,7 +57,7 @@ SILENCE_CAUSES = (
 class Outcome(enum.Enum):
     """Where one motor's read stands (see the module for the policy)."""
 
-    IDLE = "not enabling"
+    IDLE = "not read (never enabled, or a disable cancelled the read)"
     PENDING = "reading"
     CONFIRMED = "read back as stated"
     READ = "read back (not stated)"
@@ -60,7 +65,10 @@ class Outcome(enum.Enum):
     NOT_READ = "could not be read"
 
 
-_STATES = {Outcome.CONFIRMED: ProtectionState.CONFIRMED, Outcome.DIFFERS: ProtectionState.FAILED,
+#: The outcomes as the driver contract reports them: not read yet (IDLE too: "not yet
+#: written: the enable has not started") is PENDING.
+_STATES = {Outcome.IDLE: ProtectionState.PENDING, Outcome.PENDING: ProtectionState.PENDING,
+           Outcome.CONFIRMED: ProtectionState.CONFIRMED, Outcome.DIFFERS: ProtectionState.FAILED,
            Outcome.READ: ProtectionState.NOT_APPLICABLE,
            Outcome.NOT_READ: ProtectionState.NOT_APPLICABLE}
 
@@ -87,7 +95,7 @@ class Result:
     @property
     def state(self) -> ProtectionState:
         """The outcome as the driver contract reports it."""
-        return _STATES.get(self.outcome, ProtectionState.PENDING)
+        return _STATES[self.outcome]
 
 
 def judge(want: Wanted, read_ms: int) -> Result:
@@ -138,8 +146,9 @@ class TimeoutReadback:
         return self._next(now_s)
 
     def stop(self) -> None:
-        """No read under way (a disable)."""
-        self.results = [Result()] * len(self.wanted)
+        """A disable: cancel the read under way (the VESCs not read yet are IDLE again, as
+        never read); the reads that ended stand until :meth:`start`."""
+        self.results = [Result() if r.outcome is Outcome.PENDING else r for r in self.results]
         self._current = None
         self._rx.reset()
 
@@ -184,7 +193,8 @@ class TimeoutReadback:
             self._settle(i, Result(Outcome.NOT_READ, None, str(err)))
             raise
         except DecodeError as err:
-            self._error = f"the reply was malformed: {err}"
+            # The first error of the read is its reason (a lost frame, not what follows).
+            self._error = self._error or f"the reply was malformed: {err}"
             raise
         self._settle(i, judge(self.wanted[i], read.timeout_msec))
         return True
@@ -221,9 +231,10 @@ class TimeoutReadback:
         self._current = None
 
 
-def read_protection(base: Protection, result: Result, stated_s: float) -> Protection:
+def read_protection(base: Protection, result: Result, want: Wanted) -> Protection:
     """Motor's protection as its read stands: ``base`` (STATED or UNSTATED from the
-    configuration, offline) with what was read back and, when it differs, the fix."""
+    configuration, offline) with what was read back and, when it differs, the fix
+    (:func:`differs_fix`)."""
     stated = "set in VESC Tool; stated by controller_timeout_s"
     said = stated if base.guard is Guard.STATED else base.how
     how = {
@@ -240,13 +251,25 @@ def read_protection(base: Protection, result: Result, stated_s: float) -> Protec
             f"{stated}; read back from the VESC while enabling (COMM_GET_APPCONF over CAN)"))
     fix = base.fix
     if result.outcome is Outcome.DIFFERS and result.read_ms is not None:
-        read_s = result.read_ms / 1000.0
-        fix = (f"state the VESC's timeout, controller_timeout_s: {read_s:g}, or set App "
-               f"Settings > General > Timeout in VESC Tool to {round(stated_s * 1000.0)} ms"
-               if stated_s > 0.0 and result.read_ms > 0 else TIMEOUT_FIX)
+        fix = differs_fix(want, result.read_ms)
     elif result.outcome is Outcome.READ and result.read_ms is not None:
         fix = f"state it: controller_timeout_s: {result.read_ms / 1000.0:g}"
     # What the VESC will do (the read, not the statement); 0 reads as "never".
     timeout = base.timeout_s if result.read_ms is None else (result.read_ms / 1000.0 or None)
     action = TIMEOUT_ACTION if result.read_ms else base.action
     return dataclasses.replace(base, timeout_s=timeout, action=action, how=how, fix=fix)
+
+
+def differs_fix(want: Wanted, read_ms: int) -> str:
+    """The fix for a timeout read other than it must be: set the stated one in VESC Tool, or
+    state the one read -- only when the configuration would take it (``command_period_s``
+    less than half of it), else saying why not."""
+    stated_s = want.stated_s
+    if stated_s <= 0.0 or read_ms <= 0:
+        return TIMEOUT_FIX
+    tool = f"set App Settings > General > Timeout in VESC Tool to {round(stated_s * 1000.0)} ms"
+    read_s = read_ms / 1000.0
+    if want.period_s < read_s / 2.0:  # as VescOptions.check takes it
+        return f"state the VESC's timeout, controller_timeout_s: {read_s:g}, or {tool}"
+    return (f"{tool} (the VESC's {read_ms} ms cannot be stated: the keep-alive, command_period_s "
+            f"{want.period_s:g} s, must be less than half the VESC's timeout ({read_s / 2.0:g} s))")

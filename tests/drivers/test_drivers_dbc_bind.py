@@ -17,7 +17,7 @@ from hypothesis import event, example, given
 from hypothesis import strategies as st
 
 from drivers.dbc import DbcDriver, Role
-from drivers.dbc.binding import signal_range
+from drivers.dbc.signals import signal_range
 from gateway.cli import main
 from gateway.core.errors import ConfigError, EncodeError
 from gateway.core.types import Frame
