@@ -11,8 +11,11 @@ The sequence, per axis (as the official ``can_simple.py`` example of the `ODrive
   ends, if the driver's ``may_arm`` allows (confirmed, or failed under
   ``gateway.controller_watchdog: warn``);
 * an enable that does not take is repeated every :attr:`Axis.ENABLE_RETRY_S` while the axis is
-  alive, idle and error-free, :attr:`Axis.ENABLE_ATTEMPTS` times at most; a reported error is
-  never cleared automatically (the axis refused: it stays in FAULT);
+  alive, idle and error-free, :attr:`Axis.ENABLE_ATTEMPTS` times at most, each time only once a
+  heartbeat sent after the last request (past :attr:`Axis.ENABLE_GRACE_S`) still shows IDLE;
+  after the last one the axis is refused (:meth:`Axis.refused`) until the next enable, a
+  heartbeat in CLOSED_LOOP_CONTROL, or a reported error; a reported error is never cleared
+  automatically (the axis refused: it stays in FAULT);
 * disarm: Set_Input_Vel 0 then Set_Axis_State IDLE, from any state.
 
 The record is plain data the driver reads and writes on every frame; the methods here only
@@ -22,11 +25,13 @@ change the enable state and return frames, so they are tested through the driver
 from __future__ import annotations
 
 import logging
+import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, ClassVar
 
 from drivers.odrive.enums import AxisState, ControlMode, InputMode, ProcedureResult
 from gateway.core.errors import IllegalTransitionError
+from gateway.core.types import DriveFault
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -56,7 +61,8 @@ class Axis:
     ENABLE_RETRY_S: ClassVar[float] = 0.5
     #: Enable attempts (while the axis answers) before giving up.
     ENABLE_ATTEMPTS: ClassVar[int] = 3
-    #: Heartbeats this soon after an enable may still carry the errors it just cleared.
+    #: Heartbeats this soon after an enable request may still show the axis as it was before
+    #: it: the errors it just cleared, or IDLE.
     ENABLE_GRACE_S: ClassVar[float] = 0.3
 
     index: int
@@ -67,8 +73,9 @@ class Axis:
     rtr: bool
     input_mode: InputMode
     watchdog: WatchdogSetup | None
-    #: The axis state in the last heartbeat (``UNDEFINED`` before one).
+    #: The axis state in the last heartbeat (``UNDEFINED`` before one), and its timestamp.
     axis_state: AxisState | int = AxisState.UNDEFINED
+    heartbeat_s: float = -math.inf
     #: The first position estimate (turns): a drive wheel's angle is counted from it.
     pos0_turns: float | None = None
     #: The previous cycle's steering command, ``(time, angle)``, for the speed feed-forward.
@@ -84,10 +91,13 @@ class Axis:
     error_detail: str = ""
     #: A Get_Error (0.6) / Get_Motor_Error (0.5) request is due at the next poll.
     error_request_due: bool = False
+    #: The faults of the last heartbeat's own error flags (without :attr:`refusal`).
+    reported: DriveFault = DriveFault.NONE
     #: The last heartbeat's procedure result (0.6; ``SUCCESS`` in 0.5).
     procedure: ProcedureResult | int = ProcedureResult.SUCCESS
-    #: Why the last enable gave up with the axis idle and error-free ("" otherwise): a fault
-    #: of the motor until the next enable (:meth:`refused`).
+    #: Why the last enable gave up with the axis idle and error-free (:meth:`refused`; ""
+    #: otherwise): a fault of the motor until the next enable, a heartbeat in
+    #: CLOSED_LOOP_CONTROL (:meth:`armed_by`) or one with an error (:meth:`took_error`).
     refusal: str = ""
 
     # ----------------------------------------------------------------- the sequence
@@ -146,13 +156,17 @@ class Axis:
         self, codec: OdriveCodec, now_s: float, alive: bool, faulted: bool
     ) -> tuple[Frame, ...]:
         """Arm again if the axis is alive, idle and error-free, at most
-        :attr:`ENABLE_ATTEMPTS` times; a fault ends enabling once past the grace."""
+        :attr:`ENABLE_ATTEMPTS` times, then give up (:attr:`refusal`); a fault ends enabling
+        once past the grace.  Both wait for a heartbeat sent :attr:`ENABLE_GRACE_S` after the
+        last request: an older one (a slow heartbeat) does not say how the axis took it."""
         if faulted:
             if now_s - self.enable_sent_s > self.ENABLE_GRACE_S:
                 self.enabling = False  # the axis refused: stay in FAULT, never auto-clear
             return ()
         if not alive or self.axis_state != AxisState.IDLE:
             return ()  # not answering yet, or busy: wait without using up an attempt
+        if self.heartbeat_s - self.enable_sent_s <= self.ENABLE_GRACE_S:
+            return ()  # no heartbeat since the request yet: wait for its answer
         m = self.motor
         if self.attempts >= self.ENABLE_ATTEMPTS:
             self.refusal = self.refused()
@@ -186,11 +200,29 @@ class Axis:
         self.arm_waits = False
         return codec.make_transition(self.node_id, self.axis_state, AxisState.IDLE)
 
-    def armed_by(self, axis_state: AxisState | int) -> bool:
-        """Take a heartbeat's axis state: whether it is CLOSED_LOOP_CONTROL (which ends
-        enabling)."""
+    def armed_by(self, axis_state: AxisState | int, t: float) -> bool:
+        """Take the axis state of a heartbeat sent at ``t``: whether it is
+        CLOSED_LOOP_CONTROL, which ends enabling and a :attr:`refusal` (the axis did arm)."""
         self.axis_state = axis_state
+        self.heartbeat_s = t
         armed = axis_state == AxisState.CLOSED_LOOP_CONTROL
         if armed:
             self.enabling = False
+            if self.refusal:
+                m = self.motor
+                log.info('ODrive node %d ("%s") is in CLOSED_LOOP_CONTROL: no longer refused',
+                         m.node_id, m.wheel)
+                self.refusal = ""
         return armed
+
+    def took_error(self, faults: DriveFault, detail: str) -> bool:
+        """Take the faults of a heartbeat's error flags and their text: whether they are new
+        (the last heartbeat had none; logged then).  A reported error replaces a
+        :attr:`refusal`, which said there was none."""
+        new = bool(faults) and not self.reported
+        self.reported = faults
+        if faults:
+            self.refusal = ""
+        if new:
+            log.warning('ODrive node %d ("%s") reports %s', self.node_id, self.motor.wheel, detail)
+        return new

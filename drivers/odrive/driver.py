@@ -365,19 +365,19 @@ class OdriveDriver(MotorDriver[OdriveOptions]):
         i = ax.index
         self.heard(i, 1, t)
         ax.procedure = hb.procedure_result
+        armed = ax.armed_by(hb.axis_state, t)  # (CLOSED_LOOP_CONTROL also ends a refusal)
         if not (hb.axis_error or hb.motor_error or hb.encoder_error or hb.controller_error):
             # A healthy axis, nearly every heartbeat: the state the general path below ends in
             # for no error, without its flag mapping and string work.
             ax.error_detail = ax.axis_detail = ""
             ax.error_request_due = False
-            # (_publish_fault of no fault: the refusal of the last enable, if any, stays)
+            ax.reported = DriveFault.NONE  # (the refusal of the last enable, if any, stays)
             self.set_fault(i, DriveFault.CONTROLLER if ax.refusal else DriveFault.NONE, ax.refusal)
-            self.set_armed(i, ax.armed_by(hb.axis_state))
+            self.set_armed(i, armed)
             return
         fw = self.codec.firmware
         faults, detail = heartbeat_faults(fw, hb)
-        if faults and not self.faults(i):
-            log.warning('ODrive node %d ("%s") reports %s', ax.node_id, ax.motor.wheel, detail)
+        if ax.took_error(faults, detail):  # new in its own flags (logged; a refusal is not)
             ax.error_request_due = error_query_adds_detail(fw, hb)
         if faults and ax.enabling and t - ax.enable_sent_s > Axis.ENABLE_GRACE_S:
             ax.enabling = False
@@ -386,7 +386,7 @@ class OdriveDriver(MotorDriver[OdriveOptions]):
             ax.error_request_due = False
         ax.axis_detail = detail
         self._publish_fault(ax, faults)
-        self.set_armed(i, ax.armed_by(hb.axis_state))
+        self.set_armed(i, armed)
 
     def _on_error_status(self, ax: Axis, msg: ErrorStatus | MotorErrorStatus) -> None:
         ax.error_detail = error_reply_detail(self.codec.firmware, msg)
