@@ -35,6 +35,9 @@ if TYPE_CHECKING:
 
 # The shared fixtures (odom_helpers.py), bound here so that pytest finds them.
 sessions = odom_helpers.sessions
+#: The first test that asks for a robot's session records it (seconds of simulated driving on
+#: one core, several times that on a loaded machine): beyond the suite's 10 s hang guard.
+pytestmark = pytest.mark.timeout(60)
 
 
 # ----------------------------------------------------------------- the command

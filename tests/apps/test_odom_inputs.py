@@ -7,6 +7,8 @@ from __future__ import annotations
 import sys
 from typing import TYPE_CHECKING
 
+import pytest
+
 from gateway.apps.replay.replay import Sample
 from gateway.cli.commands.odom import _row, command
 from gateway.core.kinematics.odometry import Pose
@@ -18,12 +20,14 @@ if TYPE_CHECKING:
     from collections.abc import Callable
     from pathlib import Path
 
-    import pytest
     from click.testing import CliRunner
 
     from tests.apps.odom_helpers import Session
 
 sessions = odom_helpers.sessions
+#: The first test that asks for a robot's session records it (seconds of simulated driving on
+#: one core, several times that on a loaded machine): beyond the suite's 10 s hang guard.
+pytestmark = pytest.mark.timeout(60)
 
 
 def test_a_log_without_readable_frames_exits_2_with_the_error_alone(

@@ -30,6 +30,9 @@ if TYPE_CHECKING:
     from click.testing import CliRunner
 
 sessions = odom_helpers.sessions
+#: The first test that asks for a robot's session records it (seconds of simulated driving on
+#: one core, several times that on a loaded machine): beyond the suite's 10 s hang guard.
+pytestmark = pytest.mark.timeout(60)
 
 
 def restamp(text: str, t: float) -> str:
