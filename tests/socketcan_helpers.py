@@ -26,16 +26,25 @@ from gateway.runtime.client import ClientError, ControlClient
 
 #: Generous bounds for the emulated VM: process start (imports take ~10 s there), enabling.
 START_S = 180.0
+#: Where the tier runs in the emulated VM (the VM script sets VCANVM=1).
+IN_VM = os.environ.get("VCANVM") == "1"
+#: The simulators' step rate: 1 kHz on a host, 250 Hz in the VM, where a simulator process
+#: stepping at 1 kHz takes a whole emulated CPU and slows the gateway beside it.  The step rate
+#: only quantizes when a device sends (each sends at its own configured rates: the logs the
+#: end-to-end tier records are the same size at either rate); a DJI ESC reports every step.
+SIM_RATE_HZ = 250.0 if IN_VM else 1000.0
 
 
 def tier_config(source: Path, dest: Path, rate_hz: float = 100.0,
-                liveness_s: float = 3.0, driver: str = "") -> Path:
+                liveness_s: float = 3.0, driver: str = "", max_rpm: float = 0.0) -> Path:
     """A shipped configuration made fit for the tier: a lower loop rate, long liveness and
     enable timeouts, a longer command timeout, no tracking-error check (it judges speed under
     a CPU 14 times slower), written to ``dest``.
 
     :param liveness_s: the motors' liveness timeout.  A speed loop closed on the host (DJI)
         integrates over at most this long between two feedback frames: keep it short there.
+    :param max_rpm: faster drive motors than the shipped ones (0: as shipped), the robot's
+        speed limits raised in proportion: a test that drives a path takes less time.
     """
     raw: dict[str, Any] = yaml.safe_load(source.read_text())
     gateway = raw.setdefault("gateway", {})
@@ -54,6 +63,12 @@ def tier_config(source: Path, dest: Path, rate_hz: float = 100.0,
     for block in blocks:
         if isinstance(block, dict) and "controller_timeout_s" in block:
             block["controller_timeout_s"] = max(float(block["controller_timeout_s"]), 1.0)
+    if max_rpm:
+        factor = max_rpm / float(raw["motor_defaults"]["max_rpm"])
+        raw["motor_defaults"]["max_rpm"] = max_rpm
+        for key in ("max_linear_m_s", "max_angular_rad_s"):
+            if key in raw.get("limits", {}):
+                raw["limits"][key] *= factor
     if driver:  # the drive motors on another protocol than the shipped one
         defaults = raw["motor_defaults"]
         for key in ("firmware", "watchdog_endpoints", "flat_endpoints", "controller_timeout_s"):

@@ -161,7 +161,7 @@ def test_the_scan_beside_a_running_gateway_reads_only(tmp_path: Path, vcan: str,
     bench = Bench(config, vcan, str(sock_dir / "s.sock"), record, tmp_path)
     try:
         done = subprocess.run(wheelgate(vcan, "scan", "-c", str(config), "--json",
-                                        "--timeout", "40"),
+                                        "--timeout", "20"),
                               capture_output=True, text=True, timeout=600, cwd=REPO,
                               check=False)
         assert done.returncode == 0, done.stderr
@@ -206,7 +206,7 @@ def test_a_node_that_boots_during_the_scan_is_found_by_its_boot_up(
         while ready.next(START_S)["event"] != "ready":
             pass
         scan = subprocess.Popen(wheelgate(vcan, "-v", "scan", "-c", str(config), "--json",
-                                          "--timeout", "40"),
+                                          "--timeout", "20"),
                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=REPO)
         assert scan.stderr is not None and scan.stdout is not None
         err = Lines(scan.stderr)

@@ -21,7 +21,7 @@ import pytest
 import yaml
 
 from tests.conftest import CONFIG_DIR, REPO
-from tests.socketcan_helpers import START_S, Lines, tier_config
+from tests.socketcan_helpers import SIM_RATE_HZ, START_S, Lines, tier_config
 
 if TYPE_CHECKING:
     from pathlib import Path
@@ -39,7 +39,7 @@ class Sim:
         self._err = log.open("wb")
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "gateway", "--interface", "socketcan", "--channel", vcan,
-             "sim", "-c", str(config), "--json", "--every", "0", "--rate", "500"],
+             "sim", "-c", str(config), "--json", "--every", "0", "--rate", str(SIM_RATE_HZ)],
             stdout=subprocess.PIPE, stderr=self._err, cwd=REPO)
         assert self.proc.stdout is not None
         self.out = Lines(self.proc.stdout)
