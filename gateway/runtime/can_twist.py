@@ -5,6 +5,7 @@
 the command timeout starts a new sequence) and acts on its flags: ESTOP (even from a
 duplicate: an e-stop only ever stops), ENABLE (refused while an e-stop is latched that only
 the control socket may release), STOP, or else the twist.  Errors go back as ``WG_Error``.
+A frame is timed from its arrival, not from the cycle that reads it.
 """
 
 from __future__ import annotations
@@ -67,11 +68,15 @@ class CanTwists:
             return
         if cmd is None:
             return
+        # The frame's time is its arrival (the kernel's receive time on SocketCAN), not this
+        # read: after a stalled loop, a frame that waited longer than the command timeout in
+        # the receive queue is already stale, and drives nothing.
+        at = min(frame.timestamp_s, now_s)
         # A sender silent for longer than the command timeout is gone: its next frame starts
         # a new sequence, even if it repeats the counter it stopped at (a restarted sender).
-        last, self._last_s = self._last_s, now_s
+        last, self._last_s = self._last_s, at
         timeout = self.loop.cmd_timeout_s
-        if last is not None and timeout > 0.0 and now_s - last > timeout:
+        if last is not None and timeout > 0.0 and at - last > timeout:
             self.counter.reset()
         kind, lost = self.counter.feed(cmd.counter)
         counts = self.counts
@@ -98,8 +103,8 @@ class CanTwists:
             sup.enable(now_s)
             return
         if cmd.flags & TwistFlags.STOP:
-            sup.stop(now_s)
+            sup.stop(at)
             return
-        result = self._twist(cmd.twist, now_s, Source.CAN)
+        result = self._twist(cmd.twist, at, Source.CAN)
         if isinstance(result, Rejection):
             self._report(result.code, result.message, result, cmd.counter)

@@ -12,7 +12,7 @@ import pytest
 from gateway.bus.can_bus import drain
 from gateway.core.control import AUTO_RETRIES
 from gateway.core.settings import FeedbackRecovery
-from gateway.core.types import ConstraintCode, ErrorCode, GatewayState, Twist
+from gateway.core.types import ConstraintCode, ErrorCode, Frame, GatewayState, Twist
 from gateway.sim.device import SimFault
 from gateway.wire.can import TwistFlags
 from tests.conftest import CONFIG_DIR
@@ -243,4 +243,30 @@ def test_can_sender_restarting_after_the_command_timeout_is_followed(rig: Rig) -
     rig.send_can_twist(Twist(0.2))
     rig.advance(0.3)
     assert rig.gw.counts.can_duplicates == 0
+    assert min(speeds(rig)) > 5.0
+
+
+def test_a_can_twist_is_timed_from_its_arrival_not_from_the_cycle_that_reads_it(
+        rig: Rig) -> None:
+    """A twist frame that waited in the receive queue longer than cmd_timeout_s (0.5 s), as
+    after a stalled loop, is stale when the cycle reads it: its receive time starts the command
+    timeout, and no wheel is driven by it.  (The rig stamps frames with the cycle's time: the
+    twist frames get their arrival 0.6 s earlier here.)"""
+    receive, twist_id = rig.gw.edge.receive, rig.gw.wg.ids.twist
+
+    def waited(now_s: float) -> list[Frame]:
+        return [f._replace(timestamp_s=now_s - 0.6) if f.arbitration_id == twist_id else f
+                for f in receive(now_s)]
+
+    rig.gw.edge.receive = waited  # type: ignore[method-assign]
+    rig.send_can_twist(Twist(0.2))
+    rig.advance(0.3)
+    assert rig.gw.counts.can_twists == 1
+    assert rig.gw.supervisor.counts.cmd_timeouts == 1
+    assert commanded(rig) == (0.0, 0.0)
+    assert max(abs(s.wheel_velocity_rad_s) for s in rig.drive_sims) < 1e-9
+    # The same twist read as it arrives drives the wheels.
+    rig.gw.edge.receive = receive  # type: ignore[method-assign]
+    rig.send_can_twist(Twist(0.2))
+    rig.advance(0.3)
     assert min(speeds(rig)) > 5.0
