@@ -21,10 +21,11 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 from drivers.cia402.codec import INT32_RANGE, position_to_raw, velocity_to_raw
-from drivers.cia402.enums import NmtState, State
+from drivers.cia402.enums import NmtState, State, state_from_statusword
 from drivers.cia402.faults import describe_emcy, emcy_faults, is_error_reset
 from drivers.cia402.phase import Phase
 from drivers.cia402.targets import target_counts
+from gateway.core.errors import DecodeError
 from gateway.core.protection import ProtectionState
 from gateway.core.types import DriveFault, WheelFeedback
 
@@ -133,9 +134,18 @@ class Axis:
     def on_pdo(self, position: bool, statusword: int, value: int,
                now_s: float) -> WheelFeedback | None:
         """A feedback TPDO: statusword and position actual value (``position``) or velocity
-        actual value.  The wheel's feedback, once a position came (else ``None``)."""
+        actual value.  The wheel's feedback, once a position came (else ``None``).
+
+        :raises DecodeError: for a statusword whose bits match no drive state (nothing of the
+            PDO is taken: neither its value nor, by the caller, the node's liveness).
+        """
         seq = self.seq
         if statusword != seq.statusword:  # (the state follows from the word alone)
+            if state_from_statusword(statusword) is None:
+                raise DecodeError(
+                    f"node {self.motor.node_id}: TPDO statusword 0x{statusword:04X} matches no "
+                    "CiA 402 drive state (0x6041 bits 0-3, 5, 6); expected one of the state "
+                    "machine's patterns, the PDO is not taken")
             seq.on_status(statusword)
         sign, gear = self.sign, self.gear
         if position:

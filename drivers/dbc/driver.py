@@ -120,6 +120,10 @@ class DbcDriver(MotorDriver[DbcOptions]):
     NODE_ID_RANGE: ClassVar[tuple[int, int]] = (0, 0x7FF)
     STEERING: ClassVar[bool] = True
     PROTOCOL: ClassVar[str] = "DBC"
+    #: Velocity and position may come in two messages: a motor is OFFLINE while either is
+    #: older than ``liveness_s`` (one message that stopped must not leave the other's value
+    #: standing as fresh feedback).
+    LIVENESS_STREAMS: ClassVar[tuple[str, ...]] = ("velocity", "position")
     TIMEOUT_ACTION: ClassVar[str] = (
         "whatever the controller's firmware does when its command timeout expires"
     )
@@ -274,10 +278,15 @@ class DbcDriver(MotorDriver[DbcOptions]):
             return
         if velocity is not None:
             ax.velocity = ax.units.velocity_to_wheel(raw[velocity] * slot.scale + slot.offset)
+            ax.velocity_s = timestamp_s
+            self.heard(i, 0, timestamp_s)
         if position is not None:
             ax.position = ax.angle(raw[position])
+            ax.position_s = timestamp_s
+            self.heard(i, 1, timestamp_s)
         if ax.velocity is not None and ax.position is not None:
-            self.store_feedback(i, WheelFeedback(ax.position, ax.velocity, timestamp_s))
+            self.store_feedback(i, WheelFeedback(
+                ax.position, ax.velocity, min(ax.velocity_s, ax.position_s)), None)
 
     def _fault(self, i: int, ax: Axis, signal: Any, code: int) -> None:
         """A new fault code of motor ``i`` (in the cantools ``signal``): its flags and text;

@@ -67,7 +67,7 @@ from gateway.core.options import unknown_key, validate_block
 from gateway.core.protection import Guard, WatchdogPolicy, check_timeout
 from gateway.core.settings import BusConfig, GatewayConfig, LoopConfig
 from gateway.core.types import MotorConfig
-from gateway.drive.ownership import own_id_collisions
+from gateway.drive.ownership import driver_collisions, own_id_collisions
 
 if TYPE_CHECKING:
     from collections.abc import Collection, Mapping
@@ -379,7 +379,8 @@ def _check_protection(config: GatewayConfig, drives: DriveSet) -> list[str]:
 
 
 def _check_own_ids(config: GatewayConfig, drives: DriveSet) -> None:
-    """The gateway's own CAN IDs must not be any controller's (:func:`own_id_collisions`).
+    """The gateway's own CAN IDs must not be any controller's (:func:`own_id_collisions`), nor
+    one protocol's identifiers another's (:func:`driver_collisions`).
 
     :raises ConfigError: naming every collision and the fix.
     """
@@ -390,5 +391,9 @@ def _check_own_ids(config: GatewayConfig, drives: DriveSet) -> None:
             + ". Expected the gateway's own identifiers (gateway.can_ids, defaults 0x100 to "
             "0x104) apart from every controller's: choose other can_ids or other node IDs"
         )
+    shared = driver_collisions(drives)
+    if shared:
+        raise ConfigError(f"{config.source}: " + "; ".join(shared) + ". Expected every "
+                          "protocol's identifiers apart from the others': choose other node IDs")
 
 

@@ -4,12 +4,14 @@ own messages and its controllers' frames that the configuration refuses."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from gateway.drive.filters import CanFilter
 
 if TYPE_CHECKING:
     from gateway.core.settings import GatewayConfig
+    from gateway.drive.claims import FrameClaim
+    from gateway.drive.driver import MotorDriver
     from gateway.drive.driveset import DriveSet
 
 
@@ -47,3 +49,43 @@ def own_id_collisions(config: GatewayConfig, drives: DriveSet) -> list[str]:
                 out.append(f"gateway.can_ids {', '.join(hits)}: also identifiers of the "
                            f"{motor.driver} controller of {motor.wheel!r} (node {motor.node_id})")
     return out
+
+
+def driver_collisions(drives: DriveSet) -> list[str]:
+    """Identifiers that controllers of two protocols both use: a claim of one driver, sent or
+    received, that matches some identifier of another's (:mod:`gateway.drive.claims`).  On
+    the bus, one controller's frames would reach the other as commands, and the gateway would
+    give them to the first claimant as its motor's feedback (a CiA 402 EMCY at 0x089 is an
+    ODrive node 4 ``Get_Encoder_Estimates``).
+
+    :return: one sentence per pair of colliding claims, naming both motors.
+    """
+    out = []
+    groups = [(drv, drv.claims()) for drv, _ in drives.groups]
+    for k, (a, a_claims) in enumerate(groups):
+        for b, b_claims in groups[k + 1:]:
+            for ca in a_claims:
+                for cb in b_claims:
+                    if ca.extended == cb.extended and not (
+                            (ca.can_id ^ cb.can_id) & ca.mask & cb.mask):
+                        out.append(f"{_whose(a, ca.motor)} and {_whose(b, cb.motor)} both use "
+                                   f"{_ids(ca, cb)}")
+    return out
+
+
+def _whose(drv: MotorDriver[Any], motor: int | None) -> str:
+    if motor is None:
+        return f"the {drv.motors[0].driver} driver's broadcast frames"
+    m = drv.motors[motor]
+    return f"the {m.driver} controller of {m.wheel!r} (node {m.node_id})"
+
+
+def _ids(a: FrameClaim, b: FrameClaim) -> str:
+    """The identifiers two overlapping claims share, as a value/mask pair or one ID."""
+    mask = a.mask | b.mask
+    can_id = (a.can_id & a.mask) | (b.can_id & b.mask)
+    kind = "29-bit" if a.extended else "11-bit"
+    full = 0x1FFFFFFF if a.extended else 0x7FF
+    if mask & full == full:
+        return f"{kind} identifier 0x{can_id:X}"
+    return f"{kind} identifiers 0x{can_id:X} under mask 0x{mask & full:X}"

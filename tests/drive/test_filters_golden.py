@@ -7,6 +7,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 import pytest
+import yaml
 
 from gateway.config import load_config
 from gateway.core.errors import ConfigError
@@ -114,3 +115,25 @@ def test_own_ids_that_are_a_controllers_are_refused(tmp_path: Path) -> None:
                     + "\ngateway:\n  can_ids: {status: 0x501}\n")
     with pytest.raises(ConfigError, match=r"status 0x501: also identifiers of the cia402 "):
         load_config(path)
+
+
+def test_identifiers_two_protocols_share_are_refused(tmp_path: Path) -> None:
+    """ODrive node N owns 0x20*N to 0x20*N+0x1F: CiA 402 steering drives on nodes 5 to 9 send
+    their EMCY (0x080 + node) inside ODrive node 4's identifiers, and their SYNC (0x080) is that
+    node's command 0.  On the bus the ODrive driver would take a steering drive's EMCY for its
+    wheel's encoder estimate (0x089 is node 4's Get_Encoder_Estimates)."""
+    raw = yaml.safe_load((CONFIG_DIR / "swerve.yaml").read_text())
+    raw["steering_defaults"] = {"driver": "cia402", "gear_ratio": 12.8, "max_rpm": 3000,
+                                "sync": True}
+    raw["steering"] = {wheel: {"node_id": node} for wheel, node in (
+        ("front_left", 5), ("front_right", 6), ("rear_left", 7), ("rear_right", 9))}
+    path = tmp_path / "r.yaml"
+    path.write_text(yaml.safe_dump(raw))
+    with pytest.raises(ConfigError) as err:
+        load_config(path)
+    text = str(err.value)
+    assert ("the odrive controller of 'rear_right' (node 4) and the cia402 controller of "
+            "'rear_right steering' (node 9) both use 11-bit identifier 0x89") in text
+    assert ("the odrive controller of 'rear_right' (node 4) and the cia402 driver's broadcast "
+            "frames both use 11-bit identifier 0x80") in text
+    assert text.endswith("choose other node IDs")
