@@ -154,7 +154,7 @@ class Supervisor:
             self._last_twist_s = now_s
             if self.cfg.infeasible_policy is InfeasiblePolicy.PROJECT:
                 self.counts.projected += 1
-                self.target = err.nearest
+                self.target, self._timed_out = err.nearest, False  # followed: no timeout holds it
                 return Accepted(err.nearest, projected=True, error=err)
             self.target = ZERO
             return Rejection(ErrorCode.INFEASIBLE_TWIST, str(err), err)

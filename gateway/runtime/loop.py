@@ -267,6 +267,9 @@ class Gateway:
         elif self._armed:
             self._armed = False
             out.extend(self.drives.disable(now_s))
+            # Disarmed, the wheels coast down on their own: the next enable ramps from zero,
+            # not on down from the speed before the disable (as after an e-stop, stop_now).
+            result, self._prev_limited = self._solve(ZERO), False
         try:
             out.extend(self.drives.poll(now_s))
         except GatewayError as err:  # a step a drive refuses now: a fault, never an exit

@@ -123,6 +123,22 @@ def test_infeasible_twist_projected(rig: Rig, pilot: SocketPilot) -> None:
     assert rig.gw.supervisor.counts.projected == 1
 
 
+@pytest.mark.parametrize("rig", [{"infeasible_policy": "project"}], indirect=True)
+def test_a_projected_twist_ends_a_command_timeout(rig: Rig, pilot: SocketPilot) -> None:
+    """A projected twist is followed: the command timeout it ends is no longer reported
+    active, and the next one is counted."""
+    pilot.send(op="twist", vx=0.1)
+    rig.advance(1.0)  # cmd_timeout_s is 0.5
+    assert rig.gw.supervisor.cmd_timeout_active
+    for _ in range(10):
+        pilot.send(op="twist", vx=0.1, vy=0.05)  # projected onto vx 0.1
+        rig.advance(0.1)
+    assert min(commanded(rig)) > 2.0
+    assert not rig.gw.supervisor.cmd_timeout_active
+    rig.advance(1.0)
+    assert rig.gw.supervisor.counts.cmd_timeouts == 2
+
+
 @pytest.mark.parametrize("rig", [{}, {"feedback_recovery": "manual"}], indirect=True)
 def test_feedback_timeout_faults_names_motor_and_recovers(rig: Rig, pilot: SocketPilot) -> None:
     pilot.send(op="subscribe", topics=["error"])
@@ -270,3 +286,20 @@ def test_a_can_twist_is_timed_from_its_arrival_not_from_the_cycle_that_reads_it(
     rig.send_can_twist(Twist(0.2))
     rig.advance(0.3)
     assert min(speeds(rig)) > 5.0
+
+
+def test_an_enable_soon_after_a_disable_ramps_from_zero(rig: Rig, pilot: SocketPilot) -> None:
+    """A disable disarms the drives, which coast down on their own: an enable before the
+    gateway's ramp would have come down must not command the speed of before the disable
+    (it stepped to 4 rad/s in one cycle, ten times the acceleration limit's step)."""
+    pilot.send(op="twist", vx=0.2, wz=0.0)
+    rig.advance(0.4)
+    assert min(commanded(rig)) > 5.0
+    pilot.send(op="disable")
+    rig.advance(2 * rig.period)  # (the ramp down would take 0.15 s)
+    assert state(rig) is GatewayState.DISABLED
+    pilot.send(op="enable")
+    history: list[tuple[float, ...]] = []
+    rig.advance(1.0, lambda r: history.append(commanded(r)))
+    assert state(rig) is GatewayState.RUNNING
+    assert max(abs(c) for cmd in history for c in cmd) == 0.0
