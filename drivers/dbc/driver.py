@@ -278,15 +278,14 @@ class DbcDriver(MotorDriver[DbcOptions]):
             return
         if velocity is not None:
             ax.velocity = ax.units.velocity_to_wheel(raw[velocity] * slot.scale + slot.offset)
-            ax.velocity_s = timestamp_s
             self.heard(i, 0, timestamp_s)
         if position is not None:
             ax.position = ax.angle(raw[position])
-            ax.position_s = timestamp_s
             self.heard(i, 1, timestamp_s)
-        if ax.velocity is not None and ax.position is not None:
-            self.store_feedback(i, WheelFeedback(
-                ax.position, ax.velocity, min(ax.velocity_s, ax.position_s)), None)
+        # (The older of the two streams' times, once both were heard: the feedback's age.)
+        oldest = self.live.oldest[i]
+        if oldest is not None and ax.velocity is not None and ax.position is not None:
+            self.store_feedback(i, WheelFeedback(ax.position, ax.velocity, oldest), None)
 
     def _fault(self, i: int, ax: Axis, signal: Any, code: int) -> None:
         """A new fault code of motor ``i`` (in the cantools ``signal``): its flags and text;

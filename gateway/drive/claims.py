@@ -64,6 +64,11 @@ class FrameClaim:
         """Whether a frame with this identifier and identifier type is claimed."""
         return is_extended_id == self.extended and not (self.can_id ^ arbitration_id) & self.mask
 
+    def overlaps(self, other: FrameClaim) -> bool:
+        """Whether some identifier (of the same type) is claimed by both."""
+        return self.extended == other.extended and not (
+            (self.can_id ^ other.can_id) & self.mask & other.mask)
+
     def as_filter(self) -> CanFilter:
         """The kernel receive filter that passes the claimed frames."""
         return CanFilter(self.can_id, self.mask, self.extended)

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-from gateway.drive.filters import CanFilter
+from gateway.drive.filters import EXT_MASK, STD_MASK, CanFilter
 
 if TYPE_CHECKING:
     from gateway.core.settings import GatewayConfig
@@ -60,17 +60,10 @@ def driver_collisions(drives: DriveSet) -> list[str]:
 
     :return: one sentence per pair of colliding claims, naming both motors.
     """
-    out = []
     groups = [(drv, drv.claims()) for drv, _ in drives.groups]
-    for k, (a, a_claims) in enumerate(groups):
-        for b, b_claims in groups[k + 1:]:
-            for ca in a_claims:
-                for cb in b_claims:
-                    if ca.extended == cb.extended and not (
-                            (ca.can_id ^ cb.can_id) & ca.mask & cb.mask):
-                        out.append(f"{_whose(a, ca.motor)} and {_whose(b, cb.motor)} both use "
-                                   f"{_ids(ca, cb)}")
-    return out
+    return [f"{_whose(a, ca.motor)} and {_whose(b, cb.motor)} both use {_ids(ca, cb)}"
+            for k, (a, a_claims) in enumerate(groups) for b, b_claims in groups[k + 1:]
+            for ca in a_claims for cb in b_claims if ca.overlaps(cb)]
 
 
 def _whose(drv: MotorDriver[Any], motor: int | None) -> str:
@@ -85,7 +78,7 @@ def _ids(a: FrameClaim, b: FrameClaim) -> str:
     mask = a.mask | b.mask
     can_id = (a.can_id & a.mask) | (b.can_id & b.mask)
     kind = "29-bit" if a.extended else "11-bit"
-    full = 0x1FFFFFFF if a.extended else 0x7FF
+    full = EXT_MASK if a.extended else STD_MASK
     if mask & full == full:
         return f"{kind} identifier 0x{can_id:X}"
     return f"{kind} identifiers 0x{can_id:X} under mask 0x{mask & full:X}"
