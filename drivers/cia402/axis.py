@@ -78,6 +78,9 @@ class Axis:
     emcy: Emergency | None = None
     counts: int = 0
     last_raw: int | None = None
+    #: When the position TPDO behind :attr:`counts` came (s): the feedback's time (a velocity
+    #: TPDO refreshes the speed only).
+    position_s: float = 0.0
     velocity_rad_s: float = 0.0
     #: Steering: the target position of the last RPDO (counts, unwrapped); ``None`` while not
     #: armed, so the next armed cycle starts from the measured position.
@@ -155,6 +158,7 @@ class Axis:
             elif self.steer:
                 self.counts = value  # absolute: zero_rad is in the drive's own frame
             self.last_raw = value
+            self.position_s = now_s
             if self.steer:
                 seq.hold = value
         else:
@@ -162,7 +166,8 @@ class Axis:
         fb = None
         if self.last_raw is not None:
             rad = self.counts * _TWO_PI / self.opts.counts_per_rev
-            fb = WheelFeedback((rad - self.zero) * sign / gear, self.velocity_rad_s, now_s)
+            fb = WheelFeedback((rad - self.zero) * sign / gear, self.velocity_rad_s,
+                               self.position_s)
         state = seq.state
         if state is State.OPERATION_ENABLED or state is None or seq.phase is not Phase.ARMED:
             return fb  # (the steady state first)

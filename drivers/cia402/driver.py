@@ -274,10 +274,9 @@ class Cia402Driver(MotorDriver[Cia402Options]):
                 and not frame.is_remote_frame):  # a TPDO: most of the traffic
             word, value = _PDO_UNPACK(data)
             fb = axis.on_pdo(kind is _POSITION, word, value, now_s)
-            if fb is None:
-                self.heard(i, 0, now_s)
-            else:
-                self.store_feedback(i, fb)
+            self.live.heard(i, 0, now_s)
+            if fb is not None:
+                self.store_feedback(i, fb, None)
             if not (axis.published and axis.seq.state is _RUNNING):
                 self._refresh(i)
             return True
@@ -288,7 +287,7 @@ class Cia402Driver(MotorDriver[Cia402Options]):
                 axis.seq.on_sdo_error(err, now_s)
                 self._refresh(i)
             raise
-        self.heard(i, 0, now_s)  # (well-formed TPDOs are taken above)
+        self.live.heard(i, 0, now_s)  # (well-formed TPDOs are taken above)
         if isinstance(msg, Heartbeat):
             axis.on_heartbeat(msg.state, self.MAX_BOOT_RESTARTS)
         elif isinstance(msg, Emergency):

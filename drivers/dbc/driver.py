@@ -124,6 +124,7 @@ class DbcDriver(MotorDriver[DbcOptions]):
     #: older than ``liveness_s`` (one message that stopped must not leave the other's value
     #: standing as fresh feedback).
     LIVENESS_STREAMS: ClassVar[tuple[str, ...]] = ("velocity", "position")
+    SPEED_STREAM: ClassVar[int | None] = 0
     TIMEOUT_ACTION: ClassVar[str] = (
         "whatever the controller's firmware does when its command timeout expires"
     )
@@ -278,14 +279,15 @@ class DbcDriver(MotorDriver[DbcOptions]):
             return
         if velocity is not None:
             ax.velocity = ax.units.velocity_to_wheel(raw[velocity] * slot.scale + slot.offset)
-            self.heard(i, 0, timestamp_s)
+            self.live.heard(i, 0, timestamp_s)
         if position is not None:
             ax.position = ax.angle(raw[position])
-            self.heard(i, 1, timestamp_s)
-        # (The older of the two streams' times, once both were heard: the feedback's age.)
-        oldest = self.live.oldest[i]
-        if oldest is not None and ax.velocity is not None and ax.position is not None:
-            self.store_feedback(i, WheelFeedback(ax.position, ax.velocity, oldest), None)
+            ax.position_s = timestamp_s
+            self.live.heard(i, 1, timestamp_s)
+        # Once both were heard, stamped with the position's time (a velocity message apart
+        # refreshes the speed only).
+        if ax.velocity is not None and ax.position is not None:
+            self.store_feedback(i, WheelFeedback(ax.position, ax.velocity, ax.position_s), None)
 
     def _fault(self, i: int, ax: Axis, signal: Any, code: int) -> None:
         """A new fault code of motor ``i`` (in the cantools ``signal``): its flags and text;

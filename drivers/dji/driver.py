@@ -220,7 +220,7 @@ class DjiDriver(MotorDriver[DjiOptions]):
         fresh.enable(0.0)
         for ax in fresh._axes:
             ax.rotor_rad = ax.zero_rad
-            fresh.heard(ax.index, 0, 0.0)
+            fresh.live.heard(ax.index, 0, 0.0)
         return fresh.command(setpoints, 0.0)
 
     def _on_frame(self, frame: Frame) -> bool:

@@ -363,7 +363,7 @@ class OdriveDriver(MotorDriver[OdriveOptions]):
 
     def _on_heartbeat(self, ax: Axis, hb: Heartbeat, t: float) -> None:
         i = ax.index
-        self.heard(i, 1, t)
+        self.live.heard(i, 1, t)
         ax.procedure = hb.procedure_result
         armed = ax.armed_by(hb.axis_state, t)  # (CLOSED_LOOP_CONTROL also ends a refusal)
         if not (hb.axis_error or hb.motor_error or hb.encoder_error or hb.controller_error):

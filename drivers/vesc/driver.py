@@ -103,6 +103,7 @@ class VescDriver(MotorDriver[VescOptions]):
     NODE_ID_RANGE: ClassVar[tuple[int, int]] = (0, 254)
     #: A motor is OFFLINE while either status stream is older than ``liveness_s``.
     LIVENESS_STREAMS: ClassVar[tuple[str, ...]] = ("STATUS", "STATUS_5")
+    SPEED_STREAM: ClassVar[int | None] = STATUS
     #: After :meth:`enable`, how long status frames may be missing before the hint is logged.
     STATUS_HINT_AFTER_S: ClassVar[float] = 1.0
     PROTOCOL: ClassVar[str] = "VESC"
@@ -368,11 +369,10 @@ class VescDriver(MotorDriver[VescOptions]):
             if first:
                 self.set_fault(i, self.faults(i), a.missing())
             return True
-        # Stamped with the older of the two frames, so a stalled stream shows its age; each
-        # stream was heard above at its own time.
-        self.store_feedback(
-            i, WheelFeedback(a.position_rad, a.velocity_rad_s, other if other < t else t), None
-        )
+        # Stamped with the position's time (a STATUS refreshes the speed only); each stream
+        # was heard above at its own time.
+        pos_s = other if stream == STATUS else t
+        self.store_feedback(i, WheelFeedback(a.position_rad, a.velocity_rad_s, pos_s), None)
         if first:
             self.set_fault(i, self.faults(i), a.missing())
         return True

@@ -193,7 +193,14 @@ class WheelFeedback(NamedTuple):
 
     :param position_rad: wheel angle in rad, unwrapped, counted from the first sample.
     :param velocity_rad_s: wheel angular speed in rad/s.
-    :param timestamp_s: when the frame carrying it was received (s).
+    :param timestamp_s: when the frame carrying its position was received (s): the time the
+        odometry integrates it at.  A controller that sends its speed in another frame (VESC
+        STATUS and STATUS_5, CiA 402 TPDOs, DBC messages) refreshes the speed in a new
+        feedback with the same time, so that the odometry does not take an old position for a
+        new one (a sample's wheels would be staggered by up to a frame period: zig-zag and
+        false distance); how old the other frames are is the liveness's
+        (:class:`gateway.drive.liveness.Liveness`), which the feedback's age in a report takes
+        into account (:meth:`gateway.drive.driver.MotorDriver.status`).
     """
 
     position_rad: float

@@ -61,8 +61,11 @@ class MotorDriver(abc.ABC, Generic[OptT]):
     NODE_ID_RANGE: ClassVar[tuple[int, int]] = (0, 0x3F)
     #: The streams whose silence makes a motor OFFLINE (each younger than ``liveness_s``
     #: while alive); stream 0 is the feedback (:meth:`store_feedback`), the others are
-    #: reported with :meth:`heard`.
+    #: reported to :attr:`live` (:meth:`Liveness.heard`).
     LIVENESS_STREAMS: ClassVar[tuple[str, ...]] = ("feedback",)
+    #: The liveness stream of the speed when it comes apart from the position (``None``: with
+    #: it): a report's feedback age is the older of the two (the feedback has the position's).
+    SPEED_STREAM: ClassVar[int | None] = None
     #: Whether this driver closes the wheels' speed loop on the host from the feedback it
     #: decodes (DJI).  Holding such a wheel at zero speed needs that feedback, so on a fault
     #: about the feedback or the tracking the gateway releases these motors instead.
@@ -324,14 +327,10 @@ class MotorDriver(abc.ABC, Generic[OptT]):
 
     def store_feedback(self, index: int, feedback: WheelFeedback, stream: int | None = 0) -> None:
         """Record new feedback for motor ``index``, and stream ``stream`` heard at its time
-        (``None``: the caller reports the streams with :meth:`heard`)."""
+        (``None``: the caller reports the streams to :attr:`live`)."""
         self._feedback[index] = feedback
         if stream is not None:
             self.live.heard(index, stream, feedback.timestamp_s)
-
-    def heard(self, index: int, stream: int, t: float) -> None:
-        """Motor ``index``'s liveness stream ``stream`` (:attr:`LIVENESS_STREAMS`) heard at t."""
-        self.live.heard(index, stream, t)
 
     def set_fault(self, index: int, faults: DriveFault, detail: str = "") -> None:
         """Record motor ``index``'s fault flags (NONE clears); a protection fault stays in them."""
@@ -390,7 +389,8 @@ class MotorDriver(abc.ABC, Generic[OptT]):
         """A snapshot of every motor, for reports."""
         return tuple(
             MotorStatus(m.wheel, m.node_id, st, self._faults[i], self._detail[i],
-                        None if fb is None else now_s - fb.timestamp_s, fb)
+                        None if fb is None
+                        else self.live.age(i, fb.timestamp_s, self.SPEED_STREAM, now_s), fb)
             for i, (m, fb, st) in enumerate(
                 zip(self.motors, self._feedback, self.states(now_s), strict=True))
         )

@@ -63,6 +63,12 @@ class Liveness:
         if oldest is None or oldest + self.limits[index] - _MARGIN_S < self._calm_until:
             self._calm_until = -math.inf  # (a time that went back: recomputed when asked)
 
+    def age(self, index: int, t: float, stream: int | None, now_s: float) -> float:
+        """The age at ``now_s`` of what motor ``index`` sent at ``t``, or of its stream
+        ``stream`` (``None``: none) when that is older."""
+        s = None if stream is None else self.times[index][stream]
+        return now_s - (t if s is None or s >= t else s)
+
     def all_alive(self, now_s: float) -> bool:
         """Whether every motor is alive at ``now_s`` (:meth:`alive` of each, in one call that
         mostly compares one number: what the supervisor asks every cycle)."""

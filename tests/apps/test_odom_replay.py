@@ -10,7 +10,9 @@ simulators' exact wheel angles).
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import math
+import random
 from typing import TYPE_CHECKING
 
 import pytest
@@ -139,6 +141,35 @@ def test_updates_wait_until_every_wheel_has_a_new_sample() -> None:
            line(0.0025, 2, -0.2),                     # right too: update at 0.0025
            line(0.003, 1, 0.3)]                       # pending at the end: last update
     assert times(Replay(cfg, 0.0), log) == [0.0005, 0.0025, 0.003]
+
+
+def test_rounds_stay_in_step_when_the_wheels_answer_one_after_the_other() -> None:
+    # Driving straight: per round the left wheel answers, the right one 0.2 to 2 ms later,
+    # rounds 4 to 40 ms apart (a loaded host), sometimes a round with the right wheel first.
+    # An update as soon as both have a newer position takes the left of one round with the
+    # right of the round before: out of step, and it stays so (a heading off by a period's
+    # travel over the track, a path off to the side).
+    cfg = load_config(DIFF)
+    r, track = cfg.model.wheels[0].radius, 0.16
+    speed = 12.0  # rad/s at the wheels
+    rng = random.Random(7)
+    rounds = list(itertools.accumulate(rng.uniform(0.004, 0.04) for _ in range(400)))
+    log = []
+    for k, t in enumerate(rounds):
+        lag = rng.uniform(0.0002, 0.002)
+        first, second = (1, 2) if k % 37 else (2, 1)
+        turns = speed * t / (2 * math.pi)
+        log += [line(t, first, turns * (1 if first == 1 else -1)),
+                line(t + lag, second, turns * (1 if second == 1 else -1))]
+    replay = Replay(cfg)
+    headings = [s.pose.theta_rad for s in replay.feed_lines(log)]
+    true_distance = speed * (rounds[-1] - rounds[0]) * r  # (positions count from the first)
+    off = speed * 0.004 * r / track  # the heading of a round out of step, at least
+    assert max(abs(h) for h in headings) < off / 10
+    pose = replay.summary().pose
+    assert pose.x_m == pytest.approx(true_distance, rel=1e-6)  # (float32 turns)
+    assert abs(pose.y_m) < 1e-6
+    assert replay.summary().distance_m == pytest.approx(true_distance, rel=1e-6)
 
 
 def test_frames_with_one_time_stamp_make_one_update() -> None:

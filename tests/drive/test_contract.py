@@ -69,7 +69,7 @@ class Toy(MotorDriver[ToyOptions]):
             pos, vel = struct.unpack("<ih", frame.data)
             self.store_feedback(i, WheelFeedback(pos / 1000, vel / 100, frame.timestamp_s))
         elif kind == 0x200:
-            self.heard(i, 1, frame.timestamp_s)
+            self.live.heard(i, 1, frame.timestamp_s)
             self.set_armed(i, bool(frame.data[0]))
         return True
 

@@ -127,6 +127,23 @@ def test_golden_decodes() -> None:
     assert codec.decode(Frame(0x384, hexb("37 02 C0 1D FE FF"))) is None  # another node
 
 
+def test_a_velocity_tpdo_refreshes_the_speed_and_keeps_the_positions_time() -> None:
+    # The odometry integrates a position at its feedback's time: a velocity TPDO that came
+    # later must not make an old position look new (CiA 402 sends them in two TPDOs).
+    drv = Cia402Driver([factories.motor("cia402", 3, "left")])
+    drv.on_frame(Frame(0x383, hexb("37 02 00 10 00 00"), timestamp_s=1.0))  # 4096 counts
+    drv.on_frame(Frame(0x483, hexb("37 02 E8 03 00 00"), timestamp_s=1.004))  # 1000 RPM
+    fb = drv.feedback(0)
+    assert fb is not None
+    assert fb.timestamp_s == 1.0
+    assert fb.velocity_rad_s == pytest.approx(1000 * TWO_PI / 60)
+    assert drv.live.times[0] == [1.004]  # (heard at the velocity TPDO's time all the same)
+    drv.on_frame(Frame(0x383, hexb("37 02 00 20 00 00"), timestamp_s=1.01))
+    fb = drv.feedback(0)
+    assert fb is not None and fb.timestamp_s == 1.01
+    assert fb.position_rad == pytest.approx(TWO_PI)  # counts_per_rev 4096: one turn on
+
+
 def test_an_upload_of_more_bytes_than_the_object_takes_its_first_when_that_is_safe() -> None:
     """An expedited upload without its size (0x42: "an unspecified number of bytes", CiA 301)
     or with zero bytes beyond the object (a device that sends every value as 32 bits) gives

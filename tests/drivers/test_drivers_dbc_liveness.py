@@ -1,7 +1,7 @@
 """DBC: a motor whose velocity and position come in two messages (``position_message``) is
 alive only while both come: one message that stopped leaves no value standing as fresh
 feedback (a frozen position would freeze the odometry, a frozen velocity hide a blocked wheel
-from the tracking check)."""
+from the tracking check), and the feedback's age in a report is the older message's."""
 
 from __future__ import annotations
 
@@ -45,6 +45,11 @@ def test_a_motor_whose_two_feedback_messages_one_stops_goes_offline(stops: str) 
         drv.on_frame(velocity_frame(t) if stops == "position" else angle_frame(t, deg))
     assert drv.state(0, t) is DriveState.OFFLINE
     assert drv.live.silent(0, t) == [stops]
+    # The feedback is stamped with its position's time (what the odometry integrates it at);
+    # its age in a report is the older message's either way.
     fb = drv.feedback(0)
-    assert fb is not None and fb.timestamp_s == pytest.approx(last_both)
+    assert fb is not None
+    assert fb.timestamp_s == pytest.approx(last_both if stops == "position" else t)
+    age = drv.status(t)[0].feedback_age_s
+    assert age is not None and age == pytest.approx(t - last_both)
     assert not drv.rejected

@@ -330,19 +330,20 @@ def test_missing_status_frames_log_a_hint_once(caplog: pytest.LogCaptureFixture)
 
 
 def test_liveness_streams_are_status_and_status5() -> None:
-    """Each stream is heard at its own frame's time, whatever the feedback's stamp (the older
-    of the two), in either order."""
+    """Each stream is heard at its own frame's time, in either order; the feedback is stamped
+    with its position's time (STATUS_5's: a STATUS refreshes the speed only), and its age in a
+    report is the older stream's."""
     drv = VescDriver([motor(23)])
     assert drv.live.silent(0, 0.0) == ["STATUS", "STATUS_5"]
     steps = [  # frame, time; then the streams' times and the feedback's stamp
         (make_status(23, 0, 0.0, 0.0), 0.1, [0.1, None], None),
         (make_status5(23, 0, 24.0), 0.1, [0.1, 0.1], 0.1),
         (make_status(23, 0, 0.0, 0.0), 0.2, [0.2, 0.1], 0.1),
-        (make_status5(23, 0, 24.0), 0.3, [0.2, 0.3], 0.2),
+        (make_status5(23, 0, 24.0), 0.3, [0.2, 0.3], 0.3),
         (make_status(23, 0, 0.0, 0.0), 0.35, [0.35, 0.3], 0.3),
         (make_status5(23, 0, 24.0), 0.34, [0.35, 0.34], 0.34),  # stamped before the STATUS
-        (make_status5(23, 0, 24.0), 0.5, [0.35, 0.5], 0.35),
-        (make_status(23, 0, 0.0, 0.0), 0.45, [0.45, 0.5], 0.45),
+        (make_status5(23, 0, 24.0), 0.5, [0.35, 0.5], 0.5),
+        (make_status(23, 0, 0.0, 0.0), 0.45, [0.45, 0.5], 0.5),
     ]
     for frame, t, times, stamp in steps:
         assert drv.on_frame(frame.stamped(t))

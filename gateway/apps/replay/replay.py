@@ -10,15 +10,16 @@ bus.
 
 When the odometry is updated
     At the end of a group of entries that share one time stamp (the gateway stamps all frames
-    of a cycle alike, so a ``--record`` log replays at the gateway's cadence), once every
-    driven wheel has a new sample since the last update (``candump`` stamps each frame on its
-    own: updating after each would mix new and old positions of different wheels and turn
-    their stagger into zig-zag and false distance), and at most once per ``min_interval_s`` of
-    log time (by default the configured control period, as the gateway).  A wheel that falls
-    silent delays an update by at most ``max_interval_s``.  Positions are absolute, so fewer
-    updates lose no motion: the SE(2) step is exact while the twist is constant, and a twist
-    that changes within an interval costs a second-order error (``tools/bench_replay.py``
-    measures it).  Whatever is pending is integrated at the end of the log.
+    of a cycle alike, so a ``--record`` log replays at the gateway's cadence), on a round of
+    the wheels' positions, the closest in time (:mod:`gateway.apps.replay.rounds`: ``candump``
+    stamps each frame on its own and the controllers answer one after the other), and at most
+    once per ``min_interval_s`` of log time (by default the configured control period, as the
+    gateway); a round that comes sooner is passed over, its motion is in the next update's.  A
+    wheel that falls silent delays an update by at most ``max_interval_s``.  Positions are
+    absolute, so fewer updates lose no motion: the SE(2) step is exact while the twist is
+    constant, and a twist that changes within an interval costs a second-order error
+    (``tools/bench_replay.py`` measures it).  Whatever is pending is integrated at the end of
+    the log: the round held, then what came after it.
 
 When the log's time jumps
     A line out of time with the lines around it is skipped and reported; a jump the log goes
@@ -35,10 +36,11 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from gateway.apps.replay.gateway_pose import GatewayPoses
+from gateway.apps.replay.results import ReplaySummary, Sample
+from gateway.apps.replay.rounds import Rounds
 from gateway.apps.replay.timeline import MAX_GAP_S, Timeline
 from gateway.core.errors import DecodeError, KinematicsError
 from gateway.core.kinematics import Odometry
@@ -51,11 +53,9 @@ from gateway.wire.can import WgCodec
 if TYPE_CHECKING:
     from collections.abc import Iterable, Iterator, Sequence
 
-    from gateway.apps.replay.gateway_pose import PoseCheck
-    from gateway.core.kinematics import OdometryState, Pose
+    from gateway.core.kinematics import OdometryState
     from gateway.core.settings import GatewayConfig
-    from gateway.core.types import Frame, Twist, WheelFeedback
-    from gateway.drive.rejections import RejectedFrames
+    from gateway.core.types import Frame, Twist
     from gateway.wire.candump import CandumpError, LogEntry
 
 __all__ = [
@@ -75,91 +75,6 @@ DEFAULT_MAX_INTERVAL_S = 0.1
 #: Slack for float rounding of time stamps (microseconds in the log; float64 epoch times
 #: resolve 0.24 us), s.
 _STAMP_SLACK_S = 1e-6
-
-
-@dataclass(frozen=True, slots=True)
-class Sample:
-    """The odometry after one update.
-
-    :param time_s: log time of the newest feedback, s (the replay's clock after a step back).
-    :param pose: integrated pose.
-    :param twist: body twist over the last interval.
-    :param slip_m_s: RMS residual of the forward kinematics over the last interval, m/s.
-    :param distance_m: path length so far, m.
-    :param wheel_rad_s: every wheel's latest reported speed (model order), rad/s, ``None``
-        for wheels without feedback.
-    :param steer_rad: the steering angles used (``None`` for wheels not steered).
-    """
-
-    time_s: float
-    pose: Pose
-    twist: Twist
-    slip_m_s: float
-    distance_m: float
-    wheel_rad_s: tuple[float | None, ...]
-    steer_rad: tuple[float | None, ...]
-
-
-@dataclass(frozen=True, slots=True)
-class ReplaySummary:
-    """What a replay read and where it ended.
-
-    :param pose: final pose.
-    :param distance_m: path length, m.
-    :param entries: log entries read.
-    :param received: entries marked received (``R`` or no direction).
-    :param motor_frames: entries one of the drivers claimed (its motors' frames, in either
-        direction: a ``--record`` log holds the commands too).
-    :param updates: odometry updates.
-    :param corrupt_lines: lines that could not be read (skipped).
-    :param start_s: time stamp of the first entry, s (``None`` for an empty log).
-    :param end_s: time stamp of the last entry, s (after a step back of the log's time, on
-        the replay's clock: :mod:`gateway.apps.replay.timeline`).
-    :param steering: where the steering angles came from.
-    :param skipped_updates: intervals the forward kinematics could not solve (too few wheels
-        with feedback); their motion is lost.
-    :param silent_wheels: driven wheels with no feedback in the log (the odometry starts once
-        every driven wheel has reported, so one silent wheel leaves it at the origin), and
-        steering actuators with none (their wheels are then replayed at the neutral angle).
-    :param pose_check: the replay against the log's own ``WG_Odom_Pose`` frames (a
-        ``wheelgate run --record`` log has them), ``None`` without two of them.
-    :param out_of_time_lines: lines whose time stamp does not follow the lines around them
-        (skipped).
-    :param breaks: jumps of the log's time that the log goes on from (bridged).
-    :param gap_s: log time the breaks forward jump over, s (not in :attr:`duration_s`).
-    :param rejections: the motors' frames their drivers rejected, by driver and reason.
-    """
-
-    pose: Pose
-    distance_m: float
-    entries: int
-    received: int
-    motor_frames: int
-    updates: int
-    corrupt_lines: int
-    start_s: float | None
-    end_s: float | None
-    steering: SteeringSource
-    skipped_updates: int = 0
-    silent_wheels: tuple[str, ...] = ()
-    pose_check: PoseCheck | None = None
-    out_of_time_lines: int = 0
-    breaks: int = 0
-    gap_s: float = 0.0
-    rejections: tuple[RejectedFrames, ...] = ()
-
-    @property
-    def duration_s(self) -> float:
-        """Log time covered (the breaks' gaps left out), s."""
-        if self.start_s is None or self.end_s is None:
-            return 0.0
-        return self.end_s - self.start_s - self.gap_s
-
-    @property
-    def rejected_frames(self) -> int:
-        """The motors' frames their drivers rejected."""
-        return sum(r.frames for r in self.rejections)
-
 
 
 class Replay:
@@ -224,9 +139,9 @@ class Replay:
         self._needed = tuple(i for i, m in enumerate(config.motors) if m is not None)
         self._n_needed = len(self._needed)
         self._feed = OdomFeed(self._needed)
-        self._last_feedback: list[WheelFeedback | None] = [None] * self.model.n
-        # Frames the drivers took since the last update: every driven wheel having a new
-        # sample needs at least one each, so fewer spares the look at every wheel.
+        self._rounds = Rounds(self._needed)
+        # Frames the drivers took since the last round: every driven wheel having a new
+        # position needs at least one each, so fewer spares the look at every wheel.
         self._taken = 0
         groups = self.drives.groups
         self._on_frame = groups[0][0].on_frame if len(groups) == 1 else self.drives.on_frame
@@ -251,9 +166,7 @@ class Replay:
             sample = feed(entry)
             if sample is not None:
                 yield sample
-        last = self.finish()
-        if last is not None:
-            yield last
+        yield from self.finish()
 
     def feed(self, entry: LogEntry) -> Sample | None:
         """Take one entry.
@@ -266,6 +179,7 @@ class Replay:
             # Cheap tests first: every driven wheel needs a frame of its own to be new.
             if self._pending and (
                 self._taken >= self._n_needed
+                or self._rounds.held is not None
                 or (self._group_s or 0.0) - self._last_update_s + _STAMP_SLACK_S
                 >= self.max_interval_s
             ):
@@ -294,30 +208,47 @@ class Replay:
             self.unclaimed[key] = (1 if seen is None else seen[0] + 1, frame)
         return out
 
-    def finish(self) -> Sample | None:
-        """Integrate whatever is still pending (at the end of the log)."""
-        return self._update(final=True) if self._pending else None
+    def finish(self) -> list[Sample]:
+        """Integrate whatever is still pending (at the end of the log): the round held, then
+        the positions after it; the updates."""
+        out = []
+        while self._pending:
+            sample = self._update(final=True)
+            if sample is not None:
+                out.append(sample)
+        return out
 
     # ----------------------------------------------------------------- odometry
 
     def _update(self, final: bool) -> Sample | None:
         group = self._group_s if self._group_s is not None else 0.0
         elapsed = group - self._last_update_s
-        if not final and elapsed + _STAMP_SLACK_S < self.min_interval_s:
-            return None
-        waiting = not final and elapsed + _STAMP_SLACK_S < self.max_interval_s
-        if waiting and self._taken < self._n_needed:
-            return None
-        feedback = self.drives.feedback_by_wheel()
-        last = self._last_feedback
-        if waiting and any(feedback[i] is last[i] for i in self._needed):
-            return None  # wait until every driven wheel has a new sample
+        rounds = self._rounds
+        if not final and elapsed + _STAMP_SLACK_S < self.max_interval_s:
+            if rounds.held is None and self._taken < self._n_needed:
+                return None
+            before, taken = rounds.held_taken, self._taken
+            found = rounds.due(self.drives.feedback_by_wheel(), taken)
+            if found is None:
+                return None
+            feedback, later = found, True
+            self._taken = taken - before
+            if elapsed + _STAMP_SLACK_S < self.min_interval_s:
+                return None  # too soon: passed over (its positions are in the next update's)
+        else:  # the longest interval is over (a wheel fell silent), or the log: the round
+            # held, else what there is
+            now = self.drives.feedback_by_wheel()
+            held = rounds.held
+            later = held is not None
+            feedback = held if held is not None else now
+            rounds.take(feedback)
+            self._taken = 0
+            if later:
+                rounds.hold_if_new(now, 0)
+        self._pending = later  # (the positions that came after a held round)
         if any(feedback[i] is None for i in self._needed):
             return None  # not started: some driven wheel has not reported yet
-        self._pending = False
-        self._taken = 0
         self._last_update_s = group
-        self._last_feedback = feedback
         got = self._feed.sample(feedback)
         if got is None:
             return None  # no feedback newer than the last update's
