@@ -25,8 +25,11 @@ being called (enable sequence, disabled drives), so TPDO feedback and liveness n
 
 Each motor is one :class:`~drivers.cia402.axis.Axis`, which also takes what its node sends (the
 receive side).  A node is alive while any of its frames (heartbeat, TPDO, EMCY, SDO response)
-is younger than ``liveness_s``.  The frames are claimed by COB-ID (:meth:`Cia402Driver.claims`,
-the CiA 301 predefined connection set: function code << 7 | node ID).
+is younger than ``liveness_s``; armed, while its position TPDO is: a drive whose position TPDO
+stopped while its velocity TPDO and heartbeat go on would leave the odometry frozen under a
+wheel that turns (the tracking check sees the velocity, nothing else the position).  The
+frames are claimed by COB-ID (:meth:`Cia402Driver.claims`, the CiA 301 predefined connection
+set: function code << 7 | node ID).
 
 **Steering actuators** (:attr:`Cia402Driver.STEERING`) run in cyclic synchronous position mode
 (CSP, 0x6060 = 8) with the target position 0x607A in their command RPDO; why CSP, and how each
@@ -107,7 +110,7 @@ class Cia402Driver(MotorDriver[Cia402Options]):
     #: One gateway heartbeat (node and period) per bus.
     BUS_WIDE: ClassVar[tuple[str, ...]] = ("host_node_id", "host_heartbeat_s")
     NODE_ID_RANGE: ClassVar[tuple[int, int]] = (1, 127)
-    LIVENESS_STREAMS: ClassVar[tuple[str, ...]] = ("heartbeat, PDO, EMCY or SDO response",)
+    LIVENESS_STREAMS: ClassVar[tuple[str, ...]] = ("any frame; armed, the position TPDO",)
     #: SYNC period of :meth:`poll` while :meth:`command` is not called (s).
     SYNC_FALLBACK_PERIOD_S: ClassVar[float] = 0.01
     #: Boot-up messages during one enable sequence that restart it; one more is a failure.
@@ -274,7 +277,8 @@ class Cia402Driver(MotorDriver[Cia402Options]):
                 and not frame.is_remote_frame):  # a TPDO: most of the traffic
             word, value = _PDO_UNPACK(data)
             fb = axis.on_pdo(kind is _POSITION, word, value, now_s)
-            self.live.heard(i, 0, now_s)
+            if kind is _POSITION or axis.seq.phase is not _ARMED:
+                self.live.heard(i, 0, now_s)
             if fb is not None:
                 self.store_feedback(i, fb, None)
             if not (axis.published and axis.seq.state is _RUNNING):
@@ -287,7 +291,8 @@ class Cia402Driver(MotorDriver[Cia402Options]):
                 axis.seq.on_sdo_error(err, now_s)
                 self._refresh(i)
             raise
-        self.live.heard(i, 0, now_s)  # (well-formed TPDOs are taken above)
+        if axis.seq.phase is not _ARMED:  # (well-formed TPDOs are taken above)
+            self.live.heard(i, 0, now_s)
         if isinstance(msg, Heartbeat):
             axis.on_heartbeat(msg.state, self.MAX_BOOT_RESTARTS)
         elif isinstance(msg, Emergency):

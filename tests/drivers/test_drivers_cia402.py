@@ -177,7 +177,8 @@ def test_any_frame_of_a_node_keeps_it_alive() -> None:
     drv.on_frame(Frame(0x703, hexb("7F"), timestamp_s=0.1))  # heartbeat, PRE-OPERATIONAL
     assert drv.state(0, 0.35).name == "ENABLING"
     assert drv.state(0, 0.36).name == "OFFLINE"
-    assert drv.LIVENESS_STREAMS == ("heartbeat, PDO, EMCY or SDO response",)
+    assert drv.LIVENESS_STREAMS == ("any frame; armed, the position TPDO",)
+    # (Armed, the position TPDO alone: tests/drivers/test_cia402_position_tpdo.py.)
 
 
 def test_the_simulator_is_registered_apart_and_never_imported_by_the_driver() -> None:
