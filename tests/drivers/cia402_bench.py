@@ -1,6 +1,7 @@
 """The CiA 402 driver and its simulated drives on a python-can virtual bus, for the tests of
 ``test_*cia402*.py``: a :class:`Bench` steps simulated time, passes what the drives send to the
-driver and sends what the driver returns."""
+driver and sends what the driver returns; :func:`rolling_tricycle` is a whole gateway on a
+CiA 402 robot."""
 
 from __future__ import annotations
 
@@ -14,9 +15,11 @@ import can
 from drivers.cia402 import Cia402Driver
 from drivers.cia402.sim import Cia402Simulator
 from gateway.bus.can_bus import drain, send_frames
-from gateway.core.types import DriveState, Frame, MotorConfig
+from gateway.core.types import DriveState, Frame, MotorConfig, Twist
 from gateway.sim.bus import SimulatedControllers
 from tests import factories
+from tests.conftest import CONFIG_DIR
+from tests.e2e_helpers import Rig, virtual_config
 
 if TYPE_CHECKING:
     from collections.abc import Callable, Iterator, Sequence
@@ -105,3 +108,17 @@ def benches(channel: str) -> Iterator[Callable[..., Bench]]:
         for b in made:
             b.gw.shutdown()
             b.ctl.shutdown()
+
+
+@contextlib.contextmanager
+def rolling_tricycle(name: str, vx_m_s: float) -> Iterator[tuple[Rig, Cia402Driver, int]]:
+    """The tricycle (a CiA 402 drive motor and steering actuator) on its simulators, on a
+    virtual channel named after ``name``, enabled and driven at ``vx_m_s`` for 0.3 s by CAN
+    twists: the rig, its CiA 402 driver and the drive motor's index in it."""
+    with Rig(virtual_config(CONFIG_DIR / "tricycle.yaml", name)) as rig:
+        rig.enable()
+        for _ in range(6):
+            rig.send_can_twist(Twist(vx_m_s))
+            rig.advance(0.05)
+        drv = next(d for d, _ in rig.gw.drives.groups if isinstance(d, Cia402Driver))
+        yield rig, drv, next(k for k, m in enumerate(drv.motors) if not m.steering)

@@ -4,24 +4,15 @@ counted as a rejection, its value never reaches the wheel's feedback or the odom
 
 from __future__ import annotations
 
-from drivers.cia402 import Cia402Driver
 from drivers.cia402.codec import make_tpdo
 from drivers.cia402.enums import tpdo_cob_id
 from gateway.bus.can_bus import send_frames
-from gateway.core.types import GatewayState, Twist
-from tests.conftest import CONFIG_DIR
-from tests.e2e_helpers import Rig, virtual_config
+from gateway.core.types import GatewayState
+from tests.drivers.cia402_bench import rolling_tricycle
 
 
 def test_a_tpdo_whose_statusword_matches_no_state_is_not_taken() -> None:
-    cfg = virtual_config(CONFIG_DIR / "tricycle.yaml", "cia402-bad-statusword")
-    with Rig(cfg) as rig:
-        rig.enable()
-        for _ in range(6):
-            rig.send_can_twist(Twist(0.2))
-            rig.advance(0.05)
-        drv = next(d for d, _ in rig.gw.drives.groups if isinstance(d, Cia402Driver))
-        i = next(k for k, m in enumerate(drv.motors) if not m.steering)
+    with rolling_tricycle("cia402-bad-statusword", 0.2) as (rig, drv, i):
         node = drv.motors[i].node_id
         layout = drv.codec.nodes[node]
         before = drv.feedback(i)

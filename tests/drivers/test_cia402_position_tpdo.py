@@ -6,26 +6,17 @@ OFFLINE within its ``liveness_s``, the gateway stops, and the simulated wheel st
 
 from __future__ import annotations
 
-from drivers.cia402 import Cia402Driver
 from drivers.cia402.enums import PDO_COB_INVALID
 from drivers.cia402.sim import Cia402Simulator
 from gateway.core.types import DriveState, GatewayState, Twist
-from tests.conftest import CONFIG_DIR
-from tests.e2e_helpers import Rig, virtual_config
+from tests.drivers.cia402_bench import rolling_tricycle
 
 #: TPDO3's communication parameter: statusword + position in the driver's default layout.
 POSITION_TPDO_COMM = 0x1802
 
 
 def test_a_drive_whose_position_tpdo_stops_goes_offline_and_the_wheel_stops() -> None:
-    cfg = virtual_config(CONFIG_DIR / "tricycle.yaml", "cia402-position-tpdo")
-    with Rig(cfg) as rig:
-        rig.enable()
-        for _ in range(10):
-            rig.send_can_twist(Twist(0.3))
-            rig.advance(0.05)
-        drv = next(d for d, _ in rig.gw.drives.groups if isinstance(d, Cia402Driver))
-        i = next(k for k, m in enumerate(drv.motors) if not m.steering)
+    with rolling_tricycle("cia402-position-tpdo", 0.3) as (rig, drv, i):
         (sim,) = rig.drive_sims
         assert isinstance(sim, Cia402Simulator)
         assert abs(sim.wheel_velocity_rad_s) > 1.0
