@@ -40,8 +40,6 @@ class Axis:
     #: The last velocity (wheel rad/s) and angle (rad) heard, ``None`` before the first.
     velocity: float | None = None
     position: float | None = None
-    #: When :attr:`position` was heard (s).
-    position_s: float = 0.0
     #: The last raw fault code heard (0: healthy).
     fault_code: int = 0
     #: The first raw position sample, the last one, and the raw steps counted since the first.

@@ -79,7 +79,7 @@ command, mode and enable messages it sends, named as in the DBC file
 from __future__ import annotations
 
 import logging
-from typing import TYPE_CHECKING, ClassVar
+from typing import TYPE_CHECKING, ClassVar, cast
 
 from drivers.dbc.axis import Axis
 from drivers.dbc.binding import bind_motor
@@ -282,12 +282,12 @@ class DbcDriver(MotorDriver[DbcOptions]):
             self.live.heard(i, 0, timestamp_s)
         if position is not None:
             ax.position = ax.angle(raw[position])
-            ax.position_s = timestamp_s
             self.live.heard(i, 1, timestamp_s)
         # Once both were heard, stamped with the position's time (a velocity message apart
-        # refreshes the speed only).
+        # refreshes the speed only): when its stream was heard.
         if ax.velocity is not None and ax.position is not None:
-            self.store_feedback(i, WheelFeedback(ax.position, ax.velocity, ax.position_s), None)
+            pos_s = cast("float", self.live.times[i][1])
+            self.store_feedback(i, WheelFeedback(ax.position, ax.velocity, pos_s), None)
 
     def _fault(self, i: int, ax: Axis, signal: Any, code: int) -> None:
         """A new fault code of motor ``i`` (in the cantools ``signal``): its flags and text;

@@ -40,7 +40,7 @@ from typing import TYPE_CHECKING
 
 from gateway.apps.replay.gateway_pose import GatewayPoses
 from gateway.apps.replay.results import ReplaySummary, Sample
-from gateway.apps.replay.rounds import Rounds
+from gateway.apps.replay.rounds import STAMP_SLACK_S, Rounds
 from gateway.apps.replay.timeline import MAX_GAP_S, Timeline
 from gateway.core.errors import DecodeError, KinematicsError
 from gateway.core.kinematics import Odometry
@@ -72,9 +72,6 @@ log = logging.getLogger(__name__)
 
 #: Default log time after which a pending update waits no longer for every wheel, s.
 DEFAULT_MAX_INTERVAL_S = 0.1
-#: Slack for float rounding of time stamps (microseconds in the log; float64 epoch times
-#: resolve 0.24 us), s.
-_STAMP_SLACK_S = 1e-6
 
 
 class Replay:
@@ -140,9 +137,6 @@ class Replay:
         self._n_needed = len(self._needed)
         self._feed = OdomFeed(self._needed)
         self._rounds = Rounds(self._needed)
-        # Frames the drivers took since the last round: every driven wheel having a new
-        # position needs at least one each, so fewer spares the look at every wheel.
-        self._taken = 0
         groups = self.drives.groups
         self._on_frame = groups[0][0].on_frame if len(groups) == 1 else self.drives.on_frame
         self._pending = False
@@ -177,10 +171,11 @@ class Replay:
         out = None
         if t != self._group_s:
             # Cheap tests first: every driven wheel needs a frame of its own to be new.
+            rounds = self._rounds
             if self._pending and (
-                self._taken >= self._n_needed
-                or self._rounds.held is not None
-                or (self._group_s or 0.0) - self._last_update_s + _STAMP_SLACK_S
+                rounds.taken >= self._n_needed
+                or rounds.held is not None
+                or (self._group_s or 0.0) - self._last_update_s + STAMP_SLACK_S
                 >= self.max_interval_s
             ):
                 out = self._update(final=False)
@@ -193,7 +188,7 @@ class Replay:
         frame = entry.frame
         if self._on_frame(frame):
             self._motor_frames += 1
-            self._taken += 1
+            self._rounds.taken += 1
             self._pending = True
         elif (
             self._wg is not None
@@ -224,16 +219,12 @@ class Replay:
         group = self._group_s if self._group_s is not None else 0.0
         elapsed = group - self._last_update_s
         rounds = self._rounds
-        if not final and elapsed + _STAMP_SLACK_S < self.max_interval_s:
-            if rounds.held is None and self._taken < self._n_needed:
-                return None
-            before, taken = rounds.held_taken, self._taken
-            found = rounds.due(self.drives.feedback_by_wheel(), taken)
+        if not final and elapsed + STAMP_SLACK_S < self.max_interval_s:
+            found = rounds.due(self.drives.feedback_by_wheel())
             if found is None:
                 return None
             feedback, later = found, True
-            self._taken = taken - before
-            if elapsed + _STAMP_SLACK_S < self.min_interval_s:
+            if elapsed + STAMP_SLACK_S < self.min_interval_s:
                 return None  # too soon: passed over (its positions are in the next update's)
         else:  # the longest interval is over (a wheel fell silent), or the log: the round
             # held, else what there is
@@ -242,9 +233,8 @@ class Replay:
             later = held is not None
             feedback = held if held is not None else now
             rounds.take(feedback)
-            self._taken = 0
             if later:
-                rounds.hold_if_new(now, 0)
+                rounds.hold_if_new(now)
         self._pending = later  # (the positions that came after a held round)
         if any(feedback[i] is None for i in self._needed):
             return None  # not started: some driven wheel has not reported yet

@@ -15,7 +15,7 @@ distance and 0.19 rad of heading off on the way.  Controllers that send at their
 ODrives do, pair with their neighbours closest in time.
 
 Pure: the caller passes every wheel's latest feedback (stamped with its position's time,
-:class:`~gateway.core.types.WheelFeedback`) and the count of frames the drivers took.
+:class:`~gateway.core.types.WheelFeedback`) and counts the frames the drivers take.
 """
 
 from __future__ import annotations
@@ -27,11 +27,11 @@ if TYPE_CHECKING:
 
     from gateway.core.types import WheelFeedback
 
-__all__ = ["Rounds"]
+__all__ = ["STAMP_SLACK_S", "Rounds"]
 
-#: Spreads closer than this are alike (microseconds in the log; float64 epoch times resolve
-#: 0.24 us), s.
-_SLACK_S = 1e-6
+#: Slack for float rounding of time stamps (microseconds in the log; float64 epoch times
+#: resolve 0.24 us), s: spreads closer than this are alike.
+STAMP_SLACK_S = 1e-6
 
 
 def _times(feedback: Sequence[WheelFeedback | None], wheels: Sequence[int]) -> list[float]:
@@ -45,7 +45,7 @@ class Rounds:
     :param needed: the model indices of the driven wheels.
     """
 
-    __slots__ = ("held", "held_spread", "held_taken", "held_times", "last", "needed")
+    __slots__ = ("held", "held_spread", "held_taken", "held_times", "last", "needed", "taken")
 
     def __init__(self, needed: Sequence[int]) -> None:
         self.needed = tuple(needed)
@@ -58,43 +58,44 @@ class Rounds:
         self.held_times: list[float] = []
         self.held_spread = 0.0
         self.held_taken = 0
+        #: The frames the drivers took since the last round (the caller counts them): every
+        #: driven wheel having a new position needs one each, so fewer spare the look.
+        self.taken = 0
 
-    def due(self, feedback: list[WheelFeedback | None],
-            taken: int) -> list[WheelFeedback | None] | None:
-        """The round due at this ``feedback`` (``taken`` frames since the last round), if
-        any: the one held, when this one spreads over no less time (this one is held in turn
-        when every driven wheel has a newer position in it)."""
-        needed = self.needed
+    def due(self, feedback: list[WheelFeedback | None]) -> list[WheelFeedback | None] | None:
+        """The round due at this ``feedback``, if any: the one held, when this one spreads
+        over no less time (this one is held in turn when every driven wheel has a newer
+        position in it)."""
         held = self.held
         if held is None:
-            self.hold_if_new(feedback, taken)
+            self.hold_if_new(feedback)
             return None
-        times = _times(feedback, needed)
+        times = _times(feedback, self.needed)
         if times == self.held_times:
             return None  # no new position since
-        if max(times) - min(times) + _SLACK_S < self.held_spread:
-            self._hold(feedback, times, taken)  # closer in time
+        if max(times) - min(times) + STAMP_SLACK_S < self.held_spread:
+            self._hold(feedback, times)  # closer in time
             return None
-        self.take(held)
-        self.hold_if_new(feedback, taken - self.held_taken)
+        self.take(held, self.taken - self.held_taken)
+        self.hold_if_new(feedback)
         return held
 
-    def take(self, feedback: list[WheelFeedback | None]) -> None:
-        """``feedback`` is a round: from here on, every driven wheel needs a position newer
-        than in it (nothing is held)."""
+    def take(self, feedback: list[WheelFeedback | None], taken_since: int = 0) -> None:
+        """``feedback`` is a round, ``taken_since`` frames ago: from here on, every driven
+        wheel needs a position newer than in it (nothing is held)."""
         self.held = None
         self.last = [feedback[i] for i in self.needed]
+        self.taken = taken_since
 
-    def hold_if_new(self, feedback: list[WheelFeedback | None], taken: int) -> None:
+    def hold_if_new(self, feedback: list[WheelFeedback | None]) -> None:
         """Hold ``feedback`` if every driven wheel has a newer position in it than at the last
         round."""
         for i, before in zip(self.needed, self.last, strict=True):
             fb = feedback[i]
             if fb is None or (before is not None and fb.timestamp_s <= before.timestamp_s):
                 return  # wait until every driven wheel has a new position
-        self._hold(feedback, _times(feedback, self.needed), taken)
+        self._hold(feedback, _times(feedback, self.needed))
 
-    def _hold(self, feedback: list[WheelFeedback | None], times: list[float],
-              taken: int) -> None:
+    def _hold(self, feedback: list[WheelFeedback | None], times: list[float]) -> None:
         self.held, self.held_times, self.held_spread = feedback, times, max(times) - min(times)
-        self.held_taken = taken
+        self.held_taken = self.taken
