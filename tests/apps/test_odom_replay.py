@@ -23,6 +23,7 @@ from gateway.cli.commands.odom import command
 from gateway.config import load_config
 from gateway.core.kinematics import RobotModel, se2_exp
 from gateway.core.types import Twist
+from gateway.wire.candump import parse_line
 from tests.apps import odom_helpers
 from tests.apps.odom_helpers import (
     DIFF,
@@ -177,6 +178,20 @@ def test_frames_with_one_time_stamp_make_one_update() -> None:
     log = [line(k * 0.01, node, k * 0.1 * (1 if node == 1 else -1))
            for k in range(5) for node in (1, 2)]
     assert times(Replay(cfg, 0.0), log) == [0.0, 0.01, 0.02, 0.03, 0.04]
+
+
+def test_a_cycle_of_one_stamp_is_a_round_at_once() -> None:
+    # A --record log stamps a cycle's frames alike: nothing closer in time can follow, so its
+    # update comes at the start of the next cycle, not one later (the replay's pose where the
+    # gateway's own pose frames stand would lag a cycle behind them).
+    cfg = load_config(DIFF)
+    replay = Replay(cfg, 0.0)
+    got = []
+    for n, text in enumerate(line(k * 0.01, node, k * 0.1 * (1 if node == 1 else -1))
+                             for k in range(5) for node in (1, 2)):
+        sample = replay.feed(parse_line(text, n + 1))
+        got.append(None if sample is None else round(sample.time_s, 6))
+    assert got == [None, None, 0.0, None, 0.01, None, 0.02, None, 0.03, None]
 
 
 def test_least_interval_throttles_updates_without_losing_motion() -> None:

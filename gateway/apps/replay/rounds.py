@@ -69,7 +69,13 @@ class Rounds:
         held = self.held
         if held is None:
             self.hold_if_new(feedback)
-            return None
+            held = self.held
+            if held is None or self.held_spread > STAMP_SLACK_S:
+                return None
+            # In step already (a cycle's frames of a ``--record`` log share one stamp):
+            # nothing closer can come, so it is not held for the next position.
+            self.take(held)
+            return held
         times = _times(feedback, self.needed)
         if times == self.held_times:
             return None  # no new position since
