@@ -46,8 +46,8 @@ Behaviour that follows from the protocol:
   firmware ignore commands for ``m_fault_stop_time_ms`` and then clears itself; the gateway sees
   only the motor not following.  What the driver does detect is silence: a motor whose STATUS
   or STATUS_5 stream is older than ``liveness_s`` is OFFLINE.  FAULT is never reported.
-* **Controller reset.**  A power-cycled VESC restarts its tachometer at 0; the protocol does not
-  say so, and the unwrap takes the jump as motion.  Re-create the driver after a reset.
+* **Controller reset.**  A power-cycled VESC restarts its tachometer at 0 unannounced; the
+  odometry takes the step for a jump, not motion (:mod:`gateway.core.odom_feed`).
 """
 
 from __future__ import annotations

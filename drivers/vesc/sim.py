@@ -36,6 +36,8 @@ override them):
   acceleration limit); a real shorted-phase brake is weaker at low speed.
 * The tachometer counts 60-degree steps of the electrical angle (6 per electrical revolution),
   is an int32 that wraps, and starts at ``initial_tacho`` so tests can begin near the wrap.
+  :meth:`VescSimulator.power_cycle` zeroes it as every boot does (``mcpwm_foc_init``) and
+  releases the motor; the status frames go on at once (the boot's silence: ``SILENT``).
 * SET_CURRENT and SET_CURRENT_BRAKE below ``min_current_a`` (``cc_min_current``, 0.05 A)
   release the motor; above it SET_CURRENT drives toward the no-load speed (``max_rpm``) and
   SET_CURRENT_BRAKE brakes to a stop, both with an acceleration of ``accel_per_a_rad_s2`` per
@@ -129,13 +131,9 @@ def simulator_for(motor: MotorConfig) -> VescSimulator:
     """
     o = VescOptions.from_block(motor.options, f"motor {motor.wheel!r}")
     rate = o.status_rate_hz
-    return VescSimulator(
-        motor,
-        status_msgs=STATUS_1 | STATUS_5 if rate else FACTORY_STATUS_MSGS,
-        status_rate_hz=rate or FACTORY_STATUS_RATE_HZ,
-        timeout_s=o.timeout_s,
-        min_erpm=o.min_erpm,
-    )
+    return VescSimulator(motor, status_msgs=STATUS_1 | STATUS_5 if rate else FACTORY_STATUS_MSGS,
+                         status_rate_hz=rate or FACTORY_STATUS_RATE_HZ, timeout_s=o.timeout_s,
+                         min_erpm=o.min_erpm)
 
 
 class VescSimulator(DeviceSimulator):
@@ -307,10 +305,10 @@ class VescSimulator(DeviceSimulator):
 
     def _ramp(self, dt_s: float) -> None:
         """``utils_step_towards`` the command by ``s_pid_ramp_erpms_s * dt``."""
-        if self.mode not in _SPEED_MODES or self.set_point_erpm == self.command_erpm:
+        sp, cmd = self.set_point_erpm, self.command_erpm
+        if self.mode not in _SPEED_MODES or sp == cmd:
             return
         step = self.ramp_erpm_s * dt_s
-        sp, cmd = self.set_point_erpm, self.command_erpm
         self.set_point_erpm = min(sp + step, cmd) if sp < cmd else max(sp - step, cmd)
         self._follow_set_point()
 
@@ -320,9 +318,8 @@ class VescSimulator(DeviceSimulator):
         last = self._last_tick_s
         if last is not None and now_s > last:
             t = last
-            while self.mode in _SPEED_MODES and self.set_point_erpm != self.command_erpm and (
-                now_s - t > PID_PERIOD_S * (1.0 + 1e-9)
-            ):
+            while (self.mode in _SPEED_MODES and self.set_point_erpm != self.command_erpm
+                   and now_s - t > PID_PERIOD_S * (1.0 + 1e-9)):
                 self._ramp(PID_PERIOD_S)  # the speed loop steps its set point, then runs
                 if not self.faults & SimFault.STALL:  # (the base holds a stalled shaft)
                     self.model.step(PID_PERIOD_S)
@@ -330,6 +327,13 @@ class VescSimulator(DeviceSimulator):
             self._last_tick_s = t
             self._ramp(now_s - t)
         return super().tick(now_s)
+
+    def power_cycle(self) -> None:
+        """Lose power and boot again (see the module's doc): released, the tachometer at 0."""
+        self._release()
+        self.command_erpm = self.set_point_erpm = 0.0
+        self._last_cmd_s, self._initial_tacho = None, 0
+        self._steps0 = self._steps_now()
 
     def _release(self) -> None:
         self.mode = SimMode.RELEASED
@@ -352,12 +356,9 @@ class VescSimulator(DeviceSimulator):
             log.debug("simulated VESC %d: fault cleared itself", self.node_id)
             self.clear(SimFault.FAULT)
             self._fault_since_s = None
-        if (
-            self.mode != SimMode.RELEASED
-            and self.timeout_s > 0.0
-            and self._last_cmd_s is not None
-            and now_s - self._last_cmd_s > self.timeout_s
-        ):
+        last_cmd = self._last_cmd_s
+        if (self.mode != SimMode.RELEASED and self.timeout_s > 0.0 and last_cmd is not None
+                and now_s - last_cmd > self.timeout_s):
             log.debug("simulated VESC %d: command timeout, motor released", self.node_id)
             self._release()
         current_a = self._estimate_current(now_s)
@@ -382,8 +383,7 @@ class VescSimulator(DeviceSimulator):
             return self._current_a
         if prev is None or now_s <= prev[0]:
             return 0.0
-        accel = (v - prev[1]) / (now_s - prev[0])
-        return accel / self.accel_per_a_rad_s2
+        return (v - prev[1]) / (now_s - prev[0]) / self.accel_per_a_rad_s2  # accel / (a/A)
 
     def _status_frames(self, current_a: float) -> list[Frame]:
         erpm = min(max(self.erpm, -_MAX_ERPM), _MAX_ERPM)

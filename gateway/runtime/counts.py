@@ -35,3 +35,6 @@ class LoopCounts:
     errors_not_sent: int = 0
     #: Odometry updates skipped: the kinematics refused the wheels' feedback.
     odometry_errors: int = 0
+    #: Steps of a wheel's position the odometry took for jumps, not motion (a controller
+    #: that restarted its count, a corrupt value: :mod:`gateway.core.odom_feed`).
+    position_jumps: int = 0

@@ -87,7 +87,7 @@ class Gateway:
         self.supervisor.tracking.dead_bands = self.drives.uncontrolled_bands()
         self.odometry = Odometry(self.model)
         self._driven = tuple(i for i, m in enumerate(config.motors) if m is not None)
-        self.odom_feed = OdomFeed(self._driven)
+        self.odom_feed = OdomFeed(self._driven, config.limits.max_wheel_rad_s)
         self.wg = WgCodec(config.loop.can_ids)
         self.timer = timer if timer is not None else LoopTimer(config.loop.rate_hz)
         self.period_s = 1.0 / config.loop.rate_hz
@@ -119,8 +119,8 @@ class Gateway:
         self._prev_limited = False  # prev came out of the limits (not an e-stop's jump)
         self._armed = False
         self._last_cycle_s: float | None = None
-        #: ``time.perf_counter()`` when the last cycle's burst of wheel frames was sent (before
-        #: odometry and publishing): where the daemon's twist-to-frames latency ends.
+        #: ``time.perf_counter()`` when the last cycle's burst of wheel frames went (before
+        #: odometry and publishing): the end of the daemon's twist-to-frames latency.
         self.burst_sent_s = 0.0
         #: The longest time between two cycles' bursts (s): a loop stalled for seconds shows
         #: here as seconds, whatever the deadline statistics make of the skipped deadlines.
@@ -136,8 +136,8 @@ class Gateway:
                                     self.twist, self.report_error)
         #: The log lines of the frames the drivers rejected.
         self.rejections = RejectionLog(self.drives.groups)
-        # The log throttles of projected and refused twists, by source and kind.
-        self._twist_logs: dict[str, LogThrottle] = {}
+        # The log throttles of projected and refused twists (by source and kind), of jumps.
+        self._logs: dict[str, LogThrottle] = {}
 
     # ----------------------------------------------------------------- inputs
 
@@ -153,22 +153,21 @@ class Gateway:
         if isinstance(result, Accepted) and result.ik is not None:
             self._remember(result.twist, steer, result.ik)
         if isinstance(result, Accepted) and result.projected and result.error is not None:
-            self._log_twist(logging.WARNING, source, "projected", str(result.error), now_s)
+            self._log(logging.WARNING, f"{source.value} twist projected", str(result.error), now_s)
         elif isinstance(result, Rejection):
-            self._log_twist(logging.INFO, source, "refused", result.message, now_s)
+            self._log(logging.INFO, f"{source.value} twist refused", result.message, now_s)
         return result
 
-    def _log_twist(self, level: int, source: Source, what: str, text: str,
-                   now_s: float) -> None:
-        """Log a projected or refused twist, throttled per source and kind: a client that
-        pipelines them costs the loop a line per 5 s, not one per request."""
-        key = f"{source.value} twist {what}"
-        throttle = self._twist_logs.get(key)
+    def _log(self, level: int, key: str, text: str, now_s: float, what: str = "twists") -> None:
+        """Log ``key: text``, throttled per key (a projected or refused twist, by source; a
+        position jump): a client that pipelines them costs the loop a line per 5 s, not one
+        per request."""
+        throttle = self._logs.get(key)
         if throttle is None:
-            throttle = self._twist_logs[key] = LogThrottle(LOG_EVERY_S)
+            throttle = self._logs[key] = LogThrottle(LOG_EVERY_S)
         count = throttle.note(now_s)
         if count is not None:
-            log.log(level, "%s: %s%s", key, text, since_last(count, "such twists"))
+            log.log(level, "%s: %s%s", key, text, since_last(count, f"such {what}"))
 
     def report_error(
         self,
@@ -326,7 +325,13 @@ class Gateway:
         return result
 
     def _integrate(self) -> None:
-        got = self.odom_feed.sample(self.drives.feedback_by_wheel())
+        feed = self.odom_feed
+        jumps = feed.jumps
+        got = feed.sample(self.drives.feedback_by_wheel())
+        if feed.jumps != jumps:
+            self.counts.position_jumps += feed.jumps - jumps
+            self._log(logging.WARNING, "odometry", feed.last_jump_text(self.model.names),
+                      feed.stamp_s, "position jumps")
         if got is None:
             return
         try:

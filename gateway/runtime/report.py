@@ -96,6 +96,7 @@ def event_counts(loop: LoopCounts, edge: EdgeCounts, sup: SupervisorCounts
         "cmd_timeouts": sup.cmd_timeouts,
         "estops": sup.estops,
         "errors_not_sent": loop.errors_not_sent,
+        "position_jumps": loop.position_jumps,
     })
 
 

@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING
 import pytest
 import yaml
 
+from gateway.apps.replay import candump_report
 from gateway.apps.replay.replay import Replay, SteeringSource, fixed_subset, reconstruct_steer
 from gateway.cli.commands.odom import command
 from gateway.config import load_config
@@ -337,3 +338,32 @@ def test_a_log_without_pose_frames_has_no_check() -> None:
                                 line(0.1, 2, 1.0)]):
         pass
     assert replay.summary().pose_check is None
+
+
+def test_a_count_that_restarts_or_a_corrupt_value_is_no_motion_of_the_replay() -> None:
+    """Driving straight at 5 rad/s, rounds 10 ms apart: the left ODrive's count restarts at 0
+    after 1 s (a reboot), the right one sends 1e30 turns once.  The replay goes on from where
+    each wheel was: three jumps, the distance short by at most three rounds' travel."""
+    cfg = load_config(DIFF)
+    r = cfg.model.wheels[0].radius
+    speed, period = 5.0, 0.01
+    log = []
+    for k in range(300):
+        t = k * period
+        turns = speed * t / (2 * math.pi)
+        left = turns if k < 100 else speed * (t - 1.0) / (2 * math.pi)
+        right = 1e30 if k == 150 else turns
+        log += [line(t, 1, left), line(t + 0.0005, 2, -right)]
+    replay = Replay(cfg)
+    for _ in replay.feed_lines(log):
+        pass
+    s = replay.summary()
+    assert s.position_jumps == 3
+    true_distance = speed * 299 * period * r
+    assert true_distance - 3 * speed * period * r < s.distance_m < true_distance
+    assert s.pose.x_m == pytest.approx(s.distance_m, rel=1e-3)
+    assert s.last_jump.startswith("wheel 'right': its position stepped ")
+    text = candump_report.warnings(cfg, s)
+    assert ("3 steps of a wheel's position went beyond what the wheel can turn and were not "
+            "taken for motion (a controller that restarted its count, or a corrupt value); "
+            f"the last: {s.last_jump}") in text

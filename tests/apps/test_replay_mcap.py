@@ -9,6 +9,7 @@ a known motion.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import re
@@ -270,3 +271,20 @@ def test_messages_that_are_not_json_objects_are_skipped(runner: CliRunner,
     assert "2 messages on /wheels, /steering or /odom were not JSON objects" in result.stderr
     assert "recorded: none (no /odom messages" in result.stdout
     assert "(the origin: no /odom before the first /wheels)" in result.stdout
+
+
+def test_a_corrupt_wheel_angle_is_no_motion_of_the_replay(runner: CliRunner,
+                                                           tmp_path: Path) -> None:
+    """One snapshot with a wheel angle of 1e30 rad: the replay takes neither step to it nor
+    back (as the daemon's loop did not), and says so."""
+    snapshots = drive(MECANUM)
+    bad = snapshots[25]
+    first = dataclasses.replace(bad.wheels[0], position_rad=1e30)
+    snapshots[25] = dataclasses.replace(bad, wheels=(first, *bad.wheels[1:]))
+    path = record(tmp_path / "jump.mcap", MECANUM, snapshots)
+    data = summary(runner, path)
+    assert data["position_jumps"] == 2
+    # One wheel of four misses two steps of 20 ms at 4 rad/s: at most a quarter of 8 mm.
+    assert 0.2 - 0.002 - 1e-9 < data["distance_m"] < 0.2 - 0.001  # type: ignore[operator]
+    result = odom(runner, path)
+    assert "2 steps of a wheel's position went beyond what the wheel can turn" in result.output

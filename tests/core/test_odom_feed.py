@@ -6,7 +6,9 @@ from __future__ import annotations
 import math
 import random
 
-from gateway.core.odom_feed import OdomFeed
+import pytest
+
+from gateway.core.odom_feed import JUMP_SLACK_S, JUMP_SPEED_FACTOR, OdomFeed, PositionJump
 from gateway.core.types import WheelFeedback as Fb
 
 
@@ -75,3 +77,106 @@ def test_the_feed_is_the_loops_rule_and_the_replays() -> None:
                 replay_stamp, expected = replay_rule(replay_stamp, feedback, driven)
                 assert replay_feed.sample(list(feedback)) == expected
                 assert replay_feed.stamp_s == replay_stamp
+
+
+# ----------------------------------------------------------------- position jumps
+
+#: Top speeds of three wheels (rad/s): the jump bound is JUMP_SPEED_FACTOR times these.
+TOP = (10.0, 10.0, math.inf)
+
+
+def test_a_step_beyond_what_the_wheel_can_turn_is_a_jump() -> None:
+    rate = JUMP_SPEED_FACTOR * TOP[0]
+    bound = rate * (0.01 + JUMP_SLACK_S)
+    for step, jump in ((0.999 * bound, False), (-0.999 * bound, False),
+                       (1.001 * bound, True), (-1.001 * bound, True)):
+        feed = OdomFeed((0, 1), TOP)
+        assert feed.sample([Fb(1.0, 0.0, 0.0), Fb(2.0, 0.0, 0.0), None]) == (
+            0.0, [1.0, 2.0, None])
+        got = feed.sample([Fb(1.0 + step, 0.0, 0.01), Fb(2.5, 0.0, 0.01), None])
+        assert got == (0.01, [1.0 if jump else 1.0 + step, 2.5, None])
+        assert feed.jumps == jump
+        if jump:
+            assert feed.last_jump == PositionJump(0, step, 0.01, rate * (0.01 + JUMP_SLACK_S),
+                                                  0.01)
+        # A wheel without a top speed never jumps.
+        assert feed.sample([Fb(1.0 + step, 0.0, 0.02), Fb(2.5, 0.0, 0.01),
+                            Fb(1e300, 0.0, 0.02)]) == (0.02, [1.0 if jump else 1.0 + step,
+                                                              2.5, 1e300])
+        assert feed.jumps == jump
+
+
+def test_the_bound_grows_with_the_time_between_two_positions() -> None:
+    """A wheel silent for 2 s may have turned 2.1 s at three times its top speed."""
+    feed = OdomFeed((0,), TOP[:1])
+    feed.sample([Fb(0.0, 0.0, 0.0)])
+    assert feed.sample([Fb(60.0, 0.0, 2.0)]) == (2.0, [60.0])  # bound 63
+    assert feed.jumps == 0
+    assert feed.sample([Fb(124.0, 0.0, 4.0)]) == (4.0, [60.0])  # 64 in 2 s: a jump
+    assert feed.jumps == 1
+    assert feed.sample([Fb(126.0, 0.0, 4.1)]) == (4.1, [62.0])  # 2 < 30 * 0.2: motion
+
+
+def test_a_corrupt_value_and_back_leave_the_position_where_it_was() -> None:
+    """1e30 then true values again: neither step is motion; the positions after it go on
+    from where the wheel was, exactly, and move as the wheel does."""
+    feed = OdomFeed((0, 1), TOP[:2])
+    out = []
+    for k, p in enumerate((5.0, 5.01, 1e30, 1e30, 5.04, 5.05, 4.0e30, 5.07)):
+        got = feed.sample([Fb(p, 0.0, 0.01 * k), Fb(-3.0, 0.0, 0.01 * k)])
+        assert got is not None
+        out.append(got[1][0])
+    assert out == [5.0, 5.01, 5.01, 5.01, 5.01, 5.01 + (5.05 - 5.04), 5.01 + (5.05 - 5.04),
+                   5.01 + (5.05 - 5.04)]
+    assert feed.jumps == 4
+    last = feed.last_jump
+    assert last is not None and (last.wheel, last.step_rad) == (0, 5.07 - 4.0e30)
+
+
+def test_a_count_that_restarts_at_zero_goes_on_from_where_it_was() -> None:
+    feed = OdomFeed((0,), TOP[:1])
+    feed.sample([Fb(5000.0, 0.0, 0.0)])
+    feed.sample([Fb(5001.0, 0.0, 0.1)])
+    assert feed.sample([Fb(0.0, 0.0, 0.6)]) == (0.6, [5001.0])  # the controller restarted
+    assert feed.sample([Fb(2.0, 0.0, 0.7)]) == (0.7, [5003.0])  # and the wheel turns on
+    assert feed.jumps == 1
+
+
+@pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf])
+def test_a_position_that_is_not_finite_passes_for_the_odometry_to_name(bad: float) -> None:
+    feed = OdomFeed((0,), TOP[:1])
+    feed.sample([Fb(1.0, 0.0, 0.0)])
+    got = feed.sample([Fb(bad, 0.0, 0.01)])
+    assert got is not None
+    p = got[1][0]
+    assert p is not None and (p == bad or (math.isnan(bad) and math.isnan(p)))
+    # The step after it is not checked (the odometry skips it too): no jump, no poison.
+    assert feed.sample([Fb(1.2, 0.0, 0.02)]) == (0.02, [1.2])
+    assert feed.jumps == 0
+
+
+def test_steps_inside_the_bound_pass_bit_for_bit() -> None:
+    """Over random feedback (as above) whose steps stay inside the bound, the feed with top
+    speeds gives the very samples of the feed without: steps beyond what the wheel turns in
+    the slack (the slow path) included."""
+    rng = random.Random(7)
+    for _ in range(100):
+        n = rng.randrange(1, 5)
+        driven = tuple(range(n))
+        plain, bounded = OdomFeed(driven), OdomFeed(driven, [rng.uniform(60.0, 100.0)] * n)
+        feedback: list[Fb | None] = [None] * n
+        t = 0.0
+        for _ in range(60):
+            dt = rng.choice((0.001, 0.01, 1.0))
+            t += dt
+            for i in range(n):
+                if rng.random() < 0.5:
+                    # Steps of at most 9 rad (two before a sample stay inside the 18 rad
+                    # of the slack at 180 rad/s), or 98 rad after 1 s (the bound is then
+                    # 198 rad: the slow path).
+                    before = feedback[i]
+                    p = rng.uniform(-5, 5) if before is None else (
+                        before.position_rad + rng.uniform(-1, 1) * (9.0 + 89.0 * (dt == 1.0)))
+                    feedback[i] = Fb(p, 0.0, t)
+            assert bounded.sample(list(feedback)) == plain.sample(list(feedback))
+        assert bounded.jumps == 0

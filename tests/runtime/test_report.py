@@ -43,7 +43,7 @@ LEGACY_EVENTS = (
     "infeasible", "projected", "rejected", "faults", "cmd_timeouts", "estops",
 )
 #: The event counters added since, after the legacy ones in the status.
-ADDED_EVENTS = ("errors_not_sent",)
+ADDED_EVENTS = ("errors_not_sent", "position_jumps")
 
 
 def legacy_counts(daemon: Daemon) -> dict[str, int]:

@@ -27,6 +27,7 @@ from typing import TYPE_CHECKING
 
 from gateway.apps.replay.mcap_report import pose_text
 from gateway.core.numfmt import fixed, short
+from gateway.core.odom_feed import jumps_warning
 from gateway.core.steer_log import SteeringSource
 
 if TYPE_CHECKING:
@@ -111,6 +112,7 @@ def summary_json(cfg: GatewayConfig, log_path: str, s: ReplaySummary, wall_s: fl
                       "last": r.last} for r in s.rejections],
         "updates": s.updates,
         "skipped_updates": s.skipped_updates,
+        "position_jumps": s.position_jumps,
         "min_interval_s": replay.min_interval_s,
         "start_s": s.start_s,
         "duration_s": s.duration_s,
@@ -189,6 +191,8 @@ def warnings(cfg: GatewayConfig, s: ReplaySummary, foreign: Foreign | None = Non
     if s.skipped_updates:
         out.append(f"{s.skipped_updates} odometry intervals could not be solved (too few "
                    "wheels with feedback); their motion is missing")
+    if s.position_jumps:
+        out.append(jumps_warning(s.position_jumps, s.last_jump))
     check = s.pose_check
     if check is not None:
         allowed = max(POSE_TOLERANCE_M, POSE_TOLERANCE_RATIO * s.distance_m)

@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING
 
 from gateway.apps.replay.mcap_source import pose_difference
 from gateway.core.numfmt import fixed
+from gateway.core.odom_feed import jumps_warning
 from gateway.core.steer_log import SteeringSource
 from gateway.runtime.liveview_channels import ODOM_TOPIC, STEERING_TOPIC, WHEELS_TOPIC
 
@@ -99,6 +100,7 @@ def summary_json(cfg: GatewayConfig, path: str, s: McapSummary,
         "messages": dict(s.messages),
         "updates": s.updates,
         "skipped_updates": s.skipped_updates,
+        "position_jumps": s.position_jumps,
         "start_s": s.start_s,
         "duration_s": s.duration_s,
         "replay_s": wall_s,
@@ -131,6 +133,8 @@ def warnings(cfg: GatewayConfig, path: str, s: McapSummary) -> list[str]:
     if s.skipped_updates:
         out.append(f"{s.skipped_updates} odometry intervals could not be solved (too few "
                    "wheels with an angle); their motion is missing")
+    if s.position_jumps:
+        out.append(jumps_warning(s.position_jumps, s.last_jump))
     return out
 
 

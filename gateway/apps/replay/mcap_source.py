@@ -37,8 +37,9 @@ from typing import IO, TYPE_CHECKING, Any
 from gateway.apps.replay.replay import Sample
 from gateway.core.errors import GatewayError, KinematicsError
 from gateway.core.kinematics import Odometry, OdometryState, Pose
+from gateway.core.odom_feed import OdomFeed
 from gateway.core.steer_log import SteeringSource, fixed_subset
-from gateway.core.types import Twist
+from gateway.core.types import Twist, WheelFeedback
 from gateway.runtime.liveview_channels import (
     ODOM_TOPIC,
     STEERING_TOPIC,
@@ -110,6 +111,9 @@ class McapSummary:
     :param damage: why reading stopped before the end of the file ('' when it did not).
     :param unreadable: messages on the replayed topics that were not JSON objects (skipped).
     :param from_recording: whether ``start`` is the recording's pose (else the origin).
+    :param position_jumps: steps of a wheel's angle taken for jumps of its count, not motion
+        (:mod:`gateway.core.odom_feed`, as the daemon's loop).
+    :param last_jump: the last of them, described (empty without any).
     """
 
     pose: Pose
@@ -128,6 +132,8 @@ class McapSummary:
     damage: str
     unreadable: int = 0
     from_recording: bool = False
+    position_jumps: int = 0
+    last_jump: str = ""
 
     @property
     def duration_s(self) -> float:
@@ -147,6 +153,7 @@ class McapReplay:
         self.config = config
         model = self.model = config.model
         self._driven = tuple(i for i, m in enumerate(config.motors) if m is not None)
+        self._feed = OdomFeed(self._driven, config.limits.max_wheel_rad_s)
         self._drives: Any = None
         covered = {name for a in config.steering for name in a.steers}
         steered = {w.name for w in model.wheels if w.steered}
@@ -295,6 +302,11 @@ class McapReplay:
                 w = {}
             positions.append(num(w.get("position_rad")))
             speeds.append(num(w.get("measured_rad_s")))
+        feed, jumps = self._feed, self._feed.jumps
+        positions = feed.positions([None if p is None else WheelFeedback(p, 0.0, t)
+                                    for p in positions])
+        if feed.jumps != jumps:
+            log.warning("odometry at %.6f s: %s", t, feed.last_jump_text(self.model.names))
         self._seen.update(self.model.names[i] for i, p in enumerate(positions) if p is not None)
         if not self._started:
             if any(positions[i] is None for i in self._driven):
@@ -343,6 +355,8 @@ class McapReplay:
             damage=self._damage,
             unreadable=self._unreadable,
             from_recording=self._from_recording,
+            position_jumps=self._feed.jumps,
+            last_jump=self._feed.last_jump_text(self.model.names),
         )
 
 

@@ -135,7 +135,7 @@ class Replay:
         # would leave an interval with too few wheels to solve).
         self._needed = tuple(i for i, m in enumerate(config.motors) if m is not None)
         self._n_needed = len(self._needed)
-        self._feed = OdomFeed(self._needed)
+        self._feed = OdomFeed(self._needed, config.limits.max_wheel_rad_s)
         self._rounds = Rounds(self._needed)
         groups = self.drives.groups
         self._on_frame = groups[0][0].on_frame if len(groups) == 1 else self.drives.on_frame
@@ -239,7 +239,11 @@ class Replay:
         if any(feedback[i] is None for i in self._needed):
             return None  # not started: some driven wheel has not reported yet
         self._last_update_s = group
-        got = self._feed.sample(feedback)
+        feed, jumps = self._feed, self._feed.jumps
+        got = feed.sample(feedback)
+        if feed.jumps != jumps:
+            log.warning("odometry at %.6f s: %s", feed.stamp_s,
+                        feed.last_jump_text(self.model.names))
         if got is None:
             return None  # no feedback newer than the last update's
         stamp, positions = got
@@ -309,6 +313,8 @@ class Replay:
             breaks=len(self.timeline.breaks),
             gap_s=self.timeline.gap_s,
             rejections=rejected_frames(self.drives.groups, LISTENER_REJECTIONS),
+            position_jumps=self._feed.jumps,
+            last_jump=self._feed.last_jump_text(self.model.names),
             silent_wheels=(
                 *(self.model.names[i] for i in self._needed if feedback[i] is None),
                 *(a.wheel for a, fb in zip(self.config.steering, self.drives.steer_feedback(),

@@ -67,6 +67,9 @@ class ReplaySummary:
     :param breaks: jumps of the log's time that the log goes on from (bridged).
     :param gap_s: log time the breaks forward jump over, s (not in :attr:`duration_s`).
     :param rejections: the motors' frames their drivers rejected, by driver and reason.
+    :param position_jumps: steps of a wheel's position taken for jumps of its count, not
+        motion (:mod:`gateway.core.odom_feed`).
+    :param last_jump: the last of them, described (empty without any).
     """
 
     pose: Pose
@@ -86,6 +89,8 @@ class ReplaySummary:
     breaks: int = 0
     gap_s: float = 0.0
     rejections: tuple[RejectedFrames, ...] = ()
+    position_jumps: int = 0
+    last_jump: str = ""
 
     @property
     def duration_s(self) -> float:
