@@ -55,6 +55,7 @@ from drivers.odrive.messages import (
     CMD_BITS,
     CMD_MASK,
     MAX_EXTENDED_NODE_ID,
+    STREAM_HINTS,
     ErrorStatus,
     Heartbeat,
     MotorErrorStatus,
@@ -106,6 +107,7 @@ class OdriveDriver(MotorDriver[OdriveOptions]):
     #: Node IDs with 29-bit identifiers (``extended_id: true``).
     EXTENDED_NODE_ID_RANGE: ClassVar[tuple[int, int]] = (0, MAX_EXTENDED_NODE_ID)
     LIVENESS_STREAMS: ClassVar[tuple[str, ...]] = ("encoder estimates", "heartbeat")
+    STREAM_HINTS: ClassVar[Mapping[str, str]] = STREAM_HINTS
     #: Steering actuators: position control with Set_Input_Pos.
     STEERING: ClassVar[bool] = True
     PROTOCOL: ClassVar[str] = "ODrive"
@@ -357,9 +359,7 @@ class OdriveDriver(MotorDriver[OdriveOptions]):
                     wd.on_tx_sdo(reply[1], reply[2])
                 return
             expected = "at least 4 bytes in TxSdo"
-        raise DecodeError(
-            f"Expected {expected} of ODrive node {ax.node_id}, but got {frame.dlc}."
-        )
+        raise DecodeError(f"Expected {expected} of ODrive node {ax.node_id}, but got {frame.dlc}.")
 
     def _on_heartbeat(self, ax: Axis, hb: Heartbeat, t: float) -> None:
         i = ax.index

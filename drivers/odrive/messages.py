@@ -258,3 +258,12 @@ def _transitions() -> Mapping[tuple[AxisState, AxisState], Step]:
 #: (harmless repeat) or UNDEFINED (no heartbeat seen yet), never in the middle of a
 #: calibration or homing procedure, which a new request would abort.  Any other pair is illegal.
 TRANSITIONS: Mapping[tuple[AxisState, AxisState], Step] = _transitions()
+
+#: How to switch the cyclic messages the driver's liveness needs on (``axis<n>.config.can``;
+#: 0.5 names them ``*_rate_ms``, 0.6 ``*_msg_rate_ms``; 0 turns a message off).
+STREAM_HINTS: Mapping[str, str] = MappingProxyType({
+    "encoder estimates": "set axis<n>.config.can.encoder_msg_rate_ms (0.6) or encoder_rate_ms "
+                         "(0.5), 10 ms from the factory",
+    "heartbeat": "set axis<n>.config.can.heartbeat_msg_rate_ms (0.6) or heartbeat_rate_ms "
+                 "(0.5), 100 ms from the factory",
+})

@@ -57,6 +57,7 @@ import logging
 import math
 from typing import TYPE_CHECKING, ClassVar
 
+from drivers.vesc import settings
 from drivers.vesc.appconf import HOST_ID
 from drivers.vesc.axis import Axis
 from drivers.vesc.codec import (
@@ -76,7 +77,7 @@ from drivers.vesc.frames import (
 )
 from drivers.vesc.min_erpm import BELOW_MIN_ERPM, BandWatch, doubt, uncontrolled_band
 from drivers.vesc.readback import Outcome, TimeoutReadback, Wanted, read_protection
-from drivers.vesc.settings import TIMEOUT_ACTION, TIMEOUT_FIX, UNSTATED_HOW, VescOptions
+from drivers.vesc.settings import VescOptions
 from gateway.core.protection import Guard, Protection, ProtectionState
 from gateway.core.types import DriveState, WheelFeedback
 from gateway.drive.driver import MotorDriver
@@ -103,12 +104,13 @@ class VescDriver(MotorDriver[VescOptions]):
     NODE_ID_RANGE: ClassVar[tuple[int, int]] = (0, 254)
     #: A motor is OFFLINE while either status stream is older than ``liveness_s``.
     LIVENESS_STREAMS: ClassVar[tuple[str, ...]] = ("STATUS", "STATUS_5")
+    STREAM_HINTS: ClassVar[Mapping[str, str]] = settings.STREAM_HINTS
     SPEED_STREAM: ClassVar[int | None] = STATUS
     #: After :meth:`enable`, how long status frames may be missing before the hint is logged.
     STATUS_HINT_AFTER_S: ClassVar[float] = 1.0
     PROTOCOL: ClassVar[str] = "VESC"
-    TIMEOUT_ACTION: ClassVar[str] = TIMEOUT_ACTION
-    TIMEOUT_FIX: ClassVar[str] = TIMEOUT_FIX
+    TIMEOUT_ACTION: ClassVar[str] = settings.TIMEOUT_ACTION
+    TIMEOUT_FIX: ClassVar[str] = settings.TIMEOUT_FIX
     #: Seconds between two log lines about commands below ``min_erpm``.
     BAND_LOG_EVERY_S: ClassVar[float] = 5.0
     #: The timeout is read back while enabling, and a wrong one is a failed protection.
@@ -157,7 +159,7 @@ class VescDriver(MotorDriver[VescOptions]):
         factory timeout) and how to state it; with what the last enable read back."""
         prot = super().protection(index)
         if prot.guard is Guard.UNSTATED:
-            prot = dataclasses.replace(prot, how=UNSTATED_HOW)
+            prot = dataclasses.replace(prot, how=settings.UNSTATED_HOW)
         rb = self.readback
         return prot if rb is None else read_protection(prot, rb.results[index], rb.wanted[index])
 
@@ -317,11 +319,9 @@ class VescDriver(MotorDriver[VescOptions]):
         missing = a.missing()
         if missing:
             a.hinted = True
-            log.warning(
-                "VESC %d (%r), %.1f s after enable: %s (and check that it is on the bus in "
-                "CAN_MODE_VESC with this ID)",
-                a.node_id, a.wheel, now_s - since, missing,
-            )
+            log.warning("VESC %d (%r), %.1f s after enable: %s (and check that it is on the "
+                        "bus in CAN_MODE_VESC with this ID)", a.node_id, a.wheel, now_s - since,
+                        missing)
 
     # ----------------------------------------------------------------- frames
 

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
+from types import MappingProxyType
 from typing import TYPE_CHECKING, TypeVar
 
 from drivers.vesc.min_erpm import FACTORY_MIN_ERPM
@@ -72,6 +73,12 @@ FACTORY_STATUS_MSGS = 0
 
 #: Where a VESC's status messages are switched on, for the messages about missing ones.
 STATUS_WHERE = "VESC Tool, App Settings > General > Can Messages Rate 1"
+#: How to switch each status stream on (the driver's :attr:`STREAM_HINTS`).
+STREAM_HINTS: Mapping[str, str] = MappingProxyType({
+    "STATUS": f"tick Status 1 in {STATUS_WHERE}",
+    "STATUS_5": f"tick Status 5 in {STATUS_WHERE} (the motor setup wizard ticks Status 1 to 4 "
+                f"only)",
+})
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -207,10 +214,7 @@ def missing_status(status_seen: bool, status5_seen: bool) -> str:
             f"set Can Status Rate 1 (e.g. 50 Hz), and state it as status_rate_hz"
         )
     if not status5_seen:
-        return (
-            f"no STATUS_5 received (the tachometer, for odometry): tick Status 5 in "
-            f"{STATUS_WHERE} (the motor setup wizard ticks Status 1 to 4 only)"
-        )
+        return f"no STATUS_5 received (the tachometer, for odometry): {STREAM_HINTS['STATUS_5']}"
     if not status_seen:
-        return f"no STATUS received (the speed): tick Status 1 in {STATUS_WHERE}"
+        return f"no STATUS received (the speed): {STREAM_HINTS['STATUS']}"
     return ""

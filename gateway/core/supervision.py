@@ -172,6 +172,7 @@ def motor_fault_text(s: MotorStatus, why: str) -> str:
             detail = detail.split("): ", 1)[1]
         told.append(f"reports a fault: {detail}")
     if offline:
-        told.append("has not answered (no feedback yet)" if s.feedback_age_s is None
-                    else f"stopped answering (no feedback for {s.feedback_age_s:.3f} s)")
+        told.append(s.silence or (
+            "has not answered (no feedback yet)" if s.feedback_age_s is None
+            else f"stopped answering (no feedback for {s.feedback_age_s:.3f} s)"))
     return f"motor {s.name!r} (node {s.node_id}) {', and it '.join(told)}"

@@ -219,6 +219,8 @@ class MotorStatus:
     :param detail: protocol-specific fault text (flag names), empty when healthy.
     :param feedback_age_s: seconds since the last feedback frame, ``None`` before the first.
     :param feedback: latest wheel feedback, ``None`` before the first.
+    :param silence: an OFFLINE motor that still sends some of its liveness streams: what it
+        sends and what not (and how to switch that on); empty otherwise.
     """
 
     name: str
@@ -228,6 +230,7 @@ class MotorStatus:
     detail: str
     feedback_age_s: float | None
     feedback: WheelFeedback | None
+    silence: str = ""
 
 
 def _frozen_mapping() -> Mapping[str, object]:

@@ -66,6 +66,8 @@ class MotorDriver(abc.ABC, Generic[OptT]):
     #: The liveness stream of the speed when it comes apart from the position (``None``: with
     #: it): a report's feedback age is the older of the two (the feedback has the position's).
     SPEED_STREAM: ClassVar[int | None] = None
+    #: How to switch each liveness stream on, by name (:meth:`Liveness.silence`'s hints).
+    STREAM_HINTS: ClassVar[Mapping[str, str]] = {}
     #: Whether this driver closes the wheels' speed loop on the host from the feedback it
     #: decodes (DJI).  Holding such a wheel at zero speed needs that feedback, so on a fault
     #: about the feedback or the tracking the gateway releases these motors instead.
@@ -390,7 +392,9 @@ class MotorDriver(abc.ABC, Generic[OptT]):
         return tuple(
             MotorStatus(m.wheel, m.node_id, st, self._faults[i], self._detail[i],
                         None if fb is None
-                        else self.live.age(i, fb.timestamp_s, self.SPEED_STREAM, now_s), fb)
+                        else self.live.age(i, fb.timestamp_s, self.SPEED_STREAM, now_s), fb,
+                        "" if st is not DriveState.OFFLINE
+                        else self.live.silence(i, now_s, self.STREAM_HINTS))
             for i, (m, fb, st) in enumerate(
                 zip(self.motors, self._feedback, self.states(now_s), strict=True))
         )

@@ -12,7 +12,7 @@ import math
 from typing import TYPE_CHECKING, cast
 
 if TYPE_CHECKING:
-    from collections.abc import Sequence
+    from collections.abc import Mapping, Sequence
 
 
 #: How far inside every motor's limit :meth:`Liveness.all_alive` keeps its shortcut (s): far
@@ -94,6 +94,37 @@ class Liveness:
             name for name, t in zip(self.streams, self.times[index], strict=True)
             if t is None or now_s - t > limit
         ]
+
+    def silence(self, index: int, now_s: float, hints: Mapping[str, str]) -> str:
+        """What motor ``index`` still sends and what it does not, when some of its streams are
+        missing or too old and others are not ("" otherwise): for the message of a motor
+        that is OFFLINE though it answers (``hints``: how to switch a stream on, by name, said
+        for a stream never heard).  A stream counts as still coming when heard more than half
+        of ``liveness_s`` after the last of the silent ones.
+
+        >>> live = Liveness(1, ("encoder estimates", "heartbeat"), [0.25])
+        >>> live.heard(0, 1, 1.0)
+        >>> live.silence(0, 1.1, {"encoder estimates": "switch them on"})
+        'sends its heartbeat but no encoder estimates (none yet): switch them on'
+        >>> live.heard(0, 0, 1.0)
+        >>> live.heard(0, 1, 1.5)
+        >>> live.silence(0, 1.5, {"encoder estimates": "switch them on"})
+        'sends its heartbeat but no encoder estimates (none for 0.500 s)'
+        """
+        limit = self.limits[index]
+        pairs = list(zip(self.streams, self.times[index], strict=True))
+        silent = [(n, t) for n, t in pairs if t is None or now_s - t > limit]
+        # A stream still comes when heard well after the silent ones fell silent: a node that
+        # went silent as a whole stops its streams together, and the one with the shorter
+        # period was merely heard last.
+        since = max((t for _, t in silent if t is not None), default=-math.inf) + limit / 2
+        heard = [n for n, t in pairs if t is not None and now_s - t <= limit and t > since]
+        if not heard or not silent:
+            return ""
+        said = [f"{n} (none for {now_s - t:.3f} s)" if t is not None  # (no hint: it came)
+                else f"{n} (none yet)" + (f": {hints[n]}" if hints.get(n) else "")
+                for n, t in silent]
+        return f"sends its {' and '.join(heard)} but no {'; no '.join(said)}"
 
     @property
     def liveness_s(self) -> float:

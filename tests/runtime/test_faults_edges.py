@@ -112,6 +112,13 @@ def test_rejected_frame_counters_stay_bounded_under_garbage(run: Run) -> None:
 # -- a controller drops frames ----------------------------------------------------------------
 
 
+#: What a fault for dropped frames says: the stream that lost every frame is named, the one
+#: that still comes too (the VESC's STATUS_5 goes out right after its STATUS; an ODrive's
+#: heartbeat comes every 100 ms beside estimates every 10 ms).
+DROPPED_STREAM = {"vesc": "sends its STATUS but no STATUS_5 (none for ",
+                  "odrive": "sends its encoder estimates but no heartbeat (none for "}
+
+
 @pytest.mark.parametrize("run", DRIVERS, indirect=True)
 def test_dropped_frames(run: Run) -> None:
     t0 = run.inject(SimFault.DROP)
@@ -120,7 +127,7 @@ def test_dropped_frames(run: Run) -> None:
         if s.state is not GatewayState.RUNNING:
             assert all(v == 0.0 for v in s.speeds), s
         if s.state is GatewayState.FAULT:
-            assert f"{victim_text(run)} stopped answering" in s.reason
+            assert f"{victim_text(run)} {DROPPED_STREAM[run.key]}" in s.reason
     faults = [s for s in samples if s.state is GatewayState.FAULT]
     if run.key == "vesc":
         # Two status frames per period: every STATUS_5 is lost, so the tachometer is silent.
