@@ -152,6 +152,10 @@ class Report:
     distance_m: float = 0.0
     odometry_error_m: float = 0.0
     worst_heading_error_rad: float = 0.0
+    #: Steps of a wheel's position the odometry took for jumps: only while a controller sent
+    #: garbage (random bytes on an ODrive's estimates ID decode as random positions) and on
+    #: the way back from it; one at any other time is spurious.
+    position_jumps: int = 0
 
     def text(self) -> str:
         reactions = ", ".join(f"{k} {v * 1000:.1f} ms" for k, v in
@@ -164,7 +168,8 @@ class Report:
                 f"({100 * self.odometry_error_m / max(self.distance_m, 1e-9):.4f} %), worst "
                 f"heading error {math.degrees(self.worst_heading_error_rad):.3f} deg; "
                 f"{len(self.missed)} missed reactions, {len(self.spurious)} spurious faults, "
-                f"{len(self.after_clear)} tracking faults just after a clear")
+                f"{len(self.after_clear)} tracking faults just after a clear; "
+                f"{self.position_jumps} position jumps (garbage)")
 
 
 def _delta(start: Pose, end: Pose) -> tuple[float, float, float]:
@@ -283,6 +288,11 @@ class Soak:
                     self._start_segment()
             rig.advance(rig.period)
             self._record_truth()
+            if gw.counts.position_jumps != r.position_jumps:
+                r.position_jumps = gw.counts.position_jumps
+                if phase == "clean" or inj is None or inj.kind is not SimFault.GARBAGE:
+                    r.spurious.append(f"{t:.3f} s: position jump of "
+                                      f"{gw.odom_feed.last_jump_text(gw.model.names)}")
             state = gw.state
             if phase in ("clean", "settling") and state is GatewayState.FAULT:
                 fault = f"{t:.3f} s: {gw.supervisor.reason}"

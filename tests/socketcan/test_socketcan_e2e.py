@@ -130,6 +130,8 @@ def test_square_over_a_kernel_bus_matches_the_true_pose_and_replays(
         assert status["state"] == "running", status["reason"]
         counters = status["counters"]
         assert counters["can_twists"] > 5  # the corners came as CAN frames
+        # The kernel's receive stamps in a loaded VM jitter by tens of ms: no step is a jump.
+        assert counters["position_jumps"] == 0
         if robot == "odrive":
             # A frame from can-utils reaches the gateway: an e-stop typed on the command line.
             wg = WgCodec(load_config(config).loop.can_ids)
