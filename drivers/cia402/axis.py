@@ -81,6 +81,8 @@ class Axis:
     #: When the position TPDO behind :attr:`counts` came (s): the feedback's time (a velocity
     #: TPDO refreshes the speed only).
     position_s: float = 0.0
+    #: When any frame of the node last came (s; ``None``: none yet).
+    heard_s: float | None = None
     velocity_rad_s: float = 0.0
     #: Steering: the target position of the last RPDO (counts, unwrapped); ``None`` while not
     #: armed, so the next armed cycle starts from the measured position.
@@ -131,6 +133,17 @@ class Axis:
         self.setpoint += min(max(target - self.setpoint, -step), step)
         self.setpoint_s = now_s
         return position_to_raw(self.setpoint, f"target position for node {self.motor.node_id}")
+
+    def silence(self, now_s: float, liveness_s: float) -> str:
+        """An armed drive whose position TPDO is older than ``liveness_s`` while its other
+        frames still come (heard more than half of it after the position): what it sends and
+        what not, for its fault's message (:meth:`Liveness.silence`'s words); "" otherwise."""
+        heard = self.heard_s
+        if (self.seq.phase is not Phase.ARMED or heard is None or now_s - heard > liveness_s
+                or heard <= self.position_s + liveness_s / 2):
+            return ""
+        return (f"sends its other frames but no position TPDO (statusword and position actual "
+                f"value 0x6064; none for {now_s - self.position_s:.3f} s)")
 
     # ----------------------------------------------------------------- received
 

@@ -27,9 +27,9 @@ Each motor is one :class:`~drivers.cia402.axis.Axis`, which also takes what its 
 receive side).  A node is alive while any of its frames (heartbeat, TPDO, EMCY, SDO response)
 is younger than ``liveness_s``; armed, while its position TPDO is: a drive whose position TPDO
 stopped while its velocity TPDO and heartbeat go on would leave the odometry frozen under a
-wheel that turns (the tracking check sees the velocity, nothing else the position).  The
-frames are claimed by COB-ID (:meth:`Cia402Driver.claims`, the CiA 301 predefined connection
-set: function code << 7 | node ID).
+wheel that turns (the tracking check sees the velocity, nothing else the position); its fault
+says so (:meth:`Axis.silence`).  The frames are claimed by COB-ID (:meth:`Cia402Driver.claims`,
+the CiA 301 predefined connection set: function code << 7 | node ID).
 
 **Steering actuators** (:attr:`Cia402Driver.STEERING`) run in cyclic synchronous position mode
 (CSP, 0x6060 = 8) with the target position 0x607A in their command RPDO; why CSP, and how each
@@ -52,6 +52,7 @@ Reference: CiA 301 and CiA 402 (https://www.can-cia.org/can-knowledge/cia402-ser
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from typing import TYPE_CHECKING, ClassVar
 
@@ -82,7 +83,7 @@ if TYPE_CHECKING:
     from collections.abc import Mapping, Sequence
 
     from gateway.core.protection import Protection, ProtectionState
-    from gateway.core.types import Frame, MotorConfig
+    from gateway.core.types import Frame, MotorConfig, MotorStatus
 
 __all__ = ["Cia402Driver"]
 
@@ -253,10 +254,9 @@ class Cia402Driver(MotorDriver[Cia402Options]):
             if was is not Phase.ARMED and seq.phase is Phase.ARMED:
                 axis.emcy = None  # the drive reached OPERATION ENABLED: no fault is active
             self._refresh(i)
+        last = self._last_sync_s
         if self.sync_enabled and (
-            self._last_sync_s is None
-            or now_s - self._last_sync_s >= self.SYNC_FALLBACK_PERIOD_S - 1e-9
-        ):
+                last is None or now_s - last >= self.SYNC_FALLBACK_PERIOD_S - 1e-9):
             out.append(self._sync(now_s))
         return out
 
@@ -271,7 +271,7 @@ class Cia402Driver(MotorDriver[Cia402Options]):
             return False  # CANopen uses 11-bit COB-IDs; a 29-bit frame is another device's
         i, kind = hit
         axis = self._axes[i]
-        now_s = frame.timestamp_s
+        now_s = axis.heard_s = frame.timestamp_s
         data = frame.data
         if ((kind is _POSITION or kind is _VELOCITY) and len(data) == _PDO_SIZE
                 and not frame.is_remote_frame):  # a TPDO: most of the traffic
@@ -309,6 +309,12 @@ class Cia402Driver(MotorDriver[Cia402Options]):
         base = super().enable_failed()
         return [i for i, axis in enumerate(self._axes)
                 if axis.seq.phase is Phase.FAILED or i in base]
+
+    def status(self, now_s: float) -> tuple[MotorStatus, ...]:
+        """The base's report; an armed drive OFFLINE for its position TPDO alone says so."""
+        return tuple(s if s.state is not DriveState.OFFLINE or not (said := a.silence(
+            now_s, o.liveness_s)) else dataclasses.replace(s, silence=said)
+            for s, a, o in zip(super().status(now_s), self._axes, self.opts, strict=True))
 
     def _ready_state(self, index: int) -> DriveState:
         """ENABLING while the enable sequence runs, else ENABLED when armed or DISABLED."""

@@ -32,6 +32,10 @@ def test_a_drive_whose_position_tpdo_stops_goes_offline_and_the_wheel_stops() ->
         assert rig.gw.state is not GatewayState.RUNNING
         assert rig.t - t0 <= liveness + 0.1
         assert drv.state(i, rig.t) is DriveState.OFFLINE
-        assert f"node {drv.motors[i].node_id}" in rig.gw.supervisor.reason, rig.gw.supervisor.reason
+        # Named as what stopped: its other frames come (not "stopped answering").
+        m = drv.motors[i]
+        assert rig.gw.supervisor.reason.startswith(
+            f"motor '{m.wheel}' (node {m.node_id}) sends its other frames but no position TPDO "
+            f"(statusword and position actual value 0x6064; none for 0.2"), rig.gw.supervisor.reason
         rig.advance(1.5)
         assert abs(sim.wheel_velocity_rad_s) < 0.05
