@@ -28,6 +28,7 @@ from drivers.cia402.targets import target_counts
 from gateway.core.errors import DecodeError
 from gateway.core.protection import ProtectionState
 from gateway.core.types import DriveFault, WheelFeedback
+from gateway.drive.liveness import still_comes
 
 if TYPE_CHECKING:
     from drivers.cia402.codec import Emergency
@@ -136,11 +137,11 @@ class Axis:
 
     def silence(self, now_s: float, liveness_s: float) -> str:
         """An armed drive whose position TPDO is older than ``liveness_s`` while its other
-        frames still come (heard more than half of it after the position): what it sends and
-        what not, for its fault's message (:meth:`Liveness.silence`'s words); "" otherwise."""
+        frames still come (:func:`~gateway.drive.liveness.still_comes`, the rule of the other
+        protocols' streams): what it sends and what not, for its fault's message; "" otherwise."""
         heard = self.heard_s
         if (self.seq.phase is not Phase.ARMED or heard is None or now_s - heard > liveness_s
-                or heard <= self.position_s + liveness_s / 2):
+                or not still_comes(heard, self.position_s, liveness_s)):
             return ""
         return (f"sends its other frames but no position TPDO (statusword and position actual "
                 f"value 0x6064; none for {now_s - self.position_s:.3f} s)")

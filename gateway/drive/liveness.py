@@ -20,6 +20,14 @@ if TYPE_CHECKING:
 _MARGIN_S = 1e-6
 
 
+def still_comes(heard_s: float, silent_s: float, limit_s: float) -> bool:
+    """Whether a stream heard at ``heard_s`` still comes though another fell silent after
+    ``silent_s``: heard more than half of ``limit_s`` later.  A node that went silent as a
+    whole stops its streams together, and the one with the shorter period was merely heard
+    last."""
+    return heard_s > silent_s + limit_s / 2
+
+
 class Liveness:
     """When each motor's streams were last heard.
 
@@ -99,8 +107,8 @@ class Liveness:
         """What motor ``index`` still sends and what it does not, when some of its streams are
         missing or too old and others are not ("" otherwise): for the message of a motor
         that is OFFLINE though it answers (``hints``: how to switch a stream on, by name, said
-        for a stream never heard).  A stream counts as still coming when heard more than half
-        of ``liveness_s`` after the last of the silent ones.
+        for a stream never heard).  A stream counts as still coming by :func:`still_comes`,
+        after the last of the silent ones.
 
         >>> live = Liveness(1, ("encoder estimates", "heartbeat"), [0.25])
         >>> live.heard(0, 1, 1.0)
@@ -114,11 +122,9 @@ class Liveness:
         limit = self.limits[index]
         pairs = list(zip(self.streams, self.times[index], strict=True))
         silent = [(n, t) for n, t in pairs if t is None or now_s - t > limit]
-        # A stream still comes when heard well after the silent ones fell silent: a node that
-        # went silent as a whole stops its streams together, and the one with the shorter
-        # period was merely heard last.
-        since = max((t for _, t in silent if t is not None), default=-math.inf) + limit / 2
-        heard = [n for n, t in pairs if t is not None and now_s - t <= limit and t > since]
+        since = max((t for _, t in silent if t is not None), default=-math.inf)
+        heard = [n for n, t in pairs
+                 if t is not None and now_s - t <= limit and still_comes(t, since, limit)]
         if not heard or not silent:
             return ""
         said = [f"{n} (none for {now_s - t:.3f} s)" if t is not None  # (no hint: it came)
