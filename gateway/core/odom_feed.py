@@ -1,12 +1,26 @@
 """From wheel feedback to odometry samples: :class:`OdomFeed`, the one rule for the gateway's
 loop (:mod:`gateway.runtime.loop`) and the log replay (:mod:`gateway.apps.replay.replay`).
 
-The odometry integrates every wheel's latest position at the time of the newest feedback:
+The odometry integrates every wheel's position at one time, the newest feedback's:
 
 * a sample is due when some wheel's feedback is newer than the last sample's time (the
   newest time stamp among the wheels with feedback moves on);
 * that time becomes the feed's, even when the sample is not taken because a driven wheel has
   not reported yet (the odometry starts once every driven wheel has);
+* with *whole rounds* (``round_wait_s``, the gateway's loop) a sample is due only once every
+  driven wheel has a position newer than the last sample's, or has been silent for
+  ``round_wait_s`` (then it is held where it was): controllers send at their own phases (an
+  ODrive's estimates at its own 10 ms timer, a VESC's STATUS at its own rate), so a sample at
+  every new position of any wheel moved one wheel at a time.  On a mecanum robot that is a
+  zig-zag: each single wheel's step solves to a diagonal with a turn, four of them add up to
+  the straight line again, but the distance grows by up to sqrt(2) (41 %) and the odometry's
+  twist is each wheel's alone (at 0.5 m/s straight: 0.42 m/s forward, 0.42 m/s sideways and
+  1.1 rad/s of turn).  The replay chooses its rounds itself
+  (:mod:`gateway.apps.replay.rounds`);
+* every position newer than the last sample's is carried to the sample's time with its own
+  wheel's speed (``position + velocity * (time - its time)``): the wheels of one round were
+  measured up to a feedback period apart.  A wheel whose position is not newer is held (it is
+  silent; its speed is no longer known), and so is one whose speed is not finite;
 * wheels without feedback (passive, or not reported yet) get ``None``.
 
 **Position jumps.**  A wheel's position may move between two of its samples by at most
@@ -37,8 +51,8 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from operator import sub
-from typing import TYPE_CHECKING
+from operator import itemgetter, sub
+from typing import TYPE_CHECKING, cast
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -55,6 +69,9 @@ JUMP_SPEED_FACTOR = 3.0
 #: (s): receive times jitter (a bursty bus, a loaded host), and two positions received
 #: together may have been measured a feedback period apart.
 JUMP_SLACK_S = 0.1
+
+#: A feedback's time (``WheelFeedback.timestamp_s``), in C.
+_TIME = itemgetter(2)
 
 
 @dataclass(frozen=True, slots=True)
@@ -97,13 +114,21 @@ class OdomFeed:
     :param driven: the model indices of the driven wheels, whose feedback a sample needs.
     :param max_wheel_rad_s: every wheel's top speed (rad/s, model order; ``inf`` for a wheel
         without a motor): the jump bound's.  Without it no step is a jump.
+    :param round_wait_s: whole rounds (see the module docstring): how long a driven wheel may
+        be silent before a sample goes on without it, s (the gateway: the longest
+        ``liveness_s``); ``None``: a sample at every newer position.
     """
 
     def __init__(self, driven: Sequence[int],
-                 max_wheel_rad_s: Sequence[float] | None = None) -> None:
+                 max_wheel_rad_s: Sequence[float] | None = None,
+                 round_wait_s: float | None = None) -> None:
         self.driven = tuple(driven)
         #: The newest feedback time seen by :meth:`sample` (s; ``-inf`` before any).
         self.stamp_s = -math.inf
+        #: The time of the last sample :meth:`sample` returned (s; ``-inf`` before any).
+        self.sampled_s = -math.inf
+        #: Whole rounds' wait for a silent wheel (s; ``None``: no whole rounds).
+        self.round_wait_s = round_wait_s
         #: Steps taken for jumps so far (see the module docstring).
         self.jumps = 0
         #: The last of them, ``None`` before any.
@@ -138,8 +163,9 @@ class OdomFeed:
             sequence on every call (the feed keeps it to take the next steps from).
         :return: ``(time, positions)``: the newest feedback time and every wheel's position
             (rad, model order, ``None`` for wheels without feedback; a wheel that jumped, as
-            it goes on from where it was); ``None`` when no feedback is newer than the last
-            sample's, or a driven wheel has none.
+            it goes on from where it was), each new one carried to that time; ``None`` when no
+            feedback is newer than the last sample's, a driven wheel has none, or (whole
+            rounds) a driven wheel has no new position yet.
         """
         last = newest = self.stamp_s
         for fb in feedback:
@@ -148,12 +174,39 @@ class OdomFeed:
         if newest <= last:
             return None
         self.stamp_s = newest
-        positions = self.positions(feedback)
-        if None in positions:  # (one test in C where every wheel is driven and has reported)
+        sampled = self.sampled_s
+        if None in feedback:  # (else every wheel has reported: the oldest in C)
             for i in self.driven:
-                if positions[i] is None:
+                if feedback[i] is None:
                     return None  # integrate once every driven wheel has reported
-        return newest, positions
+            oldest = min(cast("WheelFeedback", feedback[i]).timestamp_s for i in self.driven)
+        else:
+            oldest = min(map(_TIME, cast("Sequence[WheelFeedback]", feedback)))
+        wait = self.round_wait_s
+        if (oldest <= sampled and wait is not None
+                and not self._round_over(feedback, newest, sampled, wait)):
+            return None  # a driven wheel has not sent a new position yet
+        positions = self.positions(feedback)
+        self.sampled_s = newest
+        if oldest == newest:
+            return newest, positions  # measured at one time (a cycle's stamp): as they are
+        # Each new position carried to the sample's time with its wheel's speed.
+        shifts = [0.0 if fb is None or fb.timestamp_s <= sampled
+                  else fb.velocity_rad_s * (newest - fb.timestamp_s) for fb in feedback]
+        if not math.isfinite(sum(shifts)):  # (a speed that is not finite: that wheel held)
+            shifts = [x if math.isfinite(x) else 0.0 for x in shifts]
+        return newest, [None if p is None else p + x
+                        for p, x in zip(positions, shifts, strict=True)]
+
+    def _round_over(self, feedback: Sequence[WheelFeedback | None], newest: float,
+                    sampled: float, wait: float) -> bool:
+        """Whether every driven wheel has a position newer than ``sampled`` or has sent none
+        for ``wait`` up to ``newest`` (whole rounds)."""
+        for i in self.driven:
+            t = cast("WheelFeedback", feedback[i]).timestamp_s
+            if sampled >= t > newest - wait:
+                return False
+        return True
 
     def positions(self, feedback: Sequence[WheelFeedback | None]) -> list[float | None]:
         """Every wheel's position, jumps taken out (see the module docstring): what

@@ -91,6 +91,9 @@ class DriveSet:
         self.unstopped: tuple[str, ...] = ()
         #: Whether any driver closes its speed loop on the host (see MotorDriver).
         self.host_speed_loop = any(drv.HOST_SPEED_LOOP for drv, _ in self.groups)
+        #: The longest ``liveness_s`` of any motor (0.0 without motors): how long the
+        #: odometry's whole rounds wait for a wheel (:class:`gateway.core.odom_feed.OdomFeed`).
+        self.liveness_s = max((drv.live.liveness_s for drv, _ in self.groups), default=0.0)
         flat = [i for _, idx in self.groups for i in idx]
         #: The one driver, when it has every wheel in model order and nothing else (the
         #: per-cycle calls go straight to it); else ``None``.

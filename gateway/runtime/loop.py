@@ -16,8 +16,9 @@ Each cycle:
    solve per new target: the supervisor's feasibility check of an accepted twist is it);
 4. every wheel's frame (and every steering actuator's) is built, then all go out as one
    burst, so no two wheels act on commands from different cycles;
-5. odometry integrates the encoder positions exactly (SE(2)), with the steering angles the
-   actuators measure (the commanded ones for wheels steered outside the gateway); odometry and
+5. odometry integrates the encoder positions exactly (SE(2)) once every driven wheel has a
+   new one (:class:`~gateway.core.odom_feed.OdomFeed`'s whole rounds), with the steering
+   angles the actuators measure (the commanded ones for wheels steered outside it); odometry and
    status go out on CAN and to socket subscribers at their rates, and errors -- the cycle's
    own and those of the requests served since the last cycle -- at most one ``WG_Error`` a
    cycle (:mod:`gateway.runtime.publish`), after the burst.
@@ -47,7 +48,6 @@ from gateway.runtime.timing import LoopTimer
 from gateway.wire.can import NO_TWIST_COUNTER, StatusReport, WgCodec
 
 if TYPE_CHECKING:
-
     import can
 
     from gateway.core.kinematics import IkResult, LimitReport
@@ -87,7 +87,8 @@ class Gateway:
         self.supervisor.tracking.dead_bands = self.drives.uncontrolled_bands()
         self.odometry = Odometry(self.model)
         self._driven = tuple(i for i, m in enumerate(config.motors) if m is not None)
-        self.odom_feed = OdomFeed(self._driven, config.limits.max_wheel_rad_s)
+        self.odom_feed = OdomFeed(self._driven, config.limits.max_wheel_rad_s,
+                                  self.drives.liveness_s)
         self.wg = WgCodec(config.loop.can_ids)
         self.timer = timer if timer is not None else LoopTimer(config.loop.rate_hz)
         self.period_s = 1.0 / config.loop.rate_hz
@@ -116,8 +117,7 @@ class Gateway:
         self._ik_result: IkResult = self.prev
         self._ik_static = not any(w.steered for w in self.model.wheels)
         self.limit_report: LimitReport | None = None
-        self._prev_limited = False  # prev came out of the limits (not an e-stop's jump)
-        self._armed = False
+        self._prev_limited = self._armed = False  # (prev came out of the limits: no e-stop)
         self._last_cycle_s: float | None = None
         #: ``time.perf_counter()`` when the last cycle's burst of wheel frames went (before
         #: odometry and publishing): the end of the daemon's twist-to-frames latency.

@@ -14,7 +14,8 @@ from gateway.core.types import WheelFeedback as Fb
 
 def loop_rule(stamp: float, feedback: list[Fb | None], driven: tuple[int, ...]
               ) -> tuple[float, tuple[float, list[float | None]] | None]:
-    """The loop's own rule before the feed (``Gateway._integrate``): (new stamp, sample)."""
+    """The loop's own rule before the feed (``Gateway._integrate``), the feed's without whole
+    rounds: (new stamp, sample)."""
     newest = stamp
     for fb in feedback:
         if fb is not None and fb.timestamp_s > newest:
@@ -53,8 +54,9 @@ def test_a_sample_needs_newer_feedback_and_every_driven_wheel() -> None:
 
 
 def test_the_feed_is_the_loops_rule_and_the_replays() -> None:
-    """Over random feedback, the feed gives the loop's samples; and, called once every driven
-    wheel has reported (as the replay does), the replay's."""
+    """Over random feedback at rest (speeds 0: nothing to carry to the sample's time), the
+    feed without whole rounds gives the loop's samples of before them; and, called once every
+    driven wheel has reported (as the replay does), the replay's."""
     rng = random.Random(5)
     for _ in range(200):
         n = rng.randrange(1, 5)
@@ -77,6 +79,62 @@ def test_the_feed_is_the_loops_rule_and_the_replays() -> None:
                 replay_stamp, expected = replay_rule(replay_stamp, feedback, driven)
                 assert replay_feed.sample(list(feedback)) == expected
                 assert replay_feed.stamp_s == replay_stamp
+
+
+# ----------------------------------------------------------------- one time for every wheel
+
+def test_new_positions_are_carried_to_the_samples_time_with_their_speeds() -> None:
+    """Each wheel's position newer than the last sample's moves on by its speed to the newest
+    time; one no newer (a silent wheel) is held, and so is one whose speed is not finite."""
+    feed = OdomFeed((0, 1, 2))
+    assert feed.sample([Fb(1.0, 2.0, 0.5), Fb(3.0, -4.0, 0.25), Fb(5.0, 8.0, 0.5)]) == (
+        0.5, [1.0, 3.0 - 4.0 * 0.25, 5.0])
+    assert feed.sampled_s == 0.5
+    # Wheel 1 not newer than the sample at 0.5: held (where it was measured).
+    assert feed.sample([Fb(2.0, 2.0, 0.75), Fb(3.0, -4.0, 0.25), Fb(7.0, 8.0, 1.0)]) == (
+        1.0, [2.0 + 2.0 * 0.25, 3.0, 7.0])
+    for bad in (math.nan, math.inf):
+        got = feed.sample([Fb(4.0, bad, 1.25), Fb(1.0, -4.0, 1.5), Fb(9.0, 8.0, 1.75)])
+        assert got == (1.75, [4.0, 1.0 - 4.0 * 0.25, 9.0])
+        feed = OdomFeed((0, 1, 2))
+        feed.sample([Fb(0.0, 0.0, 1.0)] * 3)
+    # Measured at one time (a cycle's stamp): as they are, whatever the speeds.
+    assert feed.sample([Fb(1.0, 9.0, 2.0), Fb(2.0, 9.0, 2.0), Fb(3.0, math.nan, 2.0)]) == (
+        2.0, [1.0, 2.0, 3.0])
+
+
+def test_whole_rounds_wait_for_every_driven_wheel() -> None:
+    """With whole rounds a sample waits until every driven wheel has a newer position than
+    the last sample's: controllers at their own phases, one sample per round, at the newest
+    time, every wheel carried there."""
+    feed = OdomFeed((0, 2), round_wait_s=0.25)
+    assert feed.sample([Fb(0.0, 1.0, 0.000), None, Fb(0.0, 1.0, 0.005)]) == (
+        0.005, [0.005, None, 0.0])
+    # Wheel 0's next position (at its 10 ms phase), wheel 2's not yet: no sample.
+    assert feed.sample([Fb(0.01, 1.0, 0.010), None, Fb(0.0, 1.0, 0.005)]) is None
+    assert (feed.stamp_s, feed.sampled_s) == (0.010, 0.005)
+    got = feed.sample([Fb(0.01, 1.0, 0.010), None, Fb(0.01, 1.0, 0.015)])
+    assert got is not None and got[0] == 0.015
+    assert got[1] == pytest.approx([0.015, None, 0.01], abs=1e-15)
+    # Without whole rounds, the same wheel's position alone is a sample.
+    plain = OdomFeed((0, 2))
+    plain.sample([Fb(0.0, 1.0, 0.000), None, Fb(0.0, 1.0, 0.005)])
+    assert plain.sample([Fb(0.01, 1.0, 0.010), None, Fb(0.0, 1.0, 0.005)]) == (
+        0.010, [0.01, None, 0.0])
+
+
+def test_a_silent_wheel_holds_whole_rounds_back_for_the_wait_only() -> None:
+    feed = OdomFeed((0, 1), round_wait_s=0.25)
+    feed.sample([Fb(0.0, 1.0, 0.0), Fb(0.0, 1.0, 0.0)])
+    for k in range(1, 25):  # wheel 1 silent from 0.0 on
+        assert feed.sample([Fb(0.01 * k, 1.0, 0.01 * k), Fb(0.0, 1.0, 0.0)]) is None
+    # 0.25 s after wheel 1's last position: on without it (held, not carried on by its speed).
+    assert feed.sample([Fb(0.25, 1.0, 0.25), Fb(0.0, 1.0, 0.0)]) == (0.25, [0.25, 0.0])
+    assert feed.sample([Fb(0.26, 1.0, 0.26), Fb(0.0, 1.0, 0.0)]) == (0.26, [0.26, 0.0])
+    # Back: the next round needs it again.
+    assert feed.sample([Fb(0.27, 1.0, 0.27), Fb(0.3, 1.0, 0.265)]) == (
+        0.27, [0.27, pytest.approx(0.305)])
+    assert feed.sample([Fb(0.28, 1.0, 0.28), Fb(0.3, 1.0, 0.265)]) is None
 
 
 # ----------------------------------------------------------------- position jumps

@@ -5,7 +5,8 @@ goes, stamped with its recorded time, to a :class:`~gateway.drive.driveset.Drive
 configuration (drivers ignore frames that are not theirs, so a gateway ``--record`` log with
 both directions is fed whole), and the odometry integrates every wheel's latest position by the
 gateway's own rule (:class:`gateway.core.odom_feed.OdomFeed`): at the newest feedback time
-stamp, with ``None`` for wheels without feedback.  It reads no clock and touches no file or
+stamp, each new position carried there by its wheel's speed, with ``None`` for wheels without
+feedback; the rounds are the replay's own (below).  It reads no clock and touches no file or
 bus.
 
 When the odometry is updated
