@@ -50,9 +50,14 @@ class Rig:
     cycle.  Ground truth: the simulators' exact wheel angles integrated by an independent
     odometry every simulator step, with the steering actuators' exact angles (the commanded
     ones for wheels without an actuator).
+
+    :param send_stamps: the gateway takes the simulators' frames at the simulated time they
+        were sent (a kernel's receive stamp), not at the cycle that drains them (the default:
+        what a ``--record`` log holds, so that a replay of one sees what the gateway saw).
     """
 
-    def __init__(self, config: GatewayConfig, socket_path: str | None = None) -> None:
+    def __init__(self, config: GatewayConfig, socket_path: str | None = None,
+                 send_stamps: bool = False) -> None:
         self.config = config
         self.daemon: Daemon | None = None
         if socket_path is not None:
@@ -64,7 +69,14 @@ class Rig:
         self.sims = simulators_for(self.gw.drives.all_motors())
         # The simulators and the pilot join the gateway's bus: the virtual one, or a kernel
         # interface in the socketcan tier.
-        self.ctl = SimulatedControllers(self.sims, config.bus.channel, config.bus.interface)
+        # With send_stamps, on the virtual bus the simulators' frames keep their send time
+        # (simulated), which the gateway takes as their receive time, as a kernel's stamp on a
+        # real bus.  Without, the gateway stamps them with the cycle that drains them (as a
+        # --record log does): up to a period late, and differently for each controller (they
+        # send at phases of their own).
+        keep = send_stamps and config.bus.interface == "virtual"
+        self.ctl = SimulatedControllers(self.sims, config.bus.channel, config.bus.interface,
+                                        **({"preserve_timestamps": True} if keep else {}))
         self.pilot = can.Bus(interface=config.bus.interface, channel=config.bus.channel)
         #: Simulator steps whose frames the bus refused (a full transmit queue in the tier).
         self.sim_send_failures = 0

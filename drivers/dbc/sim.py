@@ -189,10 +189,12 @@ class DbcSimulator(DeviceSimulator):
             if self.model.target_position_rad is not None:
                 self.model.target_position_rad = self.model.position_rad
         due = self._next_emit_s
-        if due is not None and now_s < due - 1e-9:
+        if due is None:
+            due = self._next_emit_s = self.first_due(now_s, self.period_s)
+        if now_s < due - 1e-9:
             return []
         # Keep the cadence; restart it after a gap longer than one period.
-        start = now_s if due is None or now_s - due > self.period_s else due
+        start = now_s if now_s - due > self.period_s else due
         self._next_emit_s = start + self.period_s
         vel = self.binding.velocity
         velocity = self.units.motor_to_velocity(self.model.velocity_rad_s)

@@ -9,7 +9,8 @@ odriverobotics/ODrive, and the `ODrive CAN protocol
 Modelled behaviour:
 
 * heartbeat every ``heartbeat_period_s`` (firmware default 100 ms), encoder estimates every
-  ``encoder_period_s`` (default 10 ms; 0 turns the cyclic stream off), answers to RTR requests
+  ``encoder_period_s`` (default 10 ms; 0 turns the cyclic stream off), both from the axis's
+  own phase (:attr:`~gateway.sim.device.DeviceSimulator.phase`), answers to RTR requests
   (0.5 also answers DLC 0 data frames) for the encoder estimates and Get_Error /
   Get_Motor_Error, and in 0.6 (unverified) for the heartbeat; 0.5 ignores a heartbeat request
   (``do_command``: "We don't currently do anything to respond to ODrive heartbeat messages");
@@ -236,16 +237,20 @@ class OdriveSimulator(DeviceSimulator):
             self._latch(AxisError.SYSTEM_LEVEL, AxisError05.MOTOR_FAILED)
         self._update_setpoint(dt)
         out: list[Frame] = []
-        if self._next_heartbeat_s is None or now_s >= self._next_heartbeat_s:
+        if self._next_heartbeat_s is None:
+            self._next_heartbeat_s = self.first_due(now_s, self.heartbeat_period_s)
+        if now_s >= self._next_heartbeat_s:
             out.append(self._heartbeat())
             self._next_heartbeat_s = _next_due(
                 self._next_heartbeat_s, now_s, self.heartbeat_period_s
             )
-        if self.encoder_period_s > 0.0 and (
-            self._next_encoder_s is None or now_s >= self._next_encoder_s
-        ):
-            out.append(self._estimates())
-            self._next_encoder_s = _next_due(self._next_encoder_s, now_s, self.encoder_period_s)
+        if self.encoder_period_s > 0.0:
+            if self._next_encoder_s is None:
+                self._next_encoder_s = self.first_due(now_s, self.encoder_period_s)
+            if now_s >= self._next_encoder_s:
+                out.append(self._estimates())
+                self._next_encoder_s = _next_due(self._next_encoder_s, now_s,
+                                                 self.encoder_period_s)
         return out
 
     def _on_fault(self) -> None:
@@ -367,14 +372,8 @@ class OdriveSimulator(DeviceSimulator):
 
 
 #: The 0.6 commands that feed the watchdog in this model (see the module docstring).
-_FEEDS_06 = frozenset(
-    {
-        CmdId.SET_INPUT_POS,
-        CmdId.SET_INPUT_VEL,
-        CmdId.SET_INPUT_TORQUE,
-        CmdId.SET_AXIS_STATE,
-    }
-)
+_FEEDS_06 = frozenset({CmdId.SET_INPUT_POS, CmdId.SET_INPUT_VEL, CmdId.SET_INPUT_TORQUE,
+                       CmdId.SET_AXIS_STATE})
 
 
 def _next_due(previous: float | None, now_s: float, period_s: float) -> float:

@@ -9,7 +9,8 @@ override them):
 * **Status messages** only as enabled: the factory's ``can_status_msgs_r1`` is 0
   (``APPCONF_CAN_STATUS_MSGS_R1``), so a factory VESC sends no status at all.  ``status_msgs``
   is that bit mask; this simulator sends STATUS (bit 0) and STATUS_5 (bit 4), in that order,
-  every ``1 / status_rate_hz`` (``can_status_rate_1``, 50 Hz from the factory), as
+  every ``1 / status_rate_hz`` (``can_status_rate_1``, 50 Hz from the factory) from the
+  VESC's own phase (:attr:`~gateway.sim.device.DeviceSimulator.phase`), as
   ``cancom_status_thread`` does.  The other status packets are not simulated.
 * **Timeout**: no command for ``timeout_s`` (``timeout_msec``, 1000 ms from the factory,
   ``APPCONF_TIMEOUT_MSEC``) releases the motor, which coasts (``timeout_brake_current`` 0 A:
@@ -179,13 +180,10 @@ class VescSimulator(DeviceSimulator):
         super().__init__(motor, model)
         pole_pairs = motor.options.get("pole_pairs")
         if not isinstance(pole_pairs, int) or isinstance(pole_pairs, bool) or pole_pairs < 1:
-            raise ConfigError(
-                f"motor {motor.wheel!r}.pole_pairs: expected int >= 1, got {pole_pairs!r}"
-            )
-        for name, value in (
-            ("status_rate_hz", status_rate_hz), ("timeout_s", timeout_s),
-            ("min_erpm", min_erpm), ("ramp_erpm_s", ramp_erpm_s),
-        ):
+            raise ConfigError(f"motor {motor.wheel!r}.pole_pairs: expected int >= 1, got "
+                              f"{pole_pairs!r}")
+        for name, value in (("status_rate_hz", status_rate_hz), ("timeout_s", timeout_s),
+                            ("min_erpm", min_erpm), ("ramp_erpm_s", ramp_erpm_s)):
             if not value >= 0.0:
                 raise ConfigError(
                     f"simulated VESC {motor.node_id}: {name}: expected at least 0, got {value!r}"
@@ -365,10 +363,12 @@ class VescSimulator(DeviceSimulator):
         if not self.status_msgs & (STATUS_1 | STATUS_5) or math.isinf(self.status_period_s):
             return []  # the factory setting: no status messages
         due = self._next_status_s
-        if due is not None and now_s < due - 1e-9:
+        if due is None:
+            due = self._next_status_s = self.first_due(now_s, self.status_period_s)
+        if now_s < due - 1e-9:
             return []
-        if due is None or now_s - due >= self.status_period_s:
-            due = now_s  # first frame, or fell behind: restart the schedule
+        if now_s - due >= self.status_period_s:
+            due = now_s  # fell behind: restart the schedule
         self._next_status_s = due + self.status_period_s
         return self._status_frames(current_a)
 

@@ -127,16 +127,19 @@ def _socketcan_hint(err: BaseException, channel: str) -> str:
     return ""
 
 
-def send_frames(bus: can.BusABC, frames: Iterable[Frame]) -> int:
-    """Send frames in order.
+def send_frames(bus: can.BusABC, frames: Iterable[Frame], timestamp_s: float = 0.0) -> int:
+    """Send frames in order, their messages stamped ``timestamp_s`` (what a virtual bus with
+    ``preserve_timestamps`` passes on: a simulated device's send time).
 
     :return: how many were sent.
     :raises BusError: on the first frame that python-can refuses.
     """
     sent = 0
     for frame in frames:
+        msg = to_message(frame)
+        msg.timestamp = timestamp_s
         try:
-            bus.send(to_message(frame))
+            bus.send(msg)
         except (can.CanError, OSError) as err:
             raise BusError(f"Sending {frame.to_cansend()} failed: {err}") from err
         sent += 1
@@ -159,11 +162,14 @@ def drain(
     Error frames and CAN FD frames are not returned (they carry nothing for the drivers,
     which speak classic CAN); they go to ``odd`` when given, for the bus's health.
 
-    :param timestamp_s: the receive time to stamp on every frame (simulated time in tests).
-        When omitted, each frame keeps the time python-can stamped on it (the kernel's receive
-        time on socketcan), moved from the wall clock onto ``time.monotonic()`` so it compares
-        with the loop's clock; a stamp more than a second away from the wall clock (an
-        interface with its own epoch) is replaced by the time of receipt.
+    :param timestamp_s: the receive time on the caller's clock (simulated time in tests): a
+        frame keeps a stamp of its own on that clock (a simulated device's send time, on a
+        virtual bus that keeps stamps) when it lies after ``since_s`` and at most this; every
+        other frame gets this time.  When omitted, each frame keeps the time python-can
+        stamped on it (the kernel's receive time on socketcan), moved from the wall clock onto
+        ``time.monotonic()`` so it compares with the loop's clock; a stamp more than a second
+        away from the wall clock (an interface with its own epoch) is replaced by the time of
+        receipt.
     :param since_s: when the previous drain began (monotonic): no frame waiting now arrived
         before it, nor after now.  A stamp moved onto the monotonic clock outside that span is
         put at its edge: the wall clock stepped (NTP) between the kernel's stamp and this
@@ -191,7 +197,9 @@ def drain(
                     odd.append(msg)
                 continue
             if timestamp_s is not None:
-                stamp = timestamp_s
+                stamp = msg.timestamp
+                if not since_s < stamp <= timestamp_s:
+                    stamp = timestamp_s
             elif abs(msg.timestamp - wall) <= _PLAUSIBLE_S:
                 stamp = msg.timestamp + offset
                 if stamp < since_s:

@@ -7,20 +7,20 @@ The odometry integrates every wheel's position at one time, the newest feedback'
   newest time stamp among the wheels with feedback moves on);
 * that time becomes the feed's, even when the sample is not taken because a driven wheel has
   not reported yet (the odometry starts once every driven wheel has);
-* with *whole rounds* (``round_wait_s``, the gateway's loop) a sample is due only once every
-  driven wheel has a position newer than the last sample's, or has been silent for
-  ``round_wait_s`` (then it is held where it was): controllers send at their own phases (an
-  ODrive's estimates at its own 10 ms timer, a VESC's STATUS at its own rate), so a sample at
-  every new position of any wheel moved one wheel at a time.  On a mecanum robot that is a
-  zig-zag: each single wheel's step solves to a diagonal with a turn, four of them add up to
-  the straight line again, but the distance grows by up to sqrt(2) (41 %) and the odometry's
-  twist is each wheel's alone (at 0.5 m/s straight: 0.42 m/s forward, 0.42 m/s sideways and
-  1.1 rad/s of turn).  The replay chooses its rounds itself
-  (:mod:`gateway.apps.replay.rounds`);
+* with *whole rounds* (the gateway's loop) a sample is due only once every driven wheel has a
+  position newer than the last sample's, or is silent (none for ``silent_s``; then it is held
+  where it was): controllers send at their own phases (an ODrive's estimates at its own
+  10 ms timer, a VESC's STATUS at its own rate), so a sample at every new position of any
+  wheel moved one wheel at a time.  On a mecanum robot that is a zig-zag: each single
+  wheel's step solves to a diagonal with a turn, four of them add up to the straight line
+  again, but the distance grows by up to sqrt(2) (41 %) and the odometry's twist is each
+  wheel's alone (at 0.5 m/s straight: 0.42 m/s forward, 0.42 m/s sideways and 1.1 rad/s of
+  turn).  The replay chooses its rounds itself (:mod:`gateway.apps.replay.rounds`);
 * every position newer than the last sample's is carried to the sample's time with its own
   wheel's speed (``position + velocity * (time - its time)``): the wheels of one round were
-  measured up to a feedback period apart.  A wheel whose position is not newer is held (it is
-  silent; its speed is no longer known), and so is one whose speed is not finite;
+  measured up to a feedback period apart.  A wheel whose position is not newer, or older than
+  ``silent_s``, is held (its speed is no longer known: a silent wheel, or a log whose clock
+  stepped), and so is one whose speed is not finite;
 * wheels without feedback (passive, or not reported yet) get ``None``.
 
 **Position jumps.**  A wheel's position may move between two of its samples by at most
@@ -114,21 +114,25 @@ class OdomFeed:
     :param driven: the model indices of the driven wheels, whose feedback a sample needs.
     :param max_wheel_rad_s: every wheel's top speed (rad/s, model order; ``inf`` for a wheel
         without a motor): the jump bound's.  Without it no step is a jump.
-    :param round_wait_s: whole rounds (see the module docstring): how long a driven wheel may
-        be silent before a sample goes on without it, s (the gateway: the longest
-        ``liveness_s``); ``None``: a sample at every newer position.
+    :param silent_s: how much older than the newest a position is when its wheel counts as
+        silent: held, not carried on by its speed, and not waited for (the gateway: the
+        longest ``liveness_s``; the replay: its longest interval).
+    :param whole_rounds: a sample only once every driven wheel has a new position or is
+        silent (the gateway's loop; the replay chooses its rounds itself).
     """
 
     def __init__(self, driven: Sequence[int],
                  max_wheel_rad_s: Sequence[float] | None = None,
-                 round_wait_s: float | None = None) -> None:
+                 silent_s: float = math.inf, whole_rounds: bool = False) -> None:
         self.driven = tuple(driven)
         #: The newest feedback time seen by :meth:`sample` (s; ``-inf`` before any).
         self.stamp_s = -math.inf
         #: The time of the last sample :meth:`sample` returned (s; ``-inf`` before any).
         self.sampled_s = -math.inf
-        #: Whole rounds' wait for a silent wheel (s; ``None``: no whole rounds).
-        self.round_wait_s = round_wait_s
+        #: When a wheel counts as silent (s; see the parameter).
+        self.silent_s = silent_s
+        #: Whether a sample waits for a whole round.
+        self.whole_rounds = whole_rounds
         #: Steps taken for jumps so far (see the module docstring).
         self.jumps = 0
         #: The last of them, ``None`` before any.
@@ -182,16 +186,17 @@ class OdomFeed:
             oldest = min(cast("WheelFeedback", feedback[i]).timestamp_s for i in self.driven)
         else:
             oldest = min(map(_TIME, cast("Sequence[WheelFeedback]", feedback)))
-        wait = self.round_wait_s
-        if (oldest <= sampled and wait is not None
-                and not self._round_over(feedback, newest, sampled, wait)):
+        silent = self.silent_s
+        if (oldest <= sampled and self.whole_rounds
+                and not self._round_over(feedback, newest, sampled, silent)):
             return None  # a driven wheel has not sent a new position yet
         positions = self.positions(feedback)
         self.sampled_s = newest
         if oldest == newest:
             return newest, positions  # measured at one time (a cycle's stamp): as they are
         # Each new position carried to the sample's time with its wheel's speed.
-        shifts = [0.0 if fb is None or fb.timestamp_s <= sampled
+        since = max(sampled, newest - silent)
+        shifts = [0.0 if fb is None or fb.timestamp_s <= since
                   else fb.velocity_rad_s * (newest - fb.timestamp_s) for fb in feedback]
         if not math.isfinite(sum(shifts)):  # (a speed that is not finite: that wheel held)
             shifts = [x if math.isfinite(x) else 0.0 for x in shifts]
@@ -199,12 +204,12 @@ class OdomFeed:
                         for p, x in zip(positions, shifts, strict=True)]
 
     def _round_over(self, feedback: Sequence[WheelFeedback | None], newest: float,
-                    sampled: float, wait: float) -> bool:
+                    sampled: float, silent: float) -> bool:
         """Whether every driven wheel has a position newer than ``sampled`` or has sent none
-        for ``wait`` up to ``newest`` (whole rounds)."""
+        for ``silent`` up to ``newest`` (whole rounds)."""
         for i in self.driven:
             t = cast("WheelFeedback", feedback[i]).timestamp_s
-            if sampled >= t > newest - wait:
+            if sampled >= t > newest - silent:
                 return False
         return True
 

@@ -88,7 +88,7 @@ class Gateway:
         self.odometry = Odometry(self.model)
         self._driven = tuple(i for i, m in enumerate(config.motors) if m is not None)
         self.odom_feed = OdomFeed(self._driven, config.limits.max_wheel_rad_s,
-                                  self.drives.liveness_s)
+                                  self.drives.liveness_s, whole_rounds=True)
         self.wg = WgCodec(config.loop.can_ids)
         self.timer = timer if timer is not None else LoopTimer(config.loop.rate_hz)
         self.period_s = 1.0 / config.loop.rate_hz

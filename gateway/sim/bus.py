@@ -74,7 +74,7 @@ class SimulatedControllers(Closing):
                 out.extend(sim.tick(now_s))
             if self.on_step is not None:
                 self.on_step(now_s)
-            return send_frames(self.bus, out)
+            return send_frames(self.bus, out, now_s)
 
     def start(self) -> SimulatedControllers:
         """Run :meth:`step` in a daemon thread until :meth:`shutdown`."""

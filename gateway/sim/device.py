@@ -87,6 +87,18 @@ class MotorModel:
         self.velocity_rad_s = v1
 
 
+#: The golden ratio's fraction, (sqrt(5) - 1) / 2.
+_GOLDEN_FRACTION = (math.sqrt(5.0) - 1.0) / 2.0
+
+
+def spread_phase(k: int) -> float:
+    """The phase (:attr:`DeviceSimulator.phase`) of a robot's ``k``-th device: ``k`` times the
+    golden ratio's fraction modulo 1, so that devices in a row spread over the period (the
+    multiples of an irrational number spread evenly modulo 1, Weyl; this one's the most
+    evenly) and runs repeat."""
+    return (k * _GOLDEN_FRACTION) % 1.0
+
+
 class SimFault(enum.IntFlag):
     """Faults a test can inject into a simulator."""
 
@@ -138,6 +150,13 @@ class DeviceSimulator(abc.ABC):
         #: Garbage frames sent (``SimFault.GARBAGE``), for assertions.
         self.garbage_sent = 0
         self._held: collections.deque[tuple[float, Frame]] = collections.deque()
+        #: Where the device's cyclic frames start within their period after its first tick
+        #: (a fraction, 0 to 1, see :meth:`first_due`): its power-up's offset.  A real
+        #: controller's timers run from its own power-up, so two controllers never send in
+        #: step (each ODrive's estimates at a phase of their own):
+        #: :func:`gateway.sim.registry.simulators_for` gives the devices of a robot phases
+        #: apart (:func:`spread_phase`).  A device alone starts at its first tick.
+        self.phase = 0.0
 
     # ----------------------------------------------------------------- public
 
@@ -166,6 +185,11 @@ class DeviceSimulator(abc.ABC):
             self._held.clear()
             return []
         return self._emit(out, now_s)
+
+    def first_due(self, now_s: float, period_s: float) -> float:
+        """When a cyclic frame of period ``period_s`` first goes out after the first tick at
+        ``now_s``: :attr:`phase` of a period later."""
+        return now_s + self.phase * period_s
 
     def inject(self, fault: SimFault) -> None:
         """Add ``fault`` to the active faults (FAULT also disarms the motor)."""

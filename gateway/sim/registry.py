@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING
 
 from drivers import BUILTIN_SIMULATORS
 from gateway.core.errors import DriverNotFoundError
-from gateway.sim.device import DeviceSimulator
+from gateway.sim.device import DeviceSimulator, spread_phase
 
 if TYPE_CHECKING:
     from collections.abc import Callable, Iterable
@@ -78,5 +78,10 @@ def simulator_for(motor: MotorConfig) -> DeviceSimulator:
 
 
 def simulators_for(motors: Iterable[MotorConfig]) -> list[DeviceSimulator]:
-    """A device simulator for every motor, in order."""
-    return [simulator_for(m) for m in motors]
+    """A device simulator for every motor, in order, each sending its cyclic frames at a phase
+    of its own (:func:`~gateway.sim.device.spread_phase`), as the controllers of a robot do,
+    each timed from its own power-up."""
+    sims = [simulator_for(m) for m in motors]
+    for k, sim in enumerate(sims):
+        sim.phase = spread_phase(k)
+    return sims

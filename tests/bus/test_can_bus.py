@@ -101,3 +101,23 @@ def test_a_wall_clock_step_before_the_drain_makes_a_frame_neither_old_nor_new(
     finally:
         rx.shutdown()
         tx.shutdown()
+
+
+def test_on_the_callers_clock_a_frame_keeps_its_own_stamp_inside_the_drains_span() -> None:
+    """``drain(timestamp_s=...)``: a frame stamped on the caller's clock (a simulated device's
+    send time, passed on by a virtual bus that keeps stamps) keeps it when it lies after the
+    previous drain and not after now; any other frame is stamped now (a wall-clock stamp)."""
+    rx = can.Bus(interface="virtual", channel="sim-clock", receive_own_messages=False)
+    keeps = can.Bus(interface="virtual", channel="sim-clock", preserve_timestamps=True)
+    wall = can.Bus(interface="virtual", channel="sim-clock")
+    try:
+        for stamp in (5.0, 4.0, 7.0, 7.5, 3.0):
+            keeps.send(can.Message(timestamp=stamp, arbitration_id=0x029, data=bytes(8),
+                                   is_extended_id=False))
+        wall.send(can.Message(timestamp=5.0, arbitration_id=0x029, data=bytes(8),
+                              is_extended_id=False))
+        got = [f.timestamp_s for f in drain(rx, timestamp_s=7.0, since_s=4.0)]
+        assert got == [5.0, 7.0, 7.0, 7.0, 7.0, 7.0]
+    finally:
+        for bus in (rx, keeps, wall):
+            bus.shutdown()

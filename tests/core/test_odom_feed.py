@@ -103,11 +103,21 @@ def test_new_positions_are_carried_to_the_samples_time_with_their_speeds() -> No
         2.0, [1.0, 2.0, 3.0])
 
 
+def test_a_position_older_than_silent_s_is_held() -> None:
+    """A new position more than ``silent_s`` older than the newest is not carried: its wheel
+    fell silent, or the log's clock stepped between them (an hour at 2 rad/s is not motion)."""
+    feed = OdomFeed((0, 1), silent_s=0.1)
+    feed.sample([Fb(0.0, 2.0, 0.0), Fb(0.0, 2.0, 0.0)])
+    assert feed.sample([Fb(1.0, 2.0, 0.15), Fb(1.0, 2.0, 3600.2)]) == (3600.2, [1.0, 1.0])
+    assert feed.sample([Fb(1.0, 2.0, 3600.21), Fb(2.0, 2.0, 3600.25)]) == (
+        3600.25, [pytest.approx(1.08), 2.0])
+
+
 def test_whole_rounds_wait_for_every_driven_wheel() -> None:
     """With whole rounds a sample waits until every driven wheel has a newer position than
     the last sample's: controllers at their own phases, one sample per round, at the newest
     time, every wheel carried there."""
-    feed = OdomFeed((0, 2), round_wait_s=0.25)
+    feed = OdomFeed((0, 2), silent_s=0.25, whole_rounds=True)
     assert feed.sample([Fb(0.0, 1.0, 0.000), None, Fb(0.0, 1.0, 0.005)]) == (
         0.005, [0.005, None, 0.0])
     # Wheel 0's next position (at its 10 ms phase), wheel 2's not yet: no sample.
@@ -124,7 +134,7 @@ def test_whole_rounds_wait_for_every_driven_wheel() -> None:
 
 
 def test_a_silent_wheel_holds_whole_rounds_back_for_the_wait_only() -> None:
-    feed = OdomFeed((0, 1), round_wait_s=0.25)
+    feed = OdomFeed((0, 1), silent_s=0.25, whole_rounds=True)
     feed.sample([Fb(0.0, 1.0, 0.0), Fb(0.0, 1.0, 0.0)])
     for k in range(1, 25):  # wheel 1 silent from 0.0 on
         assert feed.sample([Fb(0.01 * k, 1.0, 0.01 * k), Fb(0.0, 1.0, 0.0)]) is None

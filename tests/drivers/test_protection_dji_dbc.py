@@ -211,7 +211,9 @@ def test_dji_simulator_keeps_the_wheel_turning_when_the_commands_stop() -> None:
     # wheelgate dies: no frame at all from here on.
     run(drv, sims, t, t + 3.0, None)
     assert [s.command_raw for s in sims if isinstance(s, DjiSimulator)] == held
-    assert all(wheel_speed(s) == pytest.approx(target, rel=0.05) for s in sims)
+    # (At the last cycle's current, whatever the speed loop's state then: the ESCs' feedback
+    # at their own phases, the last currents differ by 10 %.)
+    assert all(wheel_speed(s) == pytest.approx(target, rel=0.1) for s in sims)
 
 
 # ===================================================================== DBC: stated or not

@@ -26,31 +26,31 @@ DISABLED = b"""\
 {"ok":true,"id":2,"odometry":{"x":1.5,"y":-2.25,"theta":0.5,"vx":0.0,"vy":0.0,"wz":0.0,\
 "slip":0.0,"distance":0.0,"t":0.0}}
 {"event":"odometry","x":1.5,"y":-2.25,"theta":0.5,"vx":0.0,"vy":0.0,"wz":0.0,"slip":0.0,\
-"distance":0.0,"t":0.015}
+"distance":0.0,"t":0.02}
 {"event":"odometry","x":1.5,"y":-2.25,"theta":0.5,"vx":0.0,"vy":0.0,"wz":0.0,"slip":0.0,\
-"distance":0.0,"t":0.035}
+"distance":0.0,"t":0.04}
 {"ok":false,"id":3,"error":{"code":"not_enabled","message":"gateway is DISABLED; send enable \
 first"}}
 {"event":"error","code":"not_enabled","message":"gateway is DISABLED; send enable first"}
 {"event":"odometry","x":1.5,"y":-2.25,"theta":0.5,"vx":0.0,"vy":0.0,"wz":0.0,"slip":0.0,\
-"distance":0.0,"t":0.06499999999999999}
+"distance":0.0,"t":0.05999999999999999}
 {"event":"odometry","x":1.5,"y":-2.25,"theta":0.5,"vx":0.0,"vy":0.0,"wz":0.0,"slip":0.0,\
-"distance":0.0,"t":0.085}
+"distance":0.0,"t":0.08}
 {"event":"status","state":"disabled","reason":""}
 {"ok":true,"id":4,"state":"estop"}
 {"event":"odometry","x":1.5,"y":-2.25,"theta":0.5,"vx":0.0,"vy":0.0,"wz":0.0,"slip":0.0,\
-"distance":0.0,"t":0.10500000000000002}
+"distance":0.0,"t":0.10000000000000002}
 {"event":"odometry","x":1.5,"y":-2.25,"theta":0.5,"vx":0.0,"vy":0.0,"wz":0.0,"slip":0.0,\
-"distance":0.0,"t":0.12500000000000003}
+"distance":0.0,"t":0.12000000000000004}
 {"event":"odometry","x":1.5,"y":-2.25,"theta":0.5,"vx":0.0,"vy":0.0,"wz":0.0,"slip":0.0,\
-"distance":0.0,"t":0.14500000000000005}
+"distance":0.0,"t":0.14000000000000004}
 {"event":"odometry","x":1.5,"y":-2.25,"theta":0.5,"vx":0.0,"vy":0.0,"wz":0.0,"slip":0.0,\
-"distance":0.0,"t":0.16500000000000006}
+"distance":0.0,"t":0.16000000000000006}
 {"event":"odometry","x":1.5,"y":-2.25,"theta":0.5,"vx":0.0,"vy":0.0,"wz":0.0,"slip":0.0,\
-"distance":0.0,"t":0.18500000000000008}
+"distance":0.0,"t":0.18000000000000008}
 {"event":"status","state":"estop","reason":"e-stop requested on the control socket"}
 {"event":"odometry","x":1.5,"y":-2.25,"theta":0.5,"vx":0.0,"vy":0.0,"wz":0.0,"slip":0.0,\
-"distance":0.0,"t":0.2050000000000001}
+"distance":0.0,"t":0.2000000000000001}
 """
 
 

@@ -82,7 +82,8 @@ class Replay:
     :param min_interval_s: least log time between two odometry updates, s; by default the
         control period of the configuration (``gateway.rate_hz``), the gateway's own cadence.
     :param max_interval_s: log time after which the odometry is updated even though some
-        driven wheel has no new sample (a wheel that fell silent), s.
+        driven wheel has no new sample (a wheel that fell silent), s; a position older than
+        this is not carried on to an update's time by its speed.
     :param max_gap_s: the largest step forward of the log's time that is no jump, s
         (:mod:`gateway.apps.replay.timeline`).
     :raises DriverNotFoundError: if a driver cannot be loaded.
@@ -136,7 +137,7 @@ class Replay:
         # would leave an interval with too few wheels to solve).
         self._needed = tuple(i for i, m in enumerate(config.motors) if m is not None)
         self._n_needed = len(self._needed)
-        self._feed = OdomFeed(self._needed, config.limits.max_wheel_rad_s)
+        self._feed = OdomFeed(self._needed, config.limits.max_wheel_rad_s, max_interval_s)
         self._rounds = Rounds(self._needed)
         groups = self.drives.groups
         self._on_frame = groups[0][0].on_frame if len(groups) == 1 else self.drives.on_frame
