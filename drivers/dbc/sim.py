@@ -188,9 +188,7 @@ class DbcSimulator(DeviceSimulator):
             self.model.target_rad_s = 0.0
             if self.model.target_position_rad is not None:
                 self.model.target_position_rad = self.model.position_rad
-        due = self._next_emit_s
-        if due is None:
-            due = self._next_emit_s = self.first_due(now_s, self.period_s)
+        due = self._next_emit_s = self.due(self._next_emit_s, now_s, self.period_s)
         if now_s < due - 1e-9:
             return []
         # Keep the cadence; restart it after a gap longer than one period.

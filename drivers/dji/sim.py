@@ -204,11 +204,11 @@ class DjiSimulator(DeviceSimulator):
             self.physics.current_a = 0.0
         if self.faults & SimFault.FAULT:
             self.physics.armed = False
-        if self._next_feedback_s is None:
-            self._next_feedback_s = self.first_due(now_s, self.feedback_period_s)
-        if now_s < self._next_feedback_s - 1e-9:
+        due = self._next_feedback_s = self.due(self._next_feedback_s, now_s,
+                                               self.feedback_period_s)
+        if now_s < due - 1e-9:
             return []
-        nxt = self._next_feedback_s + self.feedback_period_s
+        nxt = due + self.feedback_period_s
         self._next_feedback_s = nxt if nxt > now_s else now_s + self.feedback_period_s
         return [encode_feedback(self.measure())]
 

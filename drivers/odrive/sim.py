@@ -237,20 +237,18 @@ class OdriveSimulator(DeviceSimulator):
             self._latch(AxisError.SYSTEM_LEVEL, AxisError05.MOTOR_FAILED)
         self._update_setpoint(dt)
         out: list[Frame] = []
-        if self._next_heartbeat_s is None:
-            self._next_heartbeat_s = self.first_due(now_s, self.heartbeat_period_s)
+        self._next_heartbeat_s = self.due(self._next_heartbeat_s, now_s, self.heartbeat_period_s)
         if now_s >= self._next_heartbeat_s:
             out.append(self._heartbeat())
             self._next_heartbeat_s = _next_due(
                 self._next_heartbeat_s, now_s, self.heartbeat_period_s
             )
         if self.encoder_period_s > 0.0:
-            if self._next_encoder_s is None:
-                self._next_encoder_s = self.first_due(now_s, self.encoder_period_s)
-            if now_s >= self._next_encoder_s:
+            due = self._next_encoder_s = self.due(self._next_encoder_s, now_s,
+                                                  self.encoder_period_s)
+            if now_s >= due:
                 out.append(self._estimates())
-                self._next_encoder_s = _next_due(self._next_encoder_s, now_s,
-                                                 self.encoder_period_s)
+                self._next_encoder_s = _next_due(due, now_s, self.encoder_period_s)
         return out
 
     def _on_fault(self) -> None:

@@ -362,9 +362,7 @@ class VescSimulator(DeviceSimulator):
         current_a = self._estimate_current(now_s)
         if not self.status_msgs & (STATUS_1 | STATUS_5) or math.isinf(self.status_period_s):
             return []  # the factory setting: no status messages
-        due = self._next_status_s
-        if due is None:
-            due = self._next_status_s = self.first_due(now_s, self.status_period_s)
+        due = self._next_status_s = self.due(self._next_status_s, now_s, self.status_period_s)
         if now_s < due - 1e-9:
             return []
         if now_s - due >= self.status_period_s:

@@ -151,7 +151,7 @@ class DeviceSimulator(abc.ABC):
         self.garbage_sent = 0
         self._held: collections.deque[tuple[float, Frame]] = collections.deque()
         #: Where the device's cyclic frames start within their period after its first tick
-        #: (a fraction, 0 to 1, see :meth:`first_due`): its power-up's offset.  A real
+        #: (a fraction, 0 to 1, see :meth:`due`): its power-up's offset.  A real
         #: controller's timers run from its own power-up, so two controllers never send in
         #: step (each ODrive's estimates at a phase of their own):
         #: :func:`gateway.sim.registry.simulators_for` gives the devices of a robot phases
@@ -186,10 +186,11 @@ class DeviceSimulator(abc.ABC):
             return []
         return self._emit(out, now_s)
 
-    def first_due(self, now_s: float, period_s: float) -> float:
-        """When a cyclic frame of period ``period_s`` first goes out after the first tick at
-        ``now_s``: :attr:`phase` of a period later."""
-        return now_s + self.phase * period_s
+    def due(self, due_s: float | None, now_s: float, period_s: float) -> float:
+        """When a cyclic frame of period ``period_s`` is due: ``due_s`` once scheduled; the
+        first one (``due_s`` ``None``, at the first tick ``now_s``) :attr:`phase` of a period
+        later."""
+        return now_s + self.phase * period_s if due_s is None else due_s
 
     def inject(self, fault: SimFault) -> None:
         """Add ``fault`` to the active faults (FAULT also disarms the motor)."""
