@@ -84,6 +84,7 @@ if TYPE_CHECKING:
 
     from gateway.core.protection import Protection, ProtectionState
     from gateway.core.types import Frame, MotorConfig, MotorStatus
+    from gateway.drive.traffic import Traffic
 
 __all__ = ["Cia402Driver"]
 
@@ -157,10 +158,8 @@ class Cia402Driver(MotorDriver[Cia402Options]):
     @classmethod
     def validate_options(cls, raw: Mapping[str, object], where: str) -> dict[str, object]:
         """The keys of a motor block, checked one by one and against each other
-        (:meth:`Cia402Options.from_block <drivers.cia402.options.Cia402Options.from_block>`).
-
-        :raises ConfigError: naming the key, what was expected and what came.
-        """
+        (:meth:`Cia402Options.from_block <drivers.cia402.options.Cia402Options.from_block>`);
+        raises :class:`ConfigError` naming the key, what was expected and what came."""
         values = super().validate_options(raw, where)
         Cia402Options.from_block(values, where)  # the checks across keys
         return values
@@ -261,11 +260,9 @@ class Cia402Driver(MotorDriver[Cia402Options]):
         return out
 
     def _on_frame(self, frame: Frame) -> bool:
-        """Take a frame: TPDO feedback, heartbeat, EMCY or SDO response of one of our nodes.
-
-        :raises DecodeError: for a malformed one (a malformed SDO response also fails the
-            step that waited for it).
-        """
+        """Take a frame: TPDO feedback, heartbeat, EMCY or SDO response of one of our nodes;
+        raises :class:`DecodeError` for a malformed one (a malformed SDO response also fails
+        the step that waited for it)."""
         hit = self._rx.get(frame.arbitration_id)
         if hit is None or frame.is_extended_id:
             return False  # CANopen uses 11-bit COB-IDs; a 29-bit frame is another device's
@@ -319,9 +316,8 @@ class Cia402Driver(MotorDriver[Cia402Options]):
     def _ready_state(self, index: int) -> DriveState:
         """ENABLING while the enable sequence runs, else ENABLED when armed or DISABLED."""
         phase = self._axes[index].seq.phase
-        if phase in ENABLING:
-            return DriveState.ENABLING
-        return DriveState.ENABLED if phase is Phase.ARMED else DriveState.DISABLED
+        return (DriveState.ENABLING if phase in ENABLING
+                else DriveState.ENABLED if phase is Phase.ARMED else DriveState.DISABLED)
 
     # ----------------------------------------------------------------- frames
 
@@ -334,8 +330,7 @@ class Cia402Driver(MotorDriver[Cia402Options]):
     def _declare(self) -> tuple[FrameClaim, ...]:
         taken = [FrameClaim.exact(cob, False, self._rx[cob][0]) for cob in sorted(self._rx)]
         sent = [FrameClaim.exact(CobBase.NMT, False, None, receive=False),
-                FrameClaim.exact(CobBase.HEARTBEAT + self.host.node_id, False, None,
-                                 receive=False)]
+                FrameClaim.exact(CobBase.HEARTBEAT + self.host.node_id, False, receive=False)]
         if self.sync_enabled:
             sent.append(FrameClaim.exact(CobBase.SYNC, False, None, receive=False))
         for i, axis in enumerate(self._axes):
@@ -347,6 +342,11 @@ class Cia402Driver(MotorDriver[Cia402Options]):
     def message_name(self, arbitration_id: int, is_extended_id: bool) -> str | None:
         """:func:`~drivers.cia402.codec.cob_name` of an 11-bit COB-ID; ``None`` for 29-bit."""
         return None if is_extended_id else cob_name(arbitration_id)
+
+    def traffic(self, rate_hz: float) -> Traffic:
+        """The TPDOs and heartbeats as written while enabling (:mod:`drivers.cia402.traffic`)."""
+        from drivers.cia402.traffic import bus_traffic  # noqa: PLC0415 - check and run only
+        return bus_traffic(self.opts, rate_hz)
 
     # ----------------------------------------------------------------- protection
 

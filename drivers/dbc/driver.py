@@ -99,6 +99,7 @@ if TYPE_CHECKING:
     from drivers.dbc.frames import FeedbackSlot
     from gateway.core.types import Frame, MotorConfig
     from gateway.drive.options import DriverOptions
+    from gateway.drive.traffic import Traffic
 
 log = logging.getLogger(__name__)
 
@@ -194,6 +195,11 @@ class DbcDriver(MotorDriver[DbcOptions]):
     def message_name(self, arbitration_id: int, is_extended_id: bool) -> str | None:
         """The DBC file's name of a claimed message (``WD_Feedback``)."""
         return self._names.get((arbitration_id, is_extended_id))
+
+    def traffic(self, rate_hz: float) -> Traffic:
+        """The received messages at their DBC cycle times (:mod:`drivers.dbc.traffic`)."""
+        from drivers.dbc.traffic import received_traffic  # noqa: PLC0415 - check and run only
+        return received_traffic(self.codec.rx.values())
 
     # ----------------------------------------------------------------- hooks
 

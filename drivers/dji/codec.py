@@ -42,6 +42,8 @@ ESC_ID_MAX = 8
 ESCS_PER_GROUP = 4
 #: Feedback identifier of ESC ``n`` is ``FEEDBACK_ID_BASE + n``.
 FEEDBACK_ID_BASE = 0x200
+#: Each ESC's feedback frames a second (the user guides: 1 kHz), fixed in the ESC.
+FEEDBACK_HZ = 1000.0
 #: rad/s per rpm.
 RAD_S_PER_RPM = 2.0 * math.pi / 60.0
 #: M3508 planetary gearbox ratio (rotor turns per output turn), 3591/187 ~ 19.2032.

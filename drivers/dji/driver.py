@@ -62,6 +62,7 @@ from drivers.dji.axis import Axis
 from drivers.dji.codec import (
     COMMAND_IDS,
     COUNTS_PER_REV,
+    FEEDBACK_HZ,
     HALF_REV_COUNTS,
     RAD_S_PER_RPM,
     DjiFeedback,
@@ -84,6 +85,7 @@ if TYPE_CHECKING:
 
     from gateway.core.protection import Protection
     from gateway.core.types import Frame, MotorConfig
+    from gateway.drive.traffic import Traffic
 
 __all__ = ["TEMP_HYSTERESIS_C", "DjiDriver"]
 
@@ -113,6 +115,8 @@ class DjiDriver(MotorDriver[DjiOptions]):
     MALFORMED: ClassVar[str] = "malformed feedback"
     PROTOCOL: ClassVar[str] = "DJI"
     TIMEOUT_ACTION: ClassVar[str] = ACTION
+    #: The ESCs' CAN runs at 1 Mbit/s, fixed (C620 and C610 user guides).
+    BITRATES: ClassVar[tuple[int, ...]] = (1_000_000,)
 
     def __init__(self, motors: Sequence[MotorConfig]) -> None:
         super().__init__(motors)
@@ -276,6 +280,13 @@ class DjiDriver(MotorDriver[DjiOptions]):
             *(FrameClaim.exact(COMMAND_IDS[g], False, None, receive=False)
               for g in self._groups),
         )
+
+    def traffic(self, rate_hz: float) -> Traffic:
+        """Every ESC's feedback at 1 kHz: fixed in the ESC (the user guides; DJI's examples
+        decode it in their CAN receive interrupt), whatever the loop's rate."""
+        from gateway.drive.traffic import Sender, Stream, Traffic  # noqa: PLC0415 - check and run only
+        return Traffic((Stream("FEEDBACK_ESC", Sender.CONTROLLERS, FEEDBACK_HZ * len(self.motors),
+                               8, False, f"{FEEDBACK_HZ:g} Hz each, fixed in the ESC"),))
 
     def message_name(self, arbitration_id: int, is_extended_id: bool) -> str | None:
         """``COMMAND_ESC_1_4``, ``COMMAND_ESC_5_8`` or ``FEEDBACK_ESC_<n>``

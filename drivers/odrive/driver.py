@@ -75,13 +75,13 @@ if TYPE_CHECKING:
 
     from gateway.core.protection import Protection
     from gateway.core.types import Frame, MotorConfig
+    from gateway.drive.traffic import Traffic
 
 log = logging.getLogger(__name__)
 
 TAU = 2.0 * math.pi
 
-#: Command ID -> the message name in labels (``Get_Encoder_Estimates``); others are named by
-#: their number.
+#: Command ID -> the message name in labels (``Get_Encoder_Estimates``; others: a number).
 _NAMES: Mapping[int, str] = MappingProxyType({int(c): c.name.title() for c in CmdId})
 #: Command IDs as plain ints for the per-frame tests.
 _ESTIMATES = int(CmdId.GET_ENCODER_ESTIMATES)
@@ -94,10 +94,9 @@ class OdriveDriver(MotorDriver[OdriveOptions]):
     """All ODrive axes on one bus (one firmware family and one ID mode per driver).
 
     :param motors: the motors, in the order :meth:`command` receives setpoints.
-    :raises ConfigError: for a bad protocol key, a node ID out of range for the ID mode, a
-        repeated node ID, motors that disagree on ``liveness_s``, ``firmware`` or
-        ``extended_id``, a steering actuator not in passthrough, or watchdog endpoint IDs on
-        firmware 0.5.
+    :raises ConfigError: for a bad protocol key, a node ID out of range for the ID mode or
+        repeated, motors that disagree on ``liveness_s``, ``firmware`` or ``extended_id``, a
+        steering actuator not in passthrough, or watchdog endpoint IDs on firmware 0.5.
     """
 
     Options = OdriveOptions
@@ -139,9 +138,8 @@ class OdriveDriver(MotorDriver[OdriveOptions]):
         self._by_node = {ax.node_id: ax for ax in axes}
         self._any_steer = any(ax.steer for ax in axes)
         #: (Set_Input_Vel identifier, gear_ratio * sign) per motor, for :meth:`_command`.
-        self._vel = tuple(
-            (self.codec.arbitration_id(ax.node_id, CmdId.SET_INPUT_VEL), ax.scale) for ax in axes
-        )
+        self._vel = tuple((self.codec.arbitration_id(ax.node_id, CmdId.SET_INPUT_VEL), ax.scale)
+                          for ax in axes)
         #: Frames to send at the next poll (the watchdog setups' answers to replies).
         self._queued: list[Frame] = []
 
@@ -157,9 +155,8 @@ class OdriveDriver(MotorDriver[OdriveOptions]):
         """0.6 with endpoint IDs: CONFIGURED; otherwise STATED by ``controller_timeout_s``
         (set with odrivetool or the web GUI) or UNSTATED (:mod:`drivers.odrive.protection`)."""
         ax = self._axes[index]
-        return axis_protection(
-            ax.node_id, self.codec.firmware, ax.watchdog, self.opts[index].controller_timeout_s
-        )
+        return axis_protection(ax.node_id, self.codec.firmware, ax.watchdog,
+                               self.opts[index].controller_timeout_s)
 
     def protection_state(self, index: int) -> ProtectionState:
         """NOT_APPLICABLE without a 0.6 setup; else PENDING, CONFIRMED or FAILED."""
@@ -181,8 +178,7 @@ class OdriveDriver(MotorDriver[OdriveOptions]):
         return DriveState.ENABLING if ax.enabling else DriveState.DISABLED
 
     def axis_state(self, index: int) -> AxisState | int:
-        """The axis state of motor ``index`` in its last heartbeat (``UNDEFINED`` before one;
-        a plain int for a state this firmware's enum lacks)."""
+        """Motor ``index``'s axis state in its last heartbeat (``UNDEFINED`` before one)."""
         return self._axes[index].axis_state
 
     # ----------------------------------------------------------------- hooks
@@ -282,6 +278,11 @@ class OdriveDriver(MotorDriver[OdriveOptions]):
         ext = self._extended_id
         mask = (EXT_MASK if ext else STD_MASK) & ~CMD_MASK
         return tuple(FrameClaim(ax.node_id << CMD_BITS, mask, ext, ax.index) for ax in self._axes)
+
+    def traffic(self, rate_hz: float) -> Traffic:
+        """The axes' heartbeats and estimates (:mod:`drivers.odrive.traffic`)."""
+        from drivers.odrive.traffic import axis_traffic  # noqa: PLC0415 - check and run only
+        return axis_traffic(self.opts, self._extended_id, rate_hz)
 
     def message_name(self, arbitration_id: int, is_extended_id: bool) -> str | None:
         """The CANSimple command's name (``Get_Encoder_Estimates``; ``cmd 0x04`` for one

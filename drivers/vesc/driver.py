@@ -60,12 +60,7 @@ from typing import TYPE_CHECKING, ClassVar
 from drivers.vesc import settings
 from drivers.vesc.appconf import HOST_ID
 from drivers.vesc.axis import Axis
-from drivers.vesc.codec import (
-    arbitration_id,
-    make_set_current,
-    make_set_rpm,
-    unpack_status,
-)
+from drivers.vesc.codec import arbitration_id, make_set_current, make_set_rpm, unpack_status
 from drivers.vesc.frames import (
     RECEIVED,
     STATUS,
@@ -74,6 +69,7 @@ from drivers.vesc.frames import (
     claims,
     message_name,
     pong_is_ours,
+    status_traffic,
 )
 from drivers.vesc.min_erpm import BELOW_MIN_ERPM, BandWatch, doubt, uncontrolled_band
 from drivers.vesc.readback import Outcome, TimeoutReadback, Wanted, read_protection
@@ -88,6 +84,7 @@ if TYPE_CHECKING:
     from drivers.vesc.codec import VescStatus, VescStatus5
     from gateway.core.types import Frame, MotorConfig
     from gateway.drive.claims import FrameClaim
+    from gateway.drive.traffic import Traffic
 
 log = logging.getLogger(__name__)
 
@@ -142,12 +139,9 @@ class VescDriver(MotorDriver[VescOptions]):
     def validate_options(cls, raw: Mapping[str, object], where: str) -> dict[str, object]:
         """Validate the protocol keys (:class:`~drivers.vesc.settings.VescOptions`), then check
         ``command_period_s`` against the VESC's timeout and ``liveness_s`` against the stated
-        status rate.
-
-        :raises ConfigError: for an unknown, missing or bad key (``timeout_s`` with its new
-            name), a keep-alive period too long for the VESC's timeout, or a liveness time
-            shorter than two status periods.
-        """
+        status rate; raises :class:`ConfigError` for an unknown, missing or bad key
+        (``timeout_s`` with its new name), a keep-alive period too long for the VESC's
+        timeout, or a liveness time shorter than two status periods."""
         out = super().validate_options(raw, where)
         VescOptions.from_block(out, where)  # the keys against each other
         return out
@@ -332,6 +326,10 @@ class VescDriver(MotorDriver[VescOptions]):
     def message_name(self, arbitration_id: int, is_extended_id: bool) -> str | None:
         """The ``CAN_PACKET_ID`` name of a VESC frame (:func:`drivers.vesc.frames.message_name`)."""
         return message_name(arbitration_id, is_extended_id)
+
+    def traffic(self, rate_hz: float) -> Traffic:
+        """The stated status frames (:func:`drivers.vesc.frames.status_traffic`)."""
+        return status_traffic(self.opts)
 
     def _on_frame(self, frame: Frame) -> bool:
         """Take the frames our VESCs send: STATUS and STATUS_5 (used), STATUS_2/3/4/6 and a

@@ -14,7 +14,9 @@ from gateway.drive.claims import FrameClaim
 if TYPE_CHECKING:
     from collections.abc import Callable, Sequence
 
+    from drivers.vesc.settings import VescOptions
     from gateway.core.types import Frame
+    from gateway.drive.traffic import Traffic
 
 #: The liveness streams (:attr:`VescDriver.LIVENESS_STREAMS`), by index.
 STATUS, STATUS_5 = 0, 1
@@ -88,3 +90,23 @@ def pong_is_ours(frame: Frame, index_of: Callable[[int], int | None]) -> bool:
             return False
         raise
     return msg is not None and index_of(msg.node_id) is not None
+
+
+def status_traffic(opts: Sequence[VescOptions]) -> Traffic:
+    """The status frames of VESCs with these motor blocks, for the bus-load budget
+    (:mod:`gateway.drive.traffic`): STATUS and STATUS_5 (8 bytes, 29-bit) at each block's
+    ``status_rate_hz``; a block that does not state it is listed as not known (a factory VESC
+    sends none, and wheelgate cannot read the rate).  The gateway's periodic SET_RPM is
+    the budget's, from the commands."""
+    from gateway.drive.traffic import Sender, Stream, Traffic  # noqa: PLC0415 - check and run only
+
+    rates = [o.status_rate_hz for o in opts]
+    stated = [r for r in rates if r]
+    streams = tuple(
+        Stream(name, Sender.CONTROLLERS, sum(stated), 8, True,
+               f"status_rate_hz ({', '.join(f'{r:g}' for r in sorted(set(stated)))})")
+        for name in ("STATUS", "STATUS_5")) if stated else ()
+    missing = len(rates) - len(stated)
+    unknown = (f"STATUS and STATUS_5 of {missing} VESC(s) whose status_rate_hz is not stated",
+               ) if missing else ()
+    return Traffic(streams, unknown)

@@ -39,6 +39,7 @@ if TYPE_CHECKING:
     from gateway.core.types import Frame
     from gateway.drive.claims import FrameClaim
     from gateway.drive.filters import CanFilter
+    from gateway.drive.traffic import Traffic
 
 OptT = TypeVar("OptT", bound=DriverOptions)
 
@@ -59,6 +60,8 @@ class MotorDriver(abc.ABC, Generic[OptT]):
     BUS_WIDE: ClassVar[tuple[str, ...]] = ()
     #: Valid node IDs for this protocol (inclusive).
     NODE_ID_RANGE: ClassVar[tuple[int, int]] = (0, 0x3F)
+    #: The only bitrates the controllers can talk at (bit/s; empty: any the bus may have).
+    BITRATES: ClassVar[tuple[int, ...]] = ()
     #: The streams whose silence makes a motor OFFLINE (each younger than ``liveness_s``
     #: while alive); stream 0 is the feedback (:meth:`store_feedback`), the others are
     #: reported to :attr:`live` (:meth:`Liveness.heard`).
@@ -86,10 +89,8 @@ class MotorDriver(abc.ABC, Generic[OptT]):
     #: What the controller does when its stated timeout expires (:meth:`protection`).
     TIMEOUT_ACTION: ClassVar[str] = "as configured on the controller"
     #: How to set the controller's timeout, for the warning when it is not stated.
-    TIMEOUT_FIX: ClassVar[str] = (
-        "set a command timeout on the controller with its vendor's tool and state it as "
-        "controller_timeout_s"
-    )
+    TIMEOUT_FIX: ClassVar[str] = ("set a command timeout on the controller with its vendor's "
+                                  "tool and state it as controller_timeout_s")
 
     def __init_subclass__(cls, **kwargs: object) -> None:
         super().__init_subclass__(**kwargs)
@@ -135,12 +136,9 @@ class MotorDriver(abc.ABC, Generic[OptT]):
 
     @classmethod
     def validate_options(cls, raw: Mapping[str, object], where: str) -> dict[str, object]:
-        """Validate a motor block's protocol keys and fill in defaults.
-
-        :param raw: the keys of the motor block that are not common to every driver.
-        :param where: file and key path for messages, e.g. ``"robot.yaml: wheels[0].motor"``.
-        :raises ConfigError: for an unknown key, a missing required key or a bad value.
-        """
+        """Validate a motor block's protocol keys ``raw`` (those not common to every driver)
+        and fill in defaults; ``where`` (``"robot.yaml: wheels[0].motor"``) starts the
+        messages.  Raises :class:`ConfigError` for an unknown, missing or bad key."""
         return cls.Options.validate(raw, where)
 
     @classmethod
@@ -152,10 +150,8 @@ class MotorDriver(abc.ABC, Generic[OptT]):
     def validate_node_id(cls, node_id: int, where: str,
                          options: Mapping[str, object] | None = None) -> None:
         """Check a node ID against :meth:`node_id_range` of the motor block's validated
-        protocol keys ``options`` (ODrive widens it with 29-bit identifiers).
-
-        :raises ConfigError: if it is out of range.
-        """
+        protocol keys ``options`` (ODrive widens it with 29-bit identifiers); raises
+        :class:`ConfigError` if it is out of range."""
         check_node_id(node_id, where, cls.node_id_range(options))
 
     # ----------------------------------------------------------------- the template
@@ -183,12 +179,9 @@ class MotorDriver(abc.ABC, Generic[OptT]):
         """Hook of :meth:`command`: the frames for setpoints the base has checked."""
 
     def on_frame(self, frame: Frame) -> bool:
-        """Take one received frame.
-
-        :return: whether the frame belonged to this driver.  A malformed frame of this
-            protocol (the hook raises :class:`DecodeError`) is counted in :attr:`rejected`
-            under :attr:`MALFORMED`, never raised.
-        """
+        """Take one received frame; return whether it belonged to this driver.  A malformed
+        frame of this protocol (the hook raises :class:`DecodeError`) is counted in
+        :attr:`rejected` under :attr:`MALFORMED`, never raised."""
         try:
             return self._on_frame(frame)
         except DecodeError as err:
@@ -218,8 +211,8 @@ class MotorDriver(abc.ABC, Generic[OptT]):
         """Hook of :meth:`enable`: the frames that start the enable sequence."""
 
     def enable_failed(self) -> list[int]:
-        """The motors whose enable sequence ended without arming them: waiting changes nothing
-        until the next :meth:`enable` (here: a protection failed under ``REQUIRED``)."""
+        """The motors whose enable sequence ended without arming them (here: a protection
+        failed under ``REQUIRED``): waiting changes nothing until the next :meth:`enable`."""
         return [i for i, why in enumerate(self._failed.why) if why]
 
     @abc.abstractmethod
@@ -255,6 +248,12 @@ class MotorDriver(abc.ABC, Generic[OptT]):
         """The kernel receive filters of the frames :meth:`on_frame` takes (from
         :meth:`claims`; the built-in drivers are checked against random frames for it)."""
         return tuple(dict.fromkeys(c.as_filter() for c in self.claims() if c.receive))
+
+    def traffic(self, rate_hz: float) -> Traffic | None:
+        """The periodic frames beyond :meth:`command`'s (the budget takes those from
+        :meth:`preview_command`) of these motors at loop rate ``rate_hz``: the controllers'
+        own, the driver's other ones (:mod:`gateway.drive.traffic`); ``None``: undeclared."""
+        return None
 
     def preview_command(self, setpoints: Sequence[float]) -> list[Frame]:
         """The frames :meth:`command` would send for these setpoints from a freshly enabled

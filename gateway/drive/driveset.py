@@ -32,6 +32,7 @@ if TYPE_CHECKING:
     from gateway.core.types import DriveState, Frame, MotorConfig, MotorStatus, WheelFeedback
     from gateway.drive.driver import MotorDriver
     from gateway.drive.filters import CanFilter
+    from gateway.drive.traffic import Stream, Traffic
 
 log = logging.getLogger(__name__)
 _T = TypeVar("_T")
@@ -208,6 +209,31 @@ class DriveSet:
         for (drv, _), values in zip(self.groups, setpoints, strict=True):
             out.extend(drv.preview_command(values))
         return out
+
+    def traffic(self, rate_hz: float | None = None) -> Traffic:
+        """Every driver's periodic frames at loop rate ``rate_hz`` (else ``gateway.rate_hz``;
+        :mod:`gateway.drive.traffic`): its commands every cycle
+        (:meth:`MotorDriver.preview_command` of standing wheels, steering actuators at their
+        neutral angles), then what it declares (:meth:`MotorDriver.traffic`), or that it
+        declares nothing."""
+        from gateway.drive.traffic import Sender, Traffic, frame_streams  # noqa: PLC0415 - check and run only
+
+        rate = self.config.loop.rate_hz if rate_hz is None else rate_hz
+        streams: list[Stream] = []
+        unknown: list[str] = []
+        zeros = [0.0] * len(self.config.motors)
+        steer = [0.0] * len(self.config.model.wheels) if self.steered_by else None
+        for (drv, _), values in zip(self.groups, self._split(zeros, steer), strict=True):
+            streams += frame_streams(drv.preview_command(values), rate, drv.message_name,
+                                     Sender.GATEWAY, f"every cycle (gateway.rate_hz {rate:g})")
+            declared = drv.traffic(rate)
+            if declared is None:
+                unknown.append(f"the frames of the {drv.PROTOCOL} controllers (their driver "
+                               f"declares none)")
+            else:
+                streams += declared.streams
+                unknown += declared.unknown
+        return Traffic(tuple(streams), tuple(unknown))
 
     def poll(self, now_s: float) -> list[Frame]:
         """Housekeeping frames of every driver."""

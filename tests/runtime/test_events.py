@@ -20,7 +20,10 @@ pytestmark = pytest.mark.timeout(60)
 
 #: What a client subscribed to every topic reads in the first 45 cycles of a disabled
 #: TurtleBot3 (200 Hz, odometry at 50 Hz, status at 10 Hz) whose odometry was reset to
-#: (1.5, -2.25, 0.5), refused a twist at cycle 10 and was e-stopped at cycle 20.
+#: (1.5, -2.25, 0.5), refused a twist at cycle 10 and was e-stopped at cycle 20.  Each report
+#: is due on its own grid: the odometry at 0.1 s and 0.2 s comes in the cycle of the status
+#: (before, a cycle of simulated time a hair short of 0.1 s put it one cycle later, and the
+#: odometry of 0.22 s after the end).
 DISABLED = b"""\
 {"ok":true,"id":1,"topics":["error","odometry","status"]}
 {"ok":true,"id":2,"odometry":{"x":1.5,"y":-2.25,"theta":0.5,"vx":0.0,"vy":0.0,"wz":0.0,\
@@ -36,10 +39,10 @@ first"}}
 "distance":0.0,"t":0.05999999999999999}
 {"event":"odometry","x":1.5,"y":-2.25,"theta":0.5,"vx":0.0,"vy":0.0,"wz":0.0,"slip":0.0,\
 "distance":0.0,"t":0.08}
-{"event":"status","state":"disabled","reason":""}
-{"ok":true,"id":4,"state":"estop"}
 {"event":"odometry","x":1.5,"y":-2.25,"theta":0.5,"vx":0.0,"vy":0.0,"wz":0.0,"slip":0.0,\
 "distance":0.0,"t":0.10000000000000002}
+{"event":"status","state":"disabled","reason":""}
+{"ok":true,"id":4,"state":"estop"}
 {"event":"odometry","x":1.5,"y":-2.25,"theta":0.5,"vx":0.0,"vy":0.0,"wz":0.0,"slip":0.0,\
 "distance":0.0,"t":0.12000000000000004}
 {"event":"odometry","x":1.5,"y":-2.25,"theta":0.5,"vx":0.0,"vy":0.0,"wz":0.0,"slip":0.0,\
@@ -48,9 +51,11 @@ first"}}
 "distance":0.0,"t":0.16000000000000006}
 {"event":"odometry","x":1.5,"y":-2.25,"theta":0.5,"vx":0.0,"vy":0.0,"wz":0.0,"slip":0.0,\
 "distance":0.0,"t":0.18000000000000008}
-{"event":"status","state":"estop","reason":"e-stop requested on the control socket"}
 {"event":"odometry","x":1.5,"y":-2.25,"theta":0.5,"vx":0.0,"vy":0.0,"wz":0.0,"slip":0.0,\
 "distance":0.0,"t":0.2000000000000001}
+{"event":"status","state":"estop","reason":"e-stop requested on the control socket"}
+{"event":"odometry","x":1.5,"y":-2.25,"theta":0.5,"vx":0.0,"vy":0.0,"wz":0.0,"slip":0.0,\
+"distance":0.0,"t":0.2200000000000001}
 """
 
 

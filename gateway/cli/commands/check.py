@@ -8,6 +8,7 @@ import click
 
 from gateway.cli import config_option
 from gateway.cli.commands._common import load, rad_s_to_rpm
+from gateway.config.budget import bus_budget, check_bus
 from gateway.core.kinematics import PRESETS
 from gateway.core.numfmt import fixed, short
 from gateway.drive.driveset import DriveSet
@@ -25,6 +26,8 @@ def command(ctx: click.Context, config_path: str | None) -> None:
     from can.interfaces import VALID_INTERFACES  # noqa: PLC0415 - only check pays for it
 
     cfg = load(ctx, config_path, VALID_INTERFACES)  # the interface among every problem
+    drives = DriveSet(cfg)
+    warnings = [*cfg.warnings, *check_bus(cfg, drives)]  # (a bus it cannot work on: an error)
     model = cfg.model
     mob = model.mobility
     click.echo(f"config:   {cfg.source}")
@@ -81,11 +84,15 @@ def command(ctx: click.Context, config_path: str | None) -> None:
         f"linear {_num(lim.max_linear_m_s)} m/s, angular {_num(lim.max_angular_rad_s)} rad/s"
     )
     click.echo(f"bus:      {cfg.bus.interface}:{cfg.bus.channel} at {cfg.bus.bitrate} bit/s")
+    budget = bus_budget(cfg, drives)
+    click.echo(f"bus load: {budget.summary()}, nominal to worst-case bit stuffing; periodic "
+               f"frames:")
+    for line in budget.lines():
+        click.echo(f"  {line}")
     click.echo(
         f"controller-side stop when wheelgate dies (controller_watchdog: "
         f"{cfg.loop.controller_watchdog.value}):"
     )
-    drives = DriveSet(cfg)
     for label, prot in drives.protections():
         click.echo(f"  {label}: {prot.describe()}")
     for w, band in zip(cfg.model.wheels, drives.uncontrolled_bands(), strict=True):
@@ -96,6 +103,6 @@ def command(ctx: click.Context, config_path: str | None) -> None:
                 f"(it stops the motor instead); the gateway sends such commands as they are, "
                 f"counts them and expects the wheel stopped"
             )
-    for warning in cfg.warnings:
+    for warning in warnings:
         click.echo(f"warning:  {warning}")
-    click.echo("ok" if not cfg.warnings else f"ok, with {len(cfg.warnings)} warning(s)")
+    click.echo("ok" if not warnings else f"ok, with {len(warnings)} warning(s)")

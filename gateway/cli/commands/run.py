@@ -13,6 +13,7 @@ from gateway.cli import FilePath, config_option
 from gateway.cli.commands._common import check_finite, load
 from gateway.cli.commands._guards import MAX_DURATION_S
 from gateway.cli.stderr import point_at_devnull, pump_logging
+from gateway.config.budget import check_bus
 from gateway.drive.driveset import DriveSet
 from gateway.runtime.daemon import Daemon
 from gateway.runtime.report import motors_text
@@ -80,9 +81,10 @@ def _run(ctx: click.Context, config_path: str | None, sim: bool, record: str | N
          tell: Callable[[str], None]) -> None:
     """:func:`command`, saying its lines with ``tell``."""
     cfg = load(ctx, config_path)
-    for warning in cfg.warnings:
+    drives = DriveSet(cfg)
+    for warning in (*cfg.warnings, *check_bus(cfg, drives)):  # (a bus it cannot work on: raises)
         log.warning("%s", warning)
-    for label, prot in DriveSet(cfg).protections():
+    for label, prot in drives.protections():
         log.info("controller-side stop of %s: %s", label, prot.describe())
     daemon = Daemon(cfg, sim=sim, record=record, socket_path=socket_path,
                     record_mcap=record_mcap or "")
