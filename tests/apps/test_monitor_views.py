@@ -151,6 +151,23 @@ def test_render_and_json_of_a_session() -> None:
         "0x069", 3, "Get_Encoder_Estimates", "rx")
 
 
+def test_the_measured_load_beside_the_budget() -> None:
+    # The budget of the configuration (gateway.config.budget) stands beside the measured load.
+    # A session's frames are the drivers' alone: without the gateway's WG_* reports (110 a
+    # second of 111 bits, 1.221 % of 1 Mbit/s) the measured load is the budget's less those,
+    # within the window's edges (a heartbeat more or less).
+    cfg = default_config()
+    session = Session(cfg)
+    mon = BusMonitor(cfg, source="log robot.log", window_s=1.0)
+    feed_all(mon, session.run(3.0, [1.0, 1.0, 1.0, 1.0]))
+    snap = mon.snapshot(session.t)
+    assert snap.load.budget_percent == pytest.approx((14.985, 18.225))
+    assert snap.load.nominal_percent == pytest.approx(14.985 - 1.221, abs=0.1)
+    assert "load 13.7 % nominal, 16.7 % worst case  budget 15.0-18.2 %" in render(snap, 200)
+    doc = json.loads(json.dumps(snapshot_json(snap)))
+    assert doc["load"]["budget_percent"] == pytest.approx([14.985, 18.225])
+
+
 # --------------------------------------------------------------------- daemon status
 
 
@@ -180,7 +197,7 @@ def test_status_monitor_rates_from_successive_replies() -> None:
         ("ODrive node 3 Get_Encoder_Estimates (rear_left)", 100.0, 200)]
     assert snap.load.nominal_percent == pytest.approx(100 * 100 * STD8_NOMINAL / 1e6)
     assert snap.load.worst_percent is None  # the daemon does not count worst-case bits
-    assert "n/a worst case" in render(snap)
+    assert "n/a worst case  budget 15.0-18.2 %" in render(snap)
     assert snap.state == "running"
     assert snap.notes == ()
     fr = snap.motors[0]
@@ -203,6 +220,7 @@ def test_status_monitor_robot_mismatch() -> None:
     snap = mon.snapshot()
     assert "the daemon runs robot 'demo_mecanum'" in snap.notes[0]
     assert snap.motors[0].motor_rpm is None  # no such wheel in this config
+    assert snap.load.budget_percent is None  # (this config's budget is another robot's)
 
 
 def test_status_monitor_shows_the_bus_errors_and_the_faults() -> None:

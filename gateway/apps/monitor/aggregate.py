@@ -31,6 +31,7 @@ from gateway.apps.monitor.view import (
     MotorView,
     error_class_counter,
 )
+from gateway.config.budget import bus_budget
 from gateway.core.errors import DecodeError, GatewayError
 from gateway.core.status import BusErrorState, fault_names, state_name
 from gateway.core.types import DriveState
@@ -73,6 +74,12 @@ def _motors_by_name(config: GatewayConfig) -> dict[str, MotorConfig]:
     return {m.wheel: m for m in (*config.motors, *config.steering) if m is not None}
 
 
+def _budget(config: GatewayConfig, drives: DriveSet) -> tuple[float, float]:
+    """The load the configuration's periodic frames need (%, nominal and worst case)."""
+    budget = bus_budget(config, drives)
+    return budget.load(), budget.load(worst_case=True)
+
+
 def _check_window(window_s: float) -> float:
     if not (math.isfinite(window_s) and window_s > 0.0):
         raise ValueError(f"monitor window: expected a positive number of seconds, got {window_s}")
@@ -108,6 +115,7 @@ class BusMonitor:
         self.window_s = _check_window(window_s)
         self.source = source
         self.drives = DriveSet(config)
+        self._budget = _budget(config, self.drives)
         self.labeler = FrameLabeler(config)
         self._motors = _motors_by_name(config)
         self._rows: dict[tuple[int, bool, bool, str], _Row] = {}
@@ -175,7 +183,7 @@ class BusMonitor:
         )
         bitrate = self.config.bus.bitrate
         load = BusLoad(bitrate, len(self._win) * per_s, bus_load(self._nominal * per_s, bitrate),
-                       bus_load(self._worst * per_s, bitrate))
+                       bus_load(self._worst * per_s, bitrate), self._budget)
         motors = tuple(self._motor_view(st) for st in self.drives.status(now_s))
         errors = tuple(
             (f"rejected by {self._driver_name(drv.motors)}",
@@ -224,6 +232,7 @@ class StatusMonitor:
         self.window_s = _check_window(window_s)
         self.source = source
         self.labeler = FrameLabeler(config)
+        self._budget = _budget(config, DriveSet(config))
         self._motors = _motors_by_name(config)
         self._classes = {type(p).__name__: m.driver for m, p in self.labeler.probes()}
         self._samples: deque[_Sample] = deque()
@@ -262,7 +271,9 @@ class StatusMonitor:
         bitrate = status.bus.bitrate or self.config.bus.bitrate
         frames = sum(last.counts.values())
         load = BusLoad(bitrate, (frames - sum(first.counts.values())) * per_s,
-                       bus_load((last.bits - first.bits) * per_s, bitrate), None)
+                       bus_load((last.bits - first.bits) * per_s, bitrate), None,
+                       self._budget if status.robot == self.config.name
+                       and bitrate == self.config.bus.bitrate else None)  # (another robot's)
         return MonitorSnapshot(
             self.source, last.time_s, last.time_s - start, span, frames, load,
             self._motor_views(status), tuple(ids), self._errors(status),

@@ -187,6 +187,8 @@ def render(snap: MonitorSnapshot, width: int = WIDE, height: int | None = None, 
     bad = Level.ERROR if snap.state in ("fault", "estop") else Level.PLAIN
     bus = [f"bus {load.bitrate / 1000:g} kbit/s",
            f"load {fixed(load.nominal_percent, 1)} % nominal, {worst} worst case",
+           *([] if load.budget_percent is None else [
+               f"budget {fixed(load.budget_percent[0], 1)}-{fixed(load.budget_percent[1], 1)} %"]),
            f"{fixed(load.frames_per_s, 0)} frames/s over {fixed(snap.window_s, 2)} s",
            f"{snap.frames} frames"]
     counts = _error_items(snap.errors, nonzero=False)

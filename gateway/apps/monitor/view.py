@@ -60,12 +60,15 @@ class IdView:
 @dataclass(frozen=True, slots=True)
 class BusLoad:
     """Bus load over the window, in percent of ``bitrate`` (``worst_percent``: with worst-case
-    bit stuffing; ``None`` when the source does not know it)."""
+    bit stuffing; ``None`` when the source does not know it); ``budget_percent``: what the
+    configuration's periodic frames need, nominal and worst case
+    (:mod:`gateway.config.budget`), to set the measured load against."""
 
     bitrate: int
     frames_per_s: float
     nominal_percent: float
     worst_percent: float | None
+    budget_percent: tuple[float, float] | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -126,7 +129,9 @@ def snapshot_json(snap: MonitorSnapshot) -> dict[str, object]:
         "window_s": snap.window_s,
         "state": snap.state, "frames": snap.frames,
         "load": {"bitrate": load.bitrate, "frames_per_s": load.frames_per_s,
-                 "nominal_percent": load.nominal_percent, "worst_percent": load.worst_percent},
+                 "nominal_percent": load.nominal_percent, "worst_percent": load.worst_percent,
+                 "budget_percent": None if load.budget_percent is None
+                 else list(load.budget_percent)},
         "motors": [
             {"name": m.name, "driver": m.driver, "node_id": m.node_id, "state": m.state,
              "faults": list(m.faults), "detail": m.detail, "velocity_rad_s": m.velocity_rad_s,
