@@ -5,6 +5,13 @@ the silence of either the heartbeat or the encoder estimates) and ``controller_t
 (here the axis watchdog: written over CAN on 0.6, stated on 0.5, see
 :mod:`drivers.odrive.watchdog`).  ``firmware`` and ``extended_id`` hold for the whole bus: the
 driver lists them in its ``BUS_WIDE`` keys.
+
+``heartbeat_msg_rate_ms`` and ``encoder_msg_rate_ms`` state the axis's cyclic message periods
+as set on the ODrive (0.6 ``axis.config.can.heartbeat_msg_rate_ms`` and
+``encoder_msg_rate_ms``; 0.5 ``heartbeat_rate_ms`` and ``encoder_rate_ms``), which wheelgate
+does not write: 100 ms and 10 ms from the factory (0.5 ``can_simple.cpp``; the 0.6 CAN protocol
+page).  The bus-load budget counts them (:mod:`drivers.odrive.traffic`), ``liveness_s`` must
+cover two of the slower, and a simulator built from the block sends at them.
 """
 
 from __future__ import annotations
@@ -15,6 +22,7 @@ from typing import TYPE_CHECKING
 
 from drivers.odrive.enums import Firmware, InputMode
 from drivers.odrive.messages import DEFAULT_EXTENDED_ID, DEFAULT_FIRMWARE
+from gateway.core.errors import ConfigError
 from gateway.drive.options import (
     CONTROLLER_TIMEOUT_OPTION,
     DriverOptions,
@@ -26,7 +34,11 @@ from gateway.drive.options import (
 if TYPE_CHECKING:
     from collections.abc import Mapping
 
-__all__ = ["OdriveOptions"]
+__all__ = ["FACTORY_ENCODER_MS", "FACTORY_HEARTBEAT_MS", "OdriveOptions"]
+
+#: The factory heartbeat and encoder-estimate periods (ms).
+FACTORY_HEARTBEAT_MS = 100
+FACTORY_ENCODER_MS = 10
 
 _LIVENESS = DriverOptions.specs()["liveness_s"]
 
@@ -42,6 +54,8 @@ class OdriveOptions(StatedTimeout):
     :param flat_endpoints: 0.6: the firmware's ``flat_endpoints.json`` (watchdog endpoint IDs).
     :param watchdog_endpoints: 0.6: the watchdog's endpoint IDs, instead of ``flat_endpoints``.
     :param config_dir: the directory a relative ``flat_endpoints`` starts from.
+    :param heartbeat_msg_rate_ms: the heartbeat period set on the axis (ms).
+    :param encoder_msg_rate_ms: the cyclic estimates' period set on the axis (ms; 0: off).
     """
 
     liveness_s: float = spec_field(
@@ -93,6 +107,40 @@ class OdriveOptions(StatedTimeout):
     config_dir: str = option(
         str, "", help="directory a relative flat_endpoints starts from; '' = current directory"
     )
+    heartbeat_msg_rate_ms: int = option(
+        int, FACTORY_HEARTBEAT_MS, minimum=1, maximum=60_000,
+        help="the axis's heartbeat period as set on the ODrive (0.5: heartbeat_rate_ms; 100 "
+        "from the factory), for the bus budget and liveness_s",
+    )
+    encoder_msg_rate_ms: int = option(
+        int, FACTORY_ENCODER_MS, minimum=0, maximum=60_000,
+        help="the period of the cyclic encoder estimates as set on the ODrive (0.5: "
+        "encoder_rate_ms; 10 from the factory; 0: off, with encoder_request: rtr)",
+    )
+
+    @classmethod
+    def from_block(cls, raw: Mapping[str, object], where: str) -> OdriveOptions:
+        """The options of a motor block, checked one by one and against each other: cyclic
+        estimates need a period, and ``liveness_s`` must cover two periods of the slower
+        stream it watches (one late frame must not make the motor OFFLINE).
+
+        :raises ConfigError: naming the key, what was expected and what came.
+        """
+        opts = super().from_block(raw, where)
+        cyclic = opts.encoder_request == "cyclic"
+        if cyclic and not opts.encoder_msg_rate_ms:
+            raise ConfigError(f"{where}.encoder_msg_rate_ms: expected the period (ms) of the "
+                              f"cyclic estimates the driver reads (encoder_request: cyclic), "
+                              f"or encoder_request: rtr; got 0")
+        slowest = max(opts.heartbeat_msg_rate_ms, opts.encoder_msg_rate_ms if cyclic else 0)
+        if opts.liveness_s < 2 * slowest / 1000.0:
+            raise ConfigError(
+                f"{where}.liveness_s: expected at least two periods of the heartbeat "
+                f"({opts.heartbeat_msg_rate_ms} ms)" + (
+                    f" and the estimates ({opts.encoder_msg_rate_ms} ms)" if cyclic else "")
+                + f", {2 * slowest / 1000.0:g} s, or one late frame makes the motor OFFLINE; "
+                f"got {opts.liveness_s:g}")
+        return opts
 
     @property
     def firmware_family(self) -> Firmware:

@@ -383,13 +383,17 @@ def _next_due(previous: float | None, now_s: float, period_s: float) -> float:
 def simulator_for(motor: MotorConfig) -> DeviceSimulator:
     """An :class:`OdriveSimulator` for ``motor``, as the motor block says it was configured:
     at factory settings (watchdog off) with the 0.6 endpoint IDs it names, or with the watchdog
-    it states (``controller_timeout_s``) saved (:data:`drivers.BUILTIN_SIMULATORS`).
+    it states (``controller_timeout_s``) saved; its heartbeat and estimates at the periods the
+    block states (:data:`drivers.BUILTIN_SIMULATORS`).
 
     :raises ConfigError: for a bad protocol key or bad endpoint keys.
     """
     where = f"motor {motor.wheel!r}"
     options = OdriveOptions.from_block(motor.options, where)
     endpoints = endpoints_from_options(options, where)
+    beat, estimates = options.heartbeat_msg_rate_ms / 1000.0, options.encoder_msg_rate_ms / 1000.0
     if endpoints is not None:
-        return OdriveSimulator(motor, endpoints=endpoints)
-    return OdriveSimulator(motor, watchdog_timeout_s=options.controller_timeout_s)
+        return OdriveSimulator(motor, endpoints=endpoints, heartbeat_period_s=beat,
+                               encoder_period_s=estimates)
+    return OdriveSimulator(motor, watchdog_timeout_s=options.controller_timeout_s,
+                           heartbeat_period_s=beat, encoder_period_s=estimates)

@@ -1,20 +1,19 @@
 """The frames an ODrive axis sends on its own, for the bus-load budget
 (:mod:`gateway.drive.traffic`).
 
-Every axis sends its heartbeat and, unless the estimates are requested (``encoder_request:
-rtr``), its encoder estimates on timers of its own.  wheelgate does not write those rates, so
-the budget takes the firmware's factory defaults: 100 ms and 10 ms (0.5.x
-``axis.config.can.heartbeat_rate_ms`` and ``encoder_rate_ms``, ``can_simple.cpp``
-``service_stack()`` of odriverobotics/ODrive; 0.6 ``heartbeat_msg_rate_ms`` and
-``encoder_msg_rate_ms``, the ODrive CAN protocol page).  The other cyclic messages are off from
-the factory.  With ``encoder_request: rtr`` the driver asks for the estimates every cycle (a
-remote frame) and the axis answers each request.  All frames are 8 bytes.
+Every axis sends its heartbeat and, unless turned off, its encoder estimates on timers of its
+own, at the periods its motor block states (``heartbeat_msg_rate_ms``, ``encoder_msg_rate_ms``:
+:mod:`drivers.odrive.options`; the factory's 100 ms and 10 ms unless stated).  With
+``encoder_request: rtr`` the driver asks for the estimates every cycle (a remote frame) and the
+axis answers each request.  Other cyclic messages (iq, temperature, bus voltage, ...) are off
+from the factory and not counted.  All data frames are 8 bytes.
 """
 
 from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+from drivers.odrive.options import FACTORY_ENCODER_MS, FACTORY_HEARTBEAT_MS
 from gateway.drive.traffic import Sender, Stream, Traffic
 
 if TYPE_CHECKING:
@@ -22,23 +21,16 @@ if TYPE_CHECKING:
 
     from drivers.odrive.options import OdriveOptions
 
-#: The factory heartbeat and encoder-estimate periods (s).
-HEARTBEAT_S = 0.1
-ENCODER_S = 0.01
-
 
 def axis_traffic(opts: Sequence[OdriveOptions], extended: bool, rate_hz: float) -> Traffic:
     """The heartbeats and estimates of the axes with these options at loop rate ``rate_hz``."""
-    n = len(opts)
+    streams = [_cyclic("Heartbeat", [o.heartbeat_msg_rate_ms for o in opts],
+                       "heartbeat_msg_rate_ms", FACTORY_HEARTBEAT_MS, extended)]
+    estimates = [o.encoder_msg_rate_ms for o in opts if o.encoder_msg_rate_ms]
+    if estimates:
+        streams.append(_cyclic("Get_Encoder_Estimates", estimates, "encoder_msg_rate_ms",
+                               FACTORY_ENCODER_MS, extended))
     rtr = sum(1 for o in opts if o.encoder_request == "rtr")
-    rates = "heartbeat_msg_rate_ms (0.5: heartbeat_rate_ms)"
-    streams = [Stream("Heartbeat", Sender.CONTROLLERS, n / HEARTBEAT_S, 8, extended,
-                      f"{HEARTBEAT_S * 1000:g} ms each, the factory {rates}")]
-    if n - rtr:
-        streams.append(Stream(
-            "Get_Encoder_Estimates", Sender.CONTROLLERS, (n - rtr) / ENCODER_S, 8, extended,
-            f"{ENCODER_S * 1000:g} ms each, the factory encoder_msg_rate_ms (0.5: "
-            f"encoder_rate_ms)"))
     if rtr:
         every = f"every cycle (gateway.rate_hz {rate_hz:g}), encoder_request: rtr"
         streams += [
@@ -47,3 +39,12 @@ def axis_traffic(opts: Sequence[OdriveOptions], extended: bool, rate_hz: float) 
             Stream("Get_Encoder_Estimates", Sender.CONTROLLERS, rtr * rate_hz, 8, extended,
                    f"the answers, {every}")]
     return Traffic(tuple(streams))
+
+
+def _cyclic(name: str, periods_ms: Sequence[int], key: str, factory_ms: int,
+            extended: bool) -> Stream:
+    """One cyclic message of every axis with these periods."""
+    said = ", ".join(f"{p}" for p in sorted(set(periods_ms)))
+    whose = "the factory's" if set(periods_ms) == {factory_ms} else "as stated"
+    return Stream(name, Sender.CONTROLLERS, sum(1000.0 / p for p in periods_ms), 8, extended,
+                  f"{said} ms each, {key} ({whose})")

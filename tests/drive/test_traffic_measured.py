@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import pytest
+import yaml
 
 from gateway.bus.can_bus import drain
 from gateway.config.budget import bus_budget
@@ -32,7 +33,8 @@ if TYPE_CHECKING:
 
     from gateway.drive.traffic import BusBudget
 
-CONFIG = Path(__file__).resolve().parents[2] / "config"
+REPO = Path(__file__).resolve().parents[2]
+CONFIG = REPO / "config"
 
 #: How long the bus is counted (s of simulated time).
 WINDOW_S = 3.0
@@ -51,7 +53,7 @@ def _declared(budget: BusBudget) -> dict[tuple[Sender, Shape], float]:
     return dict(out)
 
 
-def _measure(config_name: str | None, channel: str, monkeypatch: pytest.MonkeyPatch,
+def _measure(config_name: str | Path | None, channel: str, monkeypatch: pytest.MonkeyPatch,
              twist: Twist) -> tuple[dict[tuple[Sender, Shape], float], BusBudget, float]:
     """Frames a second per (sender, shape) on the bus, the budget, and the bits a second."""
     path = None if config_name is None else CONFIG / config_name
@@ -87,6 +89,16 @@ def _measure(config_name: str | None, channel: str, monkeypatch: pytest.MonkeyPa
     return rates, budget, bits
 
 
+def _check(measured: dict[tuple[Sender, Shape], float], budget: BusBudget, bits: float) -> None:
+    declared = _declared(budget)
+    assert set(measured) == set(declared), (measured, declared)
+    for key, per_s in declared.items():
+        # A device's timer may fall on either side of the window's edges: one frame per
+        # stream source; else within 2 %.
+        assert measured[key] == pytest.approx(per_s, rel=0.02, abs=10.0 / WINDOW_S), key
+    assert bits == pytest.approx(budget.load() / 100.0 * budget.bitrate, rel=0.02)
+
+
 @pytest.mark.parametrize(("config_name", "twist"), [
     (None, Twist(0.4, 0.1, 0.3)),                      # ODrive, the embedded default
     ("skid_steer.yaml", Twist(0.5, 0.0, 0.4)),          # VESC
@@ -99,11 +111,23 @@ def _measure(config_name: str | None, channel: str, monkeypatch: pytest.MonkeyPa
 def test_the_budget_is_what_reaches_the_bus(
     config_name: str | None, twist: Twist, channel: str, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    measured, budget, bits = _measure(config_name, channel, monkeypatch, twist)
-    declared = _declared(budget)
-    assert set(measured) == set(declared), (measured, declared)
-    for key, per_s in declared.items():
-        # A device's timer may fall on either side of the window's edges: one frame per
-        # stream source; else within 2 %.
-        assert measured[key] == pytest.approx(per_s, rel=0.02, abs=10.0 / WINDOW_S), key
-    assert bits == pytest.approx(budget.load() / 100.0 * budget.bitrate, rel=0.02)
+    _check(*_measure(config_name, channel, monkeypatch, twist))
+
+
+def test_stated_odrive_rates_and_rtr_requests(
+    channel: str, monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    # ODrives whose heartbeat and estimates were set to 50 ms and 20 ms, one of them asked
+    # for its estimates with a remote frame every cycle (and its cyclic ones off): the budget
+    # counts what the blocks state, the simulators built from them send it.
+    raw = yaml.safe_load((REPO / "gateway" / "data" / "default.yaml").read_text())
+    raw["motor_defaults"].update(heartbeat_msg_rate_ms=50, encoder_msg_rate_ms=20)
+    raw["motors"]["rear_right"].update(encoder_request="rtr", encoder_msg_rate_ms=0)
+    path = tmp_path / "stated.yaml"
+    path.write_text(yaml.safe_dump(raw))
+    measured, budget, bits = _measure(path, channel, monkeypatch, Twist(0.4, 0.1, 0.3))
+    assert [(s.name, s.sender.value, s.per_s, s.remote) for s in budget.streams[1:4]] == [
+        ("Heartbeat", "controllers", 80.0, False),
+        ("Get_Encoder_Estimates", "controllers", 150.0, False),
+        ("Get_Encoder_Estimates", "gateway", 200.0, True)]
+    _check(measured, budget, bits)

@@ -93,6 +93,13 @@ def test_registry_and_config() -> None:
     sim = simulator_for(motor(3, firmware="0.5"))
     assert isinstance(sim, OdriveSimulator)
     assert sim.codec.firmware is V05
+    assert (sim.heartbeat_period_s, sim.encoder_period_s) == (0.1, 0.01)  # the factory's
+    sim = simulator_for(motor(3, heartbeat_msg_rate_ms=50, encoder_msg_rate_ms=0,
+                              encoder_request="rtr"))
+    assert isinstance(sim, OdriveSimulator)
+    assert (sim.heartbeat_period_s, sim.encoder_period_s) == (0.05, 0.0)  # as the block states
+    assert OdriveDriver([motor(3, heartbeat_msg_rate_ms=200, liveness_s=0.4)]).opts[0] \
+        .heartbeat_msg_rate_ms == 200
     with pytest.raises(ConfigError, match=r"firmware: expected one of '0.5', '0.6', got 5"):
         OdriveSimulator(motor(3, validate=False, firmware=5))
 
@@ -130,6 +137,22 @@ def test_registry_and_config() -> None:
         (
             [motor(3), motor(3, "right")],
             r"'right'.node_id: node 3 is already used by wheel 'left'",
+        ),
+        (  # the cyclic estimates the driver reads, turned off
+            [motor(3, encoder_msg_rate_ms=0)],
+            r"^motor 'left'.encoder_msg_rate_ms: expected the period \(ms\) of the cyclic "
+            r"estimates the driver reads \(encoder_request: cyclic\), or encoder_request: rtr; "
+            r"got 0$",
+        ),
+        (  # a heartbeat every 200 ms: the default liveness_s (0.25 s) would flap
+            [motor(3, heartbeat_msg_rate_ms=200)],
+            r"^motor 'left'.liveness_s: expected at least two periods of the heartbeat "
+            r"\(200 ms\) and the estimates \(10 ms\), 0.4 s, or one late frame makes the "
+            r"motor OFFLINE; got 0.25$",
+        ),
+        (
+            [motor(3, encoder_request="rtr", encoder_msg_rate_ms=0, liveness_s=0.15)],
+            r"liveness_s: expected at least two periods of the heartbeat \(100 ms\), 0.2 s",
         ),
     ],
 )
