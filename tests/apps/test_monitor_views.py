@@ -166,6 +166,20 @@ def test_the_measured_load_beside_the_budget() -> None:
     assert "load 13.7 % nominal, 16.7 % worst case  budget 15.0-18.2 %" in render(snap, 200)
     doc = json.loads(json.dumps(snapshot_json(snap)))
     assert doc["load"]["budget_percent"] == pytest.approx([14.985, 18.225])
+    assert snap.notes == ()
+    # Another node's frames (1000 a second, 8 bytes, 11.1 %): more than the budget, said.
+    other = Session(cfg)
+    mon = BusMonitor(cfg, source="bus", window_s=1.0)
+    frames = other.run(3.0, [1.0, 1.0, 1.0, 1.0])
+    frames += [(k / 1000.0, Frame(0x7E0, bytes(8)), "rx") for k in range(3000)]
+    feed_all(mon, sorted(frames, key=lambda f: f[0]))
+    snap = mon.snapshot(other.t)
+    assert snap.load.nominal_percent == pytest.approx(14.985 - 1.221 + 11.1, abs=0.2)
+    assert snap.notes == (
+        "the bus carries 24.8 %, more than the configuration's periodic frames need "
+        "(15.0-18.2 %): frames it does not know (another node on the bus, a controller's "
+        "message rates other than its block states)",)
+    assert "note: the bus carries 24.8 %" in render(snap, 200)
 
 
 # --------------------------------------------------------------------- daemon status

@@ -80,6 +80,25 @@ def _budget(config: GatewayConfig, drives: DriveSet) -> tuple[float, float]:
     return budget.load(), budget.load(worst_case=True)
 
 
+#: A window at least this long (s) and a measured load this many points above the budget's
+#: worst case make the note of :func:`over_budget`.
+OVER_BUDGET_AFTER_S = 1.0
+OVER_BUDGET_POINTS = 2.0
+
+
+def over_budget(load: BusLoad, span_s: float) -> tuple[str, ...]:
+    """A note when the bus carries clearly more than the configuration's budget: frames the
+    configuration does not know (another node, a controller's rates other than stated)."""
+    budget = load.budget_percent
+    if (budget is None or span_s < OVER_BUDGET_AFTER_S
+            or load.nominal_percent <= budget[1] + OVER_BUDGET_POINTS):
+        return ()
+    return (f"the bus carries {load.nominal_percent:.1f} %, more than the configuration's "
+            f"periodic frames need ({budget[0]:.1f}-{budget[1]:.1f} %): frames it does not "
+            f"know (another node on the bus, a controller's message rates other than its "
+            f"block states)",)
+
+
 def _check_window(window_s: float) -> float:
     if not (math.isfinite(window_s) and window_s > 0.0):
         raise ValueError(f"monitor window: expected a positive number of seconds, got {window_s}")
@@ -191,7 +210,7 @@ class BusMonitor:
             for drv, _ in self.drives.groups
         ) + tuple(self.counters.items())
         return MonitorSnapshot(self.source, now_s, now_s - start, max(span, 0.0), self.frames,
-                               load, motors, ids, errors)
+                               load, motors, ids, errors, notes=over_budget(load, span))
 
     def _driver_name(self, motors: tuple[MotorConfig, ...]) -> str:
         return motors[0].driver if motors else "?"
