@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, cast
 
 from drivers.odrive.enums import Firmware, InputMode
 from drivers.odrive.messages import DEFAULT_EXTENDED_ID, DEFAULT_FIRMWARE
@@ -119,28 +119,30 @@ class OdriveOptions(StatedTimeout):
     )
 
     @classmethod
-    def from_block(cls, raw: Mapping[str, object], where: str) -> OdriveOptions:
-        """The options of a motor block, checked one by one and against each other: cyclic
+    def validate(cls, raw: Mapping[str, object], where: str) -> dict[str, object]:
+        """The keys of a motor block, checked one by one and against each other: cyclic
         estimates need a period, and ``liveness_s`` must cover two periods of the slower
         stream it watches (one late frame must not make the motor OFFLINE).
 
         :raises ConfigError: naming the key, what was expected and what came.
         """
-        opts = super().from_block(raw, where)
-        cyclic = opts.encoder_request == "cyclic"
-        if cyclic and not opts.encoder_msg_rate_ms:
+        values = super().validate(raw, where)
+        cyclic = values["encoder_request"] == "cyclic"
+        beat, estimates = cast("int", values["heartbeat_msg_rate_ms"]), cast(
+            "int", values["encoder_msg_rate_ms"])
+        liveness = cast("float", values["liveness_s"])
+        if cyclic and not estimates:
             raise ConfigError(f"{where}.encoder_msg_rate_ms: expected the period (ms) of the "
                               f"cyclic estimates the driver reads (encoder_request: cyclic), "
                               f"or encoder_request: rtr; got 0")
-        slowest = max(opts.heartbeat_msg_rate_ms, opts.encoder_msg_rate_ms if cyclic else 0)
-        if opts.liveness_s < 2 * slowest / 1000.0:
+        slowest = max(beat, estimates if cyclic else 0)
+        if liveness < 2 * slowest / 1000.0:
             raise ConfigError(
                 f"{where}.liveness_s: expected at least two periods of the heartbeat "
-                f"({opts.heartbeat_msg_rate_ms} ms)" + (
-                    f" and the estimates ({opts.encoder_msg_rate_ms} ms)" if cyclic else "")
+                f"({beat} ms)" + (f" and the estimates ({estimates} ms)" if cyclic else "")
                 + f", {2 * slowest / 1000.0:g} s, or one late frame makes the motor OFFLINE; "
-                f"got {opts.liveness_s:g}")
-        return opts
+                f"got {liveness:g}")
+        return values
 
     @property
     def firmware_family(self) -> Firmware:

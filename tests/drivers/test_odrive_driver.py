@@ -139,19 +139,20 @@ def test_registry_and_config() -> None:
             r"'right'.node_id: node 3 is already used by wheel 'left'",
         ),
         (  # the cyclic estimates the driver reads, turned off
-            [motor(3, encoder_msg_rate_ms=0)],
+            [motor(3, validate=False, encoder_msg_rate_ms=0)],
             r"^motor 'left'.encoder_msg_rate_ms: expected the period \(ms\) of the cyclic "
             r"estimates the driver reads \(encoder_request: cyclic\), or encoder_request: rtr; "
             r"got 0$",
         ),
         (  # a heartbeat every 200 ms: the default liveness_s (0.25 s) would flap
-            [motor(3, heartbeat_msg_rate_ms=200)],
+            [motor(3, validate=False, heartbeat_msg_rate_ms=200)],
             r"^motor 'left'.liveness_s: expected at least two periods of the heartbeat "
             r"\(200 ms\) and the estimates \(10 ms\), 0.4 s, or one late frame makes the "
             r"motor OFFLINE; got 0.25$",
         ),
         (
-            [motor(3, encoder_request="rtr", encoder_msg_rate_ms=0, liveness_s=0.15)],
+            [motor(3, validate=False, encoder_request="rtr", encoder_msg_rate_ms=0,
+                   liveness_s=0.15)],
             r"liveness_s: expected at least two periods of the heartbeat \(100 ms\), 0.2 s",
         ),
     ],
@@ -159,6 +160,15 @@ def test_registry_and_config() -> None:
 def test_config_errors(motors: list[MotorConfig], message: str) -> None:
     with pytest.raises(ConfigError, match=message):
         OdriveDriver(motors)
+
+
+def test_the_periods_are_checked_with_the_block_that_states_them() -> None:
+    # As the loader checks a motor block (every problem of the file, each at its key path).
+    with pytest.raises(ConfigError, match=r"^robot.yaml: motors.left.liveness_s: expected at "
+                                          r"least two periods of the heartbeat \(500 ms\)"):
+        OdriveDriver.validate_options({"heartbeat_msg_rate_ms": 500}, "robot.yaml: motors.left")
+    assert OdriveDriver.validate_options(
+        {"heartbeat_msg_rate_ms": 500, "liveness_s": 1.0}, "x")["heartbeat_msg_rate_ms"] == 500
 
 
 def test_a_speed_beyond_float32_is_an_encode_error_not_an_overflow() -> None:
