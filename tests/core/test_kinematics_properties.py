@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import assume, given, settings
+from hypothesis import assume, example, given, settings
 from hypothesis import strategies as st
 
 from gateway.core.errors import InfeasibleTwistError, KinematicsError
@@ -113,6 +113,12 @@ def test_infeasible_twists_are_always_caught(model: RobotModel, t: Twist) -> Non
 
 @settings(max_examples=300, deadline=None)
 @given(robots(), twists)
+@example(
+    RobotModel([Wheel("a", WheelType.SPHERICAL, 0.0, 1.0, 0.0, 0.25),
+                Wheel("b", WheelType.SPHERICAL, 0.0, 1.0, 2.061698142643885e-09, 0.25),
+                Wheel("c", WheelType.SPHERICAL, 1.0, 1.0, 0.0, 0.25)], slip_tolerance_m_s=1e-6),
+    Twist(0.0, 0.0, 1.0),
+)
 def test_fk_inverts_ik(model: RobotModel, t: Twist) -> None:
     try:
         res = model.ik(t)
@@ -132,11 +138,20 @@ def test_fk_inverts_ik(model: RobotModel, t: Twist) -> None:
     )
     want = np.array([t.vx_m_s, t.vy_m_s, t.wz_rad_s])
     misfit = float(np.linalg.norm(a @ want - b))
-    smallest = float(np.linalg.svd(a, compute_uv=False)[-1])
+    singular = np.linalg.svd(a, compute_uv=False)
+    smallest = float(singular[-1])
     error = float(np.linalg.norm(np.array([got.vx_m_s, got.vy_m_s, got.wz_rad_s]) - want))
     assert error <= (2.0 * misfit + 1e-12) / smallest + 1e-9, (error, misfit, smallest)
     assert misfit <= 2.0 * math.sqrt(len(b)) * model.slip_tolerance_m_s
-    assert fk.residual_m_s <= misfit / math.sqrt(len(b)) + 1e-12
+    # The least squares' residual is at most the twist's own (rms), plus the rounding of a
+    # solution through the pseudo-inverse, which grows with the condition number: two wheels
+    # of a random layout at one place, their rolling directions 2e-9 rad apart, left a
+    # residual of 2.9e-9 m/s where the twist fits exactly (a run of CI, hypothesis's own
+    # draw).
+    rounding = 8.0 * np.finfo(float).eps * float(singular[0]) / smallest * float(
+        np.linalg.norm(b))
+    assert fk.residual_m_s <= misfit / math.sqrt(len(b)) + 1e-12 + rounding, (
+        fk.residual_m_s, misfit, rounding)
 
 
 @settings(max_examples=300, deadline=None)
