@@ -53,6 +53,7 @@ from drivers.cia402.codec import make_heartbeat
 from drivers.cia402.enums import CobBase, NmtState
 from drivers.cia402.options import DEFAULT_HOST_HEARTBEAT_S, DEFAULT_HOST_NODE_ID
 from drivers.cia402.quick_stop import ABORT_QUICK_STOP, quick_stop_action
+from gateway.core.cadence import next_due
 from gateway.core.errors import ConfigError
 from gateway.core.protection import Guard, Protection
 
@@ -125,8 +126,7 @@ class HostHeartbeat:
         due = self._due
         if due is not None and now_s < due - 1e-9:
             return []
-        nxt = now_s + self.period_s if due is None else due + self.period_s
-        self._due = nxt if nxt > now_s else now_s + self.period_s
+        self._due = next_due(due, now_s, self.period_s)
         return [self.frame]
 
 

@@ -47,6 +47,7 @@ from drivers.dji.codec import (
     decode_command,
     encode_feedback,
 )
+from gateway.core.cadence import next_due
 from gateway.core.errors import ConfigError, DecodeError
 from gateway.sim.device import DeviceSimulator, MotorModel, SimFault
 
@@ -208,8 +209,7 @@ class DjiSimulator(DeviceSimulator):
                                                self.feedback_period_s)
         if now_s < due - 1e-9:
             return []
-        nxt = due + self.feedback_period_s
-        self._next_feedback_s = nxt if nxt > now_s else now_s + self.feedback_period_s
+        self._next_feedback_s = next_due(due, now_s, self.feedback_period_s)
         return [encode_feedback(self.measure())]
 
     # ----------------------------------------------------------------- measurement

@@ -87,6 +87,7 @@ from drivers.odrive.sim_rules import (
     parameter_access,
 )
 from drivers.odrive.watchdog import RX_SDO, endpoints_from_options
+from gateway.core.cadence import next_due
 from gateway.core.errors import DecodeError
 from gateway.sim.device import DeviceSimulator, SimFault
 
@@ -240,7 +241,7 @@ class OdriveSimulator(DeviceSimulator):
         self._next_heartbeat_s = self.due(self._next_heartbeat_s, now_s, self.heartbeat_period_s)
         if now_s >= self._next_heartbeat_s:
             out.append(self._heartbeat())
-            self._next_heartbeat_s = _next_due(
+            self._next_heartbeat_s = next_due(
                 self._next_heartbeat_s, now_s, self.heartbeat_period_s
             )
         if self.encoder_period_s > 0.0:
@@ -248,7 +249,7 @@ class OdriveSimulator(DeviceSimulator):
                                                   self.encoder_period_s)
             if now_s >= due:
                 out.append(self._estimates())
-                self._next_encoder_s = _next_due(due, now_s, self.encoder_period_s)
+                self._next_encoder_s = next_due(due, now_s, self.encoder_period_s)
         return out
 
     def _on_fault(self) -> None:
@@ -372,12 +373,6 @@ class OdriveSimulator(DeviceSimulator):
 #: The 0.6 commands that feed the watchdog in this model (see the module docstring).
 _FEEDS_06 = frozenset({CmdId.SET_INPUT_POS, CmdId.SET_INPUT_VEL, CmdId.SET_INPUT_TORQUE,
                        CmdId.SET_AXIS_STATE})
-
-
-def _next_due(previous: float | None, now_s: float, period_s: float) -> float:
-    """The next due time of a periodic frame, without bursts after a gap."""
-    nxt = (now_s if previous is None else previous) + period_s
-    return nxt if nxt > now_s else now_s + period_s
 
 
 def simulator_for(motor: MotorConfig) -> DeviceSimulator:

@@ -32,6 +32,11 @@ class _FrameFields(NamedTuple):
     timestamp_s: float
 
 
+def hex_id(can_id: int, extended: bool) -> str:
+    """A CAN identifier as wheelgate writes it: ``0x021``, or ``0x00001117`` (29-bit)."""
+    return f"0x{can_id:08X}" if extended else f"0x{can_id:03X}"
+
+
 class Frame(_FrameFields):
     """One classical CAN frame as the pure core sees it: immutable, compared by value.
 

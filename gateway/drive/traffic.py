@@ -28,6 +28,7 @@ import enum
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+from gateway.core.types import hex_id
 from gateway.wire.busload import bus_load, frame_bits
 
 if TYPE_CHECKING:
@@ -96,7 +97,7 @@ def frame_streams(frames: Iterable[Frame], per_s: float,
     counts: dict[tuple[str, int, bool, bool], int] = {}
     for f in frames:
         ext = f.is_extended_id
-        label = name(f.arbitration_id, ext) or f"0x{f.arbitration_id:0{8 if ext else 3}X}"
+        label = name(f.arbitration_id, ext) or hex_id(f.arbitration_id, ext)
         key = (label, f.dlc, f.is_extended_id, f.is_remote_frame)
         counts[key] = counts.get(key, 0) + 1
     return [Stream(label, sender, n * per_s, dlc, ext, basis, remote)

@@ -22,6 +22,7 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING
 
+from gateway.core.cadence import next_due
 from gateway.core.events import OdometryEvent, StatusEvent
 from gateway.core.status import LastError
 from gateway.core.types import ConstraintCode, ErrorCode
@@ -127,13 +128,13 @@ class Publisher:
             frames.append(self.wg.encode_error(self._error))
             self._error = None
         if now_s >= self._next_odom_s:
-            self._next_odom_s = _next_due(self._next_odom_s, now_s, self._odom_period_s)
+            self._next_odom_s = next_due(self._next_odom_s, now_s, self._odom_period_s)
             st = self.odometry.state
             frames.append(self.wg.encode_pose(st.pose))
             frames.append(self.wg.encode_velocity(st.twist, st.slip_m_s))
             self.outbox.append(OdometryEvent(st))
         if now_s >= self._next_status_s:
-            self._next_status_s = _next_due(self._next_status_s, now_s, self._status_period_s)
+            self._next_status_s = next_due(self._next_status_s, now_s, self._status_period_s)
             frames.append(self.wg.encode_status(self.status_report(limit_report, bus_trouble)))
             self.outbox.append(StatusEvent(self.supervisor.state, self.supervisor.reason))
         self.next_due_s = min(self._next_odom_s, self._next_status_s)
@@ -164,12 +165,3 @@ class Publisher:
             missed_cycles=self.timer.missed,
             infeasible_count=sup.counts.infeasible,
         )
-
-
-def _next_due(due_s: float, now_s: float, period_s: float) -> float:
-    """The next time a report is due after the one due at ``due_s`` went out at ``now_s``:
-    one period after it, on its grid, so that a cycle a little late (or a hair early: the
-    next) does not lengthen every period, and the rate is the configured one; one period from
-    now when the loop fell behind by a whole period (no burst to catch up)."""
-    nxt = due_s + period_s
-    return nxt if nxt > now_s else now_s + period_s

@@ -34,6 +34,7 @@ import math
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
+from gateway.core.cadence import next_due
 from gateway.core.kinematics.limits import Limits, speed_scale
 from gateway.core.types import Twist
 from gateway.wire.socket import MAX_TWIST_COMPONENT
@@ -377,8 +378,8 @@ class JogState:
             return self._stopped(f"deadman: no key for {self.deadman_s:g} s: sent stop")
         if now_s < self.next_send_s:
             return Step(self)
-        due = self.next_send_s + self.period_s
-        state = dataclasses.replace(self, next_send_s=due if due > now_s else now_s + self.period_s)
+        state = dataclasses.replace(self, next_send_s=next_due(self.next_send_s, now_s,
+                                                                self.period_s))
         return Step(state, (Request("twist", self.twist),))
 
     def on_quit(self, reason: str) -> Step:

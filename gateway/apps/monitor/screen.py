@@ -17,8 +17,9 @@ import math
 from typing import TYPE_CHECKING
 
 from gateway.apps.layout import Level, Line, cut, fit, pack, paint, pair_steering, wrap
-from gateway.apps.monitor.view import error_class_of, hex_id
+from gateway.apps.monitor.view import error_class_of
 from gateway.core.numfmt import fixed
+from gateway.core.types import hex_id
 
 if TYPE_CHECKING:
     from collections.abc import Sequence

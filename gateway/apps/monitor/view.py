@@ -10,6 +10,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+from gateway.core.types import hex_id
+
 if TYPE_CHECKING:
     from gateway.drive.labels import FrameLabel
 
@@ -114,11 +116,6 @@ def error_class_of(counter: str) -> str | None:
     """The class of an error counter from :func:`error_class_counter` (``"bus off"``), else
     ``None``."""
     return counter.removeprefix(_CLASS_PREFIX) if counter.startswith(_CLASS_PREFIX) else None
-
-
-def hex_id(can_id: int, extended: bool) -> str:
-    """A CAN ID as the monitor writes it: 3 hex digits, or 8 for an extended one."""
-    return f"0x{can_id:08X}" if extended else f"0x{can_id:03X}"
 
 
 def snapshot_json(snap: MonitorSnapshot) -> dict[str, object]:

@@ -8,6 +8,7 @@ from collections import Counter
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
+from gateway.core.types import hex_id
 from gateway.drive.scan import Description
 
 if TYPE_CHECKING:
@@ -72,11 +73,6 @@ class ScanReport:
     def controllers(self) -> tuple[ScannedDevice, ...]:
         """The rows that are controllers."""
         return tuple(r for r in self.rows if r.node_id is not None)
-
-
-def hex_id(arbitration_id: int, extended: bool) -> str:
-    """``0x021`` or ``0x00001117``."""
-    return f"0x{arbitration_id:08X}" if extended else f"0x{arbitration_id:03X}"
 
 
 def _value(value: float | int | str) -> str:

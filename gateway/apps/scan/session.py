@@ -33,7 +33,8 @@ from typing import TYPE_CHECKING
 
 from gateway.apps.scan.classify import Classified, Configured, Sighting, classify
 from gateway.apps.scan.known import KnownMotors
-from gateway.apps.scan.report import UNKNOWN, WHEELGATE, ScannedDevice, ScanReport, hex_id
+from gateway.apps.scan.report import UNKNOWN, WHEELGATE, ScannedDevice, ScanReport
+from gateway.core.types import hex_id
 from gateway.drive.labels import DRIVER_TITLES
 from gateway.drive.scan import Answer, Description, Heard
 
