@@ -39,11 +39,7 @@ from typing import TYPE_CHECKING
 
 from gateway.config.daemon_blocks import parse_bus, parse_loop
 from gateway.config.gather import Problems
-from gateway.config.keys import (
-    KINEMATICS_KEYS,
-    LIMIT_KEYS,
-    TOP_KEYS,
-)
+from gateway.config.keys import KINEMATICS_KEYS, LIMIT_KEYS, TOP_KEYS
 from gateway.config.motors import (
     check_nodes,
     limit_steer_rates,
@@ -59,6 +55,7 @@ from gateway.config.wheels import (
     generic_wheels,
     preset_wheels,
     stand_in_wheels,
+    wheel_layout,
 )
 from gateway.config.yaml_text import MAX_BYTES, load_yaml, read_text
 from gateway.core.errors import ConfigError, KinematicsError
@@ -217,7 +214,8 @@ def parse_config(
         max_angular_rad_s=float(lim["max_angular_rad_s"]),  # type: ignore[arg-type]
         max_wheel_decel_rad_s2=float(lim["max_wheel_decel_rad_s2"]) or None,  # type: ignore[arg-type]
     )
-    warnings = _warnings(raw, source, bus, loop) + bridge_said
+    warnings = [*_warnings(raw, source, bus, loop), *bridge_said,
+                *wheel_layout(model, motors, source)]
     config = GatewayConfig(
         source, str(name), drive, MappingProxyType(geometry), model, motors, limits, bus, loop,
         steering, tuple(warnings), bridge, foxglove, MappingProxyType(calibration), fingerprint,

@@ -5,12 +5,26 @@ from __future__ import annotations
 
 import difflib
 import math
+from typing import TYPE_CHECKING
 
 from gateway.config.keys import MAX_LENGTH_M, MIN_LENGTH_M, WHEEL_KEYS
 from gateway.core.errors import ConfigError, KinematicsError
 from gateway.core.kinematics import PRESETS, Wheel, WheelType
+from gateway.core.kinematics.layout import (
+    NOTICED_LITTLE_M_S,
+    NOTICED_NONE_M_S,
+    closest_pair,
+    weakest_motion,
+)
 from gateway.core.kinematics.model import validate_wheel
+from gateway.core.numfmt import short
 from gateway.core.options import OptionSpec, validate_block
+
+if TYPE_CHECKING:
+    from collections.abc import Sequence
+
+    from gateway.core.kinematics import RobotModel
+    from gateway.core.types import Twist
 
 #: The most wheels a robot may have (a bound on what a config can make the loader build).
 MAX_WHEELS = 64
@@ -155,3 +169,40 @@ def generic_wheels(
         wheels.append(wheel)
         motors.append(motor or None)  # type: ignore[arg-type]
     return wheels, motors
+
+
+def wheel_layout(model: RobotModel, motors: Sequence[object | None], source: str) -> list[str]:
+    """Whether the driven wheels tell every motion apart (:mod:`gateway.core.kinematics.layout`).
+
+    :return: a warning when one motion is noticed too little to measure.
+    :raises ConfigError: when one is not noticed at all: the gateway could neither drive
+        nor measure it.
+    """
+    twist, noticed = weakest_motion(model.wheels, [m is not None for m in motors])
+    if noticed >= NOTICED_LITTLE_M_S:
+        return []
+    pair = closest_pair(model.wheels)
+    where = ("" if pair is None or pair[2] >= 0.01 * model.rho
+             else f"; wheels {pair[0]!r} and {pair[1]!r} are mounted {pair[2] * 1e3:.2g} mm apart")
+    check = ("check each wheel's position and angles (REP-103: x forward, y left, angles "
+             f"counter-clockwise; `wheelgate check` lists them){where}")
+    motion = f"{_motion(twist)} (the twist {twist}, its fastest wheel at 1 m/s)"
+    if noticed < NOTICED_NONE_M_S:
+        raise ConfigError(
+            f"{source}: wheels: {motion} turns no driven wheel and no fixed or steerable wheel "
+            f"resists it, so wheelgate could neither drive nor measure it; expected driven "
+            f"wheels that tell every motion apart: {check}")
+    return [f"{source}: wheels: {motion} turns the driven wheels, or pushes the fixed or "
+            f"steerable ones sideways, by at most {noticed * 1e3:.2g} mm/s, so odometry would "
+            f"read a wheel-speed error of 1 mm/s as up to {1 / noticed:,.0f} mm/s of motion "
+            f"(a sound layout: 1 to 2 mm/s); {check}"]
+
+
+def _motion(twist: Twist) -> str:
+    """``turning about the point x 0 m, y 0.2 m`` or ``moving straight at 90 deg`` (from x,
+    counter-clockwise): a motion as a robot builder pictures it."""
+    vx, vy, wz = twist.vx_m_s, twist.vy_m_s, twist.wz_rad_s
+    if abs(wz) * MAX_LENGTH_M > math.hypot(vx, vy):  # a centre within the largest robot
+        return (f"turning about the point x {short(-vy / wz, 4)} m, y {short(vx / wz, 4)} m "
+                f"of the body frame")
+    return f"moving straight at {math.degrees(math.atan2(vy, vx)):.0f} deg"
