@@ -16,9 +16,11 @@ from gateway.apps.init import Chosen, choose, generate
 from gateway.apps.init.annotated import WIDTH, read, render
 from gateway.apps.init.notes import FILL_IN, MEASURE
 from gateway.config import load_config
+from gateway.config.budget import check_bus
 from gateway.config.keys import MOTOR_KEYS
 from gateway.core.errors import ConfigError
-from gateway.drive.registry import VALID_DRIVERS
+from gateway.drive.driveset import DriveSet
+from gateway.drive.registry import VALID_DRIVERS, get_driver_class
 from tests.conftest import CONFIG_DIR
 
 if TYPE_CHECKING:
@@ -47,12 +49,15 @@ def make(name: str, driver: str | None = None, **kw: Any) -> Written:
 
 
 def load_written(written: Written, folder: Path) -> GatewayConfig:
-    """The configuration as ``wheelgate check -c`` loads it, with the files it names beside."""
+    """The configuration as ``wheelgate check -c`` judges it, with the files it names beside:
+    loaded, and its bus budget (a bitrate the controllers cannot talk at, a full bus)."""
     path = folder / "robot.yaml"
     path.write_text(written.text, "utf-8")
     for name in written.files:
         shutil.copy(CONFIG_DIR / name, folder / name)
-    return load_config(path)
+    config = load_config(path)
+    check_bus(config, DriveSet(config))
+    return config
 
 
 def data(text: str) -> Any:
@@ -112,6 +117,9 @@ def test_a_driver_switch_changes_only_the_drive_motors_protocol(name: str, drive
         raw.pop("motor_defaults", None)
         for block in _motor_blocks(raw):
             block.clear()
+    rates = get_driver_class(driver).BITRATES  # (DJI ESCs talk at 1 Mbit/s only)
+    if rates and before["bus"].get("bitrate") not in rates:
+        before["bus"]["bitrate"] = rates[0]
     assert after == before  # geometry, wheels, steering, limits, bus, name: as they were
     common = set(MOTOR_KEYS) - {"driver", "node_id"}
     assert [{k: v for k, v in b.items() if k in common} for b in new_motors] == [

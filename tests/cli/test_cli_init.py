@@ -254,3 +254,48 @@ def test_o_says_what_is_in_the_way_and_creates_missing_directories(runner: CliRu
         f"created {tmp_path / 'no' / 'such'}: the directory did not exist\n"
         f"wrote {new}: drive differential"), said
     assert new.is_file()
+
+
+def test_on_dji_escs_the_bus_runs_at_their_only_bitrate(runner: CliRunner, tmp_path: Path
+                                                       ) -> None:
+    """The TurtleBot's example runs at 250 kbit/s; DJI ESCs talk at 1 Mbit/s only, which
+    ``check`` requires.  init said "check: ok" and wrote 250000, which check then refused."""
+    out = tmp_path / "robot.yaml"
+    result = runner.invoke(main, ["init", "--drive", "turtlebot3_burger", "--driver", "dji",
+                                  "--acknowledge-no-controller-stop", "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    text = out.read_text()
+    header = " ".join(line[2:] for line in text.splitlines() if line.startswith("# "))
+    assert ("Its bus runs at 1000000 bit/s, the only bitrate of the DJI controllers, fixed in "
+            "them (the example's: 250000).") in header
+    assert yaml.safe_load(text)["bus"]["bitrate"] == 1_000_000
+    check = runner.invoke(main, ["check", "-c", str(out)])
+    assert check.exit_code == 0, check.output
+    said = result.stdout.split("check: ok, with ")[1].split(" ")[0]
+    assert check.output.rstrip().endswith(f"ok, with {said} warning(s)")
+    # Drivers that talk at any bitrate keep the example's.
+    same = runner.invoke(main, ["init", "--drive", "turtlebot3_burger", "--driver", "vesc",
+                                "-o", str(out), "--force"])
+    assert same.exit_code == 0, same.output
+    assert yaml.safe_load(out.read_text())["bus"]["bitrate"] == 250_000
+
+
+def test_the_bus_budget_is_judged_as_check_judges_it(
+        runner: CliRunner, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    raw = yaml.safe_load((CONFIG_DIR / "turtlebot3_burger.yaml").read_text())
+    out = tmp_path / "robot.yaml"
+    for rate, code in ((1000, 2), (500, 0)):  # 103.5 % nominal: refused; 71.8 % worst: warned
+        raw["gateway"] = {**raw.get("gateway", {}), "rate_hz": rate}
+        made = Written("turtlebot3_burger", "differential", ("odrive",), yaml.safe_dump(raw))
+        monkeypatch.setattr("gateway.cli.commands.init.generate", lambda *a, m=made, **k: m)
+        result = runner.invoke(main, ["init", "--drive", "turtlebot3_burger", "-o", str(out)])
+        assert result.exit_code == code, result.output
+        if code:
+            assert ("does not pass `wheelgate check`, so it was not written:\n"
+                    f"{out}: bus.bitrate: the configuration's periodic frames need 103.5 %"
+                    ) in result.output
+            assert not out.exists()
+        else:
+            assert "check: ok, with 1 warning(s)" in result.stdout
+            check = runner.invoke(main, ["check", "-c", str(out)])
+            assert check.output.rstrip().endswith("ok, with 1 warning(s)"), check.output

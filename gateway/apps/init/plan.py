@@ -130,7 +130,7 @@ def generate(
         source = f"from the example {template[0]!r}" if template else "none from an example"
         changes.append(f"Its drive motors are on the {driver} driver (the example's: "
                        f"{', '.join(was)}; protocol keys {source}).")
-        changes += _renumber(doc, driver)
+        changes += _renumber(doc, driver) + _only_bitrate(doc, driver)
     assignments: tuple[Assignment, ...] = ()
     unused: tuple[FoundNode, ...] = ()
     if found is not None:
@@ -245,6 +245,25 @@ def _renumber(doc: Document, driver: str) -> list[str]:
         doc.get(path)["node_id"] = next(free)
     return [f"The drive motors are numbered from node {max(low, 1)}: the example's node IDs "
             f"({', '.join(map(str, ids))}) are not free {driver} node IDs ({low}..{high})."]
+
+
+def _only_bitrate(doc: Document, driver: str) -> list[str]:
+    """Set ``bus.bitrate`` to the only bitrate of ``driver``'s controllers when the example's
+    is another (DJI ESCs: 1 Mbit/s, fixed in them; ``check`` refuses any other).
+
+    :return: the line that says so, if it did.
+    """
+    cls = get_driver_class(driver)
+    rates = cls.BITRATES
+    block = doc.get(("bus",))
+    was = block.get("bitrate") if isinstance(block, dict) else None
+    if not rates or was in rates:
+        return []
+    if not isinstance(block, dict):
+        doc.insert(("bus",), {})
+    doc.data["bus"]["bitrate"] = rates[0]
+    return [f"Its bus runs at {rates[0]} bit/s, the only bitrate of the {cls.PROTOCOL} "
+            f"controllers, fixed in them (the example's: {was if was is not None else 'none'})."]
 
 
 def _shipped_files(doc: Document, shipped: Collection[str], place: Mapping[str, str]

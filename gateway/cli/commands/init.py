@@ -17,6 +17,7 @@ shipped unit with ``ExecStart=`` naming the ``wheelgate`` that runs (:func:`runn
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import shutil
 import sys
 import tempfile
@@ -29,6 +30,7 @@ from gateway.apps.init import choose, describe, generate, parse_scan, shipped
 from gateway.apps.init.unit import unit_text
 from gateway.cli import UsageExit
 from gateway.config import load_config
+from gateway.config.budget import check_bus
 from gateway.core.errors import ConfigError
 from gateway.core.protection import Guard
 from gateway.drive.driveset import DriveSet
@@ -179,23 +181,25 @@ def _check(written: Written, target: str, acknowledged: bool) -> GatewayConfig:
             (Path(folder) / name).write_bytes(shipped.read(name))
         try:
             config = load_config(path)
+            drives = DriveSet(config)  # (the drivers may read the files named)
+            bus = check_bus(config, drives)  # (what `check` adds to the loader's checks)
         except ConfigError as err:
             raise ConfigError(
                 f"the configuration made from {written.example!r} does not pass `wheelgate "
                 f"check`, so it was not written:\n" + str(err).replace(str(path), shown)
             ) from err
-        _acknowledge(config, acknowledged)  # (the drivers may read the files named)
-        return config
+        _acknowledge(drives, acknowledged)
+        return dataclasses.replace(config, warnings=(*config.warnings, *bus))
 
 
-def _acknowledge(config: GatewayConfig, acknowledged: bool) -> None:
+def _acknowledge(drives: DriveSet, acknowledged: bool) -> None:
     """The examples acknowledge for the demo that their DJI ESCs cannot stop by themselves
     (``no_controller_stop: acknowledged``, which ``run`` requires): a file written for a robot
     says so only when its builder does, with ``--acknowledge-no-controller-stop``.
 
     :raises click.UsageError: for such controllers without the flag (nothing is written).
     """
-    unguarded = [label for label, p in DriveSet(config).protections() if p.guard is Guard.NONE]
+    unguarded = [label for label, p in drives.protections() if p.guard is Guard.NONE]
     if unguarded and not acknowledged:
         raise click.UsageError(
             f"the controllers of {', '.join(unguarded)} cannot stop by themselves (no command "
