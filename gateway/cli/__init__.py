@@ -33,6 +33,7 @@ COMMANDS: dict[str, str] = {
     "jog": "jog",
     "monitor": "monitor",
     "odom": "odom",
+    "calibrate": "calibrate",
     "sim": "sim",
     "init": "init",
     "spin": "spin",

@@ -77,7 +77,12 @@ def record(name: str, folder: Path) -> Session:
     if base != name:
         cfg = dataclasses.replace(cfg, steering=())
     legs = short_legs(cfg) if base == "ackermann" else path_legs(cfg, "square")
-    path = folder / f"{name}.log"
+    return drive(cfg, legs, folder / f"{name}.log")
+
+
+def drive(cfg: GatewayConfig, legs: list[tuple[Twist, float]], path: Path) -> Session:
+    """Drive ``legs`` (twist, seconds) on simulated controllers, recording the log at
+    ``path``, then a second at rest."""
     with Rig(cfg) as rig:
         log = SimClockLog(path, lambda: rig.t)
         rig.gw.edge.record = log

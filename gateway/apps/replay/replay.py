@@ -138,6 +138,11 @@ class Replay:
         self._needed = tuple(i for i, m in enumerate(config.motors) if m is not None)
         self._n_needed = len(self._needed)
         self._feed = OdomFeed(self._needed, config.limits.max_wheel_rad_s, max_interval_s)
+        #: Set to a list to keep what every odometry update takes, ``(wheel positions, stamp,
+        #: steering angles)``, to integrate it again on another geometry (``wheelgate
+        #: calibrate``).
+        self.kept: list[tuple[tuple[float | None, ...], float, tuple[float | None, ...]]] | None
+        self.kept = None
         self._rounds = Rounds(self._needed)
         groups = self.drives.groups
         self._on_frame = groups[0][0].on_frame if len(groups) == 1 else self.drives.on_frame
@@ -269,6 +274,8 @@ class Replay:
     def _integrate(self, positions: Sequence[float | None], stamp: float) -> OdometryState:
         if self.steering is SteeringSource.ACTUATORS:
             self._steer = self.drives.measured_steer(self._steer)
+        if self.kept is not None:
+            self.kept.append((tuple(positions), stamp, self._steer))
         if self._subset is None:
             return self.odometry.update(positions, stamp, self._steer)
         state = self.odometry.update([positions[i] for i in self._subset[0]], stamp)
