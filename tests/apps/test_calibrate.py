@@ -11,6 +11,7 @@ cannot tell as it was.
 
 from __future__ import annotations
 
+import json
 import math
 import re
 from typing import TYPE_CHECKING
@@ -189,3 +190,24 @@ def test_the_fit_goes_on_top_of_the_files_own_factors(
     assert _fitted(result.stdout) == pytest.approx(TRUE, abs=2e-4)
     assert re.search(r"wheel_radius_multipliers\.left +1\.0100 -> 1\.0200 ", result.stdout)
     assert re.search(r"wheel_separation_multiplier +1\.0200 -> 1\.0400 ", result.stdout)
+
+
+def test_json_holds_the_runs_the_factors_and_the_block(
+        runner: CliRunner, runs: dict[str, tuple[Path, str]], tmp_path: Path) -> None:
+    args = [f"{path}={end}" for kind, (path, end) in runs.items() if kind != "straight"]
+    result = runner.invoke(main, ["calibrate", "-c", str(DIFF), "--json", *args])
+    assert result.exit_code == 0, result.output
+    out = json.loads(result.stdout)
+    assert out["ok"] is True and [r["log"] for r in out["runs"]] == [
+        str(runs["ccw"][0]), str(runs["cw"][0])]
+    assert out["runs"][0]["measured"]["x_m"] == pytest.approx(float(runs["ccw"][1].split(",")[0]))
+    assert [f["key"] for f in out["factors"]] == [
+        "wheel_radius_multipliers.left", "wheel_radius_multipliers.right",
+        "wheel_separation_multiplier"]
+    assert out["kinematics"]["wheel_radius_multipliers"]["left"] == round(
+        out["factors"][0]["fitted"], 4)
+    (untold,) = out["undetermined"]
+    assert untold == pytest.approx({"left": 0.58, "right": 0.57, "separation": 0.58}, abs=0.01)
+    bad = runner.invoke(main, ["calibrate", "-c", str(DIFF), "--json", "run.log=1,2"])
+    assert bad.exit_code == 2
+    assert json.loads(bad.stdout)["error"]["code"] == "bad_usage"

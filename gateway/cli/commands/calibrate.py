@@ -11,7 +11,9 @@ Transactions on Robotics and Automation 12(6), 1996): a square clockwise and one
 counter-clockwise (they tell the wheels' size ratio and the track), and a straight run of a
 measured length (the overall size).  A combination the runs do not tell is left as it was and
 named.  Prints the end poses before and after, the factors, and the ``kinematics:`` block to
-put in the configuration; nothing is written.
+put in the configuration; nothing is written.  With ``--json`` one object: ``{"ok": true,
+"runs", "rms_mm", "factors", "undetermined", "kinematics"}``, or a failure as every command's
+(``{"ok": false, "error": {"code", "message"}}``).
 
 Exit status: 0 fitted; 2 bad usage, a log without odometry, or factors outside 0.5 to 2 (a
 measurement in the wrong unit or the wrong frame, most likely).
@@ -19,6 +21,7 @@ measurement in the wrong unit or the wrong frame, most likely).
 
 from __future__ import annotations
 
+import json
 import math
 from typing import TYPE_CHECKING
 
@@ -27,8 +30,8 @@ import yaml
 
 from gateway.apps.calibrate.fit import fit
 from gateway.apps.calibrate.runs import end_poses, factors_of, read_run, residual
-from gateway.cli import config_option
-from gateway.cli.commands._common import load
+from gateway.cli import config_option, json_option
+from gateway.cli.commands._common import json_failures, load
 from gateway.config.keys import MAX_MULTIPLIER, MIN_MULTIPLIER
 from gateway.core.errors import ConfigError
 from gateway.core.kinematics import Pose
@@ -71,53 +74,83 @@ def _rms_mm(r: tuple[float, ...]) -> float:
 @click.option("--accuracy", "accuracy_mm", type=click.FloatRange(0.1, 1000.0), default=5.0,
               show_default=True,
               help="how well the end poses were measured, mm (a heading: times the robot's size)")
+@json_option
 @click.argument("runs", metavar="LOG=X,Y,THETA...", nargs=-1, required=True)
 @click.pass_context
-def command(ctx: click.Context, config_path: str | None, accuracy_mm: float,
+def command(ctx: click.Context, config_path: str | None, accuracy_mm: float, as_json: bool,
             runs: tuple[str, ...]) -> None:
     """Fit the kinematics: block's factors to logs whose end pose was measured."""
-    given = [_measured(item) for item in runs]
-    cfg = load(ctx, config_path)
-    factors = factors_of(cfg)
-    read = []
-    for path, pose in given:
-        try:
-            with open(path, encoding="ascii", errors="replace") as f:
-                read.append(read_run(cfg, path, f, pose))
-        except OSError as err:
-            raise click.UsageError(f"{path}: cannot read the log: {err.strerror}") from err
-        except ConfigError as err:
-            raise click.UsageError(str(err)) from err
-    result = fit(lambda v: residual(cfg, factors, v, read), len(factors.names),
-                 accuracy_mm / 1e3)
-    total = _totals(cfg, factors, result.factors)
-    _report(cfg, read, factors, result.factors)
+    with json_failures(ctx, as_json):
+        given = [_measured(item) for item in runs]
+        cfg = load(ctx, config_path)
+        factors = factors_of(cfg)
+        read = [_read(cfg, path, pose) for path, pose in given]
+        result = fit(lambda v: residual(cfg, factors, v, read), len(factors.names),
+                     accuracy_mm / 1e3)
+        total = _totals(cfg, factors, result.factors)
+        short = [*factors.wheels, *(("separation",) if factors.separation else ())]
+        fitted = [round(a, 4) for _, _, a in total]
+        block: dict[str, object] = {}
+        if factors.separation:
+            block["wheel_separation_multiplier"] = fitted[-1]
+        block["wheel_radius_multipliers"] = dict(zip(factors.wheels, fitted, strict=False))
+        ends = (end_poses(cfg, factors, [1.0] * len(total), read),
+                end_poses(cfg, factors, result.factors, read))
+        bad = [f"{n} {a:.4f}" for n, _, a in total if not MIN_MULTIPLIER <= a <= MAX_MULTIPLIER]
+        if bad and as_json:
+            raise _out_of_range(bad)
+    if as_json:
+        click.echo(json.dumps({
+            "ok": True,
+            "runs": [{"log": r.name, "measured": _pose_json(r.measured),
+                      "as_configured": _pose_json(a), "as_fitted": _pose_json(b)}
+                     for r, a, b in zip(read, *ends, strict=True)],
+            "rms_mm": {"before": _rms_mm(result.before), "after": _rms_mm(result.after)},
+            "factors": [{"key": n, "configured": b, "fitted": a, "sigma": b * sd}
+                        for (n, b, a), sd in zip(total, result.uncertainty, strict=True)],
+            "undetermined": [dict(zip(short, v, strict=True)) for v in result.undetermined],
+            "kinematics": block,
+        }))
+        return
+    _report(read, *ends)
     click.echo(f"fit: end poses {_rms_mm(result.before):.1f} mm RMS from the measured -> "
                f"{_rms_mm(result.after):.1f} mm (headings weighted by the robot's size, "
                f"{cfg.model.rho:g} m), {result.steps} step(s)")
     for (name, before, after), sigma in zip(total, result.uncertainty, strict=True):
         click.echo(f"  {name:<40} {before:.4f} -> {after:.4f} +- {before * sigma:.4f}")
-    short = [*factors.wheels, *(("separation",) if factors.separation else ())]
     for v in result.undetermined:
         terms = " + ".join(f"{c:.2f} {n}" for c, n in zip(v, short, strict=True)
                            if abs(c) >= 0.005)
         click.echo(f"not told by these runs, left as it was: {terms} (a 1 % change moves the "
                    f"ends less than the {accuracy_mm:g} mm accuracy; add a run that changes "
                    f"with it: a straight run of measured length tells the overall size)")
-    bad = [f"{n} {a:.4f}" for n, _, a in total if not MIN_MULTIPLIER <= a <= MAX_MULTIPLIER]
     if bad:
-        raise click.UsageError(
-            f"the runs ask for {', '.join(bad)}, outside {MIN_MULTIPLIER:g} to "
-            f"{MAX_MULTIPLIER:g}: check the measured poses (metres and degrees, in the start "
-            f"pose's frame: x forward, y left) and that each log is the run measured")
-    fitted = [round(a, 4) for _, _, a in total]
-    block: dict[str, object] = {}
-    if factors.separation:
-        block["wheel_separation_multiplier"] = fitted[-1]
-    block["wheel_radius_multipliers"] = dict(zip(factors.wheels, fitted, strict=False))
+        raise _out_of_range(bad)
     click.echo("# fitted by wheelgate calibrate: the kinematics: block of the configuration")
     click.echo(yaml.safe_dump({"kinematics": block}, sort_keys=False,
                               default_flow_style=None).rstrip())
+
+
+def _read(cfg: GatewayConfig, path: str, pose: Pose) -> Run:
+    """One run's log, read (a file that cannot be read: a usage error naming it)."""
+    try:
+        with open(path, encoding="ascii", errors="replace") as f:
+            return read_run(cfg, path, f, pose)
+    except OSError as err:
+        raise click.UsageError(f"{path}: cannot read the log: {err.strerror}") from err
+    except ConfigError as err:
+        raise click.UsageError(str(err)) from err
+
+
+def _out_of_range(bad: list[str]) -> click.UsageError:
+    return click.UsageError(
+        f"the runs ask for {', '.join(bad)}, outside {MIN_MULTIPLIER:g} to "
+        f"{MAX_MULTIPLIER:g}: check the measured poses (metres and degrees, in the start "
+        f"pose's frame: x forward, y left) and that each log is the run measured")
+
+
+def _pose_json(pose: Pose) -> dict[str, float]:
+    return {"x_m": pose.x_m, "y_m": pose.y_m, "theta_deg": math.degrees(pose.theta_rad)}
 
 
 def _totals(cfg: GatewayConfig, factors: Factors, values: tuple[float, ...]
@@ -129,11 +162,8 @@ def _totals(cfg: GatewayConfig, factors: Factors, values: tuple[float, ...]
             for name, key, value in zip(factors.names, keys, values, strict=True)]
 
 
-def _report(cfg: GatewayConfig, runs: list[Run], factors: Factors,
-            values: tuple[float, ...]) -> None:
-    """Per run: where the odometry ends as configured, as fitted, and the measured end."""
-    now = end_poses(cfg, factors, [1.0] * len(values), runs)
-    fitted = end_poses(cfg, factors, values, runs)
+def _report(runs: list[Run], now: list[Pose], fitted: list[Pose]) -> None:
+    """Per run: the measured end, and where the odometry ends as configured and as fitted."""
     width = max(len(r.name) for r in runs)
     click.echo(f"{'run':<{width}}  {'end pose (x m, y m, theta deg)':>28}")
     for run, a, b in zip(runs, now, fitted, strict=True):
