@@ -150,11 +150,14 @@ def test_measurements_in_the_wrong_unit_are_refused(
     ("run.log=1,2,400", "expected LOG=X,Y,THETA"),
     ("{missing}=0.1,0,0", "cannot read the log"),
     ("{empty}=0.1,0,0", "got no odometry update from it"),
+    ("{mcap}=0.1,0,0", "got an MCAP recording, which calibrate does not read"),
 ])
 def test_bad_runs_are_usage_errors(runner: CliRunner, tmp_path: Path, arg: str,
                                    message: str) -> None:
     (tmp_path / "empty.log").write_text("(0.0) can0 123#00 R\n")
-    arg = arg.format(missing=tmp_path / "none.log", empty=tmp_path / "empty.log")
+    (tmp_path / "run.mcap").write_bytes(b"\x89MCAP0\r\n")
+    arg = arg.format(missing=tmp_path / "none.log", empty=tmp_path / "empty.log",
+                     mcap=tmp_path / "run.mcap")
     result = runner.invoke(main, ["calibrate", "-c", str(DIFF), arg])
     assert result.exit_code == 2, result.output
     assert message in result.output

@@ -30,6 +30,7 @@ import yaml
 
 from gateway.apps.calibrate.fit import fit
 from gateway.apps.calibrate.runs import end_poses, factors_of, read_run, residual
+from gateway.apps.replay.mcap_source import is_mcap
 from gateway.cli import config_option, json_option
 from gateway.cli.commands._common import json_failures, load
 from gateway.config.keys import MAX_MULTIPLIER, MIN_MULTIPLIER
@@ -133,6 +134,10 @@ def command(ctx: click.Context, config_path: str | None, accuracy_mm: float, as_
 
 def _read(cfg: GatewayConfig, path: str, pose: Pose) -> Run:
     """One run's log, read (a file that cannot be read: a usage error naming it)."""
+    if is_mcap(path):
+        raise click.UsageError(f"{path}: expected a candump log (`wheelgate run --record`, "
+                               f"`candump -l`), got an MCAP recording, which calibrate does "
+                               f"not read")
     try:
         with open(path, encoding="ascii", errors="replace") as f:
             return read_run(cfg, path, f, pose)
