@@ -33,6 +33,11 @@ log = logging.getLogger(__name__)
 MAX_REPLY_BYTES = 1 << 20
 #: Events kept while waiting for a reply, for :meth:`ControlClient.events` to yield later.
 MAX_BUFFERED_EVENTS = 1000
+#: How long a refused connection is tried again while the socket file is there, s: a
+#: daemon that is starting has bound the file but may not listen yet (a script that waits
+#: for the file and then connects met that window), and a stale file from a daemon that died
+#: is reported this much later.
+REFUSED_RETRY_S = 0.5
 
 
 class ClientError(GatewayError, ConnectionError):
@@ -41,6 +46,30 @@ class ClientError(GatewayError, ConnectionError):
 
 class ClientTimeoutError(ClientError, GatewayTimeoutError):
     """The gateway did not answer in time."""
+
+
+def _connect(path: str, timeout_s: float) -> socket.socket:
+    """A connected socket; a refusal is tried again every 10 ms for up to
+    :data:`REFUSED_RETRY_S` (within ``timeout_s``) while the file is there.
+
+    :raises OSError: as ``connect()`` raises it, the last refusal's after the retries.
+    """
+    give_up = time.monotonic() + min(REFUSED_RETRY_S, timeout_s)
+    while True:
+        sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+        try:
+            sock.settimeout(timeout_s)
+            sock.connect(path)
+        except ConnectionRefusedError:
+            sock.close()
+            if time.monotonic() >= give_up:
+                raise
+            time.sleep(0.01)
+        except OSError:
+            sock.close()
+            raise
+        else:
+            return sock
 
 
 class ControlClient(Closing):
@@ -59,27 +88,21 @@ class ControlClient(Closing):
         self._ids = itertools.count(1)
         self._buffer = bytearray()
         self._events: deque[dict[str, Any]] = deque(maxlen=MAX_BUFFERED_EVENTS)
-        sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
         try:
-            sock.settimeout(timeout_s)
-            sock.connect(str(self.path))
+            sock = _connect(str(self.path), timeout_s)
         except (FileNotFoundError, ConnectionRefusedError) as err:
-            sock.close()
             raise ClientError(
                 f"no gateway is listening on {self.path} (is `wheelgate run` running?)"
             ) from err
         except PermissionError as err:
-            sock.close()
             raise ClientError(
                 f"permission denied for {self.path} (is your user in the socket's group?)"
             ) from err
         except TimeoutError as err:
-            sock.close()
             raise ClientTimeoutError(
                 f"timed out after {timeout_s:g} s connecting to {self.path}"
             ) from err
         except OSError as err:
-            sock.close()
             raise ClientError(f"cannot connect to {self.path}: {err}") from err
         self._sock = sock
         self._closed = False

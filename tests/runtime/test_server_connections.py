@@ -286,6 +286,25 @@ def test_client_errors_name_the_socket(sock_path: Path) -> None:
     assert str(info.value) == expected
 
 
+def test_a_client_is_not_refused_by_a_daemon_that_binds_but_does_not_listen_yet(
+        sock_path: Path) -> None:
+    """The daemon binds its socket file, chmods it, then listens: a client that waits for
+    the file and then connects (a script's ``while [ ! -S sock ]``, and
+    ``test_kill_9_after_an_estop_restarts_estopped`` once in CI) could come in between and
+    be refused.  A refusal while the file is there is tried again for up to 0.5 s."""
+    starting = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    starting.bind(str(sock_path))
+    later = threading.Timer(0.1, starting.listen, args=(1,))
+    later.start()
+    try:
+        with ControlClient(sock_path, timeout_s=2.0):
+            conn, _ = starting.accept()
+            conn.close()
+    finally:
+        later.join()
+        starting.close()
+
+
 def test_client_timeout_and_use_after_close(server: ControlServer, sock_path: Path) -> None:
     client = ControlClient(sock_path, timeout_s=0.05)  # nobody polls the server
     with client, pytest.raises(ClientTimeoutError) as info:
