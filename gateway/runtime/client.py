@@ -48,13 +48,13 @@ class ClientTimeoutError(ClientError, GatewayTimeoutError):
     """The gateway did not answer in time."""
 
 
-def _connect(path: str, timeout_s: float) -> socket.socket:
-    """A connected socket; a refusal is tried again every 10 ms for up to
-    :data:`REFUSED_RETRY_S` (within ``timeout_s``) while the file is there.
+def _connect(path: str, timeout_s: float, retry_s: float) -> socket.socket:
+    """A connected socket; a refusal is tried again every 10 ms for up to ``retry_s`` (within
+    ``timeout_s``) while the file is there.
 
     :raises OSError: as ``connect()`` raises it, the last refusal's after the retries.
     """
-    give_up = time.monotonic() + min(REFUSED_RETRY_S, timeout_s)
+    give_up = time.monotonic() + min(retry_s, timeout_s)
     while True:
         sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
         try:
@@ -77,11 +77,15 @@ class ControlClient(Closing):
 
     :param path: the socket file.
     :param timeout_s: longest wait for connecting and for each reply, s.
+    :param refused_retry_s: how long a refused connection is tried again while the file is
+        there (:data:`REFUSED_RETRY_S`; 0 for a caller that retries on its own, and must not
+        wait, such as ``jog``'s screen).
     :raises ClientError: if nothing listens on ``path``, access is denied, or connecting
         times out (:class:`ClientTimeoutError`).
     """
 
-    def __init__(self, path: str | Path, timeout_s: float = 2.0) -> None:
+    def __init__(self, path: str | Path, timeout_s: float = 2.0,
+                 refused_retry_s: float = REFUSED_RETRY_S) -> None:
         self._closed = True
         self.path = Path(path)
         self.timeout_s = timeout_s
@@ -89,7 +93,7 @@ class ControlClient(Closing):
         self._buffer = bytearray()
         self._events: deque[dict[str, Any]] = deque(maxlen=MAX_BUFFERED_EVENTS)
         try:
-            sock = _connect(str(self.path), timeout_s)
+            sock = _connect(str(self.path), timeout_s, refused_retry_s)
         except (FileNotFoundError, ConnectionRefusedError) as err:
             raise ClientError(
                 f"no gateway is listening on {self.path} (is `wheelgate run` running?)"

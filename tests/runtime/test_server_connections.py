@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING
 
 import pytest
 
+import gateway.cli.commands.jog as jog_command
 from gateway.core.errors import GatewayError, GatewayTimeoutError
 from gateway.core.types import Twist
 from gateway.runtime.client import ClientError, ClientTimeoutError, ControlClient
@@ -303,6 +304,24 @@ def test_a_client_is_not_refused_by_a_daemon_that_binds_but_does_not_listen_yet(
     finally:
         later.join()
         starting.close()
+
+
+def test_a_caller_that_retries_on_its_own_is_not_held_up_by_a_stale_file(
+        sock_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """``jog``'s screen reconnects every second by itself: a stale socket file (a daemon
+    killed with SIGKILL) must not stop its screen 0.5 s at each try."""
+    stale = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    stale.bind(str(sock_path))
+    stale.close()
+    waited: list[float] = []
+    monkeypatch.setattr("gateway.runtime.client.time.sleep", waited.append)
+    with pytest.raises(ClientError, match="no gateway is listening"):
+        ControlClient(sock_path, refused_retry_s=0.0)
+    assert waited == []
+    link = jog_command._Link.__new__(jog_command._Link)
+    link.path, link.client, link._retry_s = str(sock_path), None, 0.0
+    link.retry(force=True)
+    assert waited == [] and "no gateway is listening" in link.error
 
 
 def test_client_timeout_and_use_after_close(server: ControlServer, sock_path: Path) -> None:

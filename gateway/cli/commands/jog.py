@@ -113,7 +113,8 @@ class _Link:
             return
         self._retry_s = time.monotonic() + RECONNECT_PERIOD_S
         try:
-            self.client = ControlClient(self.path, timeout_s=REPLY_TIMEOUT_S)
+            # (no waiting on a refused connection: the screen keeps its rate; this retries)
+            self.client = ControlClient(self.path, timeout_s=REPLY_TIMEOUT_S, refused_retry_s=0.0)
             self.error = ""
         except ClientError as err:
             self.error = str(err)
