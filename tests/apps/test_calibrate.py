@@ -26,6 +26,7 @@ from gateway.config import parse_config
 from gateway.core.kinematics import Pose
 from gateway.core.types import Twist
 from tests.apps.odom_helpers import DIFF, drive, record, replay_file
+from tests.conftest import CONFIG_DIR
 from tests.e2e_helpers import virtual_config
 
 if TYPE_CHECKING:
@@ -77,8 +78,9 @@ def runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, tuple[Path, str]
 
 
 def _fitted(output: str) -> dict[str, float]:
-    block = yaml.safe_load(output.split("# fitted by wheelgate calibrate: the kinematics: "
-                                        "block of the configuration\n", 1)[1])["kinematics"]
+    block = yaml.safe_load(output.split("# fitted by wheelgate calibrate: these keys in the "
+                                        "configuration's kinematics: block (its other keys as "
+                                        "they are)\n", 1)[1])["kinematics"]
     return {**block["wheel_radius_multipliers"],
             "separation": block.get("wheel_separation_multiplier", 1.0)}
 
@@ -214,3 +216,21 @@ def test_json_holds_the_runs_the_factors_and_the_block(
     bad = runner.invoke(main, ["calibrate", "-c", str(DIFF), "--json", "run.log=1,2"])
     assert bad.exit_code == 2
     assert json.loads(bad.stdout)["error"]["code"] == "bad_usage"
+
+
+def test_a_passive_wheels_own_factor_stays_in_the_block(runner: CliRunner, tmp_path: Path
+                                                        ) -> None:
+    """The castor's radius factor is not fitted (no motor turns it) and not lost: the block
+    printed to paste holds it as the file has it."""
+    session = record("differential_castor", tmp_path)
+    raw = yaml.safe_load((CONFIG_DIR / "differential_castor.yaml").read_text())
+    raw["kinematics"] = {"wheel_radius_multipliers": {"castor": 1.1}}
+    own = tmp_path / "robot.yaml"
+    own.write_text(yaml.safe_dump(raw))
+    end = replay_file(parse_config(raw, str(own)), session.log).odometry.state.pose
+    result = runner.invoke(main, ["calibrate", "-c", str(own), f"{session.log}="
+                                  f"{end.x_m!r},{end.y_m!r},{math.degrees(end.theta_rad)!r}"])
+    assert result.exit_code == 0, result.output
+    block = yaml.safe_load(result.stdout.split("they are)\n", 1)[1])["kinematics"]
+    assert block["wheel_radius_multipliers"] == {"left": 1.0, "right": 1.0, "castor": 1.1}
+    assert "wheel_separation_multiplier" not in block  # (drive: generic: no track)

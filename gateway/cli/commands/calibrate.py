@@ -94,7 +94,11 @@ def command(ctx: click.Context, config_path: str | None, accuracy_mm: float, as_
         block: dict[str, object] = {}
         if factors.separation:
             block["wheel_separation_multiplier"] = fitted[-1]
-        block["wheel_radius_multipliers"] = dict(zip(factors.wheels, fitted, strict=False))
+        radii = {w.name: cfg.calibration[f"radius {w.name}"] for w in cfg.model.wheels
+                 if f"radius {w.name}" in cfg.calibration}  # (a passive wheel's kept)
+        radii.update(zip(factors.wheels, fitted, strict=False))
+        block["wheel_radius_multipliers"] = {w.name: radii[w.name] for w in cfg.model.wheels
+                                             if w.name in radii}
         ends = (end_poses(cfg, factors, [1.0] * len(total), read),
                 end_poses(cfg, factors, result.factors, read))
         bad = [f"{n} {a:.4f}" for n, _, a in total if not MIN_MULTIPLIER <= a <= MAX_MULTIPLIER]
@@ -127,7 +131,8 @@ def command(ctx: click.Context, config_path: str | None, accuracy_mm: float, as_
                    f"with it: a straight run of measured length tells the overall size)")
     if bad:
         raise _out_of_range(bad)
-    click.echo("# fitted by wheelgate calibrate: the kinematics: block of the configuration")
+    click.echo("# fitted by wheelgate calibrate: these keys in the configuration's kinematics: "
+               "block (its other keys as they are)")
     click.echo(yaml.safe_dump({"kinematics": block}, sort_keys=False,
                               default_flow_style=None).rstrip())
 
