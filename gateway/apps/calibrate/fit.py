@@ -81,11 +81,12 @@ def fit(residual: Callable[[Sequence[float]], Sequence[float]], n: int,
             dp = p.copy()
             dp[k] += DERIVATIVE_STEP
             jac[:, k] = (at(dp) - r) / DERIVATIVE_STEP
-        u, s, vt = np.linalg.svd(jac, full_matrices=False)
-        kept = s * 0.01 >= accuracy_m
-        undetermined = vt[~kept] if s.size == n else np.vstack([vt[~kept], _rest(vt, n)])
-        sigma = accuracy_m * np.sqrt(((vt[kept] / s[kept, None]) ** 2).sum(axis=0))
-        step = -(vt[kept].T @ ((u[:, kept].T @ r) / s[kept]))
+        u, s, vt = np.linalg.svd(jac)  # vt: n x n; with fewer rows than n, those no row
+        s = np.concatenate([s, np.zeros(n - s.size)])  # touches come last, at 0
+        keep = np.flatnonzero(s * 0.01 >= accuracy_m)
+        undetermined = np.delete(vt, keep, axis=0)
+        sigma = accuracy_m * np.sqrt(((vt[keep] / s[keep, None]) ** 2).sum(axis=0))
+        step = -(vt[keep].T @ ((u[:, keep].T @ r) / s[keep]))
         for _ in range(30):
             candidate = at(p + step)
             if _cost(candidate) < _cost(r):
@@ -103,9 +104,3 @@ def fit(residual: Callable[[Sequence[float]], Sequence[float]], n: int,
                                                                           strict=True)),
                steps, tuple(float(x) for x in sigma))
 
-
-def _rest(vt: NDArray[np.float64], n: int) -> NDArray[np.float64]:
-    """The directions an SVD of fewer rows than columns does not return (no equation
-    touches them): the orthogonal complement of ``vt``'s rows."""
-    _, _, full = np.linalg.svd(np.vstack([vt, np.zeros((n - vt.shape[0], n))]))
-    return full[vt.shape[0]:]

@@ -17,7 +17,7 @@ import dataclasses
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from gateway.apps.replay.replay import Replay
+from gateway.apps.replay.replay import Replay, Update
 from gateway.config.wheels import preset_wheels
 from gateway.core.errors import ConfigError, KinematicsError
 from gateway.core.kinematics import Odometry, Pose, RobotModel, wrap_angle
@@ -28,9 +28,7 @@ if TYPE_CHECKING:
 
     from gateway.core.settings import GatewayConfig
 
-__all__ = ["Factors", "Run", "end_poses", "factors_of", "read_run", "residual"]
-
-Update = tuple[tuple[float | None, ...], float, tuple[float | None, ...]]
+__all__ = ["Factors", "Run", "end_poses", "factors_of", "own_radii", "read_run", "residual"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -63,6 +61,24 @@ class Factors:
         """The factors as configuration keys, in fit order."""
         return (*(f"wheel_radius_multipliers.{w}" for w in self.wheels),
                 *(("wheel_separation_multiplier",) if self.separation else ()))
+
+    @property
+    def labels(self) -> tuple[str, ...]:
+        """The factors in a word each (the wheel, ``separation``), in fit order."""
+        return (*self.wheels, *(("separation",) if self.separation else ()))
+
+    def configured(self, config: GatewayConfig) -> tuple[float, ...]:
+        """The configuration's own factors, in fit order (1.0 where it states none)."""
+        radii = own_radii(config)
+        return (*(radii.get(w, 1.0) for w in self.wheels),
+                *((config.calibration.get("wheel_separation_multiplier", 1.0),)
+                  if self.separation else ()))
+
+
+def own_radii(config: GatewayConfig) -> dict[str, float]:
+    """The configuration's ``wheel_radius_multipliers``, by wheel, in model order."""
+    return {w.name: config.calibration[f"radius {w.name}"] for w in config.model.wheels
+            if f"radius {w.name}" in config.calibration}
 
 
 def factors_of(config: GatewayConfig) -> Factors:

@@ -65,6 +65,7 @@ __all__ = [
     "ReplaySummary",
     "Sample",
     "SteeringSource",
+    "Update",
     "fixed_subset",
     "reconstruct_steer",
 ]
@@ -73,6 +74,9 @@ log = logging.getLogger(__name__)
 
 #: Default log time after which a pending update waits no longer for every wheel, s.
 DEFAULT_MAX_INTERVAL_S = 0.1
+
+#: What one odometry update takes: every wheel's position, the stamp, the steering angles.
+Update = tuple[tuple[float | None, ...], float, tuple[float | None, ...]]
 
 
 class Replay:
@@ -141,8 +145,7 @@ class Replay:
         #: Set to a list to keep what every odometry update takes, ``(wheel positions, stamp,
         #: steering angles)``, to integrate it again on another geometry (``wheelgate
         #: calibrate``).
-        self.kept: list[tuple[tuple[float | None, ...], float, tuple[float | None, ...]]] | None
-        self.kept = None
+        self.kept: list[Update] | None = None
         self._rounds = Rounds(self._needed)
         groups = self.drives.groups
         self._on_frame = groups[0][0].on_frame if len(groups) == 1 else self.drives.on_frame

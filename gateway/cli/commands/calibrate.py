@@ -29,7 +29,7 @@ import click
 import yaml
 
 from gateway.apps.calibrate.fit import fit
-from gateway.apps.calibrate.runs import end_poses, factors_of, read_run, residual
+from gateway.apps.calibrate.runs import end_poses, factors_of, own_radii, read_run, residual
 from gateway.apps.replay.mcap_source import is_mcap
 from gateway.cli import config_option, json_option
 from gateway.cli.commands._common import json_failures, load
@@ -38,7 +38,7 @@ from gateway.core.errors import ConfigError
 from gateway.core.kinematics import Pose
 
 if TYPE_CHECKING:
-    from gateway.apps.calibrate.runs import Factors, Run
+    from gateway.apps.calibrate.runs import Run
     from gateway.core.settings import GatewayConfig
 
 #: The largest measured distance a run may end at, m (a bound, as every number has one).
@@ -88,14 +88,13 @@ def command(ctx: click.Context, config_path: str | None, accuracy_mm: float, as_
         read = [_read(cfg, path, pose) for path, pose in given]
         result = fit(lambda v: residual(cfg, factors, v, read), len(factors.names),
                      accuracy_mm / 1e3)
-        total = _totals(cfg, factors, result.factors)
-        short = [*factors.wheels, *(("separation",) if factors.separation else ())]
+        total = [(name, own, own * value) for name, own, value
+                 in zip(factors.names, factors.configured(cfg), result.factors, strict=True)]
         fitted = [round(a, 4) for _, _, a in total]
         block: dict[str, object] = {}
         if factors.separation:
             block["wheel_separation_multiplier"] = fitted[-1]
-        radii = {w.name: cfg.calibration[f"radius {w.name}"] for w in cfg.model.wheels
-                 if f"radius {w.name}" in cfg.calibration}  # (a passive wheel's kept)
+        radii = own_radii(cfg)  # (a passive wheel's kept)
         radii.update(zip(factors.wheels, fitted, strict=False))
         block["wheel_radius_multipliers"] = {w.name: radii[w.name] for w in cfg.model.wheels
                                              if w.name in radii}
@@ -113,7 +112,8 @@ def command(ctx: click.Context, config_path: str | None, accuracy_mm: float, as_
             "rms_mm": {"before": _rms_mm(result.before), "after": _rms_mm(result.after)},
             "factors": [{"key": n, "configured": b, "fitted": a, "sigma": b * sd}
                         for (n, b, a), sd in zip(total, result.uncertainty, strict=True)],
-            "undetermined": [dict(zip(short, v, strict=True)) for v in result.undetermined],
+            "undetermined": [dict(zip(factors.labels, v, strict=True))
+                             for v in result.undetermined],
             "kinematics": block,
         }))
         return
@@ -124,7 +124,7 @@ def command(ctx: click.Context, config_path: str | None, accuracy_mm: float, as_
     for (name, before, after), sigma in zip(total, result.uncertainty, strict=True):
         click.echo(f"  {name:<40} {before:.4f} -> {after:.4f} +- {before * sigma:.4f}")
     for v in result.undetermined:
-        terms = " + ".join(f"{c:.2f} {n}" for c, n in zip(v, short, strict=True)
+        terms = " + ".join(f"{c:.2f} {n}" for c, n in zip(v, factors.labels, strict=True)
                            if abs(c) >= 0.005)
         click.echo(f"not told by these runs, left as it was: {terms} (a 1 % change moves the "
                    f"ends less than the {accuracy_mm:g} mm accuracy; add a run that changes "
@@ -161,15 +161,6 @@ def _out_of_range(bad: list[str]) -> click.UsageError:
 
 def _pose_json(pose: Pose) -> dict[str, float]:
     return {"x_m": pose.x_m, "y_m": pose.y_m, "theta_deg": math.degrees(pose.theta_rad)}
-
-
-def _totals(cfg: GatewayConfig, factors: Factors, values: tuple[float, ...]
-            ) -> list[tuple[str, float, float]]:
-    """Each factor's key, as configured and as fitted (the fit on top of the file's own)."""
-    keys = [f"radius {w}" for w in factors.wheels]
-    keys += ["wheel_separation_multiplier"] if factors.separation else []
-    return [(name, cfg.calibration.get(key, 1.0), cfg.calibration.get(key, 1.0) * value)
-            for name, key, value in zip(factors.names, keys, values, strict=True)]
 
 
 def _report(runs: list[Run], now: list[Pose], fitted: list[Pose]) -> None:

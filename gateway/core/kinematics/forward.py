@@ -27,7 +27,26 @@ if TYPE_CHECKING:
 
     from gateway.core.kinematics.wheels import Wheel
 
-__all__ = ["FkSolver"]
+__all__ = ["FkSolver", "system"]
+
+
+def system(
+    wheels: Sequence[Wheel], speeds: Sequence[float | None], steer: Sequence[float | None]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """``(A, b)``: the rolling rows of the measured wheels (speed not ``None``), then the
+    sliding rows of the fixed and steerable wheels, at the steering angles ``steer``."""
+    rows: list[tuple[float, float, float]] = []
+    rhs: list[float] = []
+    for i, w in enumerate(wheels):
+        sigma = steer[i] or 0.0
+        if speeds[i] is not None:
+            rows.append(w.rolling_row(sigma))
+            rhs.append(w.radius * float(speeds[i] or 0.0))
+    for i, w in enumerate(wheels):
+        if w.type in CONSTRAINING:
+            rows.append(w.sliding_row(steer[i] or 0.0))
+            rhs.append(0.0)
+    return np.array(rows, dtype=float).reshape(len(rows), 3), np.array(rhs)
 
 
 class FkSolver:
@@ -90,20 +109,8 @@ class FkSolver:
     def system(
         self, speeds: Sequence[float | None], steer: Sequence[float | None]
     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """``(A, b)``: the rolling rows of the measured wheels, then the sliding rows of the
-        fixed and steerable wheels, at the steering angles ``steer``."""
-        rows: list[tuple[float, float, float]] = []
-        rhs: list[float] = []
-        for i, w in enumerate(self.wheels):
-            sigma = steer[i] or 0.0
-            if speeds[i] is not None:
-                rows.append(w.rolling_row(sigma))
-                rhs.append(w.radius * float(speeds[i] or 0.0))
-        for i, w in enumerate(self.wheels):
-            if w.type in CONSTRAINING:
-                rows.append(w.sliding_row(steer[i] or 0.0))
-                rhs.append(0.0)
-        return np.array(rows, dtype=float).reshape(len(rows), 3), np.array(rhs)
+        """:func:`system` of these wheels."""
+        return system(self.wheels, speeds, steer)
 
     def solve(
         self, wheel_rad_s: Sequence[float | None], st: Sequence[float | None]

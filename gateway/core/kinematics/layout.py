@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from gateway.core.kinematics.wheels import CONSTRAINING
+from gateway.core.kinematics.forward import system
 from gateway.core.types import Twist
 
 if TYPE_CHECKING:
@@ -72,33 +72,34 @@ def weakest_motion(wheels: Sequence[Wheel], driven: Sequence[bool]) -> tuple[Twi
                   MIN_EXTENT_M * abs(wz))
     sign = -1.0 if (wz, vx, vy) < (0.0, 0.0, 0.0) else 1.0  # one sign, whatever LAPACK gives
     twist = Twist(vx, vy, wz).scaled(sign / fastest)
-    return twist, max((abs(r[0] * twist.vx_m_s + r[1] * twist.vy_m_s + r[2] * twist.wz_rad_s)
-                       for r in _rows(wheels, driven)), default=0.0)
+    rows = _rows(wheels, driven)
+    xi = np.array([twist.vx_m_s, twist.vy_m_s, twist.wz_rad_s])
+    return twist, float(np.max(np.abs(rows @ xi))) if rows.size else 0.0
 
 
 def equations(
     wheels: Sequence[Wheel], driven: Sequence[bool]
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """``(A, T)``: the rolling rows of the driven wheels and the sliding rows of the fixed
-    and steerable wheels (at least three rows: zeros added), for a twist ``(u, v, s w)``
-    about the centroid of the mounting points, ``s`` their RMS distance from it; ``T`` turns
-    such a twist into ``(vx, vy, wz)`` about the body frame's origin."""
+    """``(A, T)``: the equations of forward kinematics with the driven wheels measured
+    (:func:`~gateway.core.kinematics.forward.system`, at least three rows: zeros added), for
+    a twist ``(u, v, s w)`` about the centroid of the mounting points, ``s`` their RMS
+    distance from it; ``T`` turns such a twist into ``(vx, vy, wz)`` about the body frame's
+    origin."""
     rows = _rows(wheels, driven)
-    rows += [(0.0, 0.0, 0.0)] * (3 - len(rows))  # fewer equations than unknowns
+    rows = np.vstack([rows, np.zeros((max(0, 3 - len(rows)), 3))])  # fewer than unknowns
     n = len(wheels)
     cx, cy = sum(w.x for w in wheels) / n, sum(w.y for w in wheels) / n
     size = max(math.sqrt(sum((w.x - cx) ** 2 + (w.y - cy) ** 2 for w in wheels) / n),
                MIN_EXTENT_M)
     # A twist (u, v, size * w) about the centroid is (u + w * cy, v - w * cx, w) at the origin.
     to_origin = np.array([[1.0, 0.0, cy / size], [0.0, 1.0, -cx / size], [0.0, 0.0, 1.0 / size]])
-    return np.array(rows, dtype=float) @ to_origin, to_origin
+    return rows @ to_origin, to_origin
 
 
-def _rows(wheels: Sequence[Wheel], driven: Sequence[bool]) -> list[tuple[float, float, float]]:
-    """The rolling rows of the driven wheels, then the sliding rows of the fixed and steerable
-    ones, at the neutral steering angles."""
-    rows = [w.rolling_row() for w, d in zip(wheels, driven, strict=True) if d]
-    return rows + [w.sliding_row() for w in wheels if w.type in CONSTRAINING]
+def _rows(wheels: Sequence[Wheel], driven: Sequence[bool]) -> NDArray[np.float64]:
+    """The system forward kinematics solves, the driven wheels measured, at the neutral
+    steering angles."""
+    return system(wheels, [1.0 if d else None for d in driven], [None] * len(wheels))[0]
 
 
 def closest_pair(wheels: Sequence[Wheel]) -> tuple[str, str, float] | None:
