@@ -52,7 +52,7 @@ import statistics
 import struct
 import sys
 import time
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from gateway.bus.can_bus import open_bus
 from gateway.config import load_config
@@ -150,7 +150,7 @@ def run(cfg: GatewayConfig, filters: Sequence[CanFilter], sim_filters: Sequence[
     :param filters: the gateway's receive filters (applied when ``filtered``).
     :param sim_filters: the simulators' receive filters (always applied).
     """
-    kwargs: dict[str, object] = {"fd": True}
+    kwargs: dict[str, Any] = {"fd": True}
     if filtered:
         kwargs["can_filters"] = [f.as_python_can() for f in filters]
     channel = cfg.bus.channel

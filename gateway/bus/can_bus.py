@@ -10,6 +10,7 @@ import errno
 import inspect
 import logging
 import math
+import sys
 import time
 from typing import TYPE_CHECKING, Any
 
@@ -101,15 +102,33 @@ def to_frame(msg: can.Message, timestamp_s: float | None = None) -> Frame:
     ))
 
 
-def open_bus(interface: str, channel: str, **kwargs: Any) -> can.BusABC:
+def open_bus(interface: str, channel: str, bitrate: int | None = None,
+             check_link: bool = True, **kwargs: Any) -> can.BusABC:
     """Open a python-can bus.
 
-    :raises BusError: if python-can cannot open it.
+    :param bitrate: the bus's bitrate (bit/s), ``None`` when nobody stated one.  An adapter
+        that python-can drives itself (``pcan``, ``kvaser``, ``slcan``, ``gs_usb`` ...) is set
+        to it: python-can's own default (500 kbit/s for most) would leave a 1 Mbit/s robot
+        deaf.  A SocketCAN interface's bitrate is the kernel's, so it is checked instead
+        (:mod:`gateway.bus.link`): one that states another is refused, one that is down is
+        warned about with the command that brings it up.
+    :param check_link: whether to check a SocketCAN interface (not at a reopen: the loop's
+        thread runs no ``ip``, and the reopens say enough about an interface that is down).
+    :raises BusError: if python-can cannot open it, or the interface runs at another bitrate.
     """
+    if bitrate is not None:
+        if interface == "socketcan":
+            if check_link:
+                _check_link(channel, bitrate)
+        else:  # (python-can's virtual and network interfaces take it and ignore it)
+            kwargs["bitrate"] = bitrate
     try:
         return can.Bus(interface=interface, channel=channel, **kwargs)
     except (can.CanError, OSError, ValueError, ImportError) as err:
-        hint = _socketcan_hint(err, channel) if interface == "socketcan" else ""
+        if interface == "socketcan":
+            hint = _socketcan_hint(err, channel)
+        else:
+            hint = _adapter_hint(interface, channel, bitrate)
         raise BusError(f"Cannot open CAN bus {interface}:{channel}: {err}{hint}") from err
 
 
@@ -125,6 +144,58 @@ def _socketcan_hint(err: BaseException, channel: str) -> str:
                 f"them; a test bus: modprobe vcan; ip link add dev vcan0 type vcan; ip link set "
                 f"vcan0 up)")
     return ""
+
+
+def _check_link(channel: str, bitrate: int) -> None:
+    from gateway.bus.link import bitrate_refusal, down_warning, read_link  # noqa: PLC0415 - a real bus only
+
+    link = read_link(channel)
+    if link is None:
+        return
+    refusal = bitrate_refusal(link, bitrate)
+    if refusal is not None:
+        raise BusError(f"Cannot use CAN bus socketcan:{channel}: {refusal}")
+    warning = down_warning(link, bitrate)
+    if warning is not None:
+        log.warning("%s", warning)
+
+
+#: python-can interfaces whose adapters Linux also drives as SocketCAN interfaces: the kernel
+#: driver, and what python-can's interface needs installed.
+_ADAPTERS: dict[str, tuple[str, str]] = {
+    "slcan": ("slcan", "pyserial: pip install 'python-can[serial]'"),
+    "gs_usb": ("gs_usb (candleLight firmware)",
+               "pyusb and gs_usb: pip install 'python-can[gs-usb]'"),
+    "pcan": ("peak_usb", "PEAK-System's PCAN-Basic library"),
+    "kvaser": ("kvaser_usb", "Kvaser's CANlib"),
+}
+
+#: slcand's ``-s`` codes (the LAWICEL ``S0`` .. ``S8`` commands; can-utils ``slcand.c``), by
+#: bitrate.
+_SLCAN_SPEEDS = {10_000: 0, 20_000: 1, 50_000: 2, 100_000: 3, 125_000: 4, 250_000: 5,
+                 500_000: 6, 800_000: 7, 1_000_000: 8}
+
+
+def _adapter_hint(interface: str, channel: str, bitrate: int | None) -> str:
+    """What python-can's interface needs installed (the usual reason it cannot open), and on
+    Linux the SocketCAN way to the same adapter, the usual one there."""
+    kernel, needs = _ADAPTERS.get(interface, ("", ""))
+    if not kernel:
+        return ""
+    hint = f"; python-can's {interface} interface needs {needs}"
+    if sys.platform.startswith("linux"):
+        rate = "" if bitrate is None else f" bitrate {bitrate}"
+        if interface == "slcan":
+            speed = _SLCAN_SPEEDS.get(bitrate or 0)
+            tty = channel.split("@", maxsplit=1)[0]  # (python-can's slcan channel may end in @baud)
+            up = (f"sudo slcand -o{'' if speed is None else f' -s{speed}'} {tty} can0 && "
+                  f"sudo ip link set can0 up")
+        else:
+            up = f"sudo ip link set can0 up type can{rate}"
+        hint += (f"; on Linux the kernel's {kernel} driver makes this adapter a SocketCAN "
+                 f"interface, the usual way there: {up}, then --interface socketcan "
+                 f"--channel can0 (ip -details link show names it)")
+    return hint
 
 
 def send_frames(bus: can.BusABC, frames: Iterable[Frame], timestamp_s: float = 0.0) -> int:

@@ -192,11 +192,11 @@ class BusEdge:
             collections.Counter(), collections.Counter())
         self._own_bus = bus is None
         #: The python-can bus (a new object after a reopen).
-        self.bus: can.BusABC = bus if bus is not None else self._open()
+        self.bus: can.BusABC = bus if bus is not None else self._open(check_link=True)
 
-    def _open(self) -> can.BusABC:
+    def _open(self, check_link: bool = False) -> can.BusABC:
         bus = self.config.bus
-        return open_bus(bus.interface, bus.channel, **self.bus_kwargs)
+        return open_bus(bus.interface, bus.channel, bus.bitrate, check_link, **self.bus_kwargs)
 
     def _reopen(self, now_s: float) -> None:
         if not self._own_bus or not self._backoff.due(now_s):

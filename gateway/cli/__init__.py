@@ -144,11 +144,15 @@ def _asks_json(cmd: click.Command, args: list[str]) -> bool:
 @click.version_option(__version__, prog_name="wheelgate")
 @click.option("--interface", help="python-can interface, overrides the config (e.g. socketcan).")
 @click.option("--channel", help="CAN channel, overrides the config (e.g. can0).")
+@click.option("--bitrate", type=int,
+              help="CAN bitrate (bit/s), overrides the config (e.g. 1000000): set on an adapter "
+                   "python-can drives, checked against a SocketCAN interface.")
 @click.option("-v", "--verbose", count=True, help="More log output (repeat for debug).")
 @click.option("--debug", is_flag=True, help="Show tracebacks instead of short errors.")
 @click.pass_context
 def main(
-    ctx: click.Context, interface: str | None, channel: str | None, verbose: int, debug: bool
+    ctx: click.Context, interface: str | None, channel: str | None, bitrate: int | None,
+    verbose: int, debug: bool
 ) -> None:
     """wheelgate: twist in, wheel frames out, odometry back, over CAN."""
     level = logging.WARNING - 10 * min(verbose, 2)
@@ -158,7 +162,7 @@ def main(
     logging.basicConfig(level=level, handlers=[handler])
     if interface is not None:
         check_interface(interface, "--interface")
-    ctx.obj = {"interface": interface, "channel": channel, "debug": debug}
+    ctx.obj = {"interface": interface, "channel": channel, "bitrate": bitrate, "debug": debug}
 
 
 def check_interface(interface: str, hint: str) -> None:

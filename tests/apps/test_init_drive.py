@@ -77,6 +77,11 @@ def test_the_root_bus_options_go_into_the_bus_block(runner: CliRunner, tmp_path:
     plain = runner.invoke(main, ["init", "--drive", "turtlebot3_burger", "-o", "-"])
     assert yaml.safe_load(plain.stdout)["bus"]["channel"] == "can0"
     assert "from the root options" not in plain.stderr
+    rated = runner.invoke(main, ["--interface", "pcan", "--bitrate", "500000", "init",
+                                 "--drive", "turtlebot3_burger", "-o", "-"])
+    assert rated.exit_code == 0, rated.output
+    assert yaml.safe_load(rated.stdout)["bus"] == {  # an integer, as check reads it
+        "interface": "pcan", "channel": "can0", "bitrate": 500000}
 
 
 def test_what_to_do_next_is_spin_not_jog(runner: CliRunner, tmp_path: Path) -> None:

@@ -134,7 +134,7 @@ def test_monitor_once_json_without_a_daemon_is_a_json_error(runner: CliRunner,
 
 def test_monitor_once_json_on_a_bus_that_cannot_open_is_a_json_error(
         runner: CliRunner, monkeypatch: pytest.MonkeyPatch) -> None:
-    def no_bus(interface: str, channel: str, **options: object) -> None:
+    def no_bus(interface: str, channel: str, *args: object, **options: object) -> None:
         raise BusError(f"Cannot open CAN bus {interface}:{channel}: no such device")
 
     monkeypatch.setattr(monitor_command, "open_bus", no_bus)

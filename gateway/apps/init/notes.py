@@ -103,8 +103,9 @@ def blocks(drive: str) -> Mapping[str, tuple[str, ...]]:
         "gateway": ("The daemon's settings (README, The daemon).",),
         "bus": (
             "The CAN bus: interface socketcan and channel can0 on Linux.  bitrate must be the "
-            "controllers'; on socketcan the link sets it, not wheelgate: "
-            "ip link set can0 up type can bitrate <bitrate>.",
+            "controllers'; on socketcan the link sets it (ip link set can0 up type can bitrate "
+            "<bitrate>) and wheelgate refuses a link at another; on any other interface "
+            "wheelgate sets it.",
         ),
         "bridge": ("The Zenoh bridge to ROS 2 (README, Beyond one robot).",),
         "foxglove": ("The Foxglove live view (README, Beyond one robot).",),

@@ -41,7 +41,7 @@ class Written:
     :param files: shipped files it names, by name, that belong beside it (a DBC file).
     :param assignments: the node IDs a scan gave, per controller.
     :param unused: the scanned nodes of protocols no controller uses.
-    :param bus: the ``bus:`` keys given (``--interface``, ``--channel``).
+    :param bus: the ``bus:`` keys given (``--interface``, ``--channel``, ``--bitrate``).
     :param bus_was: the example's ``bus:`` block, in words, when ``bus`` changed it.
     """
 
@@ -52,7 +52,7 @@ class Written:
     files: tuple[str, ...] = ()
     assignments: tuple[Assignment, ...] = ()
     unused: tuple[FoundNode, ...] = ()
-    bus: Mapping[str, str] = dataclasses.field(default_factory=dict)
+    bus: Mapping[str, str | int] = dataclasses.field(default_factory=dict)
     bus_was: str = ""
 
 
@@ -104,7 +104,7 @@ def generate(
     file: str = "robot.yaml",
     shipped: Collection[str] = (),
     place: Mapping[str, str] | None = None,
-    bus: Mapping[str, str] | None = None,
+    bus: Mapping[str, str | int] | None = None,
 ) -> Written:
     """A commented configuration from the example ``name``.
 
@@ -116,7 +116,7 @@ def generate(
     :param shipped: the names of the shipped files other than the examples (DBC files).
     :param place: how to name a shipped file the configuration uses (default: by its name,
         beside the configuration).
-    :param bus: ``bus:`` keys to set (``interface``, ``channel``: the root options).
+    :param bus: ``bus:`` keys to set (``interface``, ``channel``, ``bitrate``: the root options).
     :raises ConfigError: for an unknown driver, or a scan that does not fit.
     """
     doc = read(examples[name], f"{name}.yaml")
@@ -147,7 +147,7 @@ def generate(
                    dict(bus or {}), bus_was if bus else "")
 
 
-def _set_bus(doc: Document, bus: Mapping[str, str]) -> str:
+def _set_bus(doc: Document, bus: Mapping[str, str | int]) -> str:
     """Set the ``bus:`` keys ``bus`` gives; the example's block before, in words."""
     block = doc.get(("bus",))
     was = (", ".join(f"{k} {v}" for k, v in block.items()) if isinstance(block, dict) and block

@@ -89,14 +89,16 @@ def scan_bus(bus: can.BusABC, timing: ScanTiming, bus_name: str,
 def scan(interface: str, channel: str, timeout_s: float,
          own_ids: Mapping[tuple[int, bool], str] | None = None,
          known: Sequence[MotorConfig] = (),
-         claimed: Sequence[MotorClaims] = ()) -> ScanReport:
+         claimed: Sequence[MotorClaims] = (), bitrate: int | None = None) -> ScanReport:
     """Open the bus, scan it for ``timeout_s`` seconds, close it.
+
+    :param bitrate: the bus's bitrate when one was stated (:func:`~gateway.bus.can_bus.open_bus`).
 
     :raises BusError: if the bus cannot be opened or receiving fails.
     :raises DriverNotFoundError: if a built-in probe fails to load.
     """
     probes = load_probes()
-    bus = open_bus(interface, channel, **bus_options(interface, None))
+    bus = open_bus(interface, channel, bitrate, **bus_options(interface, None))
     log.info("scan: listening on %s:%s for %g s", interface, channel, timeout_s)
     try:
         return scan_bus(bus, ScanTiming.for_timeout(timeout_s), f"{interface}:{channel}",

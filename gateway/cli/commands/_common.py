@@ -40,8 +40,18 @@ def load(ctx: click.Context, path: str | None,
     against ``interfaces`` with the file's other problems when given."""
     obj = ctx.find_root().obj or {}
     return load_config(config_file(ctx, path),
-                       {"interface": obj.get("interface"), "channel": obj.get("channel")},
+                       {"interface": obj.get("interface"), "channel": obj.get("channel"),
+                        "bitrate": obj.get("bitrate")},
                        interfaces)
+
+
+def bitrate_stated(ctx: click.Context, path: str | None) -> bool:
+    """Whether the bus's bitrate was said (``-c``, ``--bitrate`` or ``GATEWAY_BITRATE``), not
+    the embedded demo's: a command that may run without a configuration (``scan``) sets and
+    checks only a bitrate it was told."""
+    obj = ctx.find_root().obj or {}
+    return (path is not None or obj.get("bitrate") is not None
+            or os.environ.get("GATEWAY_BITRATE") is not None)
 
 
 def config_file(ctx: click.Context, path: str | None) -> str | None:

@@ -6,6 +6,7 @@ import math
 
 import click
 
+from gateway.bus.link import link_warnings
 from gateway.cli import config_option
 from gateway.cli.commands._common import load, rad_s_to_rpm
 from gateway.config.budget import bus_budget, check_bus
@@ -28,6 +29,8 @@ def command(ctx: click.Context, config_path: str | None) -> None:
     cfg = load(ctx, config_path, VALID_INTERFACES)  # the interface among every problem
     drives = DriveSet(cfg)
     warnings = [*cfg.warnings, *check_bus(cfg, drives)]  # (a bus it cannot work on: an error)
+    if cfg.bus.interface == "socketcan":  # the interface as this machine has it, if it has it
+        warnings += link_warnings(cfg.bus.channel, cfg.bus.bitrate)
     model = cfg.model
     mob = model.mobility
     click.echo(f"config:   {cfg.source}")

@@ -10,8 +10,9 @@ without /etc/wheelgate).
 
 ``--drive`` takes an example's name or a drive (``differential``: the example
 :data:`gateway.apps.init.shipped.BY_DRIVE` gives for it, the others named).  The root options
-``--interface``/``--channel`` go into the written ``bus:`` block.  ``--unit`` writes the
-shipped unit with ``ExecStart=`` naming the ``wheelgate`` that runs (:func:`running_wheelgate`).
+``--interface``/``--channel``/``--bitrate`` go into the written ``bus:`` block.  ``--unit``
+writes the shipped unit with ``ExecStart=`` naming the ``wheelgate`` that runs
+(:func:`running_wheelgate`).
 """
 
 from __future__ import annotations
@@ -83,7 +84,8 @@ def command(ctx: click.Context, example: str | None, driver: str | None, scan: B
 
     It says what each block means and marks what to MEASURE on the robot and FILL IN; with
     --from-scan the controllers get the node IDs that answered a scan; the root options
-    --interface/--channel go into its bus: block.  It never replaces a file unless --force.
+    --interface/--channel/--bitrate go into its bus: block.  It never replaces a file unless
+    --force.
     Example: wheelgate init --drive differential -o robot.yaml
     """
     if listing:
@@ -111,7 +113,8 @@ def command(ctx: click.Context, example: str | None, driver: str | None, scan: B
                                f"drive: {', '.join(sorted(shipped.BY_DRIVE))}")
     target = output or DEFAULT_OUTPUT
     obj = ctx.find_root().obj or {}
-    bus = {k: str(obj[k]) for k in ("interface", "channel") if obj.get(k) is not None}
+    bus: dict[str, str | int] = {k: obj[k] for k in ("interface", "channel", "bitrate")
+                                 if obj.get(k) is not None}
     with contextlib.ExitStack() as stack:
         examples = _examples()
         chosen = choose(examples, example, shipped.BY_DRIVE)
@@ -150,7 +153,7 @@ def _examples() -> dict[str, str]:
 
 def _generate(stack: contextlib.ExitStack, examples: dict[str, str], name: str,
               driver: str | None, scan: BinaryIO | None, target: str,
-              bus: dict[str, str]) -> Written:
+              bus: dict[str, str | int]) -> Written:
     """The configuration's text; on standard output, the shipped files it names are named
     where they are installed (there is no directory to put them beside it)."""
     others = [n for n in shipped.names() if not n.endswith(shipped.SUFFIX)]

@@ -320,7 +320,8 @@ def watch_bus(cfg: GatewayConfig, screen: Screen, period: float, window: float,
     """Listen on the configured bus (never sending) through a :class:`BusMonitor`."""
     if cfg.bus.interface == "virtual":
         click.echo(virtual_bus_note(cfg.bus.channel), err=True)
-    bus = open_bus(cfg.bus.interface, cfg.bus.channel, **bus_options(cfg.bus.interface, None))
+    bus = open_bus(cfg.bus.interface, cfg.bus.channel, cfg.bus.bitrate,
+                   **bus_options(cfg.bus.interface, None))
     try:
         start = time.monotonic()
         mon = BusMonitor(cfg, window, source=f"bus {cfg.bus.interface}:{cfg.bus.channel}",

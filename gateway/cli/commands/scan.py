@@ -37,7 +37,7 @@ import click
 from gateway.apps.scan import render, report_json, scan, summary, wrap
 from gateway.apps.scan.own import motor_claims, own_messages
 from gateway.cli import config_option, json_option
-from gateway.cli.commands._common import VIRTUAL_HINT, load
+from gateway.cli.commands._common import VIRTUAL_HINT, bitrate_stated, load
 from gateway.cli.commands._guards import fail_json_of
 from gateway.core.errors import GatewayError
 
@@ -88,7 +88,8 @@ def command(ctx: click.Context, config_path: str | None, timeout_s: float,
         own = own_messages(cfg, drivers=config_path is not None)
         known = [*(m for m in cfg.motors if m is not None), *cfg.steering] if config_path else []
         claimed = motor_claims(cfg) if config_path else ()
-        report = scan(bus.interface, bus.channel, timeout_s, own, known, claimed)
+        report = scan(bus.interface, bus.channel, timeout_s, own, known, claimed,
+                      bus.bitrate if bitrate_stated(ctx, config_path) else None)
     except (GatewayError, click.ClickException) as err:
         if not as_json:
             raise

@@ -107,7 +107,7 @@ def open_controllers(cfg: GatewayConfig, sims: Sequence[DeviceSimulator],
     """
     try:
         return SimulatedControllers(sims, cfg.bus.channel, interface=cfg.bus.interface,
-                                    rate_hz=rate_hz)
+                                    rate_hz=rate_hz, bitrate=cfg.bus.bitrate)
     except BusError as err:
         hint = ""
         if cfg.bus.interface == "socketcan":

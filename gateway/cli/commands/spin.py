@@ -180,7 +180,7 @@ def _bus(cfg: GatewayConfig, motor: MotorConfig, sim: bool
             lambda: device.wheel_position_rad)
         probe = lambda: ctl.snapshot(true_angle)  # noqa: E731 - read under the sim's lock
     try:
-        bus = open_bus(interface, cfg.bus.channel, **bus_options(interface, None))
+        bus = open_bus(interface, cfg.bus.channel, cfg.bus.bitrate, **bus_options(interface, None))
         try:
             yield bus, probe, f"{interface}:{cfg.bus.channel}"
         finally:
