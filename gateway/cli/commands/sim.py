@@ -103,18 +103,14 @@ def open_controllers(cfg: GatewayConfig, sims: Sequence[DeviceSimulator],
                      rate_hz: float) -> SimulatedControllers:
     """The simulators on the configuration's bus.
 
-    :raises BusError: naming the bus, with what to check.
+    :raises BusError: naming the bus, with what to check (:func:`~gateway.bus.can_bus.open_bus`
+        says it: no SocketCAN in the kernel, no such interface, a link at another bitrate).
     """
     try:
         return SimulatedControllers(sims, cfg.bus.channel, interface=cfg.bus.interface,
                                     rate_hz=rate_hz, bitrate=cfg.bus.bitrate)
     except BusError as err:
-        hint = ""
-        if cfg.bus.interface == "socketcan":
-            hint = (f"; expected an existing CAN interface {cfg.bus.channel!r} that is up "
-                    f"('ip link show {cfg.bus.channel}'; without hardware: sudo modprobe vcan "
-                    f"&& sudo ip link add vcan0 type vcan && sudo ip link set vcan0 up)")
-        raise BusError(f"wheelgate sim: {err}{hint}") from err
+        raise BusError(f"wheelgate sim: {err}") from err
 
 
 @click.command()
