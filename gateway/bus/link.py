@@ -46,8 +46,9 @@ class Link:
     bitrate: int | None
     state: str | None
 
-    def up_command(self, bitrate: int) -> str:
-        """The commands that bring this interface up at ``bitrate`` (as root)."""
+    def up_command(self, bitrate: int | str) -> str:
+        """The commands that bring this interface up at ``bitrate`` (as root; a placeholder
+        such as ``N`` when the bitrate is not known)."""
         return (f"sudo ip link set {self.name} down && sudo ip link set {self.name} up type can "
                 f"bitrate {bitrate} restart-ms 100")
 

@@ -15,6 +15,7 @@ import pytest
 import yaml
 
 import gateway.cli.commands.scan as scan_command
+from gateway.bus.link import Link
 from gateway.cli import main
 from gateway.config import load_config
 from gateway.core.types import Frame, GatewayState
@@ -136,10 +137,38 @@ def test_the_text_table_fits_80_columns_and_names_what_it_found(
     assert "note: a CANopen node that booted before the scan and sends no heartbeat" in text
 
 
-def test_the_empty_bus_hint_names_ip_link_only_for_socketcan() -> None:
+def test_the_empty_bus_hint_names_ip_link_only_for_socketcan(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    links: dict[str, Link] = {}
+    monkeypatch.setattr(scan_command, "read_link", links.get)
     assert "ip -details link show can0" in scan_command.nothing_found_hint("socketcan", "can0")
     multicast = scan_command.nothing_found_hint("udp_multicast", "239.74.163.2")
     assert "ip -details" not in multicast and "udp_multicast:239.74.163.2" in multicast
+    assert "bitrate" not in multicast  # (a network carries frames, at no bitrate of its own)
+    links["vcan0"] = Link("vcan0", "vcan", True, None, None)  # no bitrate to name
+    assert ("that the link is up at the controllers' bitrate (ip -details link show vcan0)"
+            in scan_command.nothing_found_hint("socketcan", "vcan0"))
+
+
+def test_the_empty_bus_hint_names_the_bitrate_the_scan_ran_at(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    # The usual reason for silence at a first power-on: a bitrate other than the controllers'.
+    links: dict[str, Link] = {"can0": Link("can0", "can", True, 500000, "ERROR-ACTIVE")}
+    monkeypatch.setattr(scan_command, "read_link", links.get)
+    hint = " ".join(scan_command.nothing_found_hint("socketcan", "can0").split())
+    assert ("that the controllers talk at 500000 bit/s, the link's (at another bitrate N: sudo "
+            "ip link set can0 down && sudo ip link set can0 up type can bitrate N restart-ms "
+            "100), the wiring") in hint
+    links["can0"] = Link("can0", "can", False, 250000, "STOPPED")
+    assert ("the link: it is down (bring it up at the controllers' bitrate: sudo ip link set "
+            "can0 down && sudo ip link set can0 up type can bitrate 250000 restart-ms 100)"
+            in scan_command.nothing_found_hint("socketcan", "can0"))
+    assert "bitrate 1000000 restart-ms" in scan_command.nothing_found_hint(
+        "socketcan", "can0", 1000000)  # (the configuration's, when the scan was told one)
+    assert ("that the controllers talk at python-can's default bitrate of its pcan interface "
+            "(give theirs with --bitrate)") in scan_command.nothing_found_hint("pcan", "X")
+    assert ("that the controllers talk at 1000000 bit/s, the bitrate the scan used" in
+            scan_command.nothing_found_hint("pcan", "X", 1000000))
 
 
 def test_beside_a_running_gateway(runner: CliRunner, daemon: Daemon, channel: str) -> None:

@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 
 import pytest
 
-import gateway.cli.commands.jog as jog_command
+from gateway.apps.jog.link import JogLink
 from gateway.core.errors import GatewayError, GatewayTimeoutError
 from gateway.core.types import Twist
 from gateway.runtime.client import ClientError, ClientTimeoutError, ControlClient
@@ -318,7 +318,7 @@ def test_a_caller_that_retries_on_its_own_is_not_held_up_by_a_stale_file(
     with pytest.raises(ClientError, match="no gateway is listening"):
         ControlClient(sock_path, refused_retry_s=0.0)
     assert waited == []
-    link = jog_command._Link.__new__(jog_command._Link)
+    link = JogLink.__new__(JogLink)
     link.path, link.client, link._retry_s = str(sock_path), None, 0.0
     link.retry(force=True)
     assert waited == [] and "no gateway is listening" in link.error

@@ -60,6 +60,8 @@ SPEED_BINDINGS: Mapping[str, tuple[float, float]] = {
     "q": (1.1, 1.1), "z": (0.9, 0.9), "w": (1.1, 1.0), "x": (0.9, 1.0),
     "e": (1.0, 1.1), "c": (1.0, 0.9),
 }
+#: The "key" of a motion the gamepad holds (``jog --joystick``, :mod:`gateway.apps.jog.pad`).
+PAD_KEY = "joystick"
 #: Keys that end the session (each sends stop first), key -> its name.
 QUIT_KEYS: Mapping[str, str] = {"\x03": "Ctrl-C", "\x04": "Ctrl-D", "\x1b": "Esc"}
 #: teleop_twist_keyboard's z keys; a ground robot has no z.
@@ -72,29 +74,6 @@ DEFAULT_DEADMAN_S = 0.6
 NO_LIMIT = "no limit set"
 #: How often a held motion key re-sends its twist (10 Hz).
 SEND_PERIOD_S = 0.1
-
-#: The keys on the screen, in full: at most 79 columns, as on an 80-column terminal.
-HELP = (
-    "Moving around:        Holonomic (shift):      Speeds, +/-10 %:",
-    "   u    i    o           U    I    O             q/z  both",
-    "   j    k    l           J    K    L             w/x  linear only",
-    "   m    ,    .           M    <    >             e/c  angular only",
-    "k, space, any other key: stop      t/b (z): not applicable, stop",
-    "quit: Ctrl-C, Ctrl-D or Esc; quitting sends stop (q is a speed key)",
-)
-#: The line added to :data:`HELP` for a drive that cannot follow vy.
-HELP_NOT_HOLONOMIC = "holonomic (shift) keys: not on this {drive} drive; they stop"
-#: The keys in three lines, for a short terminal (``{deadman}``: the deadman time, s).
-HELP_COMPACT = (
-    "move: u i o / j k l / m , .   sideways (shift): U I O / J K L / M < >",
-    "stop: k, space, other keys   +/-10 %: q/z both speeds, w/x linear, e/c angular",
-    "quit: Ctrl-C, Ctrl-D or Esc (sends stop)   deadman: {deadman:g} s without a key, stop",
-)
-#: The first line of :data:`HELP_COMPACT` for a drive that cannot follow vy.
-HELP_COMPACT_NOT_HOLONOMIC = (
-    "move: u i o / j k l / m , .   (shift keys, sideways: not on this drive)")
-#: The keys in one line, for a very short terminal.
-HELP_LINE = "keys: uio/jkl/m,. move, shift sideways  k stop  q/z w/x e/c speeds  Ctrl-C quit"
 
 
 @dataclass(frozen=True, slots=True)
@@ -216,6 +195,8 @@ def key_name(key: str) -> str:
     """A key as the screen shows it."""
     if key == " ":
         return "space"
+    if key == PAD_KEY:
+        return key
     if key in QUIT_KEYS:
         return QUIT_KEYS[key]
     if len(key) > 1:
@@ -266,7 +247,8 @@ class JogState:
     :param deadman_s: a motion stops when no motion key came for this long.
     :param period_s: how often a held motion is re-sent.
     :param key: the motion key being held, ``""`` when stopped.
-    :param direction: (x, y, yaw) of that key, each -1, 0 or 1.
+    :param direction: (x, y, yaw) of that key, each -1, 0 or 1 (of the pad: fractions of
+        full travel, -1 to 1).
     :param last_key_s: when that key last arrived.
     :param next_send_s: when the motion is re-sent next.
     :param message: what the last event did, for the screen.
@@ -279,7 +261,7 @@ class JogState:
     deadman_s: float = DEFAULT_DEADMAN_S
     period_s: float = SEND_PERIOD_S
     key: str = ""
-    direction: tuple[int, int, int] = (0, 0, 0)
+    direction: tuple[float, float, float] = (0, 0, 0)
     last_key_s: float = -math.inf
     next_send_s: float = math.inf
     message: str = ""
@@ -345,7 +327,7 @@ class JogState:
             return self._stopped(f"{key_name(key)}: stop")
         return self._stopped(f"{key_name(key)} is not a jog key: sent stop")
 
-    def _move(self, key: str, direction: tuple[int, int, int], now_s: float) -> Step:
+    def _move(self, key: str, direction: tuple[float, float, float], now_s: float) -> Step:
         held = (self.moving and direction == self.direction
                 and now_s - self.last_key_s < self.deadman_s)
         state = dataclasses.replace(self, key=key, direction=direction, last_key_s=now_s)
@@ -381,6 +363,23 @@ class JogState:
         state = dataclasses.replace(self, next_send_s=next_due(self.next_send_s, now_s,
                                                                 self.period_s))
         return Step(state, (Request("twist", self.twist),))
+
+    def on_pad(self, direction: tuple[float, float, float] | None, now_s: float,
+               lost: str = "") -> Step:
+        """The pad's motion at ``now_s`` (:meth:`gateway.apps.jog.pad.Pad.direction`; ``None``:
+        not enabled), given on every pass of the loop: while it is held its motion stays alive
+        as a repeating key's does, and goes out at the send period; let go, centred or
+        ``lost`` (why the pad cannot be read), it stops the motion it started (not a key's)."""
+        ours = self.moving and self.key == PAD_KEY
+        if direction is None or not any(direction):
+            if not ours:
+                return Step(self)
+            why = ("sticks centred" if direction is not None else
+                   lost or "enable button released")
+            return self._stopped(f"joystick: {why}: sent stop")
+        if ours:  # (a new direction goes out at the next send, within the period)
+            return Step(dataclasses.replace(self, direction=direction, last_key_s=now_s))
+        return self._move(PAD_KEY, direction, now_s)
 
     def on_quit(self, reason: str) -> Step:
         """End the session (a quit key, end of input, a hang-up or a signal): stop."""

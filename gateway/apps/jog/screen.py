@@ -16,14 +16,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
-from gateway.apps.jog.keys import (
-    HELP,
-    HELP_COMPACT,
-    HELP_COMPACT_NOT_HOLONOMIC,
-    HELP_LINE,
-    HELP_NOT_HOLONOMIC,
-    key_name,
-)
+from gateway.apps.jog.keys import key_name
 from gateway.apps.layout import Level, Line, fit, pack, paint, pair_steering, wrap
 from gateway.core.numfmt import fixed
 from gateway.core.status import fault_names, state_name
@@ -37,6 +30,30 @@ if TYPE_CHECKING:
     from gateway.apps.jog.keys import JogState
     from gateway.core.status import GatewayStatus, MotorReport
     from gateway.core.types import Twist
+
+
+#: The keys on the screen, in full: at most 79 columns, as on an 80-column terminal.
+HELP = (
+    "Moving around:        Holonomic (shift):      Speeds, +/-10 %:",
+    "   u    i    o           U    I    O             q/z  both",
+    "   j    k    l           J    K    L             w/x  linear only",
+    "   m    ,    .           M    <    >             e/c  angular only",
+    "k, space, any other key: stop      t/b (z): not applicable, stop",
+    "quit: Ctrl-C, Ctrl-D or Esc; quitting sends stop (q is a speed key)",
+)
+#: The line added to :data:`HELP` for a drive that cannot follow vy.
+HELP_NOT_HOLONOMIC = "holonomic (shift) keys: not on this {drive} drive; they stop"
+#: The keys in three lines, for a short terminal (``{deadman}``: the deadman time, s).
+HELP_COMPACT = (
+    "move: u i o / j k l / m , .   sideways (shift): U I O / J K L / M < >",
+    "stop: k, space, other keys   +/-10 %: q/z both speeds, w/x linear, e/c angular",
+    "quit: Ctrl-C, Ctrl-D or Esc (sends stop)   deadman: {deadman:g} s without a key, stop",
+)
+#: The first line of :data:`HELP_COMPACT` for a drive that cannot follow vy.
+HELP_COMPACT_NOT_HOLONOMIC = (
+    "move: u i o / j k l / m , .   (shift keys, sideways: not on this drive)")
+#: The keys in one line, for a very short terminal.
+HELP_LINE = "keys: uio/jkl/m,. move, shift sideways  k stop  q/z w/x e/c speeds  Ctrl-C quit"
 
 
 # --------------------------------------------------------------------- what the daemon says
@@ -80,6 +97,9 @@ class Screen:
         (:func:`gateway.apps.layout.steering_of` of the configuration).
     :param note: a warning about the daemon's configuration (the same robot from an edited
         file, :func:`gateway.cli.commands._common.other_text`), ``""``: none.
+    :param pad: the gamepad's line (:meth:`gateway.apps.jog.joystick.Joystick.describe`),
+        ``""``: no gamepad.
+    :param pad_ok: whether the gamepad is read (its line is an error if not).
     """
 
     robot: str
@@ -92,6 +112,8 @@ class Screen:
     connected: bool = True
     steering: Mapping[str, tuple[str, ...]] = field(default_factory=dict)
     note: str = ""
+    pad: str = ""
+    pad_ok: bool = True
 
 
 def _twist(t: Twist) -> str:
@@ -273,7 +295,9 @@ def render(screen: Screen, width: int = 100, height: int | None = None,
         [wrap(title + screen.connection, width, 2, connection, len(title))],
         _help(screen),
         [[Line("")], []],
-        [wrap(command, width, 2)],
+        [[*wrap(command, width, 2),
+          *(wrap(screen.pad, width, 2, Level.PLAIN if screen.pad_ok else Level.ERROR, 10)
+            if screen.pad else [])]],
         [speeds],
         [wrap(f"message: {jog.message}", width, n) for n in (3, 1)],
         [wrap(f"last error: {error}", width, n, error_level, 12) for n in (3, 1)],

@@ -5,6 +5,8 @@ mode (so Ctrl-C arrives as a key), one screen redrawn in place with ANSI escapes
 screen; no curses) and fitted to the terminal's size at every draw, faults in colour unless
 ``NO_COLOR`` is set, ``select`` on stdin with the deadman's deadlines as timeouts, status
 polled at 5 Hz.  ``--standalone`` runs a daemon in a thread of this process, privately.
+``--joystick`` adds a gamepad's device to the ``select`` (:mod:`gateway.apps.jog.joystick`,
+:mod:`gateway.apps.jog.pad`); the daemon's socket is :mod:`gateway.apps.jog.link`.
 
 Whatever ends the session -- Ctrl-C, Ctrl-D, Esc, end of input, a closed terminal, SIGHUP,
 SIGTERM or SIGINT -- sends stop before the terminal mode is restored.  Should this program die
@@ -15,8 +17,8 @@ from __future__ import annotations
 
 import collections
 import contextlib
-import json
 import logging
+import math
 import os
 import select
 import shutil
@@ -26,19 +28,22 @@ import termios
 import threading
 import time
 import tty
-from typing import IO, TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import click
 
 from gateway.apps.jog import keys
+from gateway.apps.jog.joystick import Joystick, JoystickError
 from gateway.apps.jog.keys import STOP, JogState, Request, jog_limits, split_keys, steps_errors
+from gateway.apps.jog.link import JogLink
+from gateway.apps.jog.pad import DEFAULT_AXES, DEFAULT_ENABLE, PadMap
 from gateway.apps.jog.screen import Screen, read_status, render, reply_error
 from gateway.apps.keyboard import read_keys
 from gateway.apps.layout import steering_of, wants_colour
 from gateway.cli import FilePath, UsageExit, config_option
 from gateway.cli.commands import _common as common
 from gateway.cli.commands._guards import caught_signals
-from gateway.runtime.client import ClientError, ControlClient
+from gateway.runtime.client import ClientError
 from gateway.runtime.daemon import Daemon
 from gateway.runtime.sdnotify import SystemdNotifier
 
@@ -51,10 +56,6 @@ if TYPE_CHECKING:
 
 #: How often the daemon's status is polled (s).
 STATUS_PERIOD_S = 0.2
-#: How often a lost connection is retried (s).
-RECONNECT_PERIOD_S = 1.0
-#: Longest wait for any reply (s); the deadman loop must not hang on a stuck daemon.
-REPLY_TIMEOUT_S = 1.0
 #: Log lines kept for the screen.
 LOG_LINES = 3
 
@@ -63,66 +64,6 @@ _MAX_SOCKET_DIR = 90
 
 _ENTER = "\x1b[?1049h\x1b[?25l\x1b[2J"  # alternate screen, hide the cursor, clear
 _LEAVE = "\r\n\x1b[?25h\x1b[?1049l"  # a fresh line where no alternate screen is restored
-
-
-class _Link:
-    """The connection to the daemon: requests, their log, reconnection after a loss.
-
-    :raises ClientError: if the first connection fails.
-    """
-
-    def __init__(self, path: str, log_file: IO[str] | None) -> None:
-        self.path = path
-        self.log_file = log_file
-        self.client: ControlClient | None = ControlClient(path, timeout_s=REPLY_TIMEOUT_S)
-        self.error = ""
-        self.last_op = ""
-        self._retry_s = 0.0
-        self._t0 = time.monotonic()
-
-    def request(self, payload: dict[str, object]) -> dict[str, Any] | None:
-        """The reply, or ``None`` when the daemon cannot be reached (``error`` says why)."""
-        if self.client is None:
-            return None
-        try:
-            return self.client.request(payload)
-        except ClientError as err:
-            self.error = str(err)
-            self.client.close()
-            self.client = None
-            self._retry_s = time.monotonic() + RECONNECT_PERIOD_S
-            return None
-
-    def send(self, req: Request) -> dict[str, Any] | None:
-        """Send a twist or stop, and log it with its reply."""
-        if self.client is None:
-            self.retry(force=req.op == "stop")
-        payload = req.payload()
-        reply = self.request(payload)
-        self.last_op = req.op if reply is not None and reply.get("ok") else ""
-        if self.log_file is not None:
-            entry = {"t_s": round(time.monotonic() - self._t0, 4), "request": payload,
-                     "reply": reply, **({"error": self.error} if reply is None else {})}
-            self.log_file.write(json.dumps(entry) + "\n")
-            self.log_file.flush()
-        return reply
-
-    def retry(self, force: bool = False) -> None:
-        """Reconnect after a loss, at most every :data:`RECONNECT_PERIOD_S` unless forced."""
-        if self.client is not None or (not force and time.monotonic() < self._retry_s):
-            return
-        self._retry_s = time.monotonic() + RECONNECT_PERIOD_S
-        try:
-            # (no waiting on a refused connection: the screen keeps its rate; this retries)
-            self.client = ControlClient(self.path, timeout_s=REPLY_TIMEOUT_S, refused_retry_s=0.0)
-            self.error = ""
-        except ClientError as err:
-            self.error = str(err)
-
-    def close(self) -> None:
-        if self.client is not None:
-            self.client.close()
-            self.client = None
 
 
 class _LogCapture(logging.Handler):
@@ -215,6 +156,16 @@ class _Terminal:
             self.write("\x1b[H" + "\x1b[K\r\n".join(lines) + "\x1b[K\x1b[J")
 
 
+def _axes(ctx: click.Context, param: click.Parameter, value: str) -> tuple[int, int, int]:
+    """``--joy-axes``: three joydev axis numbers (exit 2 for anything else)."""
+    parts = [p.strip() for p in value.split(",")]
+    if len(parts) != 3 or not all(p.isascii() and p.isdecimal() and int(p) <= 255
+                                  for p in parts):
+        raise click.BadParameter(f"expected three axis numbers 0 to 255 for vx, vy and wz, "
+                                 f"as 1,0,3; got {value!r}")
+    return int(parts[0]), int(parts[1]), int(parts[2])
+
+
 def _checked(cfg: GatewayConfig, speed: float | None, turn: float | None) -> JogLimits:
     """The jog limits of ``cfg``; ``--speed`` and ``--turn`` refused beyond them (exit 2)."""
     limits = jog_limits(cfg)
@@ -223,11 +174,11 @@ def _checked(cfg: GatewayConfig, speed: float | None, turn: float | None) -> Jog
     return limits
 
 
-def _session(fd_in: int, wake_fd: int, caught: list[str], term: _Terminal, link: _Link,
+def _session(fd_in: int, wake_fd: int, caught: list[str], term: _Terminal, link: JogLink,
              state: JogState, cfg: GatewayConfig, title: str, logs: _LogCapture,
-             note: str) -> JogState:
+             note: str, pad: Joystick | None) -> JogState:
     """The select loop; returns the final state (stop has been sent); ``note``: a warning
-    about the daemon's configuration, on the screen."""
+    about the daemon's configuration, on the screen; ``pad``: the gamepad, if any."""
     last_error = ""
     view: GatewayStatus | None = None
     next_status = 0.0
@@ -259,9 +210,13 @@ def _session(fd_in: int, wake_fd: int, caught: list[str], term: _Terminal, link:
             connection = (f"connected: {link.path}" if link.client is not None else
                           f"DISCONNECTED: {link.error} (retrying)")
             term.draw(Screen(cfg.name, title, connection, state, view, last_error,
-                             tuple(logs.lines), link.client is not None, steering, note))
-            deadline = min(state.next_deadline_s(), next_status)
-            ready, _, _ = select.select([fd_in, wake_fd], [], [], max(0.0, deadline - now))
+                             tuple(logs.lines), link.client is not None, steering, note,
+                             "" if pad is None else pad.describe(),
+                             pad is None or pad.fd is not None))
+            deadline = min(state.next_deadline_s(), next_status,
+                           math.inf if pad is None else pad.next_retry_s())
+            fds = [fd_in, wake_fd] + ([pad.fd] if pad is not None and pad.fd is not None else [])
+            ready, _, _ = select.select(fds, [], [], max(0.0, deadline - now))
             now = time.monotonic()
             if wake_fd in ready:
                 os.read(wake_fd, 512)
@@ -286,6 +241,14 @@ def _session(fd_in: int, wake_fd: int, caught: list[str], term: _Terminal, link:
                     send(step.requests)
                     if state.ended:
                         break
+            if pad is not None:
+                if pad.fd is not None and pad.fd in ready:
+                    pad.read()
+                pad.retry(now)
+                step = state.on_pad(pad.pad.direction(state.limits.holonomic), now,
+                                    "" if pad.fd is not None else f"lost: {pad.error}")
+                state = step.state
+                send(step.requests)
             step = state.on_tick(now)
             state = step.state
             send(step.requests)
@@ -315,6 +278,15 @@ def _session(fd_in: int, wake_fd: int, caught: list[str], term: _Terminal, link:
                    f"(teleop_twist_keyboard's turn; default {keys.DEFAULT_ANGULAR_RAD_S:g}).")
 @click.option("--log", "log_path", type=FilePath(dir_okay=False, writable=True), default=None,
               help="Write every twist and stop sent, with its reply, as JSON lines.")
+@click.option("--joystick", type=FilePath(dir_okay=False), default=None,
+              help="Drive with a gamepad too: its Linux joystick device (e.g. /dev/input/js0). "
+                   "Hold the enable button; the left stick drives, the right one turns.")
+@click.option("--joy-enable", type=click.IntRange(0, 255), default=DEFAULT_ENABLE,
+              show_default=True, help="The button to hold (joydev number; 4: LB, L1).")
+@click.option("--joy-axes", default=",".join(map(str, DEFAULT_AXES)), show_default=True,
+              callback=_axes,
+              help="The axes for vx, vy and wz (joydev numbers; pushed up or left is "
+                   "positive).")
 @click.pass_context
 def command(
     ctx: click.Context,
@@ -326,6 +298,9 @@ def command(
     speed: float | None,
     turn: float | None,
     log_path: str | None,
+    joystick: str | None,
+    joy_enable: int,
+    joy_axes: tuple[int, int, int],
 ) -> None:
     """Drive the robot from the keyboard (teleop_twist_keyboard keys) on one screen.
 
@@ -335,6 +310,8 @@ def command(
        m , .     M < >   q/z w/x e/c: speeds +/-10%
 
     A move lasts while its key repeats; --deadman seconds without one sends stop.
+    With --joystick a gamepad drives while its enable button is held (pressed after the pad
+    was opened); letting go, or losing the pad, sends stop.
     Quit with Ctrl-C, Ctrl-D or Esc (q speeds up, as in teleop_twist_keyboard); quitting
     always sends stop.  Should this program die, the daemon's cmd_timeout_s stops the robot.
     The screen fits the terminal; faults are red unless NO_COLOR is set.
@@ -350,6 +327,13 @@ def command(
     if not sys.stdin.isatty():
         raise UsageExit("jog reads keys from a terminal, but stdin is not a terminal")
     with contextlib.ExitStack() as stack:
+        pad = None
+        if joystick is not None:  # (before a standalone daemon starts: refused, nothing ran)
+            try:
+                pad = Joystick(joystick, PadMap(joy_enable, *joy_axes))
+            except JoystickError as err:
+                raise UsageExit(f"--joystick: {err}") from err
+            stack.callback(pad.close)
         log_file = None
         if log_path is not None:
             try:
@@ -363,7 +347,7 @@ def command(
         else:
             path = common.socket_for(ctx, config_path, socket_path)
         try:
-            link = _Link(path, log_file)
+            link = JogLink(path, log_file)
         except ClientError as err:
             raise click.ClickException(str(err)) from err
         stack.callback(link.close)
@@ -387,7 +371,7 @@ def command(
         stack.enter_context(_raw_terminal(fd_in))
         term.write(_ENTER)
         stack.callback(term.write, _LEAVE)
-        state = _session(fd_in, wake_r, caught, term, link, state, cfg, title, logs, note)
+        state = _session(fd_in, wake_r, caught, term, link, state, cfg, title, logs, note, pad)
     if link.last_op != "stop":
         raise click.ClickException(
             f"could not send stop to {path}: {link.error or 'refused'}; the daemon's "

@@ -36,6 +36,7 @@ import click
 
 from gateway.apps.scan import render, report_json, scan, summary, wrap
 from gateway.apps.scan.own import motor_claims, own_messages
+from gateway.bus.link import read_link
 from gateway.cli import config_option, json_option
 from gateway.cli.commands._common import VIRTUAL_HINT, bitrate_stated, load
 from gateway.cli.commands._guards import fail_json_of
@@ -55,17 +56,43 @@ def _timeout(ctx: click.Context, param: click.Parameter, value: float) -> float:
     return value
 
 
-def nothing_found_hint(interface: str, channel: str) -> str:
-    """What to check when no controller answered."""
+def nothing_found_hint(interface: str, channel: str, bitrate: int | None = None) -> str:
+    """What to check when no controller answered (a bitrate other than the controllers' is
+    the usual cause at a first power-on, so the one the bus ran at is named).
+
+    :param bitrate: the bitrate the adapter was opened at, ``None``: python-can's default
+        (an adapter) or the link's (SocketCAN, read here).
+    """
     if interface == "virtual":
         return (f"python-can's virtual bus (channel {channel!r}) exists only inside this "
                 f"process, so no controller elsewhere is on it; {VIRTUAL_HINT}")
-    link = (f"that the link is up at the controllers' bitrate (ip -details link show "
-            f"{channel}), " if interface == "socketcan" else "")
     return (f"check the bus: --interface/--channel (or the configuration's bus: block; here "
-            f"{interface}:{channel}), {link}the wiring, the termination and the "
-            f"controllers' power; a CANopen node that booted before the scan and has no "
-            f"heartbeat (0x1017 = 0) stays silent")
+            f"{interface}:{channel}), {_rate_hint(interface, channel, bitrate)}the wiring, the "
+            f"termination and the controllers' power; a CANopen node that booted before the "
+            f"scan and has no heartbeat (0x1017 = 0) stays silent")
+
+
+#: python-can interfaces that carry frames over a network, with no bitrate of their own.
+_NETWORKED = frozenset({"udp_multicast", "socketcand", "remote"})
+
+
+def _rate_hint(interface: str, channel: str, bitrate: int | None) -> str:
+    if interface in _NETWORKED:
+        return ""
+    if interface != "socketcan":
+        if bitrate is None:
+            return (f"that the controllers talk at python-can's default bitrate of its "
+                    f"{interface} interface (give theirs with --bitrate), ")
+        return f"that the controllers talk at {bitrate} bit/s, the bitrate the scan used, "
+    found = read_link(channel)
+    if found is None or (found.up and found.bitrate is None):  # (a vcan: no bitrate)
+        return (f"that the link is up at the controllers' bitrate (ip -details link show "
+                f"{channel}), ")
+    if not found.up:
+        return (f"the link: it is down (bring it up at the controllers' bitrate: "
+                f"{found.up_command(bitrate or found.bitrate or 'N')}), ")
+    return (f"that the controllers talk at {found.bitrate} bit/s, the link's (at another "
+            f"bitrate N: {found.up_command('N')}), ")
 
 
 @click.command()
@@ -94,7 +121,8 @@ def command(ctx: click.Context, config_path: str | None, timeout_s: float,
         if not as_json:
             raise
         fail_json_of(ctx, err)
-    hint = None if report.controllers else nothing_found_hint(bus.interface, bus.channel)
+    hint = None if report.controllers else nothing_found_hint(
+        bus.interface, bus.channel, bus.bitrate if bitrate_stated(ctx, config_path) else None)
     if as_json:
         click.echo(json.dumps(report_json(report)))
         if hint is not None:
