@@ -9,22 +9,25 @@ from typing import TYPE_CHECKING, Any
 from gateway.drive.filters import EXT_MASK, STD_MASK, CanFilter
 
 if TYPE_CHECKING:
+    from collections.abc import Iterable
+
     from gateway.core.settings import GatewayConfig
     from gateway.drive.claims import FrameClaim
     from gateway.drive.driver import MotorDriver
     from gateway.drive.driveset import DriveSet
 
 
-def gateway_filters(config: GatewayConfig, drives: DriveSet) -> tuple[CanFilter, ...]:
+def gateway_filters(config: GatewayConfig, drives: DriveSet,
+                    watched: Iterable[tuple[int, bool]] = ()) -> tuple[CanFilter, ...]:
     """Every identifier the gateway consumes: what its drivers claim to take
-    (:meth:`~gateway.drive.driveset.DriveSet.receive_filters`) and, with ``gateway.can_input``,
-    the twist command (``gateway.can_ids.twist``)."""
+    (:meth:`~gateway.drive.driveset.DriveSet.receive_filters`), with ``gateway.can_input``
+    the twist command (``gateway.can_ids.twist``), and the identifiers ``watched`` (its own
+    frames, heard only when another sends them: :mod:`gateway.runtime.commanders`)."""
     declared = drives.receive_filters()
     ids = config.loop.can_ids
-    if not config.loop.can_input:
-        return declared
-    twist = CanFilter.exact(ids.twist, ids.extended)
-    return declared if twist in declared else (*declared, twist)
+    twist = ((ids.twist, ids.extended),) if config.loop.can_input else ()
+    more = (CanFilter.exact(i, e) for i, e in (*twist, *watched))
+    return tuple(dict.fromkeys((*declared, *more)))
 
 
 def own_id_collisions(config: GatewayConfig, drives: DriveSet) -> list[str]:

@@ -1,27 +1,24 @@
 """One control cycle of the gateway: receive, decide, solve, send one burst, integrate.
 
-:class:`Gateway` owns the drivers, the odometry and the supervisor, and three parts of its
-own: the bus (:class:`~gateway.bus.edge.BusEdge`: send, receive, tally, reopen), the CAN
-command input (:class:`~gateway.runtime.can_twist.CanTwists`) and the reports
-(:class:`~gateway.runtime.publish.Publisher`).  Its :meth:`Gateway.cycle` is deterministic
-given the time it is called with, so tests run it on simulated time;
-:mod:`gateway.runtime.daemon` calls it from the real-time loop.
+:class:`Gateway` owns the drivers, the odometry and the supervisor, and parts of its own: the
+bus (:class:`~gateway.bus.edge.BusEdge`: send, receive, tally, reopen), the CAN command input
+(:class:`~gateway.runtime.can_twist.CanTwists`), the reports
+(:class:`~gateway.runtime.publish.Publisher`) and the watch for a second commander
+(:mod:`gateway.runtime.commanders`).  :meth:`Gateway.cycle` is deterministic given the time
+it is called with, so tests run it on simulated time; :mod:`gateway.runtime.daemon` calls it
+from the real-time loop.  Each cycle:
 
-Each cycle:
-
-1. drain the bus: CAN twist frames go to the supervisor, feedback frames to the drivers
-   (timestamped on receipt);
+1. drain the bus: CAN twists to the supervisor, feedback to the drivers (timestamped on
+   receipt), our own frames sent by another to the watch;
 2. the supervisor turns the motors' states and the newest valid twist into a target;
 3. inverse kinematics and limits (one scale factor, reported) give every wheel's speed (one
    solve per new target: the supervisor's feasibility check of an accepted twist is it);
 4. every wheel's frame (and every steering actuator's) is built, then all go out as one
    burst, so no two wheels act on commands from different cycles;
 5. odometry integrates the encoder positions exactly (SE(2)) once every driven wheel has a
-   new one (:class:`~gateway.core.odom_feed.OdomFeed`'s whole rounds), with the steering
-   angles the actuators measure (the commanded ones for wheels steered outside it); odometry and
-   status go out on CAN and to socket subscribers at their rates, and errors -- the cycle's
-   own and those of the requests served since the last cycle -- at most one ``WG_Error`` a
-   cycle (:mod:`gateway.runtime.publish`), after the burst.
+   new one (:class:`~gateway.core.odom_feed.OdomFeed`'s whole rounds), with the measured
+   steering angles; odometry and status go out at their rates, and errors at most one
+   ``WG_Error`` a cycle (:mod:`gateway.runtime.publish`), after the burst.
 """
 
 from __future__ import annotations
@@ -41,6 +38,7 @@ from gateway.core.types import ErrorCode, Frame, GatewayState, Twist
 from gateway.drive.driveset import DriveSet
 from gateway.drive.ownership import gateway_filters
 from gateway.runtime.can_twist import CanTwists
+from gateway.runtime.commanders import Commanders, own_frames
 from gateway.runtime.counts import LoopCounts
 from gateway.runtime.publish import Publisher
 from gateway.runtime.rejections import RejectionLog
@@ -94,8 +92,9 @@ class Gateway:
         self.period_s = 1.0 / config.loop.rate_hz
         #: Event counters for status reports (the bus's: ``edge.counts``).
         self.counts = LoopCounts()
+        own = own_frames(config, self.drives)  # (heard only when another sends them)
         #: The identifiers the gateway consumes (its drivers' claims and its twist input).
-        self.receive_filters = gateway_filters(config, self.drives)
+        self.receive_filters = gateway_filters(config, self.drives, own)
         #: The bus: sending, receiving, tallying, reopening.
         self.edge = BusEdge(
             config, bus, self.period_s,
@@ -134,6 +133,9 @@ class Gateway:
         #: WG_Twist_Cmd frames from the bus.
         self.can_twists = CanTwists(self.wg, config.loop, self.supervisor, self.counts,
                                     self.twist, self.report_error)
+        #: Our own frames from another sender (:mod:`gateway.runtime.commanders`).
+        self.commanders = Commanders(config, own, self.supervisor, self.report_error)
+        self._route = self.commanders.route(self.drives.takers)
         #: The log lines of the frames the drivers rejected.
         self.rejections = RejectionLog(self.drives.groups)
         # The log throttles of projected and refused twists (by source and kind), of jumps.
@@ -202,7 +204,7 @@ class Gateway:
             ids = self.wg.ids
             twist_id = ids.twist if self.config.loop.can_input else -1
             twist_ext = ids.extended
-            take, other = self.drives.takers.get, self.drives.on_frame
+            take, other = self._route.get, self.drives.on_frame
             for frame in frames:
                 ident, ext = frame.arbitration_id, frame.is_extended_id
                 if ident == twist_id and ext == twist_ext:
@@ -248,9 +250,7 @@ class Gateway:
         if not decision.ramp:
             self._prev_limited = False
         elif not (result is prev and self._prev_limited):
-            # (Skipped when the solve is the very command the limits passed last cycle -- any
-            # change would have been a new object: no change means no acceleration and no
-            # steering, the same report.)
+            # (Skipped for the very command the limits passed last cycle: the same report.)
             result, self.limit_report = apply_limits(
                 self.model, result, self.config.limits, prev, dt
             )

@@ -190,3 +190,16 @@ def test_kernel_filters_keep_foreign_traffic_out_of_the_process(rig: Rig, vcan: 
                for i, e in received), received
     assert rig.gw.edge.counts.frames_received > before  # the drives' feedback still comes
     assert state(rig) is GatewayState.RUNNING
+
+
+def test_another_program_commanding_our_motors_is_a_fault(rig: Rig, vcan: str) -> None:
+    # The kernel's filters let another socket's Set_Input_Vel of node 1 in (our own frames are
+    # never delivered back to our socket: the drive above ran without a fault).
+    drive(rig, 0.6)
+    assert state(rig) is GatewayState.RUNNING, rig.gw.supervisor.reason
+    with can.Bus(interface="socketcan", channel=vcan) as other:
+        other.send(can.Message(arbitration_id=1 << 5 | CmdId.SET_INPUT_VEL, data=bytes(8),
+                               is_extended_id=False))
+    rig.advance(0.1)
+    assert state(rig) is GatewayState.FAULT
+    assert rig.gw.supervisor.reason.startswith(f"another sender on socketcan:{vcan}: heard 02D#")

@@ -1,0 +1,134 @@
+"""A second commander on the bus: frames only this gateway should send, heard from another.
+
+Two programs that command the same motors fight over them, each overwriting the other's set
+points: the service and a ``wheelgate run`` started by hand on another socket, ``jog
+--standalone`` beside a running daemon, a script with ``cansend``.  A node never receives
+its own frames (SocketCAN delivers a socket's frames to the *other* sockets only, unless
+``CAN_RAW_RECV_OWN_MSGS`` is set: Linux ``Documentation/networking/can.rst``, "RAW socket
+option CAN_RAW_RECV_OWN_MSGS"; python-can's virtual bus likewise), so a frame that carries
+one of this gateway's own identifiers came from someone else:
+
+* a command of one of its motors (the identifiers of its drivers' cyclic command frames,
+  :meth:`~gateway.drive.driveset.DriveSet.preview`; remote frames, a read-only request, are
+  not commands), or
+* a wheelgate's own report (``WG_Status``, ``WG_Odom_Pose``, ``WG_Odom_Velocity``,
+  ``WG_Error`` at this configuration's identifiers): another gateway runs on this bus.
+
+A command while the motors are enabled is a fault (``bus_error``) that names the frame and what
+to do; the automatic recovery then re-enables as after any bus fault, and faults again while
+the other keeps sending.  A command while they are not, or a report, is a warning (at most one
+line per 5 s): nothing of ours is overwritten yet, and a second gateway that drives other
+motors is a configuration to fix (its own ``gateway.can_ids``), not a fight; should it drive
+ours, its commands say so.  The identifiers are added to the kernel receive filters
+(:func:`gateway.drive.ownership.gateway_filters`), so the other's frames reach the process.
+``wheelgate spin`` makes the same judgement before it arms a motor
+(:func:`gateway.apps.spin.plan.someone_else`).
+"""
+
+from __future__ import annotations
+
+import functools
+import logging
+from typing import TYPE_CHECKING
+
+from gateway.bus.health import LogThrottle
+from gateway.core.types import ErrorCode, Frame, Twist
+
+if TYPE_CHECKING:
+    from collections.abc import Callable, Mapping
+
+    from gateway.core.control import Supervisor
+    from gateway.core.settings import GatewayConfig
+    from gateway.drive.driveset import DriveSet
+
+log = logging.getLogger(__name__)
+
+Key = tuple[int, bool]
+
+#: The shortest time between two warnings (s).
+WARN_EVERY_S = 5.0
+#: How :func:`own_frames` names a wheelgate's report (the end of its description).
+REPORT = "of another wheelgate"
+
+
+def own_frames(config: GatewayConfig, drives: DriveSet) -> dict[Key, str]:
+    """The identifiers only this gateway sends, each with what it is (for messages).
+
+    The motors' commands come from a preview at zero speed and neutral angles: the frames a
+    cycle sends whatever the set points (a protocol's other frames -- enabling, configuring
+    -- go out once and are not judged).
+    """
+    from gateway.drive.labels import FrameLabeler  # noqa: PLC0415 - once, at start
+
+    labeler = FrameLabeler(config)
+    rest = config.model.ik(Twist())
+    out: dict[Key, str] = {}
+    for frame in drives.preview(rest.wheel_rad_s, rest.steer_rad):
+        if not frame.is_remote_frame:
+            key = (frame.arbitration_id, frame.is_extended_id)
+            out.setdefault(key, f"a command: {labeler.label_id(*key).text}")
+    ids = config.loop.can_ids
+    for name, ident in (("WG_Status", ids.status), ("WG_Odom_Pose", ids.odom_pose),
+                        ("WG_Odom_Velocity", ids.odom_velocity), ("WG_Error", ids.error)):
+        out.setdefault((ident, ids.extended), f"{name} {REPORT}")
+    if config.loop.can_input:  # (the twist input is meant to come from another node)
+        out.pop((ids.twist, ids.extended), None)
+    return out
+
+
+class Commanders:
+    """What the cycle does with a frame only this gateway should send.
+
+    :param config: the configuration (the bus's name in messages).
+    :param own: :func:`own_frames`.
+    :param supervisor: the supervisor, for the fault.
+    :param report: the gateway's error report (``report_error(code, message, wheel=...)``).
+    """
+
+    def __init__(self, config: GatewayConfig, own: Mapping[Key, str], supervisor: Supervisor,
+                 report: Callable[..., None]) -> None:
+        self.bus = f"{config.bus.interface}:{config.bus.channel}"
+        self.own = dict(own)
+        self.supervisor = supervisor
+        self.report = report
+        self._warn = LogThrottle(WARN_EVERY_S)
+        #: Frames heard from another sender, since start.
+        self.heard = 0
+
+    def route(self, takers: Mapping[Key, Callable[[Frame], bool]]
+              ) -> dict[Key, Callable[[Frame], bool]]:
+        """``takers`` with each of :attr:`own`'s identifiers sent to :meth:`other` first (a
+        driver that claims its node's whole range, ODrive's, keeps its remote frames)."""
+        out = dict(takers)
+        for key in self.own:
+            out[key] = functools.partial(self._take, key, takers.get(key))
+        return out
+
+    def _take(self, key: Key, taker: Callable[[Frame], bool] | None, frame: Frame) -> bool:
+        if frame.is_remote_frame:
+            return taker(frame) if taker is not None else False
+        self.other(frame, key)
+        return True
+
+    def other(self, frame: Frame, key: Key) -> None:
+        """``frame`` came from another sender: a command is a fault while the motors are
+        enabled; a report, or a command while they are not, a warning."""
+        self.heard += 1
+        what = self.own[key]
+        heard = f"another sender on {self.bus}: heard {frame.to_cansend()} ({what})"
+        if what.endswith(REPORT):  # a second gateway; its commands, if of our motors, tell
+            message = (f"{heard}: another wheelgate runs on this bus; if it drives these "
+                       f"motors, stop it; if it drives others, give each its own "
+                       f"gateway.can_ids")
+        else:
+            message = (f"{heard}, which only this gateway sends: two programs command these "
+                       f"motors (another wheelgate run, jog --standalone, a script); stop "
+                       f"the other one")
+        fault = None if what.endswith(REPORT) else self.supervisor.bus_fault(message)
+        if fault is not None:
+            log.error("fault: %s", message)
+            self.report(ErrorCode.BUS_ERROR, message)
+            return
+        n = self._warn.note(frame.timestamp_s)
+        if n is not None:
+            log.warning("%s (%d such frames since the last line)", message, n)
