@@ -46,7 +46,8 @@ def claims(node_ids: Sequence[int], reads: bool) -> tuple[FrameClaim, ...]:
     the labels; and with ``reads`` (the timeouts are read back), the COMM_GET_APPCONF requests
     sent (PROCESS_SHORT_BUFFER to each controller) and the buffer protocol's frames to the
     gateway's ID (the replies, of no one motor: their FILL frames do not name the sender).
-    A command another master sends one of our controllers is not taken."""
+    A command another master sends one of our controllers is not taken (the gateway's watch
+    for a second commander hears the cyclic ones: :mod:`gateway.runtime.commanders`)."""
     out = [
         *(FrameClaim.exact(arbitration_id(packet, n), True, i)
           for i, n in enumerate(node_ids) for packet, _ in RECEIVED),
