@@ -273,9 +273,8 @@ class OdriveDriver(MotorDriver[OdriveOptions]):
 
     def claims(self) -> tuple[FrameClaim, ...]:
         """Every CANSimple message of our nodes (``node_id << 5 | cmd``, any command): the
-        replies and cyclic messages :meth:`on_frame` decodes, and the commands (another
-        master's) it takes and ignores; the gateway watches the cyclic ones
-        (Set_Input_Vel) before this driver sees them (:mod:`gateway.runtime.commanders`)."""
+        replies and cyclic messages :meth:`on_frame` decodes, and another master's commands
+        (the gateway's watch for a second commander hears the cyclic ones first)."""
         ext = self._extended_id
         mask = (EXT_MASK if ext else STD_MASK) & ~CMD_MASK
         return tuple(FrameClaim(ax.node_id << CMD_BITS, mask, ext, ax.index) for ax in self._axes)
@@ -300,8 +299,7 @@ class OdriveDriver(MotorDriver[OdriveOptions]):
         Frames of the other ID type or of other nodes are not ours.  Of ours, malformed frames
         raise :class:`DecodeError` (the base counts them); remote frames other than the
         requests this driver sends itself are counted in :attr:`rejected`; command frames
-        (another master talking to our axes) are ignored here (the gateway's watch for a
-        second commander takes the cyclic ones first).
+        (another master talking to our axes) are ignored here.
         """
         # Every frame of our nodes comes here: encoder estimates, most of the traffic, go from
         # the payload to the wheel feedback without an EncoderEstimates object.
