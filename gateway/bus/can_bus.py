@@ -147,15 +147,11 @@ def _socketcan_hint(err: BaseException, channel: str) -> str:
 
 
 def _check_link(channel: str, bitrate: int) -> None:
-    from gateway.bus.link import bitrate_refusal, down_warning, read_link  # noqa: PLC0415 - a real bus only
+    from gateway.bus.link import judge_link  # noqa: PLC0415 - a real bus only
 
-    link = read_link(channel)
-    if link is None:
-        return
-    refusal = bitrate_refusal(link, bitrate)
+    refusal, warning = judge_link(channel, bitrate)
     if refusal is not None:
         raise BusError(f"Cannot use CAN bus socketcan:{channel}: {refusal}")
-    warning = down_warning(link, bitrate)
     if warning is not None:
         log.warning("%s", warning)
 

@@ -132,15 +132,21 @@ def down_warning(link: Link, bitrate: int) -> str | None:
     return f"{link.name} is down: nothing can be sent until it is up ({up})"
 
 
-def link_warnings(channel: str, bitrate: int) -> list[str]:
-    """What is wrong with SocketCAN interface ``channel`` here for a bus at ``bitrate``, as
-    ``check`` warns of it (the interface may still be set up before the gateway starts: a
-    unit's ``ExecStartPre=``, systemd-networkd); nothing when it is not here."""
+def judge_link(channel: str, bitrate: int) -> tuple[str | None, str | None]:
+    """SocketCAN interface ``channel`` here for a bus at ``bitrate``: why it must not be used
+    (:func:`bitrate_refusal`) and what to warn of (:func:`down_warning`), each ``None`` when
+    nothing (nothing at all when it is not here)."""
     link = read_link(channel)
     if link is None:
-        return []
+        return None, None
     refusal = bitrate_refusal(link, bitrate)
+    return refusal, None if refusal is not None else down_warning(link, bitrate)
+
+
+def link_warnings(channel: str, bitrate: int) -> list[str]:
+    """:func:`judge_link` as ``check`` warns of it (the interface may still be set up before
+    the gateway starts: a unit's ``ExecStartPre=``, systemd-networkd)."""
+    refusal, warning = judge_link(channel, bitrate)
     if refusal is not None:
         return [f"{refusal} (wheelgate refuses to use it until they agree)"]
-    warning = down_warning(link, bitrate)
     return [] if warning is None else [warning]

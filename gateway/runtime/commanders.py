@@ -33,6 +33,7 @@ from typing import TYPE_CHECKING
 
 from gateway.bus.health import LogThrottle
 from gateway.core.types import ErrorCode, Frame, Twist
+from gateway.drive.labels import OWN_MESSAGES, FrameLabeler
 
 if TYPE_CHECKING:
     from collections.abc import Callable, Mapping
@@ -58,8 +59,6 @@ def own_frames(config: GatewayConfig, drives: DriveSet) -> dict[Key, str]:
     cycle sends whatever the set points (a protocol's other frames -- enabling, configuring
     -- go out once and are not judged).
     """
-    from gateway.drive.labels import FrameLabeler  # noqa: PLC0415 - once, at start
-
     labeler = FrameLabeler(config)
     rest = config.model.ik(Twist())
     out: dict[Key, str] = {}
@@ -67,13 +66,17 @@ def own_frames(config: GatewayConfig, drives: DriveSet) -> dict[Key, str]:
         if not frame.is_remote_frame:
             key = (frame.arbitration_id, frame.is_extended_id)
             out.setdefault(key, f"a command: {labeler.label_id(*key).text}")
-    ids = config.loop.can_ids
-    for name, ident in (("WG_Status", ids.status), ("WG_Odom_Pose", ids.odom_pose),
-                        ("WG_Odom_Velocity", ids.odom_velocity), ("WG_Error", ids.error)):
-        out.setdefault((ident, ids.extended), f"{name} {REPORT}")
-    if config.loop.can_input:  # (the twist input is meant to come from another node)
-        out.pop((ids.twist, ids.extended), None)
+    for key, name in _reports(config).items():
+        out.setdefault(key, f"{name} {REPORT}")
     return out
+
+
+def _reports(config: GatewayConfig) -> dict[Key, str]:
+    """The gateway's own reports by identifier (its twist input is meant to come from another
+    node: not one of them)."""
+    ids = config.loop.can_ids
+    return {(getattr(ids, key), ids.extended): name for key, name in OWN_MESSAGES.items()
+            if key != "twist"}
 
 
 class Commanders:
@@ -91,6 +94,7 @@ class Commanders:
         self.own = dict(own)
         self.supervisor = supervisor
         self.report = report
+        self._reports = frozenset(_reports(config))
         self._warn = LogThrottle(WARN_EVERY_S)
         #: Frames heard from another sender, since start.
         self.heard = 0
@@ -116,7 +120,8 @@ class Commanders:
         self.heard += 1
         what = self.own[key]
         heard = f"another sender on {self.bus}: heard {frame.to_cansend()} ({what})"
-        if what.endswith(REPORT):  # a second gateway; its commands, if of our motors, tell
+        report = key in self._reports
+        if report:  # a second gateway; its commands, if of our motors, tell
             message = (f"{heard}: another wheelgate runs on this bus; if it drives these "
                        f"motors, stop it; if it drives others, give each its own "
                        f"gateway.can_ids")
@@ -124,7 +129,7 @@ class Commanders:
             message = (f"{heard}, which only this gateway sends: two programs command these "
                        f"motors (another wheelgate run, jog --standalone, a script); stop "
                        f"the other one")
-        fault = None if what.endswith(REPORT) else self.supervisor.bus_fault(message)
+        fault = None if report else self.supervisor.bus_fault(message)
         if fault is not None:
             log.error("fault: %s", message)
             self.report(ErrorCode.BUS_ERROR, message)
