@@ -246,3 +246,25 @@ def errors_on_can(rig: Rig) -> list[ErrorReport]:
         if report is not None:
             out.append(report)
     return out
+
+
+def sent(gw: Gateway) -> list[tuple[int, bool]]:
+    """Every frame ``gw`` hands to python-can from now on (what reaches the bus), as
+    ``(identifier, extended)``."""
+    out: list[tuple[int, bool]] = []
+    bus = gw.edge.bus
+    send = bus.send
+
+    def spy(msg: can.Message, timeout: float | None = None) -> None:
+        out.append((msg.arbitration_id, msg.is_extended_id))
+        send(msg, timeout)
+
+    bus.send = spy  # type: ignore[method-assign]
+    return out
+
+
+def reports(gw: Gateway) -> set[tuple[int, bool]]:
+    """The identifiers of the gateway's own WG_* reports."""
+    ids = gw.config.loop.can_ids
+    return {(ids.odom_pose, ids.extended), (ids.odom_velocity, ids.extended),
+            (ids.status, ids.extended), (ids.error, ids.extended)}

@@ -130,7 +130,8 @@ def measure(protocol: str, cycles: int) -> dict[str, Counts]:
     bench = Bench(protocol, overhead_ns=0.0)
     anchor = Anchor.open(bench) if protocol in ANCHOR_LOOPS else None
     try:
-        bench.record_pool(cycles * PERIOD_S, enable_cycles=200, twist_cycles=300)
+        # (450: the gateway listens 250 ms before it takes an enable, commanders.LISTEN_S)
+        bench.record_pool(cycles * PERIOD_S, enable_cycles=450, twist_cycles=300)
         schedule = bench.schedule("1 kHz mix", cycles)
         slots = [[_delivered(m, bench.channel) for m in g] for g in schedule]
         work = Work(slots, bench.run_gateway(schedule[:cycles], None)[3])

@@ -159,7 +159,8 @@ def main(argv: list[str] | None = None) -> None:
     anchor = Anchor.open(bench) if args.anchor else None
     sides = (*SIDES, ANCHOR) if anchor is not None else SIDES
     # A pool of exactly N cycles: every N-cycle window of the 1 kHz mix holds the same frames.
-    bench.record_pool(args.cycles * PERIOD_S, enable_cycles=200, twist_cycles=300)
+    # (450: the gateway listens 250 ms before it takes an enable, commanders.LISTEN_S)
+    bench.record_pool(args.cycles * PERIOD_S, enable_cycles=450, twist_cycles=300)
     works: dict[str, Work] = {}
     frames: dict[str, dict[int, list[int]]] = {}
     for mix in MIXES:

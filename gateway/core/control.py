@@ -8,6 +8,7 @@ whether the drives should be armed.  The loop (:mod:`gateway.runtime.loop`) does
 States (:class:`~gateway.core.types.GatewayState`)::
 
     DISABLED --enable--> ENABLING --all motors ENABLED--> RUNNING
+    ENABLING --another program commands the motors--> FAULT (released; runtime.commanders)
     RUNNING  --motor FAULT/OFFLINE, a wheel off its command, a command not encodable--> FAULT
     FAULT    --all answer again, recovery "auto" (3 tries)--> ENABLING
     FAULT    --enable (recovery "manual")--> ENABLING
@@ -111,7 +112,10 @@ class Supervisor:
         self.bus_ok = True
         #: An e-stop whose zero and disarm the loop has not sent yet (its ``stop_now``).
         self.estop_owed = False
-        self._timed_out = self._pending_enable = False
+        #: An enable requested, not yet taken by the loop (:meth:`take_enable_request`):
+        #: nothing is armed meanwhile (:meth:`decide`).
+        self.enable_pending = False
+        self._timed_out = self.yielded = False  # (yielded to another commander: yield_motors)
         self._fault_s = 0.0
         self._now_hint = 0.0
         self._auto_attempts = 0
@@ -123,12 +127,9 @@ class Supervisor:
         self.steer_tracking = SteerMonitor(loop.tracking)
 
     def _go(self, event: Event) -> bool:
-        """The one place that changes :attr:`state`: to where :mod:`gateway.core.transitions`
-        says ``event`` takes it.
-
-        :return: whether the state changed (``False``: the table ignores ``event`` here).
-        :raises IllegalTransitionError: for an event the table does not allow in this state.
-        """
+        """The one place that changes :attr:`state`, as :mod:`gateway.core.transitions` says:
+        whether it changed (``False``: the table ignores ``event`` here; an event it does not
+        allow in this state raises :class:`~gateway.core.errors.IllegalTransitionError`)."""
         target = next_state(self.state, event)
         if target is None:
             return False
@@ -158,15 +159,12 @@ class Supervisor:
                 return Accepted(err.nearest, projected=True, error=err)
             self.target = ZERO
             return Rejection(ErrorCode.INFEASIBLE_TWIST, str(err), err)
-        self.target = twist
-        self._last_twist_s = now_s
-        self._timed_out = False
+        self.target, self._last_twist_s, self._timed_out = twist, now_s, False
         return Accepted(twist, ik=ik)
 
     def stop(self, now_s: float) -> None:
         """Zero twist, drives stay armed."""
-        self.target = ZERO
-        self._last_twist_s = now_s
+        self.target, self._last_twist_s = ZERO, now_s
 
     def estop(self, reason: str = "e-stop requested") -> None:
         """Zero at once and disarm until an explicit enable."""
@@ -174,7 +172,7 @@ class Supervisor:
             self.counts.estops += 1
         self._go(Event.ESTOP)
         self.reason = reason
-        self.target, self._pending_enable = ZERO, False  # (an enable not yet taken: off)
+        self.target, self.enable_pending = ZERO, False  # (an enable not yet taken: off)
         self.estop_owed = True
 
     def enable(self, now_s: float) -> None:
@@ -186,24 +184,29 @@ class Supervisor:
         if not self._go(event):
             return
         self._enable_started_s = now_s
-        self._pending_enable = True
-        self.target = ZERO
-        self.reason = ""
-        self.faulted = ()
+        self.enable_pending, self.yielded = True, False
+        self.target, self.reason, self.faulted = ZERO, "", ()
 
     def disable(self) -> None:
         """Ramp to zero and disarm (an e-stop stays latched: only enable releases it)."""
         self._go(Event.DISABLE)
-        self.target, self._pending_enable = ZERO, False  # (an enable not yet taken: off)
+        self.target, self.enable_pending = ZERO, False  # (an enable not yet taken: off)
 
     def shutdown(self) -> None:
         """The process is stopping: zero and disarm for good."""
         self._go(Event.SHUTDOWN)
-        self.target, self._pending_enable = ZERO, False  # (an enable not yet taken: off)
+        self.target, self.enable_pending = ZERO, False  # (an enable not yet taken: off)
 
     def enable_failed(self, why: str) -> str:
         """The drives refused the enable sequence: FAULT with ``why`` as the reason."""
         return self._refused(Event.ENABLE_REFUSED, f"enable refused: {why}")
+
+    def yield_motors(self, why: str) -> str:
+        """Another program commands these motors: the enable not yet taken is withheld.  FAULT
+        (``bus_error``) with ``why``, the motors released whatever ``fault_action`` says (the
+        other keeps them; none of our commands goes out) until an enable is taken."""
+        self.enable_pending, self.yielded = False, True
+        return self._refused(Event.ENABLE_REFUSED, f"enable withheld: {why}", ErrorCode.BUS_ERROR)
 
     def command_failed(self, why: str) -> str:
         """A drive could not encode the cycle's command (a speed its controller's field cannot
@@ -218,13 +221,11 @@ class Supervisor:
             return self.enable_failed(why)
         return self._refused(Event.COMMAND_FAILED, f"housekeeping failed: {why}")
 
-    def _refused(self, event: Event, reason: str) -> str:
+    def _refused(self, event: Event, reason: str, code: ErrorCode = ErrorCode.MOTOR_FAULT) -> str:
         self.counts.faults += 1
         self._go(event)
-        self.target = ZERO
-        self._fault_s = self._now_hint
-        self.fault_code = ErrorCode.MOTOR_FAULT
-        self.reason = reason
+        self.target, self._fault_s = ZERO, self._now_hint
+        self.fault_code, self.reason = code, reason
         return reason
 
     @property
@@ -232,9 +233,13 @@ class Supervisor:
         """Whether the command timeout holds the target at zero."""
         return self._timed_out
 
+    def hold_enable(self, now_s: float) -> None:
+        """The loop holds the enable pending (listening first): ``enable_timeout_s`` restarts."""
+        self._enable_started_s = now_s
+
     def take_enable_request(self) -> bool:
         """Whether the loop should send the drives' enable frames now (once per enable)."""
-        pending, self._pending_enable = self._pending_enable, False
+        pending, self.enable_pending = self.enable_pending, False
         return pending
 
     # ----------------------------------------------------------------- per cycle
@@ -262,13 +267,12 @@ class Supervisor:
         self.tracking.reset()
         self.steer_tracking.reset()
         if state is GatewayState.ENABLING:
-            states = board.states(now_s)
-            if states and states.count(DriveState.ENABLED) == len(states):
+            states = board.states(now_s)  # (ENABLED before our enable: another program's)
+            if not self.enable_pending and states.count(DriveState.ENABLED) == len(states) > 0:
                 self._go(Event.ENABLED)
-                self._running_since_s = now_s
-                self._last_twist_s = now_s
+                self._running_since_s = self._last_twist_s = now_s
                 return None
-            if not self._pending_enable and (failed := board.enable_failed()):
+            if not self.enable_pending and (failed := board.enable_failed()):
                 return self._fault(board, now_s, failed, "failed its enable sequence")
             if now_s - self._enable_started_s > self.cfg.enable_timeout_s:
                 late = [i for i, s in enumerate(states) if s is not DriveState.ENABLED]
@@ -330,9 +334,8 @@ class Supervisor:
         statuses = board.status(now_s)
         motors = [statuses[i] for i in which]
         self.counts.faults += 1
-        self._fault_s = self._now_hint
         self._go(Event.FAULT)
-        self.target = ZERO
+        self.target, self._fault_s = ZERO, self._now_hint
         self.faulted = tuple(s.name for s in motors)
         if not why and any(s.state is DriveState.OFFLINE for s in motors):
             code = ErrorCode.FEEDBACK_TIMEOUT
@@ -349,11 +352,8 @@ class Supervisor:
         if not self._go(Event.BUS_FAULT):
             return None
         self.counts.faults += 1
-        self._fault_s = self._now_hint
-        self.target = ZERO
-        self.faulted = tuple(names)
-        self.reason = message
-        self.fault_code = ErrorCode.BUS_ERROR
+        self.target, self._fault_s, self.faulted = ZERO, self._now_hint, tuple(names)
+        self.fault_code, self.reason = ErrorCode.BUS_ERROR, message
         return Fault(ErrorCode.BUS_ERROR, message)
 
     def decide(self, now_s: float) -> Decision:
@@ -367,11 +367,11 @@ class Supervisor:
             # Zero at once: with a motor gone, no wheel should keep driving on its own.  A speed
             # loop closed on the host cannot hold zero on feedback that is missing, late or not
             # followed (late DJI feedback makes it run away): release those motors.
-            release = self.cfg.fault_action is FaultAction.DISARM or (
+            release = self.cfg.fault_action is FaultAction.DISARM or self.yielded or (
                 self.host_speed_loop and self.fault_code in _FEEDBACK_FAULTS)
             return _FAULT_RELEASED if release else _FAULT_ARMED
         if state is GatewayState.ENABLING:
-            return _ENABLING
+            return _HOLD if self.enable_pending else _ENABLING
         timeout = self.cfg.cmd_timeout_s
         if (
             timeout > 0.0

@@ -15,9 +15,15 @@ one of this gateway's own identifiers came from someone else:
   ``WG_Error`` at this configuration's identifiers): another gateway runs on this bus.
 
 A command while the motors are enabled is a fault (``bus_error``) that names the frame and what
-to do; the automatic recovery then re-enables as after any bus fault, and faults again while
-the other keeps sending.  A command while they are not, or a report, is a warning (at most one
-line per 5 s): nothing of ours is overwritten yet, and a second gateway that drives other
+to do.  An enable is taken only once the gateway has listened for :data:`LISTEN_S` since its
+first cycle, and is **withheld** while another sender has commanded these motors within that
+time (:meth:`Commanders.may_enable`): a FAULT (``bus_error``) that releases the motors, so the
+program that commanded first keeps them.  Until it arms them, the gateway sends the motors
+nothing while it listens or hears the other (:meth:`Commanders.quiet`: no housekeeping, no stop
+when it shuts down), so a second ``wheelgate run`` started beside a running one stops neither.
+The automatic recovery retries as after any bus fault, and is withheld again while the other
+keeps sending.  A command while the motors are not enabled, or a report, is a warning (at most
+one line per 5 s): nothing of ours is overwritten yet, and a second gateway that drives other
 motors is a configuration to fix (its own ``gateway.can_ids``), not a fight; should it drive
 ours, its commands say so.  The identifiers are added to the kernel receive filters
 (:func:`gateway.drive.ownership.gateway_filters`), so the other's frames reach the process.
@@ -48,6 +54,11 @@ Key = tuple[int, bool]
 
 #: The shortest time between two warnings (s).
 WARN_EVERY_S = 5.0
+#: How long the gateway listens before it takes its first enable, and how recent another
+#: sender's command must be to withhold one (s): the 250 ms that SAE J1939-81's address claim
+#: waits for a contending claim before a node uses its address.  Another wheelgate commands
+#: every cycle (50 Hz at the slowest), so it is heard a dozen times in that window.
+LISTEN_S = 0.25
 #: How :func:`own_frames` names a wheelgate's report (the end of its description).
 REPORT = "of another wheelgate"
 
@@ -98,6 +109,50 @@ class Commanders:
         self._warn = LogThrottle(WARN_EVERY_S)
         #: Frames heard from another sender, since start.
         self.heard = 0
+        #: The time of the gateway's first cycle (set by it): listening starts there.
+        self.since_s: float | None = None
+        #: The last command of ours heard from another sender: when, and what was heard.
+        self._last_command: tuple[float, str] | None = None
+
+    def may_enable(self, now_s: float) -> bool:
+        """Whether the loop may take the enable pending now.
+
+        Not while listening (the first :data:`LISTEN_S` after the first cycle: the enable
+        waits, nothing is armed).  After that, an enable comes too soon after another
+        sender's command of these motors (within :data:`LISTEN_S`): it is withheld, a fault
+        that releases the motors (:meth:`~gateway.core.control.Supervisor.yield_motors`),
+        logged and reported.
+        """
+        since = self.since_s
+        if since is None or now_s - since < LISTEN_S:
+            self.supervisor.hold_enable(now_s)
+            return False
+        holder = self.holder(now_s)
+        if holder is None:
+            return True
+        message = self.supervisor.yield_motors(
+            f"{holder}: another program commands these motors (another wheelgate run, jog "
+            f"--standalone, a script), and it keeps them; stop it, then enable")
+        log.error("fault: %s", message)
+        self.report(ErrorCode.BUS_ERROR, message)
+        return False
+
+    def holder(self, now_s: float) -> str | None:
+        """What was heard of another sender commanding these motors now (a command of ours
+        within :data:`LISTEN_S`), else ``None``."""
+        last = self._last_command
+        if last is None or now_s - last[0] > LISTEN_S:
+            return None
+        return f"{last[1]} {max(0.0, now_s - last[0]):.3f} s ago"
+
+    def quiet(self, now_s: float) -> bool:
+        """Whether a gateway that has not armed its motors sends them nothing, not even its
+        housekeeping (a CANopen SYNC, its heartbeat, SDO requests), nor a stop when it shuts
+        down: while it listens at start, and while another sender commands them
+        (:meth:`holder`).  Two SYNC producers on one CANopen network are an error (CiA 301),
+        and our heartbeat would keep the other's drives from stopping when the other dies."""
+        since = self.since_s
+        return since is None or now_s - since < LISTEN_S or self.holder(now_s) is not None
 
     def route(self, takers: Mapping[Key, Callable[[Frame], bool]]
               ) -> dict[Key, Callable[[Frame], bool]]:
@@ -126,10 +181,13 @@ class Commanders:
                        f"motors, stop it; if it drives others, give each its own "
                        f"gateway.can_ids")
         else:
+            self._last_command = (frame.timestamp_s, heard)
             message = (f"{heard}, which only this gateway sends: two programs command these "
                        f"motors (another wheelgate run, jog --standalone, a script); stop "
                        f"the other one")
-        fault = None if report else self.supervisor.bus_fault(message)
+        # (An enable not taken yet armed nothing: may_enable judges it.)
+        sup = self.supervisor
+        fault = None if report or sup.enable_pending else sup.bus_fault(message)
         if fault is not None:
             log.error("fault: %s", message)
             self.report(ErrorCode.BUS_ERROR, message)

@@ -35,6 +35,7 @@ from gateway.runtime.report import announcement, build_status
 from gateway.runtime.requests import RequestHandler
 from gateway.runtime.sdnotify import SystemdNotifier
 from gateway.runtime.server import ControlServer
+from gateway.runtime.stopping import stop_motors
 from gateway.runtime.timing import MissProbe, Scheduler, realtime_setup
 from gateway.sim.bus import SimulatedControllers
 from gateway.sim.registry import simulators_for
@@ -49,9 +50,6 @@ if TYPE_CHECKING:
     from gateway.wire.socket import ProtocolError, Request
 
 log = logging.getLogger(__name__)
-
-#: How long the shutdown keeps polling so multi-step disarm sequences finish (s).
-SHUTDOWN_GRACE_S = 0.3
 
 #: Every signal whose default action ends the process and that Python can catch: each one
 #: stops the daemon the way SIGTERM does (zero, disarm, socket file removed, exit 0).  SIGHUP
@@ -101,6 +99,8 @@ class Daemon:
         #: The name of the signal that stopped the daemon, if one did; whether the shutdown's
         #: zero and disarm went out (every motor's, and the bus took every frame of it).
         self.stop_signal, self.stop_sent = "", False
+        #: Why the shutdown sent the motors nothing ('': it sent the zero and disarm).
+        self.left_to = ""
         self._closers: list[Any] = []
         self.writer: can.Listener | None = None
         try:
@@ -264,7 +264,8 @@ class Daemon:
             log.info("state %s", text)
             if self.announce is not None:
                 line = announcement(self.config, before, gw.state, self._announced_running,
-                                    self.sim is not None, self.socket_path)
+                                    self.sim is not None, self.socket_path,
+                                    gw.supervisor.yielded)
                 self._announced_running |= gw.state is GatewayState.RUNNING
                 if line:
                     try:
@@ -366,27 +367,24 @@ class Daemon:
         if self.remote.active:
             self.remote.serve(time.monotonic())
 
-    def shutdown(self) -> None:
-        """Zero and disarm every motor, then close everything (safe to call twice)."""
+    def shutdown(self, now_s: float | None = None) -> None:
+        """Zero and disarm every motor, then close everything (safe to call twice).
+
+        Not a motor that another program commands while this gateway has not armed them
+        (:meth:`.Commanders.quiet`): then nothing is sent, and :attr:`left_to` says why.
+
+        :param now_s: the time of the loop's clock (simulated time in tests); now when omitted.
+        """
         if not self._closers:
             return
         gw = self.gateway
         self.notifier.stopping("sending zero and disarm")
         try:
             gw.supervisor.shutdown()
-            now = time.monotonic()
-            if not (sent := gw.edge.send(gw.drives.disable(now))):  # (run's last line says)
-                log.error("the zero and disarm did not all go out: the bus refused them")
-            self.stop_sent = sent and not gw.drives.unstopped
-            end = now + SHUTDOWN_GRACE_S
-            while time.monotonic() < end:
-                time.sleep(0.01)
-                t = time.monotonic()
-                for frame in gw.edge.receive(t):
-                    gw.drives.on_frame(frame)
-                gw.edge.send(gw.drives.poll(t))
-        except GatewayError as err:  # (the stop went out first: DriveSet.disable)
-            log.error("shutdown after the stop: %s", err)
+            stopped = stop_motors(gw, time.monotonic() if now_s is None else now_s)
+            self.stop_sent, self.left_to = stopped.sent, stopped.left_to
+        except GatewayError as err:  # (DriveSet.disable sends every stop it can build)
+            log.error("shutdown: %s", err)
         finally:
             self.close()
 

@@ -10,7 +10,8 @@ from the real-time loop.  Each cycle:
 
 1. drain the bus: CAN twists to the supervisor, feedback to the drivers (timestamped on
    receipt), our own frames sent by another to the watch;
-2. the supervisor turns the motors' states and the newest valid twist into a target;
+2. the supervisor turns the motors' states and the newest valid twist into a target (an
+   enable is taken once the watch has listened for another commander and heard none);
 3. inverse kinematics and limits (one scale factor, reported) give every wheel's speed (one
    solve per new target: the supervisor's feasibility check of an accepted twist is it);
 4. every wheel's frame (and every steering actuator's) is built, then all go out as one
@@ -116,7 +117,9 @@ class Gateway:
         self._ik_result: IkResult = self.prev
         self._ik_static = not any(w.steered for w in self.model.wheels)
         self.limit_report: LimitReport | None = None
-        self._prev_limited = self._armed = False  # (prev came out of the limits: no e-stop)
+        #: Whether the drives are armed by this gateway (its last decision armed them).
+        self.armed = False
+        self._prev_limited = False  # (prev came out of the limits: no e-stop)
         self._last_cycle_s: float | None = None
         #: ``time.perf_counter()`` when the last cycle's burst of wheel frames went (before
         #: odometry and publishing): the end of the daemon's twist-to-frames latency.
@@ -171,20 +174,14 @@ class Gateway:
         if count is not None:
             log.log(level, "%s: %s%s", key, text, since_last(count, f"such {what}"))
 
-    def report_error(
-        self,
-        code: ErrorCode,
-        message: str,
-        rejection: Rejection | None = None,
-        twist_counter: int = NO_TWIST_COUNTER,
-        wheel: str | None = None,
-    ) -> None:
+    def report_error(self, code: ErrorCode, message: str, rejection: Rejection | None = None,
+                     twist_counter: int = NO_TWIST_COUNTER, wheel: str | None = None) -> None:
         """Report an error: in the outbox for socket clients at once, and on CAN as a
         ``WG_Error`` with the cycle's reports -- after its burst of commands, untracked; the
         next cycle's for an error reported between cycles (a request's) -- at most one a cycle
         (:meth:`~gateway.runtime.publish.Publisher.error` says which), the others counted
-        (``errors_not_sent``).  Never sends: a request refused between cycles costs
-        the bus nothing until the cycle, whatever the number of requests.
+        (``errors_not_sent``).  Never sends: a request refused between cycles costs the bus
+        nothing until the cycle, whatever the number of requests.
 
         :param wheel: the wheel the error is about, when it is not the rejection's.
         """
@@ -196,6 +193,8 @@ class Gateway:
 
     def cycle(self, now_s: float) -> None:
         """One control cycle at time ``now_s`` (monotonic seconds)."""
+        if not self.counts.cycles:  # the watch for another commander listens from here
+            self.commanders.since_s = now_s
         self.counts.cycles += 1
         out: list[Frame] = []
         edge = self.edge
@@ -231,7 +230,7 @@ class Gateway:
             log.error("fault: %s", fault.message)
             self.report_error(fault.code, fault.message,
                               wheel=sup.faulted[0] if sup.faulted else None)
-        if sup.take_enable_request():
+        if sup.enable_pending and self.commanders.may_enable(now_s) and sup.take_enable_request():
             try:
                 out.extend(self.drives.enable(now_s))
             except GatewayError as err:
@@ -256,21 +255,22 @@ class Gateway:
             )
             self._prev_limited = True
         if decision.armed:
-            self._armed = True
+            self.armed = True
             try:
                 out.extend(self.drives.command(result.wheel_rad_s, now_s, result.steer_rad))
             except EncodeError as err:  # e.g. a max_rpm beyond the controller's speed field
                 message = sup.command_failed(str(err))
                 log.error("fault: %s", message)
                 self.report_error(ErrorCode.MOTOR_FAULT, message)
-        elif self._armed:
-            self._armed = False
+        elif self.armed:
+            self.armed = False
             out.extend(self.drives.disable(now_s))
             # Disarmed, the wheels coast down on their own: the next enable ramps from zero,
             # not on down from the speed before the disable (as after an e-stop, stop_now).
             result, self._prev_limited = self._solve(ZERO), False
-        try:
-            out.extend(self.drives.poll(now_s))
+        try:  # (housekeeping: not while the motors are another's, commanders.quiet)
+            if self.armed or not self.commanders.quiet(now_s):
+                out.extend(self.drives.poll(now_s))
         except GatewayError as err:  # a step a drive refuses now: a fault, never an exit
             message = sup.poll_failed(str(err))
             log.error("fault: %s", message)
@@ -298,8 +298,8 @@ class Gateway:
             return
         sup.estop_owed = False
         self.prev, self._prev_limited = self._solve(ZERO), False
-        if self._armed:
-            self._armed = False
+        if self.armed:
+            self.armed = False
             self.edge.send(self.drives.disable(now_s), now_s)
 
     def _solve(self, twist: Twist) -> IkResult:
@@ -347,8 +347,7 @@ class Gateway:
         if change is None:
             change, edge.bus_state_change = edge.bus_state_change, None
         starved, edge.starved = edge.starved, None
-        sup = self.supervisor
-        bus = self.config.bus
+        sup, bus = self.supervisor, self.config.bus
         messages: list[tuple[str, tuple[str, ...]]] = []
         if change is BusErrorState.BUS_OFF:
             sup.bus_ok = False

@@ -180,14 +180,21 @@ def motors_text(config: GatewayConfig) -> str:
 
 
 def announcement(config: GatewayConfig, before: GatewayState, now: GatewayState,
-                 announced_running: bool, simulated: bool, socket_path: str) -> str:
+                 announced_running: bool, simulated: bool, socket_path: str,
+                 yielded: bool = False) -> str:
     """The line for the person who started the daemon on a state change ('' for none): the
     first time the motors run, and a start that failed (the fault's own log line says why;
-    this one adds what to do on a virtual bus with no simulator)."""
+    this one adds what to do on a virtual bus with no simulator).
+
+    :param yielded: the enable was withheld: another program commands the motors.
+    """
     where = f"{config.bus.interface} {config.bus.channel}"
     if now is GatewayState.RUNNING and not announced_running:
         return (f"wheelgate: running on {where}: {motors_text(config)} enabled; control "
                 f"socket {socket_path}")
+    if now is GatewayState.FAULT and yielded:
+        return ("wheelgate: not enabled: another program commands these motors, and nothing "
+                "is sent to them while it does (the fault logged above says what was heard)")
     if now is GatewayState.FAULT and before is GatewayState.ENABLING:
         line = "wheelgate: the motors did not enable (the fault logged above says why)"
         if config.bus.interface == "virtual" and not simulated:

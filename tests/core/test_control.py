@@ -219,6 +219,7 @@ def test_fault_releases_host_side_speed_loops_when_feedback_is_in_doubt(
         host_loop: bool, state: DriveState, released: bool) -> None:
     sup = Supervisor(MODEL, LoopConfig(), host_speed_loop=host_loop)
     sup.enable(0.0)
+    assert sup.take_enable_request()
     sup.motors(motors(DriveState.ENABLED, DriveState.ENABLED), 0.1)
     assert sup.motors(motors(DriveState.ENABLED, state, age=0.4), 1.0) is not None
     d = sup.decide(1.0)
@@ -233,6 +234,7 @@ def recover(sup: Supervisor, now_s: float) -> float:
         t += 0.05
         sup.motors(motors(DriveState.DISABLED, DriveState.DISABLED), t)
     if state_of(sup) is GatewayState.ENABLING:
+        assert sup.take_enable_request()  # (the loop sends the drives' enable frames)
         sup.motors(motors(DriveState.ENABLED, DriveState.ENABLED), t)
     return t
 
@@ -265,6 +267,7 @@ def test_automatic_recovery_is_bounded_unless_running_holds_in_between(
 def test_tracking_fault_of_a_host_side_speed_loop_waits_for_enable(host_loop: bool) -> None:
     sup = Supervisor(MODEL, LoopConfig(), host_speed_loop=host_loop)
     sup.enable(0.0)
+    assert sup.take_enable_request()
     sup.motors(motors(DriveState.ENABLED, DriveState.ENABLED), 0.1)
     t, fault = 0.1, None
     while fault is None and t < 2.0:  # the right wheel turns at 10 rad/s on a command of 0

@@ -221,6 +221,7 @@ def test_supervisor_checks_only_while_running_and_starts_afresh() -> None:
     for k in range(100):  # not RUNNING: not checked, and the count is forgotten
         assert sup.motors(statuses(4.0, 0.0, 1 + k * DT), 1 + k * DT, [4.0, 4.0]) is None
     sup.enable(3.0)
+    assert sup.take_enable_request()
     sup.motors(statuses(0.0, 0.0, 3.0), 3.0)
     assert sup.state is GatewayState.RUNNING
     for k in range(40):

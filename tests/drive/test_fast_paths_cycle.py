@@ -242,6 +242,7 @@ def test_supervisor_decisions_are_reused_only_while_equal() -> None:
     sup = Supervisor(model, LoopConfig(cmd_timeout_s=0.5))
     sup.enable(0.0)
     assert sup.decide(0.0) is sup.decide(0.1)  # ENABLING: one constant decision
+    assert sup.take_enable_request()  # (the loop sends the enable frames)
     enabled = [MotorStatus(w.name, k + 1, DriveState.ENABLED, DriveFault.NONE, "", 0.0, None)
                for k, w in enumerate(model.wheels)]
     sup.motors(StatusBoard(enabled), 0.0)

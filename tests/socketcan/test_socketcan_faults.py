@@ -23,10 +23,13 @@ from gateway.config import load_config
 from gateway.core.control import Source
 from gateway.core.status import BusErrorState
 from gateway.core.types import ErrorCode, GatewayState, Twist
-from tests.e2e_helpers import Rig, error_frame
+from gateway.runtime.daemon import Daemon
+from gateway.runtime.sdnotify import SystemdNotifier
+from tests.e2e_helpers import Rig, error_frame, reports, sent
 
 if TYPE_CHECKING:
     from collections.abc import Iterator
+    from pathlib import Path
 
 pytestmark = [pytest.mark.socketcan, pytest.mark.timeout(300)]
 
@@ -203,3 +206,39 @@ def test_another_program_commanding_our_motors_is_a_fault(rig: Rig, vcan: str) -
     rig.advance(0.1)
     assert state(rig) is GatewayState.FAULT
     assert rig.gw.supervisor.reason.startswith(f"another sender on socketcan:{vcan}: heard 02D#")
+
+
+def test_a_second_gateway_started_beside_a_running_one_stops_neither(
+        rig: Rig, vcan: str, sock_dir: Path) -> None:
+    # A second daemon for the same robot on the same kernel bus (a `wheelgate run` by hand
+    # beside the service), enabled at start: it listens, hears the running one's commands
+    # through the kernel, withholds its enable and sends the motors nothing, not even a stop
+    # when it shuts down.  The running one hears only its reports: it drives on.
+    drive(rig, 0.6)
+    faults = rig.gw.supervisor.counts.faults
+    second = Daemon(rig.config, socket_path=str(sock_dir / "second.sock"),
+                    notifier=SystemdNotifier(None))
+    try:
+        second.gateway.edge.stamp_with_cycle_time = True  # (the rig's simulated time)
+        out = sent(second.gateway)
+        second.gateway.supervisor.enable(rig.t)  # as gateway.enable_on_start
+        for _ in range(5):
+            rig.gw.twist(Twist(0.2), rig.t, Source.SOCKET)
+            rig.advance(0.2, lambda r: second.step(r.t))
+        reason = second.gateway.supervisor.reason
+        assert second.gateway.state is GatewayState.FAULT
+        assert reason.startswith(f"enable withheld: another sender on socketcan:{vcan}: heard "
+                                 ), reason
+        assert " Set_Input_Vel (" in reason, reason  # the running one's command, through the kernel
+        assert state(rig) is GatewayState.RUNNING, rig.gw.supervisor.reason
+        assert min(abs(s.wheel_velocity_rad_s) for s in rig.drive_sims) > 1.0
+        assert rig.gw.commanders.heard > 0  # its WG_Status and odometry: a warning only
+        second.shutdown(rig.t)
+        assert second.left_to.startswith("another program commands them (another sender on ")
+        assert set(out) <= reports(rig.gw)  # nothing to the motors, not even a stop
+        drive(rig, 0.4)
+        assert state(rig) is GatewayState.RUNNING, rig.gw.supervisor.reason
+        assert rig.gw.supervisor.counts.faults == faults  # never disturbed
+        assert min(abs(s.wheel_velocity_rad_s) for s in rig.drive_sims) > 1.0
+    finally:
+        second.close()

@@ -122,6 +122,7 @@ def _run(ctx: click.Context, config_path: str | None, sim: bool, record: str | N
     why = f" ({daemon.stop_signal})" if daemon.stop_signal else ""
     unstopped = daemon.gateway.drives.unstopped
     tell(f"wheelgate: stopped{why}; " + (
+        f"nothing was sent to the motors: {daemon.left_to}" if daemon.left_to else
         "every motor was sent zero and disarm" if daemon.stop_sent else
         f"no stop could be built for {', '.join(map(repr, unstopped))}: only their "
         "controllers' own timeouts stop them (see the log)" if unstopped else
