@@ -21,7 +21,8 @@ from gateway.core.errors import ConfigError, GatewayError, InfeasibleTwistError
 if TYPE_CHECKING:
     from collections.abc import Callable
 
-#: Subcommand name -> module under ``gateway.cli.commands``.
+#: Subcommand name -> module under ``gateway.cli.commands`` (``module:name`` for one of its
+#: commands, else its ``command``).
 COMMANDS: dict[str, str] = {
     "check": "check",
     "ik": "ik",
@@ -38,6 +39,9 @@ COMMANDS: dict[str, str] = {
     "init": "init",
     "spin": "spin",
     "scan": "scan",
+    "estop": "ops:estop",
+    "enable": "ops:enable",
+    "disable": "ops:disable",
 }
 
 EXIT_ERROR = 1
@@ -85,10 +89,12 @@ class LazyGroup(click.Group):
         return sorted(COMMANDS)
 
     def get_command(self, ctx: click.Context, cmd_name: str) -> click.Command | None:
-        module = COMMANDS.get(cmd_name)
-        if module is None:
+        where = COMMANDS.get(cmd_name)
+        if where is None:
             return None
-        command: click.Command = importlib.import_module(f"gateway.cli.commands.{module}").command
+        module, _, name = where.partition(":")  # (a module of several commands names one)
+        command: click.Command = getattr(
+            importlib.import_module(f"gateway.cli.commands.{module}"), name or "command")
         return command
 
     def resolve_command(
