@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import math
 import socket
 import subprocess
 import sys
@@ -66,8 +67,8 @@ def commander(args: argparse.Namespace) -> None:
 def ros_node(args: argparse.Namespace) -> None:
     """A ROS 2 node as rmw_zenoh puts it on the wire (:mod:`gateway.wire.ros2`): its tokens, a
     ``Twist`` (or ``TwistStamped``) publisher on ``--cmd-vel`` sending every 50 ms, and
-    subscriptions to ``--odom`` and ``/tf``; prints ``ready``, then one JSON line per
-    odometry or transform received."""
+    subscriptions to ``--odom``, ``/tf`` and with ``--joints`` that topic's joint states;
+    prints ``ready``, then one JSON line per message received."""
     from gateway.wire import ros2  # noqa: PLC0415 - the bridge's own wire layer
 
     s = session(args.connect, args.lease)
@@ -109,6 +110,14 @@ def ros_node(args: argparse.Namespace) -> None:
         show("tf", {"frame": t.header.frame_id, "child": t.child_frame_id,
                     "x": t.translation.x, "qz": t.rotation.z, "qw": t.rotation.w})
 
+    def on_joints(sample: Any) -> None:
+        j = ros2.decode_joint_state(sample.payload.to_bytes())
+        show("joints", {"names": list(j.name), "position": list(j.position),
+                        "velocity": [None if math.isnan(v) else v for v in j.velocity]})
+
+    if args.joints:
+        keep.append(s.declare_subscriber(ros2.topic_subscription_key(
+            args.domain, args.joints, ros2.JOINT_STATE), on_joints))
     keep += [s.declare_subscriber(ros2.topic_subscription_key(args.domain, args.odom,
                                                               ros2.ODOMETRY), on_odom),
              s.declare_subscriber(ros2.topic_subscription_key(args.domain, "/tf",
@@ -182,6 +191,7 @@ def main(argv: list[str] | None = None) -> None:
     r.add_argument("--domain", type=int, default=0)
     r.add_argument("--cmd-vel", default="/cmd_vel")
     r.add_argument("--odom", default="/odom")
+    r.add_argument("--joints", default="", help="also read sensor_msgs/msg/JointState here")
     r.add_argument("--vx", type=float, default=0.3)
     r.add_argument("--wz", type=float, default=0.0)
     r.add_argument("--stamped", action="store_true", help="TwistStamped instead of Twist")

@@ -37,9 +37,12 @@ from gateway.core.errors import ConfigError
 from gateway.core.options import OptionSpec, validate_block
 
 if TYPE_CHECKING:
-    from collections.abc import Mapping
+    from collections.abc import Mapping, Sequence
 
-__all__ = ["BRIDGE_KEYS", "FOXGLOVE_KEYS", "parse_bridge", "parse_foxglove"]
+__all__ = ["BRIDGE_KEYS", "FOXGLOVE_KEYS", "check_joints", "parse_bridge", "parse_foxglove"]
+
+#: The longest joint name (characters).
+MAX_JOINT_NAME = 100
 
 _MODES = tuple(m.value for m in ZenohMode)
 _ACTIONS = tuple(a.value for a in DeadmanAction)
@@ -72,6 +75,10 @@ ROS2_KEYS: Mapping[str, OptionSpec] = MappingProxyType({
     "node_name": OptionSpec(str, "wheelgate"),
     "attachment": OptionSpec(str, "positional", choices=_LAYOUTS,
                              help="labelled for the rmw_zenoh 0.2.0 to 0.2.3 of Jazzy"),
+    "joint_states": OptionSpec(str, "", help="topic of the wheels' and steering actuators' "
+                                             "sensor_msgs/msg/JointState ('': none)"),
+    "joints": OptionSpec(dict, {}, help="joint name per wheel or steering actuator (default: "
+                                        "its own name), as the robot's URDF names them"),
 })
 FOXGLOVE_KEYS: Mapping[str, OptionSpec] = MappingProxyType({
     "host": OptionSpec(str, "127.0.0.1", help="address of the WebSocket server"),
@@ -146,6 +153,47 @@ def check_name(value: str, where: str) -> str:
     return value
 
 
+def _joints(raw: object, where: str) -> tuple[tuple[str, str], ...]:
+    """The ``joints:`` mapping: wheel or actuator name -> joint name (printable, no spaces,
+    each used once)."""
+    if not isinstance(raw, dict):  # (validate_block checked it)
+        raise ConfigError(f"{where}: expected dict, got {raw!r}")
+    pairs = []
+    for name, joint in raw.items():
+        if (not isinstance(joint, str) or not 0 < len(joint) <= MAX_JOINT_NAME
+                or not joint.isprintable() or any(c.isspace() for c in joint)):
+            raise ConfigError(f"{where}.{name}: expected a joint name of 1 to "
+                              f"{MAX_JOINT_NAME} printable characters without spaces, got "
+                              f"{joint!r}")
+        pairs.append((str(name), joint))
+    joints = [j for _, j in pairs]
+    for name, joint in pairs:
+        if joints.count(joint) > 1:
+            raise ConfigError(f"{where}.{name}: expected a joint name of its own, got "
+                              f"{joint!r}, which another wheel or actuator has too")
+    return tuple(pairs)
+
+
+def check_joints(bridge: BridgeSettings, names: Sequence[str], source: str) -> None:
+    """The ``joints:`` of ``bridge.ros2`` name the robot's wheels and steering actuators
+    (``names``), and no joint name is another one's own name.
+
+    :raises ConfigError: naming the key, what was expected and what came.
+    """
+    ros2 = bridge.ros2
+    if ros2 is None:
+        return
+    where = f"{source}: bridge.ros2.joints"
+    renamed = dict(ros2.joints)
+    for name, joint in ros2.joints:
+        if name not in names:
+            raise ConfigError(f"{where}.{name}: expected a wheel or steering actuator of the "
+                              f"robot ({', '.join(names)}), got {name!r}")
+        if joint in names and joint != name and joint not in renamed:
+            raise ConfigError(f"{where}.{name}: expected a joint name no other wheel or "
+                              f"actuator keeps as its own, got {joint!r}")
+
+
 def parse_bridge(raw: object, source: str, robot: str) -> tuple[BridgeSettings, list[str]]:
     """The ``bridge:`` block and its warnings.
 
@@ -193,11 +241,16 @@ def parse_bridge(raw: object, source: str, robot: str) -> tuple[BridgeSettings, 
 
         if namespace:
             validate_namespace(namespace, f"{where}.namespace")
+        keys = ("cmd_vel", "odom", "joint_states") if r["joint_states"] else ("cmd_vel", "odom")
         topics = {key: resolve_topic_name(str(r[key]), namespace or "/", f"{where}.ros2.{key}")
-                  for key in ("cmd_vel", "odom")}  # relative to the namespace, or absolute
-        if topics["odom"] == topics["cmd_vel"]:
-            raise ConfigError(f"{where}.ros2.odom: expected a topic other than cmd_vel's, got "
-                              f"{r['odom']!r}, which is {topics['odom']!r} as cmd_vel is")
+                  for key in keys}  # relative to the namespace, or absolute
+        for key in keys[1:]:
+            same = [k for k in keys[:keys.index(key)] if topics[k] == topics[key]]
+            if same:
+                raise ConfigError(f"{where}.ros2.{key}: expected a topic other than "
+                                  f"{same[0]}'s, got {r[key]!r}, which is {topics[key]!r} as "
+                                  f"{same[0]} is")
+        r["joints"] = _joints(r["joints"], f"{where}.ros2.joints")
         validate_node_name(str(r["node_name"]), f"{where}.ros2.node_name")
         for key in ("odom_frame", "base_frame"):
             check_name(str(r[key]), f"{where}.ros2.{key}")

@@ -196,7 +196,7 @@ def parse_config(
     bridge_said: list[str] = []
     if "bridge" in raw or "foxglove" in raw:
         # Loaded only for these blocks: their settings classes cost start-up time otherwise.
-        from gateway.config.bridge import parse_bridge, parse_foxglove  # noqa: PLC0415
+        from gateway.config.bridge import check_joints, parse_bridge, parse_foxglove  # noqa: PLC0415
 
         if "bridge" in raw and isinstance(name, str):
             parsed = found.check(lambda: parse_bridge(raw["bridge"], source, name))
@@ -207,6 +207,8 @@ def parse_config(
     found.raise_any()
     assert robot is not None and lim is not None and bus is not None and loop is not None
     drive, geometry, model, motors, steering, calibration = robot
+    if bridge is not None:  # (the joints it names must be the robot's)
+        check_joints(bridge, [m.wheel for m in (*motors, *steering) if m is not None], source)
     limits = Limits(
         max_wheel_rad_s=tuple(math.inf if m is None else m.max_wheel_rad_s for m in motors),
         max_wheel_accel_rad_s2=float(lim["max_wheel_accel_rad_s2"]),  # type: ignore[arg-type]

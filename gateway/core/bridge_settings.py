@@ -87,6 +87,10 @@ class Ros2Settings:
     :param attachment: the attachment layout the bridge's publishers write (what the ROS
         machines' rmw_zenoh reads: ``LABELLED`` for Jazzy's 0.2.0 to 0.2.3); incoming samples
         may carry either.
+    :param joint_states: the topic ``sensor_msgs/msg/JointState`` of the wheels and steering
+        actuators goes out on ('': none).
+    :param joints: ``(wheel or actuator name, joint name)`` pairs: the joint names the joint
+        states carry (a URDF's); a wheel or actuator not named here is its own joint name.
     """
 
     domain_id: int = 0
@@ -97,6 +101,8 @@ class Ros2Settings:
     base_frame: str = "base_link"
     node_name: str = "wheelgate"
     attachment: AttachmentFormat = AttachmentFormat.POSITIONAL
+    joint_states: str = ""
+    joints: tuple[tuple[str, str], ...] = ()
 
 
 @dataclass(frozen=True, slots=True)

@@ -113,6 +113,24 @@ def test_the_attachment_of_jazzys_first_rmw_zenoh_releases() -> None:
      "'/cmd_vel' as cmd_vel is"),
     ({"namespace": "r1", "ros2": {"odom": "/r1/cmd_vel"}},
      "bridge.ros2.odom: expected a topic other than cmd_vel's"),
+    ({"ros2": {"joint_states": "odom"}},
+     "bridge.ros2.joint_states: expected a topic other than odom's, got 'odom', which is "
+     "'/odom' as odom is"),
+    ({"ros2": {"joint_states": "joint states"}}, "bridge.ros2.joint_states: expected letters"),
+    ({"ros2": {"joints": ["front_left"]}},
+     "bridge.ros2.joints: expected dict, got ['front_left']"),
+    ({"ros2": {"joints": {"front_left": "front left joint"}}},
+     "bridge.ros2.joints.front_left: expected a joint name of 1 to 100 printable characters "
+     "without spaces, got 'front left joint'"),
+    ({"ros2": {"joints": {"front_left": "j", "rear_left": "j"}}},
+     "bridge.ros2.joints.front_left: expected a joint name of its own, got 'j', which another "
+     "wheel or actuator has too"),
+    ({"ros2": {"joints": {"front_lft": "j"}}},
+     "bridge.ros2.joints.front_lft: expected a wheel or steering actuator of the robot "
+     "(front_left, front_right, rear_left, rear_right), got 'front_lft'"),
+    ({"ros2": {"joints": {"front_left": "rear_left"}}},
+     "bridge.ros2.joints.front_left: expected a joint name no other wheel or actuator keeps "
+     "as its own, got 'rear_left'"),
     ({"ros": {}}, "bridge.ros: unknown key; did you mean 'ros2'? (known bridge keys: deadman, "
      "namespace, ros2, zenoh)"),
     ("yes", "bridge: expected a mapping, got 'yes'"),
@@ -189,3 +207,12 @@ def test_check_validates_the_blocks_without_importing_zenoh_or_foxglove(tmp_path
                           timeout=60, check=False)
     assert done.returncode == 0, done.stdout + done.stderr
     assert "ok" in done.stdout
+
+
+def test_joint_states_are_off_unless_a_topic_is_given_and_joints_rename_wheels() -> None:
+    ros2 = bridge(bridge={"ros2": {}}).ros2
+    assert ros2 is not None and ros2.joint_states == "" and ros2.joints == ()
+    ros2 = bridge(bridge={"ros2": {"joint_states": "joint_states", "joints": {
+        "front_left": "fl_wheel_joint", "rear_left": "front_left"}}}).ros2
+    assert ros2 is not None and ros2.joint_states == "joint_states"
+    assert ros2.joints == (("front_left", "fl_wheel_joint"), ("rear_left", "front_left"))

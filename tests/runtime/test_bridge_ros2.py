@@ -134,3 +134,33 @@ def test_a_bad_ros_sample_is_reported_and_changes_nothing(
     observer.wait(lambda k, e: k == "error" and "geometry_msgs/msg/Twist" in e["message"],
                   after=before, timeout_s=5.0)
     assert observer.query("status")["state"] == "running"
+
+
+@pytest.mark.parametrize("gateway", [{"joint_states": "joint_states", "joints": {
+    "front_left": "front_left_wheel_joint", "rear_right": "rear_right_wheel_joint"}}],
+    indirect=True, ids=["joint_states"])
+def test_a_ros_node_reads_the_wheels_joint_states(
+        gateway: tuple[subprocess.Popen[bytes], str], observer: Observer) -> None:
+    """``joint_states``: every wheel's angle and speed under its URDF joint name, the angles
+    moving with the wheels (what ``robot_state_publisher`` needs for RViz)."""
+    _, connect = gateway
+    node = spawn_ros_node(connect, "--cmd-vel", CMD_VEL, "--odom", ODOM, "--vx", "0.3",
+                          "--joints", "/robot1/joint_states")
+    try:
+        observer.wait(moving(0.3))
+        joints = [e for e in lines(node, 60) if e["topic"] == "joints"]
+        assert len(joints) >= 2, joints
+        first, last = joints[0], joints[-1]
+        assert last["names"] == ["front_left_wheel_joint", "front_right", "rear_left",
+                                 "rear_right_wheel_joint"]
+        # Driving forward at 0.3 m/s: every wheel turns forward (the right side's motors are
+        # mirrored, not its wheels), its angle growing.
+        assert all(v is not None and v > 1.0 for v in last["velocity"]), last
+        assert all(b > a for a, b in zip(first["position"], last["position"], strict=True))
+    finally:
+        ended(node)
+    tokens = [parse_token(str(r.ok.key_expr)) for r in
+              observer.s.liveliness().get("@ros2_lv/0/**", timeout=5.0) if r.ok is not None]
+    ours = {(t.kind, t.topic, t.type_name) for t in tokens if t.node_name == "wheelgate"}
+    assert (EntityKind.PUBLISHER, "/robot1/joint_states",
+            "sensor_msgs::msg::dds_::JointState_") in ours

@@ -25,6 +25,7 @@ from pycdr2._support import Endianness
 
 from gateway.wire.ros2 import (
     Header,
+    JointState,
     Odometry,
     Quaternion,
     TFMessage,
@@ -33,10 +34,12 @@ from gateway.wire.ros2 import (
     Twist3D,
     TwistStamped,
     Vector3,
+    decode_joint_state,
     decode_odometry,
     decode_tf_message,
     decode_twist,
     decode_twist_stamped,
+    encode_joint_state,
     encode_odometry,
     encode_tf_message,
     encode_twist,
@@ -83,6 +86,9 @@ CTransformStamped = idl_struct("geometry_msgs::msg::dds_::TransformStamped_",
                                header=CHeader, child_frame_id=str, transform=CTransform)
 CTFMessage = idl_struct("tf2_msgs::msg::dds_::TFMessage_",
                         transforms=T.sequence[CTransformStamped])
+CJointState = idl_struct("sensor_msgs::msg::dds_::JointState_", header=CHeader,
+                         name=T.sequence[str], position=T.sequence[T.float64],
+                         velocity=T.sequence[T.float64], effort=T.sequence[T.float64])
 
 
 # ----------------------------------------------------------------------------- conversions
@@ -121,6 +127,11 @@ def c_tf(m: TFMessage) -> Any:
     ])
 
 
+def c_joints(m: JointState) -> Any:
+    return CJointState(c_header(m.header), list(m.name), list(m.position), list(m.velocity),
+                       list(m.effort))
+
+
 def cdr(struct: Any) -> bytes:
     """pycdr2's XCDR1 little-endian payload of ``struct``."""
     return bytes(struct.serialize(endianness=Endianness.Little, use_version_2=False))
@@ -139,6 +150,10 @@ QUATERNIONS = st.builds(Quaternion, FLOATS, FLOATS, FLOATS, FLOATS)
 COVARIANCES = st.lists(FLOATS, min_size=36, max_size=36).map(tuple)
 ODOMETRIES = st.builds(Odometry, HEADERS, NAMES, VECTORS, QUATERNIONS, COVARIANCES, TWISTS,
                        COVARIANCES)
+JOINT_STATES = st.integers(0, 5).flatmap(lambda n: st.builds(
+    JointState, HEADERS, st.lists(NAMES, min_size=n, max_size=n).map(tuple),
+    *(st.one_of(st.just(()), st.lists(FLOATS, min_size=n, max_size=n).map(tuple))
+      for _ in range(3))))
 TF_MESSAGES = st.builds(TFMessage, st.lists(
     st.builds(TransformStamped, HEADERS, NAMES, VECTORS, QUATERNIONS), max_size=4).map(tuple))
 
@@ -215,3 +230,20 @@ def test_any_tf_message_matches_pycdr2(message: TFMessage) -> None:
     expected = cdr(c_tf(message))
     assert encode_tf_message(message) == expected
     assert decode_tf_message(expected) == message
+
+
+@pytest.mark.parametrize("names", [(), ("a",), ("front_left", "rear"), ("ünï", "b", "cd")])
+def test_joint_state_matches_pycdr2_for_every_padding(names: tuple[str, ...]) -> None:
+    n = len(names)
+    message = JointState(Header(Time(1_700_000_000, 7), ""), names,
+                         tuple(1.5 * k for k in range(n)), tuple(-0.25 * k for k in range(n)))
+    expected = cdr(c_joints(message))
+    assert encode_joint_state(message) == expected
+    assert decode_joint_state(expected) == message
+
+
+@given(JOINT_STATES)
+def test_any_joint_state_matches_pycdr2(message: JointState) -> None:
+    expected = cdr(c_joints(message))
+    assert encode_joint_state(message) == expected
+    assert decode_joint_state(expected) == message

@@ -14,7 +14,12 @@ publisher, time, GID) on every sample, and the graph as liveliness tokens under 
   being the XXH3 hash of the token key (:func:`gateway.wire.ros2.keys.gid_of`).
 * **Out**: ``nav_msgs/msg/Odometry`` on ``odom`` (frame ``odom_frame``, child ``base_frame``,
   covariances zero: not estimated) and, with ``tf: true``, ``tf2_msgs/msg/TFMessage`` with the
-  ``odom_frame`` -> ``base_frame`` transform on ``/tf`` (Nav2 needs it there).
+  ``odom_frame`` -> ``base_frame`` transform on ``/tf`` (Nav2 needs it there); with a
+  ``joint_states`` topic, ``sensor_msgs/msg/JointState`` of every wheel (its unwrapped angle and
+  measured speed) and steering actuator (its angle; speed NaN, not measured, as ros2_control's
+  ``joint_state_broadcaster`` fills an interface it lacks), under the ``joints`` names, which
+  ``robot_state_publisher`` turns into the wheels' transforms for RViz.  A motor not heard yet
+  is left out (none of its values is known).
 """
 
 from __future__ import annotations
@@ -30,12 +35,14 @@ from gateway.core.errors import DecodeError, EncodeError
 from gateway.runtime.bridge.inbox import NO_REPLY, Inbound, TwistSource
 from gateway.runtime.bridge.session import import_zenoh
 from gateway.wire.ros2 import (
+    JOINT_STATE,
     ODOMETRY,
     TF_MESSAGE,
     TWIST,
     TWIST_STAMPED,
     EntityKind,
     Header,
+    JointState,
     Odometry,
     QosProfile,
     Quaternion,
@@ -47,6 +54,7 @@ from gateway.wire.ros2 import (
     decode_twist,
     decode_twist_stamped,
     encode_attachment,
+    encode_joint_state,
     encode_odometry,
     encode_tf_message,
     entity_token,
@@ -61,14 +69,14 @@ from gateway.wire.ros2 import (
 from gateway.wire.socket import ProtocolError, TwistRequest, parse_request
 
 if TYPE_CHECKING:
-    from collections.abc import Callable
+    from collections.abc import Callable, Mapping
 
     from gateway.core.bridge_settings import AttachmentFormat, Ros2Settings
     from gateway.runtime.mailbox import Snapshot
 
 log = logging.getLogger(__name__)
 
-__all__ = ["Ros2Side", "commander_name", "twist_request"]
+__all__ = ["Ros2Side", "commander_name", "joint_state", "twist_request"]
 
 #: ``/tf`` publishers keep 100 (tf2_ros's ``DynamicBroadcasterQoS``).
 TF_QOS = QosProfile(depth=100)
@@ -152,6 +160,13 @@ class Ros2Side:
             session, topic_key(domain, "/tf", TF_MESSAGE), entity_token(
                 EntityKind.PUBLISHER, domain, zid, 0, next(ids), ns, name, "/tf", TF_MESSAGE,
                 TF_QOS), settings.attachment)
+        self.joints_topic = (resolve_topic_name(settings.joint_states, ns)
+                             if settings.joint_states else "")
+        self.joints = None if not self.joints_topic else _Publisher(
+            session, topic_key(domain, self.joints_topic, JOINT_STATE), entity_token(
+                EntityKind.PUBLISHER, domain, zid, 0, next(ids), ns, name, self.joints_topic,
+                JOINT_STATE, QosProfile()), settings.attachment)
+        self._joint_names = dict(settings.joints)
         self._types = {TWIST.dds_name, TWIST_STAMPED.dds_name}
         self._entities.append(session.liveliness().declare_subscriber(
             f"@ros2_lv/{domain}/**", self._on_token, history=True))
@@ -187,14 +202,40 @@ class Ros2Side:
                     header, s.base_frame, position, rotation),))))
         except EncodeError as err:  # e.g. a stamp beyond int32 seconds (2038)
             log.warning("bridge: ROS 2 odometry not sent: %s", err)
+        if self.joints is not None:
+            try:
+                self.joints.put(encode_joint_state(joint_state(snap, self._joint_names)))
+            except EncodeError as err:
+                log.warning("bridge: ROS 2 joint states not sent: %s", err)
 
     def close(self) -> None:
         """Withdraw the tokens (the node leaves ``ros2 node list``)."""
-        for publisher in (self.odom, self.tf):
+        for publisher in (self.odom, self.tf, self.joints):
             if publisher is not None:
                 publisher.token.undeclare()
         for entity in self._entities:
             entity.undeclare()
+
+
+def joint_state(snap: Snapshot, names: Mapping[str, str]) -> JointState:
+    """The ``sensor_msgs/msg/JointState`` of a snapshot: every wheel and steering actuator
+    heard so far, under its joint name (``names``, else its own)."""
+    joints: list[str] = []
+    position: list[float] = []
+    velocity: list[float] = []
+    for wheel in snap.wheels:
+        if wheel.position_rad is not None:
+            joints.append(names.get(wheel.name, wheel.name))
+            position.append(wheel.position_rad)
+            speed = wheel.measured_rad_s
+            velocity.append(math.nan if speed is None else speed)
+    for actuator in snap.steering:
+        if actuator.measured_rad is not None:
+            joints.append(names.get(actuator.name, actuator.name))
+            position.append(actuator.measured_rad)
+            velocity.append(math.nan)
+    return JointState(Header(ns_to_stamp(snap.stamp_ns), ""), tuple(joints), tuple(position),
+                      tuple(velocity))
 
 
 def _ros_twist(decode: Callable[[bytes], Twist3D], payload: bytes, attachment: bytes | None,

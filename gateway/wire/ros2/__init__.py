@@ -4,7 +4,8 @@ What a Zenoh bridge needs to exchange messages with ROS 2 nodes that run rmw_zen
 public repository ros2/rmw_zenoh, Jazzy and later):
 
 * :mod:`gateway.wire.ros2.cdr`: XCDR1 little-endian codecs of ``geometry_msgs/msg/Twist``,
-  ``TwistStamped``, ``nav_msgs/msg/Odometry`` and ``tf2_msgs/msg/TFMessage``
+  ``TwistStamped``, ``nav_msgs/msg/Odometry``, ``tf2_msgs/msg/TFMessage`` and
+  ``sensor_msgs/msg/JointState``
   (:mod:`~gateway.wire.ros2.cdr_stream` has the reader and writer,
   :mod:`~gateway.wire.ros2.messages` the dataclasses and the stamp helpers);
 * :mod:`gateway.wire.ros2.types`: the types' names, DDS names, RIHS01 hashes and ``.msg``
@@ -31,10 +32,12 @@ from gateway.wire.ros2.attachment import (
 )
 from gateway.wire.ros2.cdr import (
     TWIST_SIZE,
+    decode_joint_state,
     decode_odometry,
     decode_tf_message,
     decode_twist,
     decode_twist_stamped,
+    encode_joint_state,
     encode_odometry,
     encode_tf_message,
     encode_twist,
@@ -56,6 +59,7 @@ from gateway.wire.ros2.messages import (
     COVARIANCE_SIZE,
     ZERO_COVARIANCE,
     Header,
+    JointState,
     Odometry,
     Quaternion,
     TFMessage,
@@ -85,6 +89,7 @@ from gateway.wire.ros2.qos import (
 )
 from gateway.wire.ros2.typehash import compute_type_hash
 from gateway.wire.ros2.types import (
+    JOINT_STATE,
     MESSAGE_DEFINITIONS,
     ODOMETRY,
     ROS_TYPES,
@@ -102,6 +107,7 @@ __all__ = [
     "DEFAULT_DEPTH",
     "GID_SIZE",
     "HUMBLE_TYPE_HASH",
+    "JOINT_STATE",
     "MESSAGE_DEFINITIONS",
     "ODOMETRY",
     "ROS_TYPES",
@@ -116,6 +122,7 @@ __all__ = [
     "EntityKind",
     "Header",
     "History",
+    "JointState",
     "LivelinessToken",
     "Odometry",
     "QosProfile",
@@ -131,11 +138,13 @@ __all__ = [
     "compute_type_hash",
     "dds_type_name",
     "decode_attachment",
+    "decode_joint_state",
     "decode_odometry",
     "decode_tf_message",
     "decode_twist",
     "decode_twist_stamped",
     "encode_attachment",
+    "encode_joint_state",
     "encode_odometry",
     "encode_tf_message",
     "encode_twist",

@@ -1,4 +1,4 @@
-"""Hand-written XCDR1 little-endian codecs of the four messages the bridge exchanges.
+"""Hand-written XCDR1 little-endian codecs of the five messages the bridge exchanges.
 
 ====================================  =========================================================
 message                               body layout (offsets from the end of the 4-byte header)
@@ -12,6 +12,9 @@ message                               body layout (offsets from the end of the 4
 ``tf2_msgs/msg/TFMessage``            u32 count, then per transform: header, string
                                       child_frame_id, pad to 8, 7 x f64 (translation xyz,
                                       rotation xyzw)
+``sensor_msgs/msg/JointState``        header, u32 count and the strings of name, then each of
+                                      position, velocity, effort: u32 count, pad to 8 (when
+                                      not empty), count x f64
 ====================================  =========================================================
 
 Field order comes from the ``.msg`` files (ros2/common_interfaces, ros2/geometry2), the
@@ -43,6 +46,7 @@ from gateway.wire.ros2.messages import (
     COVARIANCE_SIZE,
     NS_PER_S,
     Header,
+    JointState,
     Odometry,
     Quaternion,
     TFMessage,
@@ -57,6 +61,7 @@ TWIST = "geometry_msgs/msg/Twist"
 TWIST_STAMPED = "geometry_msgs/msg/TwistStamped"
 ODOMETRY = "nav_msgs/msg/Odometry"
 TF_MESSAGE = "tf2_msgs/msg/TFMessage"
+JOINT_STATE = "sensor_msgs/msg/JointState"
 
 _SIX = struct.Struct("<6d")
 _POSE = struct.Struct("<7d")
@@ -236,3 +241,57 @@ def decode_tf_message(payload: Payload) -> TFMessage:
     r.finish()
     return TFMessage(tuple(transforms))
 
+
+
+# ----------------------------------------------------------------------------- JointState
+
+
+def _write_float64_sequence(w: CdrWriter, values: object, field: str) -> None:
+    items = tuple(values) if isinstance(values, (tuple, list)) else values
+    if not isinstance(items, tuple):
+        raise EncodeError(f"{JOINT_STATE}: expected a sequence of numbers for {field}, "
+                          f"got {values!r}")
+    w.sequence_length(len(items), field)
+    if items:  # (an empty sequence is its count alone: nothing to align)
+        w.float64s(struct.Struct(f"<{len(items)}d"), items, field)
+
+
+def _read_float64_sequence(r: CdrReader, field: str) -> tuple[float, ...]:
+    count = r.sequence_length(field, 8)
+    return r.float64s(struct.Struct(f"<{count}d"), field) if count else ()
+
+
+def encode_joint_state(message: JointState) -> bytes:
+    """The ``sensor_msgs/msg/JointState`` payload of ``message``; each of position, velocity
+    and effort is empty or has one value per name."""
+    if not isinstance(message, JointState):
+        raise EncodeError(f"{JOINT_STATE}: expected a JointState, got {message!r}")
+    names = tuple(message.name) if isinstance(message.name, (tuple, list)) else None
+    if names is None:
+        raise EncodeError(f"{JOINT_STATE}: expected a sequence of str for name, got "
+                          f"{message.name!r}")
+    w = CdrWriter(JOINT_STATE)
+    _write_header(w, message.header, "header")
+    w.sequence_length(len(names), "name")
+    for index, name in enumerate(names):
+        w.string(name, f"name[{index}]")
+    for field in ("position", "velocity", "effort"):
+        values = getattr(message, field)
+        if isinstance(values, (tuple, list)) and len(values) not in (0, len(names)):
+            raise EncodeError(f"{JOINT_STATE}: expected none or {len(names)} numbers for "
+                              f"{field} (one per name), got {len(values)}")
+        _write_float64_sequence(w, values, field)
+    return w.payload()
+
+
+def decode_joint_state(payload: Payload) -> JointState:
+    """The :class:`JointState` in a ``sensor_msgs/msg/JointState`` payload."""
+    r = CdrReader(JOINT_STATE, payload)
+    header = _read_header(r, "header")
+    count = r.sequence_length("name", 5)  # (a string: its length and its NUL at least)
+    names = tuple(r.string(f"name[{index}]") for index in range(count))
+    position = _read_float64_sequence(r, "position")
+    velocity = _read_float64_sequence(r, "velocity")
+    effort = _read_float64_sequence(r, "effort")
+    r.finish()
+    return JointState(header, names, position, velocity, effort)

@@ -1,7 +1,7 @@
 """The ROS 2 messages the bridge speaks, as frozen dataclasses, and the stamp helpers.
 
 Each class mirrors one message of the public repositories ros2/common_interfaces
-(``geometry_msgs``, ``nav_msgs``, ``std_msgs``), ros2/geometry2 (``tf2_msgs``) and
+(``geometry_msgs``, ``nav_msgs``, ``sensor_msgs``, ``std_msgs``), ros2/geometry2 (``tf2_msgs``) and
 ros2/rcl_interfaces (``builtin_interfaces``), field for field and in the same order, except
 :class:`Twist3D`, which flattens ``geometry_msgs/msg/Twist``'s two vectors, and
 :class:`Odometry`, which flattens the ``PoseWithCovariance`` and ``TwistWithCovariance``.
@@ -153,3 +153,21 @@ class TFMessage:
     """``tf2_msgs/msg/TFMessage``: what ``/tf`` and ``/tf_static`` carry."""
 
     transforms: tuple[TransformStamped, ...] = ()
+
+
+@dataclass(frozen=True, slots=True)
+class JointState:
+    """``sensor_msgs/msg/JointState``: joints by name, each array empty or one value per name.
+
+    :param header: stamp (the frame is unused).
+    :param name: the joints' names (a URDF's joint names, for ``robot_state_publisher``).
+    :param position: rad for a revolute or continuous joint.
+    :param velocity: rad/s.
+    :param effort: N m.
+    """
+
+    header: Header = Header()
+    name: tuple[str, ...] = ()
+    position: tuple[float, ...] = ()
+    velocity: tuple[float, ...] = ()
+    effort: tuple[float, ...] = ()

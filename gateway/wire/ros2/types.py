@@ -2,14 +2,14 @@
 
 A type hash (RIHS01, REP 2011) identifies a message definition; rmw_zenoh puts it in every data
 key and liveliness token, so a subscriber only meets publishers of the identical definition.
-The four hashes below are the published ones (Jazzy and later; the definitions have not changed
+The five hashes below are the published ones (Jazzy and later; the definitions have not changed
 since); :func:`gateway.wire.ros2.typehash.compute_type_hash` recomputes each of them from
 :data:`MESSAGE_DEFINITIONS`, and ``tests/wire/test_ros2_types.py`` checks that they agree.
 
 :data:`MESSAGE_DEFINITIONS` holds the ``.msg`` text of every type involved (comments dropped):
 from the public repositories ros2/common_interfaces (``geometry_msgs``, ``nav_msgs``,
-``std_msgs``), ros2/geometry2 (``tf2_msgs/msg/TFMessage.msg``) and ros2/rcl_interfaces
-(``builtin_interfaces/msg/Time.msg``).
+``sensor_msgs``, ``std_msgs``), ros2/geometry2 (``tf2_msgs/msg/TFMessage.msg``) and
+ros2/rcl_interfaces (``builtin_interfaces/msg/Time.msg``).
 """
 
 from __future__ import annotations
@@ -68,12 +68,16 @@ TF_MESSAGE = RosType(
     "tf2_msgs/msg/TFMessage",
     "RIHS01_e369d0f05a23ae52508854b66f6aa0437f3449d652e8cbf22d5abe85d020f087",
 )
-#: The four types, by ROS name.
+JOINT_STATE = RosType(
+    "sensor_msgs/msg/JointState",
+    "RIHS01_a13ee3a330e346c9d87b5aa18d24e11690752bd33a0350f11c5882bc9179260e",
+)
+#: The five types, by ROS name.
 ROS_TYPES: Mapping[str, RosType] = MappingProxyType(
-    {t.ros_name: t for t in (TWIST, TWIST_STAMPED, ODOMETRY, TF_MESSAGE)}
+    {t.ros_name: t for t in (TWIST, TWIST_STAMPED, ODOMETRY, TF_MESSAGE, JOINT_STATE)}
 )
 
-#: ``.msg`` text of the four types and of every type they reference, by ROS name.
+#: ``.msg`` text of the five types and of every type they reference, by ROS name.
 MESSAGE_DEFINITIONS: Mapping[str, str] = MappingProxyType({
     "builtin_interfaces/msg/Time": "int32 sec\nuint32 nanosec\n",
     "std_msgs/msg/Header": "builtin_interfaces/Time stamp\nstring frame_id\n",
@@ -93,4 +97,8 @@ MESSAGE_DEFINITIONS: Mapping[str, str] = MappingProxyType({
         "geometry_msgs/PoseWithCovariance pose\ngeometry_msgs/TwistWithCovariance twist\n"
     ),
     "tf2_msgs/msg/TFMessage": "geometry_msgs/TransformStamped[] transforms\n",
+    "sensor_msgs/msg/JointState": (
+        "std_msgs/Header header\nstring[] name\nfloat64[] position\nfloat64[] velocity\n"
+        "float64[] effort\n"
+    ),
 })
