@@ -9,7 +9,9 @@ hold ``wheelgate/<ns>/commander/<name>`` while it commands, and attach its name 
 ``python tools/bridge_peer.py observe --connect ... --ns robot1`` subscribes to the gateway's
 odometry, status and errors until its stdin closes, then prints how many of each came.
 ``python tools/bridge_peer.py ros-node --connect ... [--cmd-vel /robot1/cmd_vel] [--stamped]``
-is a ROS 2 node on rmw_zenoh as the wire shows it (no ROS installed): see :func:`ros_node`.
+is a ROS 2 node on rmw_zenoh as the wire shows it (no ROS installed): see :func:`ros_node`;
+``ros-call --connect ... --service /robot1/wheelgate/estop`` calls a ``std_srvs/srv/Trigger``
+service as a ROS client does (:func:`ros_call`).
 """
 
 from __future__ import annotations
@@ -139,6 +141,37 @@ def ros_node(args: argparse.Namespace) -> None:
         time.sleep(0.05)
 
 
+def ros_call(args: argparse.Namespace) -> None:
+    """A ROS 2 client's call of a ``std_srvs/srv/Trigger`` service as rmw_zenoh puts it on the
+    wire (a query on the service's key, the request's sequence number, time and the client's
+    GID in the attachment); prints one JSON line per reply: the response, and whether the
+    reply's attachment carries the request's sequence number and GID back."""
+    from gateway.wire import ros2  # noqa: PLC0415 - the bridge's own wire layer
+
+    s = session(args.connect, args.lease)
+    zid = str(s.zid())
+    token = ros2.entity_token(ros2.EntityKind.CLIENT, args.domain, zid, 0, 1, "/", "caller",
+                              args.service, ros2.TRIGGER, ros2.QosProfile())
+    keep = s.liveliness().declare_token(token)
+    gid, seq = ros2.gid_of(token), 41
+    payload = b"\x00\x01\x00" if args.bad_request else ros2.encode_trigger_request()
+    replies = s.get(ros2.topic_key(args.domain, args.service, ros2.TRIGGER), payload=payload,
+                    attachment=ros2.encode_attachment(seq, time.time_ns(), gid),
+                    timeout=10.0)
+    for reply in replies:
+        if reply.ok is None:
+            sys.stdout.write(json.dumps({"error": str(reply.err)}) + "\n")
+            continue
+        response = ros2.decode_trigger_response(reply.ok.payload.to_bytes())
+        attachment = ros2.decode_attachment(reply.ok.attachment.to_bytes())
+        sys.stdout.write(json.dumps({
+            "success": response.success, "message": response.message,
+            "seq": attachment.sequence_number == seq, "gid": attachment.gid == gid}) + "\n")
+    sys.stdout.flush()
+    keep.undeclare()
+    s.close()
+
+
 def observe(args: argparse.Namespace) -> None:
     """Subscribe to the gateway's news until stdin closes; print how many samples came."""
     s = session(args.connect, args.lease)
@@ -200,12 +233,19 @@ def main(argv: list[str] | None = None) -> None:
                    help="the labelled attachment of Jazzy's rmw_zenoh 0.2.0 to 0.2.3")
     r.add_argument("--quiet", action="store_true", help="print nothing after 'ready'")
     r.add_argument("--lease", type=float, default=10.0)
+    k = sub.add_parser("ros-call")
+    k.add_argument("--connect", required=True)
+    k.add_argument("--domain", type=int, default=0)
+    k.add_argument("--service", required=True, help="e.g. /robot1/wheelgate/estop")
+    k.add_argument("--bad-request", action="store_true", help="a request cut short")
+    k.add_argument("--lease", type=float, default=10.0)
     o = sub.add_parser("observe")
     o.add_argument("--connect", required=True)
     o.add_argument("--ns", required=True)
     o.add_argument("--lease", type=float, default=10.0)
     args = parser.parse_args(argv)
-    {"commander": commander, "ros-node": ros_node, "observe": observe}[args.role](args)
+    {"commander": commander, "ros-node": ros_node, "ros-call": ros_call,
+     "observe": observe}[args.role](args)
 
 
 if __name__ == "__main__":

@@ -79,6 +79,8 @@ ROS2_KEYS: Mapping[str, OptionSpec] = MappingProxyType({
                                              "sensor_msgs/msg/JointState ('': none)"),
     "joints": OptionSpec(dict, {}, help="joint name per wheel or steering actuator (default: "
                                         "its own name), as the robot's URDF names them"),
+    "services": OptionSpec(bool, False, help="std_srvs/srv/Trigger services ~/estop, "
+                                             "~/enable, ~/disable of the gateway's node"),
 })
 FOXGLOVE_KEYS: Mapping[str, OptionSpec] = MappingProxyType({
     "host": OptionSpec(str, "127.0.0.1", help="address of the WebSocket server"),

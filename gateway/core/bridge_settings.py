@@ -91,6 +91,8 @@ class Ros2Settings:
         actuators goes out on ('': none).
     :param joints: ``(wheel or actuator name, joint name)`` pairs: the joint names the joint
         states carry (a URDF's); a wheel or actuator not named here is its own joint name.
+    :param services: whether the node offers ``std_srvs/srv/Trigger`` services ``~/estop``,
+        ``~/enable`` and ``~/disable`` (the control socket's requests, from the bridge).
     """
 
     domain_id: int = 0
@@ -103,6 +105,7 @@ class Ros2Settings:
     attachment: AttachmentFormat = AttachmentFormat.POSITIONAL
     joint_states: str = ""
     joints: tuple[tuple[str, str], ...] = ()
+    services: bool = False
 
 
 @dataclass(frozen=True, slots=True)

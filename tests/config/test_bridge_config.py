@@ -212,6 +212,9 @@ def test_check_validates_the_blocks_without_importing_zenoh_or_foxglove(tmp_path
 def test_joint_states_are_off_unless_a_topic_is_given_and_joints_rename_wheels() -> None:
     ros2 = bridge(bridge={"ros2": {}}).ros2
     assert ros2 is not None and ros2.joint_states == "" and ros2.joints == ()
+    assert ros2.services is False  # (the services too, unless asked for)
+    ros2 = bridge(bridge={"ros2": {"services": True}}).ros2
+    assert ros2 is not None and ros2.services is True
     ros2 = bridge(bridge={"ros2": {"joint_states": "joint_states", "joints": {
         "front_left": "fl_wheel_joint", "rear_left": "front_left"}}}).ros2
     assert ros2 is not None and ros2.joint_states == "joint_states"

@@ -10,12 +10,16 @@ import json
 import os
 import signal
 import statistics
+import subprocess
+import sys
 import time
 from typing import TYPE_CHECKING, Any
 
 import pytest
 
+from gateway.runtime.client import ControlClient
 from gateway.wire.ros2 import EntityKind, parse_token
+from tests.conftest import REPO
 from tests.runtime import bridge_helpers
 from tests.runtime.bridge_helpers import (
     Observer,
@@ -27,7 +31,6 @@ from tests.runtime.bridge_helpers import (
 )
 
 if TYPE_CHECKING:
-    import subprocess
     from collections.abc import Iterator
 
 pytest.importorskip("zenoh", reason="eclipse-zenoh not installed: pip install 'wheelgate[zenoh]'")
@@ -164,3 +167,42 @@ def test_a_ros_node_reads_the_wheels_joint_states(
     ours = {(t.kind, t.topic, t.type_name) for t in tokens if t.node_name == "wheelgate"}
     assert (EntityKind.PUBLISHER, "/robot1/joint_states",
             "sensor_msgs::msg::dds_::JointState_") in ours
+
+
+def ros_call(connect: str, service: str, *args: str) -> list[dict[str, Any]]:
+    """``tools/bridge_peer.py ros-call``'s replies."""
+    done = subprocess.run([sys.executable, bridge_helpers.PEER, "ros-call", "--connect", connect,
+                           "--service", service, *args], capture_output=True, timeout=60,
+                          cwd=REPO, check=True)
+    return [json.loads(line) for line in done.stdout.splitlines()]
+
+
+@pytest.mark.parametrize("gateway", [{"services": True}], indirect=True, ids=["services"])
+def test_a_ros_client_estops_and_disables_the_robot_through_its_services(
+        gateway: tuple[subprocess.Popen[bytes], str], observer: Observer, sock_path: str) -> None:
+    """``services: true``: ``std_srvs/srv/Trigger`` on ``~/estop``, ``~/enable`` and
+    ``~/disable``: the robot follows, each response says the state, and each reply carries the
+    call's sequence number and the client's GID back (how rmw_zenoh pairs them)."""
+    _, connect = gateway
+    node = "/robot1/wheelgate"
+    assert ros_call(connect, f"{node}/estop") == [
+        {"success": True, "message": "state: estop", "seq": True, "gid": True}]
+    assert observer.query("status", timeout_s=5.0).get("state") == "estop"
+    # The e-stop is released only on the control socket (estop_release: socket, the default).
+    [refused] = ros_call(connect, f"{node}/enable")
+    assert refused["success"] is False and "released only by an enable on the control " \
+        "socket" in refused["message"], refused
+    [bad] = ros_call(connect, f"{node}/disable", "--bad-request")
+    assert bad["success"] is False and bad["message"].endswith(
+        "std_srvs/srv/Trigger_Request: expected at least the 4-byte encapsulation header, got "
+        "3 bytes"), bad
+    assert observer.query("status", timeout_s=5.0).get("state") == "estop"  # (nothing done)
+    with ControlClient(sock_path) as client:  # released where the configuration says
+        assert client.request({"op": "enable"})["ok"] is True
+    assert ros_call(connect, f"{node}/disable") == [
+        {"success": True, "message": "state: disabled", "seq": True, "gid": True}]
+    tokens = [parse_token(str(r.ok.key_expr)) for r in
+              observer.s.liveliness().get("@ros2_lv/0/**", timeout=5.0) if r.ok is not None]
+    ours = {(t.kind, t.topic, t.type_name) for t in tokens if t.node_name == "wheelgate"}
+    for op in ("estop", "enable", "disable"):
+        assert (EntityKind.SERVICE, f"{node}/{op}", "std_srvs::srv::dds_::Trigger_") in ours

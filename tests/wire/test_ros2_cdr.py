@@ -305,3 +305,14 @@ def test_encoders_refuse_the_wrong_message_class() -> None:
 def test_stamps_convert_both_ways(ns: int, stamp: Time) -> None:
     assert ns_to_stamp(ns) == stamp
     assert stamp_to_ns(stamp) == ns
+
+
+def test_a_trigger_request_or_response_that_is_not_one_is_refused() -> None:
+    from gateway.wire.ros2 import decode_trigger_request, decode_trigger_response
+
+    with pytest.raises(DecodeError, match=r"^std_srvs/srv/Trigger_Request: expected 1 bytes "
+                                          r"for structure_needs_at_least_one_member"):
+        decode_trigger_request(b"\x00\x01\x00\x00")
+    with pytest.raises(DecodeError, match=r"^std_srvs/srv/Trigger_Response: expected 0 or 1 "
+                                          r"for success, got 2"):
+        decode_trigger_response(b"\x00\x01\x00\x00\x02\x00\x00\x00\x01\x00\x00\x00\x00")

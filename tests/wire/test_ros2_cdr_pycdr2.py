@@ -31,17 +31,22 @@ from gateway.wire.ros2 import (
     TFMessage,
     Time,
     TransformStamped,
+    TriggerResponse,
     Twist3D,
     TwistStamped,
     Vector3,
     decode_joint_state,
     decode_odometry,
     decode_tf_message,
+    decode_trigger_request,
+    decode_trigger_response,
     decode_twist,
     decode_twist_stamped,
     encode_joint_state,
     encode_odometry,
     encode_tf_message,
+    encode_trigger_request,
+    encode_trigger_response,
     encode_twist,
     encode_twist_stamped,
 )
@@ -86,6 +91,10 @@ CTransformStamped = idl_struct("geometry_msgs::msg::dds_::TransformStamped_",
                                header=CHeader, child_frame_id=str, transform=CTransform)
 CTFMessage = idl_struct("tf2_msgs::msg::dds_::TFMessage_",
                         transforms=T.sequence[CTransformStamped])
+CTriggerRequest = idl_struct("std_srvs::srv::dds_::Trigger_Request_",
+                             structure_needs_at_least_one_member=T.uint8)
+CTriggerResponse = idl_struct("std_srvs::srv::dds_::Trigger_Response_", success=bool,
+                              message=str)
 CJointState = idl_struct("sensor_msgs::msg::dds_::JointState_", header=CHeader,
                          name=T.sequence[str], position=T.sequence[T.float64],
                          velocity=T.sequence[T.float64], effort=T.sequence[T.float64])
@@ -247,3 +256,14 @@ def test_any_joint_state_matches_pycdr2(message: JointState) -> None:
     expected = cdr(c_joints(message))
     assert encode_joint_state(message) == expected
     assert decode_joint_state(expected) == message
+
+
+@pytest.mark.parametrize(("success", "message"), [(True, ""), (False, "x"), (True, "state: estop"),
+                                                  (False, "ünï")])
+def test_trigger_matches_pycdr2(success: bool, message: str) -> None:
+    assert encode_trigger_request() == cdr(CTriggerRequest(0))
+    decode_trigger_request(cdr(CTriggerRequest(7)))  # (the placeholder means nothing)
+    expected = cdr(CTriggerResponse(success, message))
+    response = TriggerResponse(success, message)
+    assert encode_trigger_response(response) == expected
+    assert decode_trigger_response(expected) == response

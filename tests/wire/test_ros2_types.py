@@ -82,6 +82,26 @@ geometry_msgs/PoseWithCovariance pose
 geometry_msgs/TwistWithCovariance twist
 """,
     "tf2_msgs/msg/TFMessage": "geometry_msgs/TransformStamped[] transforms\n",
+    "sensor_msgs/msg/JointState": "std_msgs/Header header\n\nstring[] name\n\nfloat64[] "
+                                  "position\nfloat64[] velocity\nfloat64[] effort\n",
+    # service_msgs/msg/ServiceEventInfo.msg with its constants, and std_srvs/srv/Trigger.srv
+    # as rosidl splits it (the empty request gets rosidl's placeholder member).
+    "service_msgs/msg/ServiceEventInfo": (
+        "uint8 REQUEST_SENT = 0\nuint8 REQUEST_RECEIVED = 1\nuint8 RESPONSE_SENT = 2\n"
+        "uint8 RESPONSE_RECEIVED = 3\n\n# The type of event this message represents\n"
+        "uint8 event_type\n\nbuiltin_interfaces/Time stamp\n\nchar[16] client_gid\n\n"
+        "int64 sequence_number\n"),
+    "std_srvs/srv/Trigger_Request": "uint8 structure_needs_at_least_one_member\n",
+    "std_srvs/srv/Trigger_Response": "bool success   # indicate successful run of triggered "
+                                     "service\nstring message # informational, e.g. for error "
+                                     "messages\n",
+    "std_srvs/srv/Trigger_Event": (
+        "service_msgs/ServiceEventInfo info\nstd_srvs/srv/Trigger_Request[<=1] request\n"
+        "std_srvs/srv/Trigger_Response[<=1] response\n"),
+    "std_srvs/srv/Trigger": (
+        "std_srvs/srv/Trigger_Request request_message\n"
+        "std_srvs/srv/Trigger_Response response_message\n"
+        "std_srvs/srv/Trigger_Event event_message\n"),
 }
 
 PUBLISHED = {
@@ -93,7 +113,17 @@ PUBLISHED = {
         "RIHS01_5f0fcd4f81d5d06ad9b4c4c63e3ea51b82d6ae4d0558f1d475229b1121db6f64",
     "tf2_msgs/msg/TFMessage":
         "RIHS01_e369d0f05a23ae52508854b66f6aa0437f3449d652e8cbf22d5abe85d020f087",
+    # (``ros2 topic info /joint_states --verbose`` prints it)
+    "sensor_msgs/msg/JointState":
+        "RIHS01_a13ee3a330e346c9d87b5aa18d24e11690752bd33a0350f11c5882bc9179260e",
+    # (a service's hash is the service type's: the key of its queryable carries it)
+    "std_srvs/srv/Trigger":
+        "RIHS01_eeff2cd6fa5ad9d27cdf4dec64818317839b62f212a91e6b5304b634b2062c5f",
 }
+
+
+def test_every_type_of_the_module_is_checked_here() -> None:
+    assert set(ROS_TYPES) == set(PUBLISHED)
 
 
 @pytest.mark.parametrize("name", sorted(PUBLISHED))
@@ -115,6 +145,18 @@ def test_other_published_hashes_are_recomputed() -> None:
         == "RIHS01_df668c740482bbd48fb39d76a70dfd4bd59db1288021743503259e948f6b1a18"
     assert compute_type_hash("builtin_interfaces/msg/Time", UPSTREAM) \
         == "RIHS01_b106235e25a4c5ed35098aa0a61a3ee9c9b18d197f398b0e4206cea9acf9c197"
+    # A service's parts have hashes of their own (Trigger's empty request with rosidl's
+    # placeholder member; std_srvs/srv/SetBool's whole service).
+    assert compute_type_hash("std_srvs/srv/Trigger_Request", UPSTREAM) \
+        == "RIHS01_d010825374ce8918e72bfd826c82603e60f45419e932ea976f807b74a863a199"
+    set_bool = {**UPSTREAM, **{
+        f"std_srvs/srv/SetBool{part}": text.replace("Trigger", "SetBool")
+        for part, text in (("_Request", "bool data\n"),
+                           ("_Response", UPSTREAM["std_srvs/srv/Trigger_Response"]),
+                           ("_Event", UPSTREAM["std_srvs/srv/Trigger_Event"]),
+                           ("", UPSTREAM["std_srvs/srv/Trigger"]))}}
+    assert compute_type_hash("std_srvs/srv/SetBool", set_bool) \
+        == "RIHS01_abe9e4bb6b41b40e6789712c00ec8871923e089af3f667a79992a428cff2da0a"
 
 
 def test_the_hashed_text_is_exactly_rosidls_json() -> None:

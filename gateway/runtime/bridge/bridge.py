@@ -188,7 +188,8 @@ class Bridge:
 
             self._ros = Ros2Side(
                 s, self.settings.ros2, self.settings.ros_namespace,
-                commander=lambda who, alive: self._admit(CommanderEvent(who, alive)))
+                commander=lambda who, alive: self._admit(CommanderEvent(who, alive)),
+                call=self._submit)
             twists += self._ros.twists
         self._token: Any = s.liveliness().declare_token(keys.gateway_token)
         self._twists = twists  # (one store: the loop may be reading the list)
@@ -216,6 +217,11 @@ class Bridge:
                 op, None if payload is None else payload.to_bytes(), key)
         except ProtocolError as err:
             request = err
+        self._submit(query, request)
+
+    def _submit(self, query: Any, request: Request | ProtocolError) -> None:
+        """Hand a query's request to the loop, its reply to come (:func:`_answer`); answer
+        at once when the gateway is stopping or the inbox is full."""
         with self._lock:
             if self._closed:
                 client = 0
@@ -350,7 +356,12 @@ def _bad(err: ProtocolError) -> LastError:
 
 
 def _answer(query: Any, line: bytes) -> None:
-    """Reply to a query and finalize it (the querier waits until every reply is sent)."""
+    """Reply to a query and finalize it (the querier waits until every reply is sent); a
+    ROS service call (:class:`~gateway.runtime.bridge.ros2.RosCall`) answers in its type."""
+    answer = getattr(query, "answer", None)
+    if answer is not None:
+        answer(line)
+        return
     try:
         query.reply(query.key_expr, line)
     except Exception:  # the querier may be gone

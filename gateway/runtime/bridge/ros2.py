@@ -20,6 +20,12 @@ publisher, time, GID) on every sample, and the graph as liveliness tokens under 
   ``joint_state_broadcaster`` fills an interface it lacks), under the ``joints`` names, which
   ``robot_state_publisher`` turns into the wheels' transforms for RViz.  A motor not heard yet
   is left out (none of its values is known).
+* **Services**, with ``services: true``: ``std_srvs/srv/Trigger`` on the node's ``~/estop``,
+  ``~/enable`` and ``~/disable`` (``/robot1/wheelgate/estop``): each the control socket's
+  request, through the bridge's inbox as the native ``rpc/<op>`` queries (the e-stop release
+  rule included); the response's ``success`` is the reply's ``ok``, its ``message`` the state
+  or the error.  As rmw_zenoh's service server (``rmw_zenoh_cpp/src/detail/rmw_service_data.cpp``)
+  the reply carries the request's sequence number and the client's GID in its attachment.
 """
 
 from __future__ import annotations
@@ -38,6 +44,7 @@ from gateway.wire.ros2 import (
     JOINT_STATE,
     ODOMETRY,
     TF_MESSAGE,
+    TRIGGER,
     TWIST,
     TWIST_STAMPED,
     EntityKind,
@@ -48,15 +55,18 @@ from gateway.wire.ros2 import (
     Quaternion,
     TFMessage,
     TransformStamped,
+    TriggerResponse,
     Twist3D,
     Vector3,
     decode_attachment,
+    decode_trigger_request,
     decode_twist,
     decode_twist_stamped,
     encode_attachment,
     encode_joint_state,
     encode_odometry,
     encode_tf_message,
+    encode_trigger_response,
     entity_token,
     gid_of,
     node_token,
@@ -66,7 +76,7 @@ from gateway.wire.ros2 import (
     topic_key,
     topic_subscription_key,
 )
-from gateway.wire.socket import ProtocolError, TwistRequest, parse_request
+from gateway.wire.socket import Op, ProtocolError, Request, TwistRequest, parse_request
 
 if TYPE_CHECKING:
     from collections.abc import Callable, Mapping
@@ -76,7 +86,11 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
-__all__ = ["Ros2Side", "commander_name", "joint_state", "twist_request"]
+__all__ = ["SERVICE_OPS", "Ros2Side", "RosCall", "commander_name", "joint_state",
+           "twist_request"]
+
+#: The requests offered as ``std_srvs/srv/Trigger`` services of the node (``~/<op>``).
+SERVICE_OPS: tuple[Op, ...] = (Op.ESTOP, Op.ENABLE, Op.DISABLE)
 
 #: ``/tf`` publishers keep 100 (tf2_ros's ``DynamicBroadcasterQoS``).
 TF_QOS = QosProfile(depth=100)
@@ -120,6 +134,44 @@ class _Publisher:
                                                              self.layout))
 
 
+class RosCall:
+    """A ROS service call waiting for the loop's reply (:meth:`answer` sends it).
+
+    :param query: the Zenoh query.
+    :param attachment: the request's attachment (sequence number, time, the client's GID).
+    :param layout: the attachment layout the reply is written in.
+    """
+
+    def __init__(self, query: Any, attachment: bytes | None, layout: AttachmentFormat) -> None:
+        self.query = query
+        self.layout = layout
+        self.seq, self.gid, self.bad = 0, bytes(16), ""
+        if attachment is None:
+            self.bad = "expected rmw_zenoh's attachment (sequence number, time, GID), got none"
+        else:
+            try:
+                got = decode_attachment(attachment)
+                self.seq, self.gid = got.sequence_number, got.gid
+            except DecodeError as err:
+                self.bad = str(err)
+
+    def answer(self, line: bytes) -> None:
+        """Reply with the ``Trigger`` response of the socket's reply ``line``, then finish."""
+        try:
+            reply = json.loads(line)
+            ok = reply.get("ok") is True
+            message = (f"state: {reply.get('state')}" if ok else
+                       str((reply.get("error") or {}).get("message", reply)))
+            self.query.reply(self.query.key_expr,
+                             encode_trigger_response(TriggerResponse(ok, message)),
+                             attachment=encode_attachment(self.seq, time.time_ns(), self.gid,
+                                                          self.layout))
+        except Exception:  # the client may be gone
+            log.debug("bridge: reply to %s failed", self.query.key_expr, exc_info=True)
+        finally:
+            self.query.drop()
+
+
 class Ros2Side:
     """The ROS 2 endpoints of the bridge (see the module's doc).
 
@@ -132,9 +184,12 @@ class Ros2Side:
     """
 
     def __init__(self, session: Any, settings: Ros2Settings, namespace: str,
-                 commander: Callable[[str, bool], object]) -> None:
+                 commander: Callable[[str, bool], object],
+                 call: Callable[[RosCall, Request | ProtocolError], object] | None = None
+                 ) -> None:
         self.settings = settings
         self._commander = commander
+        self._call = call
         ns = "/" + namespace if namespace else "/"
         domain, zid, name = settings.domain_id, str(session.zid()), settings.node_name
         self.cmd_vel = resolve_topic_name(settings.cmd_vel, ns)
@@ -167,6 +222,17 @@ class Ros2Side:
                 EntityKind.PUBLISHER, domain, zid, 0, next(ids), ns, name, self.joints_topic,
                 JOINT_STATE, QosProfile()), settings.attachment)
         self._joint_names = dict(settings.joints)
+        #: The services' names (``/robot1/wheelgate/estop``), by op.
+        self.services: dict[Op, str] = {}
+        if settings.services and call is not None:
+            for op in SERVICE_OPS:
+                service = f"{ns.rstrip('/')}/{name}/{op.value}"
+                self.services[op] = service
+                self._entities.append(session.declare_queryable(
+                    topic_key(domain, service, TRIGGER), functools.partial(self._on_call, op)))
+                self._entities.append(session.liveliness().declare_token(entity_token(
+                    EntityKind.SERVICE, domain, zid, 0, next(ids), ns, name, service, TRIGGER,
+                    QosProfile())))
         self._types = {TWIST.dds_name, TWIST_STAMPED.dds_name}
         self._entities.append(session.liveliness().declare_subscriber(
             f"@ros2_lv/{domain}/**", self._on_token, history=True))
@@ -181,6 +247,24 @@ class Ros2Side:
         if (token.kind is EntityKind.PUBLISHER and token.topic == self.cmd_vel
                 and token.type_name in self._types):
             self._commander(commander_name(token.gid), str(sample.kind).endswith("PUT"))
+
+    def _on_call(self, op: Op, query: Any) -> None:
+        key = str(query.key_expr)
+        attachment, payload = query.attachment, query.payload
+        call = RosCall(query, None if attachment is None else attachment.to_bytes(),
+                       self.settings.attachment)
+        request: Request | ProtocolError
+        try:
+            decode_trigger_request(b"" if payload is None else payload.to_bytes())
+            if call.bad:
+                raise ProtocolError(f"{key}: {call.bad}")
+            request = parse_request(json.dumps({"op": op.value}))
+        except DecodeError as err:
+            request = ProtocolError(f"{key}: {err}")
+        except ProtocolError as err:
+            request = err
+        if self._call is not None:
+            self._call(call, request)
 
     # ----------------------------------------------------------------- out (the worker)
 

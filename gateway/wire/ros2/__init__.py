@@ -4,8 +4,8 @@ What a Zenoh bridge needs to exchange messages with ROS 2 nodes that run rmw_zen
 public repository ros2/rmw_zenoh, Jazzy and later):
 
 * :mod:`gateway.wire.ros2.cdr`: XCDR1 little-endian codecs of ``geometry_msgs/msg/Twist``,
-  ``TwistStamped``, ``nav_msgs/msg/Odometry``, ``tf2_msgs/msg/TFMessage`` and
-  ``sensor_msgs/msg/JointState``
+  ``TwistStamped``, ``nav_msgs/msg/Odometry``, ``tf2_msgs/msg/TFMessage``,
+  ``sensor_msgs/msg/JointState`` and the service ``std_srvs/srv/Trigger``
   (:mod:`~gateway.wire.ros2.cdr_stream` has the reader and writer,
   :mod:`~gateway.wire.ros2.messages` the dataclasses and the stamp helpers);
 * :mod:`gateway.wire.ros2.types`: the types' names, DDS names, RIHS01 hashes and ``.msg``
@@ -35,11 +35,15 @@ from gateway.wire.ros2.cdr import (
     decode_joint_state,
     decode_odometry,
     decode_tf_message,
+    decode_trigger_request,
+    decode_trigger_response,
     decode_twist,
     decode_twist_stamped,
     encode_joint_state,
     encode_odometry,
     encode_tf_message,
+    encode_trigger_request,
+    encode_trigger_response,
     encode_twist,
     encode_twist_stamped,
 )
@@ -65,6 +69,7 @@ from gateway.wire.ros2.messages import (
     TFMessage,
     Time,
     TransformStamped,
+    TriggerResponse,
     Twist3D,
     TwistStamped,
     Vector3,
@@ -94,6 +99,7 @@ from gateway.wire.ros2.types import (
     ODOMETRY,
     ROS_TYPES,
     TF_MESSAGE,
+    TRIGGER,
     TWIST,
     TWIST_STAMPED,
     RosType,
@@ -112,6 +118,7 @@ __all__ = [
     "ODOMETRY",
     "ROS_TYPES",
     "TF_MESSAGE",
+    "TRIGGER",
     "TWIST",
     "TWIST_SIZE",
     "TWIST_STAMPED",
@@ -132,6 +139,7 @@ __all__ = [
     "TFMessage",
     "Time",
     "TransformStamped",
+    "TriggerResponse",
     "Twist3D",
     "TwistStamped",
     "Vector3",
@@ -141,12 +149,16 @@ __all__ = [
     "decode_joint_state",
     "decode_odometry",
     "decode_tf_message",
+    "decode_trigger_request",
+    "decode_trigger_response",
     "decode_twist",
     "decode_twist_stamped",
     "encode_attachment",
     "encode_joint_state",
     "encode_odometry",
     "encode_tf_message",
+    "encode_trigger_request",
+    "encode_trigger_response",
     "encode_twist",
     "encode_twist_stamped",
     "entity_token",

@@ -1,4 +1,4 @@
-"""Hand-written XCDR1 little-endian codecs of the five messages the bridge exchanges.
+"""Hand-written XCDR1 little-endian codecs of the messages the bridge exchanges.
 
 ====================================  =========================================================
 message                               body layout (offsets from the end of the 4-byte header)
@@ -15,6 +15,9 @@ message                               body layout (offsets from the end of the 4
 ``sensor_msgs/msg/JointState``        header, u32 count and the strings of name, then each of
                                       position, velocity, effort: u32 count, pad to 8 (when
                                       not empty), count x f64
+``std_srvs/srv/Trigger`` request      u8 ``structure_needs_at_least_one_member`` (an empty
+                                      struct's placeholder; 5 bytes in all)
+``std_srvs/srv/Trigger`` response     bool success (u8), pad to 4, string message
 ====================================  =========================================================
 
 Field order comes from the ``.msg`` files (ros2/common_interfaces, ros2/geometry2), the
@@ -52,6 +55,7 @@ from gateway.wire.ros2.messages import (
     TFMessage,
     Time,
     TransformStamped,
+    TriggerResponse,
     Twist3D,
     TwistStamped,
     Vector3,
@@ -62,6 +66,8 @@ TWIST_STAMPED = "geometry_msgs/msg/TwistStamped"
 ODOMETRY = "nav_msgs/msg/Odometry"
 TF_MESSAGE = "tf2_msgs/msg/TFMessage"
 JOINT_STATE = "sensor_msgs/msg/JointState"
+TRIGGER_REQUEST = "std_srvs/srv/Trigger_Request"
+TRIGGER_RESPONSE = "std_srvs/srv/Trigger_Response"
 
 _SIX = struct.Struct("<6d")
 _POSE = struct.Struct("<7d")
@@ -295,3 +301,42 @@ def decode_joint_state(payload: Payload) -> JointState:
     effort = _read_float64_sequence(r, "effort")
     r.finish()
     return JointState(header, names, position, velocity, effort)
+
+
+# ----------------------------------------------------------------------------- std_srvs Trigger
+
+
+def encode_trigger_request() -> bytes:
+    """A ``std_srvs/srv/Trigger`` request (its placeholder byte 0)."""
+    w = CdrWriter(TRIGGER_REQUEST)
+    w.octet(0, "structure_needs_at_least_one_member")
+    return w.payload()
+
+
+def decode_trigger_request(payload: Payload) -> None:
+    """Check a ``std_srvs/srv/Trigger`` request (any placeholder value: it means nothing)."""
+    r = CdrReader(TRIGGER_REQUEST, payload)
+    r.octet("structure_needs_at_least_one_member")
+    r.finish()
+
+
+def encode_trigger_response(message: TriggerResponse) -> bytes:
+    """The ``std_srvs/srv/Trigger`` response payload of ``message``."""
+    if not isinstance(message, TriggerResponse) or not isinstance(message.success, bool):
+        raise EncodeError(f"{TRIGGER_RESPONSE}: expected a TriggerResponse with a bool "
+                          f"success, got {message!r}")
+    w = CdrWriter(TRIGGER_RESPONSE)
+    w.octet(message.success, "success")
+    w.string(message.message, "message")
+    return w.payload()
+
+
+def decode_trigger_response(payload: Payload) -> TriggerResponse:
+    """The :class:`TriggerResponse` in a ``std_srvs/srv/Trigger`` response payload."""
+    r = CdrReader(TRIGGER_RESPONSE, payload)
+    success = r.octet("success")
+    if success > 1:
+        raise DecodeError(f"{TRIGGER_RESPONSE}: expected 0 or 1 for success, got {success}")
+    message = r.string("message")
+    r.finish()
+    return TriggerResponse(bool(success), message)

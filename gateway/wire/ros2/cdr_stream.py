@@ -117,6 +117,10 @@ class CdrReader:
         self._pos = pos + size
         return pos
 
+    def octet(self, field: str) -> int:
+        """One ``uint8`` (or ``bool``, 0 or 1 on the wire)."""
+        return self._data[self._take(1, 1, field)]
+
     def int32(self, field: str) -> int:
         """One ``int32``."""
         return int(_I32.unpack_from(self._data, self._take(4, 4, field))[0])
@@ -220,6 +224,11 @@ class CdrWriter:
                 f"got {value!r}"
             )
         return value
+
+    def octet(self, value: object, field: str) -> None:
+        """One ``uint8`` (a ``bool`` is 0 or 1)."""
+        self._buf.append(self._check_int(int(value) if isinstance(value, bool) else value,
+                                         0, 255, field))
 
     def int32(self, value: object, field: str) -> None:
         """One ``int32``."""

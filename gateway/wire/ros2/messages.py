@@ -1,8 +1,9 @@
 """The ROS 2 messages the bridge speaks, as frozen dataclasses, and the stamp helpers.
 
 Each class mirrors one message of the public repositories ros2/common_interfaces
-(``geometry_msgs``, ``nav_msgs``, ``sensor_msgs``, ``std_msgs``), ros2/geometry2 (``tf2_msgs``) and
-ros2/rcl_interfaces (``builtin_interfaces``), field for field and in the same order, except
+(``geometry_msgs``, ``nav_msgs``, ``sensor_msgs``, ``std_msgs``, ``std_srvs``), ros2/geometry2
+(``tf2_msgs``) and ros2/rcl_interfaces (``builtin_interfaces``), field for field and in the
+same order, except
 :class:`Twist3D`, which flattens ``geometry_msgs/msg/Twist``'s two vectors, and
 :class:`Odometry`, which flattens the ``PoseWithCovariance`` and ``TwistWithCovariance``.
 Units are the ROS ones (REP 103): metres, radians, seconds.  Values are not validated here:
@@ -171,3 +172,15 @@ class JointState:
     position: tuple[float, ...] = ()
     velocity: tuple[float, ...] = ()
     effort: tuple[float, ...] = ()
+
+
+@dataclass(frozen=True, slots=True)
+class TriggerResponse:
+    """``std_srvs/srv/Trigger``'s response (its request has no field).
+
+    :param success: whether the service did what it is for.
+    :param message: what happened, for a person.
+    """
+
+    success: bool = False
+    message: str = ""

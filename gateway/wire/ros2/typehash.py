@@ -15,7 +15,8 @@ ros2/rosidl (``serialize_field_type``, ``extract_full_type_description``,
 
 The ``.msg`` reader here covers what ``rosidl_adapter`` turns into IDL for ordinary messages:
 primitive types, (bounded) strings, fixed arrays, bounded and unbounded sequences, nested types
-(``Type``, ``pkg/Type``), default values and constants (both ignored).  Pure: no I/O.
+(``Type``, ``pkg/Type``; a service's parts as ``pkg/srv/Name_Request``), default values and
+constants (both ignored).  Pure: no I/O.
 """
 
 from __future__ import annotations
@@ -73,7 +74,7 @@ _PRIMITIVES = {
     "string": FieldType.STRING, "wstring": FieldType.WSTRING,
 }
 _TYPE = re.compile(
-    r"(?P<base>[A-Za-z][A-Za-z0-9_]*(?:/[A-Za-z][A-Za-z0-9_]*)?)"
+    r"(?P<base>[A-Za-z][A-Za-z0-9_]*(?:/(?:srv/)?[A-Za-z][A-Za-z0-9_]*)?)"
     r"(?:<=(?P<string_bound>[0-9]+))?"
     r"(?:\[(?P<array>(?:<=)?[0-9]*)\])?$"
 )
@@ -130,7 +131,8 @@ def _field(ros_name: str, line_no: int, type_text: str, name: str) -> FieldDescr
     elif bound is None:
         type_id = int(FieldType.NESTED_TYPE)
         package = (base if "/" in base else ros_name).partition("/")[0]
-        nested = f"{package}/msg/{base.rsplit('/', 1)[-1]}"
+        # (a service's parts, ``pkg/srv/Name_Request``, are named in full)
+        nested = base if base.count("/") == 2 else f"{package}/msg/{base.rsplit('/', 1)[-1]}"
     else:
         raise DecodeError(f"{where}: expected a bound on a string, got {type_text!r}")
     capacity = 0

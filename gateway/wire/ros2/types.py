@@ -2,7 +2,7 @@
 
 A type hash (RIHS01, REP 2011) identifies a message definition; rmw_zenoh puts it in every data
 key and liveliness token, so a subscriber only meets publishers of the identical definition.
-The five hashes below are the published ones (Jazzy and later; the definitions have not changed
+The six hashes below are the published ones (Jazzy and later; the definitions have not changed
 since); :func:`gateway.wire.ros2.typehash.compute_type_hash` recomputes each of them from
 :data:`MESSAGE_DEFINITIONS`, and ``tests/wire/test_ros2_types.py`` checks that they agree.
 
@@ -72,12 +72,18 @@ JOINT_STATE = RosType(
     "sensor_msgs/msg/JointState",
     "RIHS01_a13ee3a330e346c9d87b5aa18d24e11690752bd33a0350f11c5882bc9179260e",
 )
-#: The five types, by ROS name.
+#: A service: its hash is the service type's, its DDS name the service's
+#: (``std_srvs::srv::dds_::Trigger_``: rmw_zenoh strips the response type's ``Response_``).
+TRIGGER = RosType(
+    "std_srvs/srv/Trigger",
+    "RIHS01_eeff2cd6fa5ad9d27cdf4dec64818317839b62f212a91e6b5304b634b2062c5f",
+)
+#: The six types, by ROS name.
 ROS_TYPES: Mapping[str, RosType] = MappingProxyType(
-    {t.ros_name: t for t in (TWIST, TWIST_STAMPED, ODOMETRY, TF_MESSAGE, JOINT_STATE)}
+    {t.ros_name: t for t in (TWIST, TWIST_STAMPED, ODOMETRY, TF_MESSAGE, JOINT_STATE, TRIGGER)}
 )
 
-#: ``.msg`` text of the five types and of every type they reference, by ROS name.
+#: ``.msg`` text of the six types and of every type they reference, by ROS name.
 MESSAGE_DEFINITIONS: Mapping[str, str] = MappingProxyType({
     "builtin_interfaces/msg/Time": "int32 sec\nuint32 nanosec\n",
     "std_msgs/msg/Header": "builtin_interfaces/Time stamp\nstring frame_id\n",
@@ -100,5 +106,23 @@ MESSAGE_DEFINITIONS: Mapping[str, str] = MappingProxyType({
     "sensor_msgs/msg/JointState": (
         "std_msgs/Header header\nstring[] name\nfloat64[] position\nfloat64[] velocity\n"
         "float64[] effort\n"
+    ),
+    # A service as rosidl describes it (rosidl_generator_type_description ``add_srv``): its
+    # request, response and introspection event; an empty struct (Trigger's request) gets
+    # rosidl's placeholder member, as std_msgs/msg/Empty's generated description shows.
+    "service_msgs/msg/ServiceEventInfo": (
+        "uint8 event_type\nbuiltin_interfaces/Time stamp\nchar[16] client_gid\n"
+        "int64 sequence_number\n"
+    ),
+    "std_srvs/srv/Trigger_Request": "uint8 structure_needs_at_least_one_member\n",
+    "std_srvs/srv/Trigger_Response": "bool success\nstring message\n",
+    "std_srvs/srv/Trigger_Event": (
+        "service_msgs/ServiceEventInfo info\nstd_srvs/srv/Trigger_Request[<=1] request\n"
+        "std_srvs/srv/Trigger_Response[<=1] response\n"
+    ),
+    "std_srvs/srv/Trigger": (
+        "std_srvs/srv/Trigger_Request request_message\n"
+        "std_srvs/srv/Trigger_Response response_message\n"
+        "std_srvs/srv/Trigger_Event event_message\n"
     ),
 })
