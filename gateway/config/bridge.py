@@ -244,14 +244,14 @@ def parse_bridge(raw: object, source: str, robot: str) -> tuple[BridgeSettings, 
         if namespace:
             validate_namespace(namespace, f"{where}.namespace")
         keys = ("cmd_vel", "odom", "joint_states") if r["joint_states"] else ("cmd_vel", "odom")
-        topics = {key: resolve_topic_name(str(r[key]), namespace or "/", f"{where}.ros2.{key}")
-                  for key in keys}  # relative to the namespace, or absolute
-        for key in keys[1:]:
-            same = [k for k in keys[:keys.index(key)] if topics[k] == topics[key]]
-            if same:
+        taken: dict[str, str] = {}  # topic (relative to the namespace, or absolute) -> key
+        for key in keys:
+            topic = resolve_topic_name(str(r[key]), namespace or "/", f"{where}.ros2.{key}")
+            if topic in taken:
                 raise ConfigError(f"{where}.ros2.{key}: expected a topic other than "
-                                  f"{same[0]}'s, got {r[key]!r}, which is {topics[key]!r} as "
-                                  f"{same[0]} is")
+                                  f"{taken[topic]}'s, got {r[key]!r}, which is {topic!r} as "
+                                  f"{taken[topic]} is")
+            taken[topic] = key
         r["joints"] = _joints(r["joints"], f"{where}.ros2.joints")
         validate_node_name(str(r["node_name"]), f"{where}.ros2.node_name")
         for key in ("odom_frame", "base_frame"):

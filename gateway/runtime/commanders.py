@@ -109,10 +109,19 @@ class Commanders:
         self._warn = LogThrottle(WARN_EVERY_S)
         #: Frames heard from another sender, since start.
         self.heard = 0
-        #: The time of the gateway's first cycle (set by it): listening starts there.
+        #: When listening began: the first time the watch was asked (:meth:`quiet`, every
+        #: cycle until the motors are armed, so the gateway's first cycle).
         self.since_s: float | None = None
-        #: The last command of ours heard from another sender: when, and what was heard.
-        self._last_command: tuple[float, str] | None = None
+        #: The last command of ours heard from another sender: when, the frame, its key.
+        self._last_command: tuple[float, Frame, Key] | None = None
+
+    def _listening(self, now_s: float) -> bool:
+        """Whether the watch is still in its first :data:`LISTEN_S` (it starts now when it
+        had not)."""
+        since = self.since_s
+        if since is None:
+            since = self.since_s = now_s
+        return now_s - since < LISTEN_S
 
     def may_enable(self, now_s: float) -> bool:
         """Whether the loop may take the enable pending now.
@@ -123,8 +132,7 @@ class Commanders:
         that releases the motors (:meth:`~gateway.core.control.Supervisor.yield_motors`),
         logged and reported.
         """
-        since = self.since_s
-        if since is None or now_s - since < LISTEN_S:
+        if self._listening(now_s):
             self.supervisor.hold_enable(now_s)
             return False
         holder = self.holder(now_s)
@@ -143,7 +151,8 @@ class Commanders:
         last = self._last_command
         if last is None or now_s - last[0] > LISTEN_S:
             return None
-        return f"{last[1]} {max(0.0, now_s - last[0]):.3f} s ago"
+        t, frame, key = last
+        return f"{self._heard(frame, key)} {max(0.0, now_s - t):.3f} s ago"
 
     def quiet(self, now_s: float) -> bool:
         """Whether a gateway that has not armed its motors sends them nothing, not even its
@@ -151,8 +160,7 @@ class Commanders:
         down: while it listens at start, and while another sender commands them
         (:meth:`holder`).  Two SYNC producers on one CANopen network are an error (CiA 301),
         and our heartbeat would keep the other's drives from stopping when the other dies."""
-        since = self.since_s
-        return since is None or now_s - since < LISTEN_S or self.holder(now_s) is not None
+        return self._listening(now_s) or self.holder(now_s) is not None
 
     def route(self, takers: Mapping[Key, Callable[[Frame], bool]]
               ) -> dict[Key, Callable[[Frame], bool]]:
@@ -173,25 +181,30 @@ class Commanders:
         """``frame`` came from another sender: a command is a fault while the motors are
         enabled; a report, or a command while they are not, a warning."""
         self.heard += 1
-        what = self.own[key]
-        heard = f"another sender on {self.bus}: heard {frame.to_cansend()} ({what})"
         report = key in self._reports
-        if report:  # a second gateway; its commands, if of our motors, tell
-            message = (f"{heard}: another wheelgate runs on this bus; if it drives these "
-                       f"motors, stop it; if it drives others, give each its own "
-                       f"gateway.can_ids")
-        else:
-            self._last_command = (frame.timestamp_s, heard)
-            message = (f"{heard}, which only this gateway sends: two programs command these "
-                       f"motors (another wheelgate run, jog --standalone, a script); stop "
-                       f"the other one")
-        # (An enable not taken yet armed nothing: may_enable judges it.)
-        sup = self.supervisor
-        fault = None if report or sup.enable_pending else sup.bus_fault(message)
-        if fault is not None:
-            log.error("fault: %s", message)
-            self.report(ErrorCode.BUS_ERROR, message)
-            return
+        if not report:
+            self._last_command = (frame.timestamp_s, frame, key)
+            sup = self.supervisor
+            if not sup.enable_pending:  # (one not taken yet armed nothing: may_enable judges)
+                message = self._message(frame, key, report)
+                if sup.bus_fault(message) is not None:
+                    log.error("fault: %s", message)
+                    self.report(ErrorCode.BUS_ERROR, message)
+                    return
         n = self._warn.note(frame.timestamp_s)
         if n is not None:
-            log.warning("%s (%d such frames since the last line)", message, n)
+            log.warning("%s (%d such frames since the last line)",
+                        self._message(frame, key, report), n)
+
+    def _heard(self, frame: Frame, key: Key) -> str:
+        return f"another sender on {self.bus}: heard {frame.to_cansend()} ({self.own[key]})"
+
+    def _message(self, frame: Frame, key: Key, report: bool) -> str:
+        """What hearing ``frame`` means: another wheelgate (a report), or a fight."""
+        if report:  # a second gateway; its commands, if of our motors, tell
+            return (f"{self._heard(frame, key)}: another wheelgate runs on this bus; if it "
+                    f"drives these motors, stop it; if it drives others, give each its own "
+                    f"gateway.can_ids")
+        return (f"{self._heard(frame, key)}, which only this gateway sends: two programs "
+                f"command these motors (another wheelgate run, jog --standalone, a script); "
+                f"stop the other one")

@@ -193,8 +193,6 @@ class Gateway:
 
     def cycle(self, now_s: float) -> None:
         """One control cycle at time ``now_s`` (monotonic seconds)."""
-        if not self.counts.cycles:  # the watch for another commander listens from here
-            self.commanders.since_s = now_s
         self.counts.cycles += 1
         out: list[Frame] = []
         edge = self.edge

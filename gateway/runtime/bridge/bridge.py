@@ -358,12 +358,14 @@ def _bad(err: ProtocolError) -> LastError:
 def _answer(query: Any, line: bytes) -> None:
     """Reply to a query and finalize it (the querier waits until every reply is sent); a
     ROS service call (:class:`~gateway.runtime.bridge.ros2.RosCall`) answers in its type."""
-    answer = getattr(query, "answer", None)
-    if answer is not None:
-        answer(line)
-        return
+    payload, attachment = line, None
+    response = getattr(query, "response", None)
+    if response is not None:  # (a RosCall: its query, and its response to the line)
+        query = query.query
     try:
-        query.reply(query.key_expr, line)
+        if response is not None:
+            payload, attachment = response(line)
+        query.reply(query.key_expr, payload, attachment=attachment)
     except Exception:  # the querier may be gone
         log.debug("bridge: reply to %s failed", query.key_expr, exc_info=True)
     finally:

@@ -39,6 +39,7 @@ from typing import TYPE_CHECKING, Any, cast
 
 from gateway.core.errors import DecodeError, EncodeError
 from gateway.runtime.bridge.inbox import NO_REPLY, Inbound, TwistSource
+from gateway.runtime.bridge.native import parse_query
 from gateway.runtime.bridge.session import import_zenoh
 from gateway.wire.ros2 import (
     JOINT_STATE,
@@ -135,7 +136,8 @@ class _Publisher:
 
 
 class RosCall:
-    """A ROS service call waiting for the loop's reply (:meth:`answer` sends it).
+    """A ROS service call waiting for the loop's reply (:meth:`response` is its payload and
+    attachment; the bridge's ``_answer`` sends them).
 
     :param query: the Zenoh query.
     :param attachment: the request's attachment (sequence number, time, the client's GID).
@@ -155,21 +157,15 @@ class RosCall:
             except DecodeError as err:
                 self.bad = str(err)
 
-    def answer(self, line: bytes) -> None:
-        """Reply with the ``Trigger`` response of the socket's reply ``line``, then finish."""
-        try:
-            reply = json.loads(line)
-            ok = reply.get("ok") is True
-            message = (f"state: {reply.get('state')}" if ok else
-                       str((reply.get("error") or {}).get("message", reply)))
-            self.query.reply(self.query.key_expr,
-                             encode_trigger_response(TriggerResponse(ok, message)),
-                             attachment=encode_attachment(self.seq, time.time_ns(), self.gid,
-                                                          self.layout))
-        except Exception:  # the client may be gone
-            log.debug("bridge: reply to %s failed", self.query.key_expr, exc_info=True)
-        finally:
-            self.query.drop()
+    def response(self, line: bytes) -> tuple[bytes, bytes]:
+        """The ``Trigger`` response of the socket's reply ``line``, and the reply's
+        attachment (the call's sequence number and the client's GID)."""
+        reply = json.loads(line)
+        ok = reply.get("ok") is True
+        message = (f"state: {reply.get('state')}" if ok else
+                   str((reply.get("error") or {}).get("message", reply)))
+        return (encode_trigger_response(TriggerResponse(ok, message)),
+                encode_attachment(self.seq, time.time_ns(), self.gid, self.layout))
 
 
 class Ros2Side:
@@ -258,7 +254,7 @@ class Ros2Side:
             decode_trigger_request(b"" if payload is None else payload.to_bytes())
             if call.bad:
                 raise ProtocolError(f"{key}: {call.bad}")
-            request = parse_request(json.dumps({"op": op.value}))
+            request = parse_query(op, None, key)  # (no payload: the op's bare request)
         except DecodeError as err:
             request = ProtocolError(f"{key}: {err}")
         except ProtocolError as err:

@@ -252,16 +252,6 @@ def decode_tf_message(payload: Payload) -> TFMessage:
 # ----------------------------------------------------------------------------- JointState
 
 
-def _write_float64_sequence(w: CdrWriter, values: object, field: str) -> None:
-    items = tuple(values) if isinstance(values, (tuple, list)) else values
-    if not isinstance(items, tuple):
-        raise EncodeError(f"{JOINT_STATE}: expected a sequence of numbers for {field}, "
-                          f"got {values!r}")
-    w.sequence_length(len(items), field)
-    if items:  # (an empty sequence is its count alone: nothing to align)
-        w.float64s(struct.Struct(f"<{len(items)}d"), items, field)
-
-
 def _read_float64_sequence(r: CdrReader, field: str) -> tuple[float, ...]:
     count = r.sequence_length(field, 8)
     return r.float64s(struct.Struct(f"<{count}d"), field) if count else ()
@@ -272,10 +262,10 @@ def encode_joint_state(message: JointState) -> bytes:
     and effort is empty or has one value per name."""
     if not isinstance(message, JointState):
         raise EncodeError(f"{JOINT_STATE}: expected a JointState, got {message!r}")
-    names = tuple(message.name) if isinstance(message.name, (tuple, list)) else None
-    if names is None:
+    names = message.name
+    if not isinstance(names, (tuple, list)):
         raise EncodeError(f"{JOINT_STATE}: expected a sequence of str for name, got "
-                          f"{message.name!r}")
+                          f"{names!r}")
     w = CdrWriter(JOINT_STATE)
     _write_header(w, message.header, "header")
     w.sequence_length(len(names), "name")
@@ -283,10 +273,12 @@ def encode_joint_state(message: JointState) -> bytes:
         w.string(name, f"name[{index}]")
     for field in ("position", "velocity", "effort"):
         values = getattr(message, field)
-        if isinstance(values, (tuple, list)) and len(values) not in (0, len(names)):
+        if not isinstance(values, (tuple, list)) or len(values) not in (0, len(names)):
             raise EncodeError(f"{JOINT_STATE}: expected none or {len(names)} numbers for "
-                              f"{field} (one per name), got {len(values)}")
-        _write_float64_sequence(w, values, field)
+                              f"{field} (one per name), got {values!r}")
+        w.sequence_length(len(values), field)
+        if values:  # (an empty sequence is its count alone: nothing to align)
+            w.float64s(struct.Struct(f"<{len(values)}d"), values, field)
     return w.payload()
 
 
