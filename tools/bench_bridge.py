@@ -91,7 +91,7 @@ def loop_side(posts: int) -> None:
         for _ in range(5):
             t0 = time.perf_counter()
             for _ in range(posts):
-                remote.post((event,))
+                remote.post((event,), 0.0)
             post_us.append((time.perf_counter() - t0) / posts * 1e6)
             t0 = time.perf_counter()
             cycles(posts)

@@ -69,8 +69,9 @@ def commander(args: argparse.Namespace) -> None:
 def ros_node(args: argparse.Namespace) -> None:
     """A ROS 2 node as rmw_zenoh puts it on the wire (:mod:`gateway.wire.ros2`): its tokens, a
     ``Twist`` (or ``TwistStamped``) publisher on ``--cmd-vel`` sending every 50 ms, and
-    subscriptions to ``--odom``, ``/tf`` and with ``--joints`` that topic's joint states;
-    prints ``ready``, then one JSON line per message received."""
+    subscriptions to ``--odom``, ``/tf``, with ``--joints`` that topic's joint states and with
+    ``--diagnostics`` that topic's diagnostics (on the exact key, the type's hash in it, as a
+    Jazzy subscriber); prints ``ready``, then one JSON line per message received."""
     from gateway.wire import ros2  # noqa: PLC0415 - the bridge's own wire layer
 
     s = session(args.connect, args.lease)
@@ -117,9 +118,19 @@ def ros_node(args: argparse.Namespace) -> None:
         show("joints", {"names": list(j.name), "position": list(j.position),
                         "velocity": [None if math.isnan(v) else v for v in j.velocity]})
 
+    def on_diagnostics(sample: Any) -> None:
+        d = ros2.decode_diagnostic_array(sample.payload.to_bytes())
+        show("diagnostics", {"key": str(sample.key_expr), "statuses": [
+            {"level": int(x.level), "name": x.name, "message": x.message,
+             "hardware_id": x.hardware_id, "values": {v.key: v.value for v in x.values}}
+            for x in d.status]})
+
     if args.joints:
         keep.append(s.declare_subscriber(ros2.topic_subscription_key(
             args.domain, args.joints, ros2.JOINT_STATE), on_joints))
+    if args.diagnostics:
+        keep.append(s.declare_subscriber(ros2.topic_key(
+            args.domain, args.diagnostics, ros2.DIAGNOSTIC_ARRAY), on_diagnostics))
     keep += [s.declare_subscriber(ros2.topic_subscription_key(args.domain, args.odom,
                                                               ros2.ODOMETRY), on_odom),
              s.declare_subscriber(ros2.topic_subscription_key(args.domain, "/tf",
@@ -225,6 +236,8 @@ def main(argv: list[str] | None = None) -> None:
     r.add_argument("--cmd-vel", default="/cmd_vel")
     r.add_argument("--odom", default="/odom")
     r.add_argument("--joints", default="", help="also read sensor_msgs/msg/JointState here")
+    r.add_argument("--diagnostics", default="",
+                   help="also read diagnostic_msgs/msg/DiagnosticArray here")
     r.add_argument("--vx", type=float, default=0.3)
     r.add_argument("--wz", type=float, default=0.0)
     r.add_argument("--stamped", action="store_true", help="TwistStamped instead of Twist")

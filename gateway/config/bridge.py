@@ -81,6 +81,9 @@ ROS2_KEYS: Mapping[str, OptionSpec] = MappingProxyType({
                                         "its own name), as the robot's URDF names them"),
     "services": OptionSpec(bool, False, help="std_srvs/srv/Trigger services ~/estop, "
                                              "~/enable, ~/disable of the gateway's node"),
+    "diagnostics": OptionSpec(str, "", help="topic of the gateway's, bus's and motors' "
+                                            "diagnostic_msgs/msg/DiagnosticArray, once a "
+                                            "second ('': none; ROS's tools read /diagnostics)"),
 })
 FOXGLOVE_KEYS: Mapping[str, OptionSpec] = MappingProxyType({
     "host": OptionSpec(str, "127.0.0.1", help="address of the WebSocket server"),
@@ -243,7 +246,7 @@ def parse_bridge(raw: object, source: str, robot: str) -> tuple[BridgeSettings, 
 
         if namespace:
             validate_namespace(namespace, f"{where}.namespace")
-        keys = ("cmd_vel", "odom", "joint_states") if r["joint_states"] else ("cmd_vel", "odom")
+        keys = ("cmd_vel", "odom", *(k for k in ("joint_states", "diagnostics") if r[k]))
         taken: dict[str, str] = {}  # topic (relative to the namespace, or absolute) -> key
         for key in keys:
             topic = resolve_topic_name(str(r[key]), namespace or "/", f"{where}.ros2.{key}")

@@ -93,6 +93,8 @@ class Ros2Settings:
         states carry (a URDF's); a wheel or actuator not named here is its own joint name.
     :param services: whether the node offers ``std_srvs/srv/Trigger`` services ``~/estop``,
         ``~/enable`` and ``~/disable`` (the control socket's requests, from the bridge).
+    :param diagnostics: the topic ``diagnostic_msgs/msg/DiagnosticArray`` goes out on ('':
+        none; ``/diagnostics`` is where ROS's diagnostic tools look).
     """
 
     domain_id: int = 0
@@ -106,6 +108,7 @@ class Ros2Settings:
     joint_states: str = ""
     joints: tuple[tuple[str, str], ...] = ()
     services: bool = False
+    diagnostics: str = ""
 
 
 @dataclass(frozen=True, slots=True)

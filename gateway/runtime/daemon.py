@@ -26,12 +26,11 @@ import can
 
 from gateway.config import default_socket_path
 from gateway.core.errors import GatewayError
-from gateway.core.settings import FeedbackRecovery
-from gateway.core.types import DriveState, GatewayState
+from gateway.core.types import GatewayState
 from gateway.runtime.latch import EstopLatch, latch_path
 from gateway.runtime.loop import Gateway
 from gateway.runtime.remote import Remote
-from gateway.runtime.report import announcement, build_status
+from gateway.runtime.report import announcement, build_status, status_text
 from gateway.runtime.requests import RequestHandler
 from gateway.runtime.sdnotify import SystemdNotifier
 from gateway.runtime.server import ControlServer
@@ -131,6 +130,8 @@ class Daemon:
         self.latch = EstopLatch(latch_path(config.loop.state_file, config.name))
         self._ready = False
         self._state = GatewayState.DISABLED
+        #: The state last said is ENABLING while listening for another commander.
+        self._listening = False
         #: Answers the socket's requests (:mod:`gateway.runtime.requests`).
         self.requests = RequestHandler(self.gateway, self.server, self.latch, self.status)
         # When each twist accepted since the last cycle arrived (the latency's start).
@@ -251,7 +252,7 @@ class Daemon:
             topic = event_topic(news)
             if server.has_subscribers(topic):
                 server.publish(topic, event_line(news))
-        self.remote.post(gw.outbox)
+        self.remote.post(gw.outbox, now_s)
         gw.outbox.clear()
         sup = gw.supervisor
         self.latch.track(sup.counts.estops, sup.reason if gw.state is GatewayState.ESTOP else None)
@@ -259,9 +260,7 @@ class Daemon:
             if self._state is GatewayState.ESTOP:
                 self.latch.clear()  # only an explicit enable leaves ESTOP
             before, self._state = self._state, gw.state
-            text = self._status_text()
-            self.notifier.status(text)
-            log.info("state %s", text)
+            self._say_state()
             if self.announce is not None:
                 line = announcement(self.config, before, gw.state, self._announced_running,
                                     self.sim is not None, self.socket_path,
@@ -272,6 +271,8 @@ class Daemon:
                         self.announce(line)
                     except OSError as err:  # best effort, as logging is: stderr may be gone
                         log.debug("announcement not written: %s", err)
+        elif self._listening and not sup.enable_pending:  # (listened: the enable is taken)
+            self._say_state()
         if gw.state is GatewayState.RUNNING and not self._ready:
             self._mark_ready()
         if self._watchdog_s is not None and now_s >= self._next_watchdog and self._healthy():
@@ -279,21 +280,13 @@ class Daemon:
             self._next_watchdog = now_s + self._watchdog_s
         self.scheduler.timer.record_cost(time.perf_counter() - start)
 
-    def _status_text(self) -> str:
-        """The state for systemd's ``STATUS=``, with what the daemon waits for."""
+    def _say_state(self) -> None:
+        """The state, with what the daemon waits for, to systemd's ``STATUS=`` and the log."""
         gw = self.gateway
-        reason = gw.supervisor.reason
-        text = gw.state.name + (f": {reason}" if reason else "")
-        if gw.state is GatewayState.ENABLING:
-            return text + ": waiting for the motors to enable"
-        if (gw.state is GatewayState.FAULT
-                and self.config.loop.feedback_recovery is FeedbackRecovery.AUTO):
-            offline = [s.name for s in gw.drives.status(time.monotonic())
-                       if s.state is DriveState.OFFLINE]
-            if offline:
-                text += (f" (waiting for motors: {', '.join(offline)} silent; the drives are "
-                         f"enabled again once every motor answers)")
-        return text
+        self._listening = gw.state is GatewayState.ENABLING and gw.supervisor.enable_pending
+        text = status_text(gw)
+        self.notifier.status(text)
+        log.info("state %s", text)
 
     def _healthy(self) -> bool:
         """Whether to feed the systemd watchdog: the loop runs (we are in it) and the bus
@@ -302,7 +295,7 @@ class Daemon:
 
     def _mark_ready(self) -> None:
         self._ready = True
-        self.notifier.ready(f"{self._status_text()}; socket {self.socket_path}")
+        self.notifier.ready(f"{status_text(self.gateway)}; socket {self.socket_path}")
 
     def _wait(self) -> None:
         """Serve the socket until the next deadline: poll while whole milliseconds remain

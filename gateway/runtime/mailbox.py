@@ -4,8 +4,9 @@ The loop must never wait for a network peer: a Zenoh ``put`` costs 50-70 us of t
 thread, a WebSocket client can stall.  So the loop only *posts* to a :class:`Mailbox` (a lock
 held for a few attribute stores) and a worker thread *takes* what is there:
 
-* one slot each for the newest :class:`Snapshot` and the newest state: a slow worker skips
-  to the latest instead of falling behind (old poses are worth nothing);
+* one slot each for the newest :class:`Snapshot`, the newest state and the newest full status
+  report (for ROS 2 diagnostics): a slow worker skips to the latest instead of falling behind
+  (old poses are worth nothing);
 * the errors, in order and none dropped while fewer than :data:`MAX_ERRORS` wait (beyond that
   the oldest go, counted in :attr:`Delivery.errors_dropped`: a worker that stalled for that
   long has lost its peer anyway);
@@ -23,7 +24,7 @@ from typing import TYPE_CHECKING, Generic, TypeVar
 if TYPE_CHECKING:
     from gateway.core.events import StatusEvent
     from gateway.core.kinematics.odometry import OdometryState
-    from gateway.core.status import LastError
+    from gateway.core.status import GatewayStatus, LastError
     from gateway.core.types import GatewayState
 
 __all__ = ["MAX_ERRORS", "Delivery", "Mailbox", "Snapshot", "SteerSample", "WheelSample"]
@@ -95,6 +96,7 @@ class Delivery(Generic[R]):
     :param replies: the replies since the last take, oldest first.
     :param errors_dropped: errors lost because :data:`MAX_ERRORS` were waiting.
     :param closed: the mailbox was closed: the worker should end.
+    :param report: the newest full status since the last take, if any.
     """
 
     snapshot: Snapshot | None
@@ -103,6 +105,7 @@ class Delivery(Generic[R]):
     replies: tuple[R, ...]
     errors_dropped: int
     closed: bool
+    report: GatewayStatus | None = None
 
 
 class Mailbox(Generic[R]):
@@ -112,21 +115,27 @@ class Mailbox(Generic[R]):
         self._cond = threading.Condition(threading.Lock())
         self._snapshot: Snapshot | None = None
         self._status: StatusEvent | None = None
+        self._report: GatewayStatus | None = None
         self._errors: collections.deque[LastError] = collections.deque()
         self._replies: list[R] = []
         self._dropped = 0
         self._closed = False
 
     def post(self, snapshot: Snapshot | None = None, status: StatusEvent | None = None,
-             errors: tuple[LastError, ...] = (), replies: tuple[R, ...] = ()) -> None:
-        """Leave news for the worker (the newest snapshot and state replace older ones)."""
-        if snapshot is None and status is None and not errors and not replies:
+             errors: tuple[LastError, ...] = (), replies: tuple[R, ...] = (),
+             report: GatewayStatus | None = None) -> None:
+        """Leave news for the worker (the newest snapshot, state and report replace older
+        ones)."""
+        if (snapshot is None and status is None and not errors and not replies
+                and report is None):
             return
         with self._cond:
             if snapshot is not None:
                 self._snapshot = snapshot
             if status is not None:
                 self._status = status
+            if report is not None:
+                self._report = report
             for err in errors:
                 if len(self._errors) == MAX_ERRORS:
                     self._errors.popleft()
@@ -141,8 +150,8 @@ class Mailbox(Generic[R]):
             if not self._pending():
                 self._cond.wait(timeout_s)
             out = Delivery(self._snapshot, self._status, tuple(self._errors),
-                           tuple(self._replies), self._dropped, self._closed)
-            self._snapshot = self._status = None
+                           tuple(self._replies), self._dropped, self._closed, self._report)
+            self._snapshot = self._status = self._report = None
             self._errors.clear()
             self._replies = []
             self._dropped = 0
@@ -156,4 +165,4 @@ class Mailbox(Generic[R]):
 
     def _pending(self) -> bool:
         return (self._closed or self._snapshot is not None or self._status is not None
-                or bool(self._errors) or bool(self._replies))
+                or self._report is not None or bool(self._errors) or bool(self._replies))

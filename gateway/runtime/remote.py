@@ -5,13 +5,16 @@
 through exactly the socket's path: newest valid wins, the limits, ``cmd_timeout_s``), acts on
 a lost commander (:mod:`gateway.runtime.bridge.deadman`), and posts the loop's news -- a
 :class:`~gateway.runtime.mailbox.Snapshot` at the odometry rate, the state, every error -- to
-each worker's mailbox.  The modules behind it (and Zenoh, the Foxglove SDK) are imported only
-when the configuration asks for them.
+each worker's mailbox, and with ROS 2 diagnostics the whole status to the bridge's once a
+second and at a change of state (:mod:`gateway.runtime.bridge.diagnostics`).  The modules
+behind it (and Zenoh, the Foxglove SDK) are imported only when the configuration asks for
+them.
 """
 
 from __future__ import annotations
 
 import logging
+import math
 import time
 from typing import TYPE_CHECKING, Any
 
@@ -29,6 +32,7 @@ if TYPE_CHECKING:
 
     from gateway.core.events import OutboxEvent
     from gateway.core.status import GatewayStatus
+    from gateway.core.types import GatewayState
     from gateway.runtime.bridge.bridge import Bridge
     from gateway.runtime.latch import EstopLatch
     from gateway.runtime.loop import Gateway
@@ -43,6 +47,8 @@ POLL_MAX = 64
 #: The share of the cycle's period the loop gives them (a status query builds the whole
 #: status): what is left waits for the next cycle.
 SERVE_SHARE = 0.2
+#: The shortest time between two diagnostics reports when the state keeps changing (s).
+REPORT_MIN_S = 0.1
 
 
 class Remote:
@@ -62,6 +68,13 @@ class Remote:
         config = gateway.config
         self.gateway = gateway
         self.latch = latch
+        self._status = status
+        #: When the next diagnostics report is due, the state the last one showed, and when
+        #: it went (a report goes only with ROS 2 diagnostics configured).
+        self._report_due_s = -math.inf
+        self._report_state: GatewayState | None = None
+        self._report_s = -math.inf
+        self._reports = False
         self.bridge: Bridge | None = None
         self.view: Any = None
         self._mailboxes: list[Mailbox[Any]] = []
@@ -70,8 +83,10 @@ class Remote:
                 # Imported only with a bridge: block (and Zenoh only by the bridge).
                 from gateway.runtime.bridge.bridge import Bridge  # noqa: PLC0415
                 from gateway.runtime.bridge.deadman import Deadman  # noqa: PLC0415
+                from gateway.runtime.bridge.diagnostics import hardware_ids  # noqa: PLC0415
 
-                self.bridge = Bridge(config.bridge)
+                self.bridge = Bridge(config.bridge, hardware_ids(config))
+                self._reports = bool(config.bridge.ros2 and config.bridge.ros2.diagnostics)
                 self._mailboxes.append(self.bridge.mailbox)
                 self.requests = RequestHandler(gateway, self.bridge, latch, status,
                                                Source.BRIDGE, "the Zenoh bridge")
@@ -159,8 +174,13 @@ class Remote:
 
     # ----------------------------------------------------------------- news
 
-    def post(self, outbox: Sequence[OutboxEvent]) -> None:
-        """Hand this cycle's news to the workers (loop thread; never waits for them)."""
+    def post(self, outbox: Sequence[OutboxEvent], now_s: float) -> None:
+        """Hand this cycle's news to the workers (loop thread; never waits for them).
+
+        :param now_s: the cycle's time (monotonic), for the diagnostics' period.
+        """
+        if self._reports:
+            self._report(now_s)
         if not self._mailboxes or not outbox:
             return
         snapshot = None
@@ -175,6 +195,21 @@ class Remote:
                 errors.append(news)
         for box in self._mailboxes:
             box.post(snapshot, status, tuple(errors))
+
+    def _report(self, now_s: float) -> None:
+        """The whole status for the bridge's ROS 2 diagnostics, when due (once a
+        :data:`~gateway.runtime.bridge.diagnostics.DIAGNOSTICS_PERIOD_S`, and at a change of
+        state, at most every :data:`REPORT_MIN_S`)."""
+        state = self.gateway.state
+        if now_s < self._report_due_s and (state is self._report_state
+                                           or now_s - self._report_s < REPORT_MIN_S):
+            return
+        assert self.bridge is not None  # (reports are on only with a bridge)
+        from gateway.runtime.bridge.diagnostics import DIAGNOSTICS_PERIOD_S  # noqa: PLC0415
+
+        self._report_state, self._report_s = state, now_s
+        self._report_due_s = now_s + DIAGNOSTICS_PERIOD_S
+        self.bridge.mailbox.post(report=self._status())
 
     def close(self) -> None:
         """Stop the workers and close the session (the gateway's token disappears)."""

@@ -11,9 +11,11 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import time
 from types import MappingProxyType
 from typing import TYPE_CHECKING
 
+from gateway.core.settings import FeedbackRecovery
 from gateway.core.status import (
     BusHealth,
     BusReport,
@@ -29,7 +31,8 @@ from gateway.core.status import (
     TimingReport,
     TrackingReport,
 )
-from gateway.core.types import GatewayState
+from gateway.core.types import DriveState, GatewayState
+from gateway.runtime.commanders import LISTEN_S
 
 if TYPE_CHECKING:
     from collections.abc import Mapping, Sequence
@@ -42,7 +45,7 @@ if TYPE_CHECKING:
     from gateway.runtime.counts import LoopCounts
     from gateway.runtime.loop import Gateway
 
-__all__ = ["build_status", "event_counts", "timing_report"]
+__all__ = ["build_status", "event_counts", "status_text", "timing_report"]
 
 
 def _finite(value: float | None) -> float | None:
@@ -169,6 +172,25 @@ def build_status(
         ),
         config=ConfigReport(cfg.path or cfg.source, cfg.fingerprint),
     )
+
+
+def status_text(gw: Gateway) -> str:
+    """The state for systemd's ``STATUS=`` and the log, with what the daemon waits for."""
+    sup = gw.supervisor
+    text = gw.state.name + (f": {sup.reason}" if sup.reason else "")
+    if gw.state is GatewayState.ENABLING:
+        if sup.enable_pending:  # (held while the gateway listens: commanders.may_enable)
+            return text + (f": listening {LISTEN_S:g} s for another program commanding these "
+                           f"motors before enabling them")
+        return text + ": waiting for the motors to enable"
+    if (gw.state is GatewayState.FAULT
+            and gw.config.loop.feedback_recovery is FeedbackRecovery.AUTO):
+        offline = [s.name for s in gw.drives.status(time.monotonic())
+                   if s.state is DriveState.OFFLINE]
+        if offline:
+            text += (f" (waiting for motors: {', '.join(offline)} silent; the drives are "
+                     f"enabled again once every motor answers)")
+    return text
 
 
 def motors_text(config: GatewayConfig) -> str:

@@ -117,6 +117,10 @@ def test_the_attachment_of_jazzys_first_rmw_zenoh_releases() -> None:
      "bridge.ros2.joint_states: expected a topic other than odom's, got 'odom', which is "
      "'/odom' as odom is"),
     ({"ros2": {"joint_states": "joint states"}}, "bridge.ros2.joint_states: expected letters"),
+    ({"ros2": {"joint_states": "/diagnostics", "diagnostics": "/diagnostics"}},
+     "bridge.ros2.diagnostics: expected a topic other than joint_states's, got '/diagnostics', "
+     "which is '/diagnostics' as joint_states is"),
+    ({"ros2": {"diagnostics": "diag nostics"}}, "bridge.ros2.diagnostics: expected letters"),
     ({"ros2": {"joints": ["front_left"]}},
      "bridge.ros2.joints: expected dict, got ['front_left']"),
     ({"ros2": {"joints": {"front_left": "front left joint"}}},
@@ -214,7 +218,9 @@ def test_joint_states_are_off_unless_a_topic_is_given_and_joints_rename_wheels()
     assert ros2 is not None and ros2.joint_states == "" and ros2.joints == ()
     assert ros2.services is False  # (the services too, unless asked for)
     ros2 = bridge(bridge={"ros2": {"services": True}}).ros2
-    assert ros2 is not None and ros2.services is True
+    assert ros2 is not None and ros2.services is True and ros2.diagnostics == ""
+    ros2 = bridge(bridge={"ros2": {"diagnostics": "/diagnostics"}}).ros2
+    assert ros2 is not None and ros2.diagnostics == "/diagnostics"
     ros2 = bridge(bridge={"ros2": {"joint_states": "joint_states", "joints": {
         "front_left": "fl_wheel_joint", "rear_left": "front_left"}}}).ros2
     assert ros2 is not None and ros2.joint_states == "joint_states"

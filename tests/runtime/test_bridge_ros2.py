@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import signal
 import statistics
 import subprocess
@@ -31,7 +32,7 @@ from tests.runtime.bridge_helpers import (
 )
 
 if TYPE_CHECKING:
-    from collections.abc import Iterator
+    from collections.abc import Callable, Iterator
 
 pytest.importorskip("zenoh", reason="eclipse-zenoh not installed: pip install 'wheelgate[zenoh]'")
 pytestmark = pytest.mark.timeout(90)
@@ -42,6 +43,13 @@ observer = bridge_helpers.observer
 
 CMD_VEL = "/robot1/cmd_vel"
 ODOM = "/robot1/odom"
+
+
+def entities(observer: Observer) -> set[tuple[EntityKind, str | None, str | None]]:
+    """The gateway node's entities in the ROS graph: kind, topic and type of each token."""
+    tokens = [parse_token(str(r.ok.key_expr)) for r in
+              observer.s.liveliness().get("@ros2_lv/0/**", timeout=5.0) if r.ok is not None]
+    return {(t.kind, t.topic, t.type_name) for t in tokens if t.node_name == "wheelgate"}
 
 
 def lines(proc: subprocess.Popen[bytes], count: int, timeout_s: float = 20.0) -> Iterator[
@@ -162,9 +170,7 @@ def test_a_ros_node_reads_the_wheels_joint_states(
         assert all(b > a for a, b in zip(first["position"], last["position"], strict=True))
     finally:
         ended(node)
-    tokens = [parse_token(str(r.ok.key_expr)) for r in
-              observer.s.liveliness().get("@ros2_lv/0/**", timeout=5.0) if r.ok is not None]
-    ours = {(t.kind, t.topic, t.type_name) for t in tokens if t.node_name == "wheelgate"}
+    ours = entities(observer)
     assert (EntityKind.PUBLISHER, "/robot1/joint_states",
             "sensor_msgs::msg::dds_::JointState_") in ours
 
@@ -201,8 +207,65 @@ def test_a_ros_client_estops_and_disables_the_robot_through_its_services(
         assert client.request({"op": "enable"})["ok"] is True
     assert ros_call(connect, f"{node}/disable") == [
         {"success": True, "message": "state: disabled", "seq": True, "gid": True}]
-    tokens = [parse_token(str(r.ok.key_expr)) for r in
-              observer.s.liveliness().get("@ros2_lv/0/**", timeout=5.0) if r.ok is not None]
-    ours = {(t.kind, t.topic, t.type_name) for t in tokens if t.node_name == "wheelgate"}
+    ours = entities(observer)
     for op in ("estop", "enable", "disable"):
         assert (EntityKind.SERVICE, f"{node}/{op}", "std_srvs::srv::dds_::Trigger_") in ours
+
+
+def diagnostics(node: subprocess.Popen[bytes], until: Callable[[dict[str, Any]], bool],
+                timeout_s: float = 20.0) -> dict[str, Any]:
+    """The first diagnostics message the node prints that ``until`` accepts, its statuses by
+    name."""
+    assert node.stdout is not None
+    end = time.monotonic() + timeout_s
+    while time.monotonic() < end:
+        event = json.loads(node.stdout.readline())
+        if event["topic"] == "diagnostics":
+            report = {s["name"]: s for s in event["statuses"]} | {"key": event["key"]}
+            if until(report):
+                return report
+    raise AssertionError(f"no such diagnostics within {timeout_s} s")
+
+
+@pytest.mark.parametrize("gateway", [{"diagnostics": "/diagnostics"}], indirect=True,
+                         ids=["diagnostics"])
+def test_a_ros_node_reads_the_diagnostics_of_the_gateway_the_bus_and_every_motor(
+        gateway: tuple[subprocess.Popen[bytes], str], observer: Observer, sock_path: str) -> None:
+    """``diagnostics: /diagnostics``: ``diagnostic_msgs/msg/DiagnosticArray`` on the key a
+    Jazzy subscriber declares (the type's hash in it): OK while running, each motor with its
+    driver, node and bus; an e-stop is a WARN at once, not a second later."""
+    _, connect = gateway
+    node = spawn_ros_node(connect, "--cmd-vel", CMD_VEL, "--vx", "0.0", "--diagnostics",
+                          "/diagnostics")
+    try:
+        running = diagnostics(node, lambda r: "wheelgate: gateway" in r)
+        assert running["key"].startswith("0/diagnostics/diagnostic_msgs::msg::dds_::"
+                                          "DiagnosticArray_/RIHS01_5a8a36ef")
+        gw = running["wheelgate: gateway"]
+        assert (gw["level"], gw["message"], gw["hardware_id"]) == (0, "running", "demo_mecanum")
+        assert gw["values"]["state"] == "running" and "Hz of 100 Hz" in gw["values"]["loop rate"]
+        bus = running["wheelgate: CAN bus"]
+        assert (bus["level"], bus["message"]) == (0, "controller active"), bus
+        assert int(bus["values"]["frames sent"]) > 0
+        motors = {k: v for k, v in running.items() if k.startswith("wheelgate: motor ")}
+        assert sorted(motors) == [f"wheelgate: motor {w}" for w in
+                                  ("front_left", "front_right", "rear_left", "rear_right")]
+        fl = motors["wheelgate: motor front_left"]
+        assert fl["level"] == 0 and fl["message"] == "enabled", fl
+        assert re.fullmatch(r"odrive node \d+ on virtual:\S+", fl["hardware_id"]), fl
+        assert fl["values"]["controller stop"].startswith("configured"), fl
+        assert fl["values"]["velocity"].endswith(" rad/s")
+        with ControlClient(sock_path) as client:
+            diagnostics(node, lambda r: True)  # (the periodic one: the next is a second away)
+            assert client.request({"op": "estop"})["ok"] is True
+            stopped = time.monotonic()
+            estop = diagnostics(node, lambda r: True)
+            assert time.monotonic() - stopped < 0.6  # (the state changed: not the next second)
+            gw = estop["wheelgate: gateway"]
+            assert gw["level"] == 1 and gw["message"].startswith("estop: "), gw
+            assert client.request({"op": "enable"})["ok"] is True
+    finally:
+        ended(node)
+    ours = entities(observer)
+    assert (EntityKind.PUBLISHER, "/diagnostics",
+            "diagnostic_msgs::msg::dds_::DiagnosticArray_") in ours

@@ -153,6 +153,21 @@ def test_the_first_enable_waits_until_the_gateway_has_listened() -> None:
         assert set(out) - reports(r.gw)
 
 
+def test_systemd_and_the_log_say_the_gateway_listens_then_waits_for_the_motors(
+        sock_path: str, caplog: pytest.LogCaptureFixture) -> None:
+    with Rig(config("wg-cmd-says"), socket_path=sock_path) as r, \
+            caplog.at_level(logging.INFO, "gateway.runtime.daemon"):
+        r.gw.supervisor.enable(r.t)
+        r.advance(0.6)
+        assert r.gw.state is GatewayState.RUNNING
+    states = [rec.getMessage() for rec in caplog.records if rec.getMessage().startswith("state")]
+    assert states == [
+        "state ENABLING: listening 0.25 s for another program commanding these motors before "
+        "enabling them",
+        "state ENABLING: waiting for the motors to enable",  # (listened: the enable is taken)
+        "state RUNNING"], states
+
+
 def test_a_second_gateway_beside_a_commanding_one_withholds_its_enable_and_sends_nothing(
         caplog: pytest.LogCaptureFixture) -> None:
     # The robot is driven by another program (a wheelgate already running: its command of

@@ -145,7 +145,11 @@ def test_ready_with_the_motors_unpowered_and_the_status_says_what_it_waits_for(
     try:
         ready = read_notify(nsock, b"READY=1", 30.0)
         assert any(m.startswith(b"READY=1") for m in ready), (ready, proc.poll())
-        assert any(b"ENABLING" in m and b"waiting for the motors" in m for m in ready), ready
+        # First it listens for another program commanding these motors, then it waits.
+        assert any(b"ENABLING: listening 0.25 s" in m for m in ready), ready
+        waiting = read_notify(nsock, b"STATUS=ENABLING: waiting for the motors to enable", 10.0)
+        assert any(b"STATUS=ENABLING: waiting for the motors to enable" in m
+                   for m in waiting), waiting
         later = read_notify(nsock, b"waiting for motors", 10.0)
         assert any(b"STATUS=FAULT" in m and b"waiting for motors: left, right silent" in m
                    for m in later), later

@@ -10,6 +10,7 @@ from gateway.core.kinematics.odometry import OdometryState, Pose
 from gateway.core.status import LastError
 from gateway.core.types import ErrorCode, GatewayState, Twist
 from gateway.runtime.mailbox import MAX_ERRORS, Mailbox, Snapshot, WheelSample
+from tests.wire.status_samples import sample_status
 
 
 def snap(x: float) -> Snapshot:
@@ -31,6 +32,16 @@ def test_the_newest_snapshot_and_state_win_errors_and_replies_keep_order() -> No
     assert not got.closed and got.errors_dropped == 0
     empty = box.take(0.0)
     assert empty.snapshot is None and empty.status is None and not empty.errors
+    assert empty.report is None
+
+
+def test_the_newest_full_report_wins_and_wakes_the_worker() -> None:
+    box: Mailbox[str] = Mailbox()
+    box.post(report=sample_status(robot="old"))
+    box.post(report=sample_status(robot="new"))
+    got = box.take(5.0)  # (returns at once: a report is news)
+    assert got.report is not None and got.report.robot == "new"
+    assert box.take(0.0).report is None
 
 
 def test_errors_beyond_the_bound_drop_the_oldest_and_are_counted() -> None:

@@ -92,6 +92,21 @@ geometry_msgs/TwistWithCovariance twist
         "uint8 event_type\n\nbuiltin_interfaces/Time stamp\n\nchar[16] client_gid\n\n"
         "int64 sequence_number\n"),
     "std_srvs/srv/Trigger_Request": "uint8 structure_needs_at_least_one_member\n",
+    # diagnostic_msgs' three messages, constants included (``byte``: its own type id).
+    "diagnostic_msgs/msg/KeyValue": "# What to label this value when viewing.\nstring key\n"
+                                    "# A value to track over time.\nstring value\n",
+    "diagnostic_msgs/msg/DiagnosticStatus": (
+        "# This message holds the status of an individual component of the robot.\n\n"
+        "# Possible levels of operations.\nbyte OK=0\nbyte WARN=1\nbyte ERROR=2\n"
+        "byte STALE=3\n\n# Level of operation enumerated above.\nbyte level\n"
+        "# A description of the test/component reporting.\nstring name\n"
+        "# A description of the status.\nstring message\n"
+        "# A hardware unique string.\nstring hardware_id\n"
+        "# An array of values associated with the status.\nKeyValue[] values\n"),
+    "diagnostic_msgs/msg/DiagnosticArray": (
+        "# This message is used to send diagnostic information about the state of the robot."
+        "\nstd_msgs/Header header # for timestamp\n"
+        "DiagnosticStatus[] status # an array of components being reported on\n"),
     "std_srvs/srv/Trigger_Response": "bool success   # indicate successful run of triggered "
                                      "service\nstring message # informational, e.g. for error "
                                      "messages\n",
@@ -119,6 +134,10 @@ PUBLISHED = {
     # (a service's hash is the service type's: the key of its queryable carries it)
     "std_srvs/srv/Trigger":
         "RIHS01_eeff2cd6fa5ad9d27cdf4dec64818317839b62f212a91e6b5304b634b2062c5f",
+    # (Jazzy's, as copper-project/copper-rs lists them: components/payloads/cu_ros2_payloads/
+    # all_rihs.md; its DiagnosticStatus and KeyValue are checked below)
+    "diagnostic_msgs/msg/DiagnosticArray":
+        "RIHS01_5a8a36efb05fb25070fa0fb3810290c0e6cd4862b54a8fb975a1ee8dc55a333e",
 }
 
 
@@ -157,6 +176,15 @@ def test_other_published_hashes_are_recomputed() -> None:
                            ("", UPSTREAM["std_srvs/srv/Trigger"]))}}
     assert compute_type_hash("std_srvs/srv/SetBool", set_bool) \
         == "RIHS01_abe9e4bb6b41b40e6789712c00ec8871923e089af3f667a79992a428cff2da0a"
+    # DiagnosticArray's parts, and a ``byte`` that is not a ``uint8`` (example_interfaces'
+    # Byte, ``byte data``), as the same list has them.
+    assert compute_type_hash("diagnostic_msgs/msg/DiagnosticStatus", UPSTREAM) \
+        == "RIHS01_b0e3e692ea2d54a8af2f4ef1930e81556a2db55216b771f8a7d2724ed47bf0e4"
+    assert compute_type_hash("diagnostic_msgs/msg/KeyValue", UPSTREAM) \
+        == "RIHS01_d68081eaa540288c5440753baecef0c4e16e81a5f78ad68902ded5100413bb42"
+    assert compute_type_hash("example_interfaces/msg/Byte", {
+        "example_interfaces/msg/Byte": "byte data\n"}) \
+        == "RIHS01_f014e0424be54b8ba7c35490aea4198be92df1de4e88f4e19a2fbbce2e020bb9"
 
 
 def test_the_hashed_text_is_exactly_rosidls_json() -> None:

@@ -50,7 +50,7 @@ from gateway.wire.socket import ProtocolError, reply_error
 from gateway.wire.socket.events import event_line
 
 if TYPE_CHECKING:
-    from collections.abc import Iterable
+    from collections.abc import Iterable, Mapping
 
     from gateway.core.bridge_settings import BridgeSettings
     from gateway.runtime.bridge.ros2 import Ros2Side
@@ -79,6 +79,8 @@ class Bridge:
     """The Zenoh side of the daemon (see the module's doc).
 
     :param settings: the ``bridge:`` block.
+    :param hardware: each motor's hardware id by its name, for the ROS 2 diagnostics
+        (:func:`~gateway.runtime.bridge.diagnostics.hardware_ids`).
     :raises BridgeError: when Zenoh is missing, the session cannot be opened or its keys
         cannot be declared.  A client whose router cannot be reached is no error: the robot
         may boot before the machine that runs the router, so the bridge keeps trying in a
@@ -86,8 +88,10 @@ class Bridge:
         without it, and declares its keys once it is connected.
     """
 
-    def __init__(self, settings: BridgeSettings) -> None:
+    def __init__(self, settings: BridgeSettings, hardware: Mapping[str, str] | None = None
+                 ) -> None:
         self.settings = settings
+        self.hardware = dict(hardware or {})
         self.keys = NativeKeys.of(settings.namespace)
         #: News and replies from the loop for the worker.
         self.mailbox: Mailbox[tuple[int, bytes]] = Mailbox()
@@ -189,7 +193,7 @@ class Bridge:
             self._ros = Ros2Side(
                 s, self.settings.ros2, self.settings.ros_namespace,
                 commander=lambda who, alive: self._admit(CommanderEvent(who, alive)),
-                call=self._submit)
+                call=self._submit, hardware=self.hardware)
             twists += self._ros.twists
         self._token: Any = s.liveliness().declare_token(keys.gateway_token)
         self._twists = twists  # (one store: the loop may be reading the list)
@@ -305,6 +309,8 @@ class Bridge:
                 self._ros.publish(news.snapshot)
         if news.status is not None:
             self._status.put(event_line(news.status))
+        if news.report is not None and self._ros is not None:
+            self._ros.publish_report(news.report)
         for err in news.errors:
             self._error.put(event_line(err))
         if news.errors_dropped:

@@ -20,6 +20,9 @@ publisher, time, GID) on every sample, and the graph as liveliness tokens under 
   ``joint_state_broadcaster`` fills an interface it lacks), under the ``joints`` names, which
   ``robot_state_publisher`` turns into the wheels' transforms for RViz.  A motor not heard yet
   is left out (none of its values is known).
+* **Diagnostics**, with a ``diagnostics`` topic (``/diagnostics``):
+  ``diagnostic_msgs/msg/DiagnosticArray`` of the gateway, the CAN bus and every motor, once a
+  second and at a change of state (:mod:`gateway.runtime.bridge.diagnostics`).
 * **Services**, with ``services: true``: ``std_srvs/srv/Trigger`` on the node's ``~/estop``,
   ``~/enable`` and ``~/disable`` (``/robot1/wheelgate/estop``): each the control socket's
   request, through the bridge's inbox as the native ``rpc/<op>`` queries (the e-stop release
@@ -38,10 +41,12 @@ import time
 from typing import TYPE_CHECKING, Any, cast
 
 from gateway.core.errors import DecodeError, EncodeError
+from gateway.runtime.bridge.diagnostics import diagnostic_array
 from gateway.runtime.bridge.inbox import NO_REPLY, Inbound, TwistSource
 from gateway.runtime.bridge.native import parse_query
 from gateway.runtime.bridge.session import import_zenoh
 from gateway.wire.ros2 import (
+    DIAGNOSTIC_ARRAY,
     JOINT_STATE,
     ODOMETRY,
     TF_MESSAGE,
@@ -64,6 +69,7 @@ from gateway.wire.ros2 import (
     decode_twist,
     decode_twist_stamped,
     encode_attachment,
+    encode_diagnostic_array,
     encode_joint_state,
     encode_odometry,
     encode_tf_message,
@@ -83,6 +89,7 @@ if TYPE_CHECKING:
     from collections.abc import Callable, Mapping
 
     from gateway.core.bridge_settings import AttachmentFormat, Ros2Settings
+    from gateway.core.status import GatewayStatus
     from gateway.runtime.mailbox import Snapshot
 
 log = logging.getLogger(__name__)
@@ -175,15 +182,18 @@ class Ros2Side:
     :param settings: the ``bridge.ros2`` block.
     :param namespace: the ROS namespace ('' for none).
     :param commander: a commander's token came (``True``) or went (Zenoh's threads call it).
+    :param call: takes a service call and its request (or why it is refused).
+    :param hardware: each motor's hardware id by its name, for the diagnostics.
 
     :attr:`twists` are the ``cmd_vel`` subscribers (one per type), for the loop to take from.
     """
 
     def __init__(self, session: Any, settings: Ros2Settings, namespace: str,
                  commander: Callable[[str, bool], object],
-                 call: Callable[[RosCall, Request | ProtocolError], object] | None = None
-                 ) -> None:
+                 call: Callable[[RosCall, Request | ProtocolError], object] | None = None,
+                 hardware: Mapping[str, str] | None = None) -> None:
         self.settings = settings
+        self._hardware = dict(hardware or {})
         self._commander = commander
         self._call = call
         ns = "/" + namespace if namespace else "/"
@@ -218,6 +228,12 @@ class Ros2Side:
                 EntityKind.PUBLISHER, domain, zid, 0, next(ids), ns, name, self.joints_topic,
                 JOINT_STATE, QosProfile()), settings.attachment)
         self._joint_names = dict(settings.joints)
+        self.diagnostics_topic = (resolve_topic_name(settings.diagnostics, ns)
+                                  if settings.diagnostics else "")
+        self.diagnostics = None if not self.diagnostics_topic else _Publisher(
+            session, topic_key(domain, self.diagnostics_topic, DIAGNOSTIC_ARRAY), entity_token(
+                EntityKind.PUBLISHER, domain, zid, 0, next(ids), ns, name,
+                self.diagnostics_topic, DIAGNOSTIC_ARRAY, QosProfile()), settings.attachment)
         #: The services' names (``/robot1/wheelgate/estop``), by op.
         self.services: dict[Op, str] = {}
         if settings.services and call is not None:
@@ -288,9 +304,19 @@ class Ros2Side:
             except EncodeError as err:
                 log.warning("bridge: ROS 2 joint states not sent: %s", err)
 
+    def publish_report(self, report: GatewayStatus) -> None:
+        """The diagnostics of a status report (nothing without a ``diagnostics`` topic)."""
+        if self.diagnostics is None:
+            return
+        try:
+            self.diagnostics.put(encode_diagnostic_array(diagnostic_array(
+                report, self.settings.node_name, self._hardware, time.time_ns())))
+        except EncodeError as err:
+            log.warning("bridge: ROS 2 diagnostics not sent: %s", err)
+
     def close(self) -> None:
         """Withdraw the tokens (the node leaves ``ros2 node list``)."""
-        for publisher in (self.odom, self.tf, self.joints):
+        for publisher in (self.odom, self.tf, self.joints, self.diagnostics):
             if publisher is not None:
                 publisher.token.undeclare()
         for entity in self._entities:

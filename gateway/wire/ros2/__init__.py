@@ -8,6 +8,7 @@ public repository ros2/rmw_zenoh, Jazzy and later):
   ``sensor_msgs/msg/JointState`` and the service ``std_srvs/srv/Trigger``
   (:mod:`~gateway.wire.ros2.cdr_stream` has the reader and writer,
   :mod:`~gateway.wire.ros2.messages` the dataclasses and the stamp helpers);
+  :mod:`gateway.wire.ros2.diagnostics`: ``diagnostic_msgs/msg/DiagnosticArray`` and its codec;
 * :mod:`gateway.wire.ros2.types`: the types' names, DDS names, RIHS01 hashes and ``.msg``
   definitions; :mod:`~gateway.wire.ros2.typehash` recomputes a hash (REP 2011);
 * :mod:`gateway.wire.ros2.attachment`: the attachment every sample carries (sequence number,
@@ -46,6 +47,14 @@ from gateway.wire.ros2.cdr import (
     encode_trigger_response,
     encode_twist,
     encode_twist_stamped,
+)
+from gateway.wire.ros2.diagnostics import (
+    DiagnosticArray,
+    DiagnosticLevel,
+    DiagnosticStatus,
+    KeyValue,
+    decode_diagnostic_array,
+    encode_diagnostic_array,
 )
 from gateway.wire.ros2.keys import (
     ADMIN_SPACE,
@@ -94,6 +103,7 @@ from gateway.wire.ros2.qos import (
 )
 from gateway.wire.ros2.typehash import compute_type_hash
 from gateway.wire.ros2.types import (
+    DIAGNOSTIC_ARRAY,
     JOINT_STATE,
     MESSAGE_DEFINITIONS,
     ODOMETRY,
@@ -111,6 +121,7 @@ __all__ = [
     "ATTACHMENT_SIZE",
     "COVARIANCE_SIZE",
     "DEFAULT_DEPTH",
+    "DIAGNOSTIC_ARRAY",
     "GID_SIZE",
     "HUMBLE_TYPE_HASH",
     "JOINT_STATE",
@@ -125,11 +136,15 @@ __all__ = [
     "ZERO_COVARIANCE",
     "Attachment",
     "AttachmentFormat",
+    "DiagnosticArray",
+    "DiagnosticLevel",
+    "DiagnosticStatus",
     "Durability",
     "EntityKind",
     "Header",
     "History",
     "JointState",
+    "KeyValue",
     "LivelinessToken",
     "Odometry",
     "QosProfile",
@@ -146,6 +161,7 @@ __all__ = [
     "compute_type_hash",
     "dds_type_name",
     "decode_attachment",
+    "decode_diagnostic_array",
     "decode_joint_state",
     "decode_odometry",
     "decode_tf_message",
@@ -154,6 +170,7 @@ __all__ = [
     "decode_twist",
     "decode_twist_stamped",
     "encode_attachment",
+    "encode_diagnostic_array",
     "encode_joint_state",
     "encode_odometry",
     "encode_tf_message",

@@ -82,7 +82,8 @@ _MIN_TRANSFORM_BYTES = 4 + 4 + 4 + 1 + 4 + 1 + _POSE.size
 # ----------------------------------------------------------------------------- shared parts
 
 
-def _write_header(w: CdrWriter, header: object, field: str) -> None:
+def write_header(w: CdrWriter, header: object, field: str) -> None:
+    """A ``std_msgs/msg/Header`` (stamp, frame id) at ``field``."""
     if not isinstance(header, Header) or not isinstance(header.stamp, Time):
         raise EncodeError(f"{w.type_name}: expected a Header for {field}, got {header!r}")
     w.int32(header.stamp.sec, f"{field}.stamp.sec")
@@ -90,7 +91,8 @@ def _write_header(w: CdrWriter, header: object, field: str) -> None:
     w.string(header.frame_id, f"{field}.frame_id")
 
 
-def _read_header(r: CdrReader, field: str) -> Header:
+def read_header(r: CdrReader, field: str) -> Header:
+    """The ``std_msgs/msg/Header`` at ``field``."""
     sec = r.int32(f"{field}.stamp.sec")
     nanosec = r.uint32(f"{field}.stamp.nanosec")
     return Header(Time(sec, nanosec), r.string(f"{field}.frame_id"))
@@ -161,7 +163,7 @@ def encode_twist_stamped(message: TwistStamped) -> bytes:
     if not isinstance(message, TwistStamped):
         raise EncodeError(f"{TWIST_STAMPED}: expected a TwistStamped, got {message!r}")
     w = CdrWriter(TWIST_STAMPED)
-    _write_header(w, message.header, "header")
+    write_header(w, message.header, "header")
     w.float64s(_SIX, _twist_values(TWIST_STAMPED, message.twist, "twist"), "twist")
     return w.payload()
 
@@ -169,7 +171,7 @@ def encode_twist_stamped(message: TwistStamped) -> bytes:
 def decode_twist_stamped(payload: Payload) -> TwistStamped:
     """The :class:`TwistStamped` in a ``geometry_msgs/msg/TwistStamped`` payload."""
     r = CdrReader(TWIST_STAMPED, payload)
-    header = _read_header(r, "header")
+    header = read_header(r, "header")
     twist = Twist3D(*r.float64s(_SIX, "twist"))
     r.finish()
     return TwistStamped(header, twist)
@@ -183,7 +185,7 @@ def encode_odometry(message: Odometry) -> bytes:
     if not isinstance(message, Odometry):
         raise EncodeError(f"{ODOMETRY}: expected an Odometry, got {message!r}")
     w = CdrWriter(ODOMETRY)
-    _write_header(w, message.header, "header")
+    write_header(w, message.header, "header")
     w.string(message.child_frame_id, "child_frame_id")
     w.float64s(_POSE, _pose_values(ODOMETRY, message.position, message.orientation,
                                    "pose.pose"), "pose.pose")
@@ -199,7 +201,7 @@ def encode_odometry(message: Odometry) -> bytes:
 def decode_odometry(payload: Payload) -> Odometry:
     """The :class:`Odometry` in a ``nav_msgs/msg/Odometry`` payload."""
     r = CdrReader(ODOMETRY, payload)
-    header = _read_header(r, "header")
+    header = read_header(r, "header")
     child = r.string("child_frame_id")
     position, orientation = _read_pose(r, "pose.pose")
     pose_covariance = r.float64s(_COVARIANCE, "pose.covariance")
@@ -226,7 +228,7 @@ def encode_tf_message(message: TFMessage) -> bytes:
             raise EncodeError(
                 f"{TF_MESSAGE}: expected a TransformStamped for {field}, got {transform!r}"
             )
-        _write_header(w, transform.header, f"{field}.header")
+        write_header(w, transform.header, f"{field}.header")
         w.string(transform.child_frame_id, f"{field}.child_frame_id")
         w.float64s(_POSE, _pose_values(TF_MESSAGE, transform.translation, transform.rotation,
                                        f"{field}.transform"), f"{field}.transform")
@@ -240,7 +242,7 @@ def decode_tf_message(payload: Payload) -> TFMessage:
     transforms = []
     for index in range(count):
         field = f"transforms[{index}]"
-        header = _read_header(r, f"{field}.header")
+        header = read_header(r, f"{field}.header")
         child = r.string(f"{field}.child_frame_id")
         translation, rotation = _read_pose(r, f"{field}.transform")
         transforms.append(TransformStamped(header, child, translation, rotation))
@@ -267,7 +269,7 @@ def encode_joint_state(message: JointState) -> bytes:
         raise EncodeError(f"{JOINT_STATE}: expected a sequence of str for name, got "
                           f"{names!r}")
     w = CdrWriter(JOINT_STATE)
-    _write_header(w, message.header, "header")
+    write_header(w, message.header, "header")
     w.sequence_length(len(names), "name")
     for index, name in enumerate(names):
         w.string(name, f"name[{index}]")
@@ -285,7 +287,7 @@ def encode_joint_state(message: JointState) -> bytes:
 def decode_joint_state(payload: Payload) -> JointState:
     """The :class:`JointState` in a ``sensor_msgs/msg/JointState`` payload."""
     r = CdrReader(JOINT_STATE, payload)
-    header = _read_header(r, "header")
+    header = read_header(r, "header")
     count = r.sequence_length("name", 5)  # (a string: its length and its NUL at least)
     names = tuple(r.string(f"name[{index}]") for index in range(count))
     position = _read_float64_sequence(r, "position")

@@ -2,14 +2,16 @@
 
 A type hash (RIHS01, REP 2011) identifies a message definition; rmw_zenoh puts it in every data
 key and liveliness token, so a subscriber only meets publishers of the identical definition.
-The six hashes below are the published ones (Jazzy and later; the definitions have not changed
-since); :func:`gateway.wire.ros2.typehash.compute_type_hash` recomputes each of them from
+The seven hashes below are the published ones (Jazzy and later; the definitions have not
+changed since; ``diagnostic_msgs/msg/DiagnosticArray``'s as the public repository
+copper-project/copper-rs lists Jazzy's, ``components/payloads/cu_ros2_payloads/all_rihs.md``);
+:func:`gateway.wire.ros2.typehash.compute_type_hash` recomputes each of them from
 :data:`MESSAGE_DEFINITIONS`, and ``tests/wire/test_ros2_types.py`` checks that they agree.
 
-:data:`MESSAGE_DEFINITIONS` holds the ``.msg`` text of every type involved (comments dropped):
-from the public repositories ros2/common_interfaces (``geometry_msgs``, ``nav_msgs``,
-``sensor_msgs``, ``std_msgs``), ros2/geometry2 (``tf2_msgs/msg/TFMessage.msg``) and
-ros2/rcl_interfaces (``builtin_interfaces/msg/Time.msg``).
+:data:`MESSAGE_DEFINITIONS` holds the ``.msg`` text of every type involved (comments and
+constants dropped): from the public repositories ros2/common_interfaces (``diagnostic_msgs``,
+``geometry_msgs``, ``nav_msgs``, ``sensor_msgs``, ``std_msgs``, ``std_srvs``), ros2/geometry2
+(``tf2_msgs/msg/TFMessage.msg``) and ros2/rcl_interfaces (``builtin_interfaces/msg/Time.msg``).
 """
 
 from __future__ import annotations
@@ -78,12 +80,17 @@ TRIGGER = RosType(
     "std_srvs/srv/Trigger",
     "RIHS01_eeff2cd6fa5ad9d27cdf4dec64818317839b62f212a91e6b5304b634b2062c5f",
 )
-#: The six types, by ROS name.
+DIAGNOSTIC_ARRAY = RosType(
+    "diagnostic_msgs/msg/DiagnosticArray",
+    "RIHS01_5a8a36efb05fb25070fa0fb3810290c0e6cd4862b54a8fb975a1ee8dc55a333e",
+)
+#: The seven types, by ROS name.
 ROS_TYPES: Mapping[str, RosType] = MappingProxyType(
-    {t.ros_name: t for t in (TWIST, TWIST_STAMPED, ODOMETRY, TF_MESSAGE, JOINT_STATE, TRIGGER)}
+    {t.ros_name: t for t in (TWIST, TWIST_STAMPED, ODOMETRY, TF_MESSAGE, JOINT_STATE, TRIGGER,
+                             DIAGNOSTIC_ARRAY)}
 )
 
-#: ``.msg`` text of the six types and of every type they reference, by ROS name.
+#: ``.msg`` text of the seven types and of every type they reference, by ROS name.
 MESSAGE_DEFINITIONS: Mapping[str, str] = MappingProxyType({
     "builtin_interfaces/msg/Time": "int32 sec\nuint32 nanosec\n",
     "std_msgs/msg/Header": "builtin_interfaces/Time stamp\nstring frame_id\n",
@@ -125,4 +132,9 @@ MESSAGE_DEFINITIONS: Mapping[str, str] = MappingProxyType({
         "std_srvs/srv/Trigger_Response response_message\n"
         "std_srvs/srv/Trigger_Event event_message\n"
     ),
+    "diagnostic_msgs/msg/KeyValue": "string key\nstring value\n",
+    "diagnostic_msgs/msg/DiagnosticStatus": (
+        "byte level\nstring name\nstring message\nstring hardware_id\nKeyValue[] values\n"
+    ),
+    "diagnostic_msgs/msg/DiagnosticArray": "std_msgs/Header header\nDiagnosticStatus[] status\n",
 })
