@@ -106,7 +106,11 @@ def ros_node(args: argparse.Namespace) -> None:
         a = ros2.decode_attachment(sample.attachment.to_bytes())
         show("odom", {"frame": o.header.frame_id, "child": o.child_frame_id,
                       "vx": o.twist.linear_x, "wz": o.twist.angular_z, "x": o.position.x,
-                      "seq": a.sequence_number, "layout": a.layout.value})
+                      "seq": a.sequence_number, "layout": a.layout.value,
+                      "pose_variances": o.pose_covariance[::7],
+                      "twist_variances": o.twist_covariance[::7],
+                      "off_diagonal": any(v for i, v in enumerate(
+                          (*o.pose_covariance, *o.twist_covariance)) if i % 36 % 7)})
 
     def on_tf(sample: Any) -> None:
         t = ros2.decode_tf_message(sample.payload.to_bytes()).transforms[0]

@@ -18,6 +18,7 @@ https://zenoh.io/docs/manual/configuration/); a listen endpoint on every interfa
 from __future__ import annotations
 
 import ipaddress
+import math
 import re
 import socket
 from types import MappingProxyType
@@ -65,6 +66,8 @@ ZENOH_KEYS: Mapping[str, OptionSpec] = MappingProxyType({
                                "and its tokens alive (a frozen commander is dropped after its "
                                "own lease)"),
 })
+_VARIANCES_HELP = ("the odometry's variances of x, y, z, rotation about x, y, z (diff_drive_"
+                   "controller's key; zeros: not estimated)")
 ROS2_KEYS: Mapping[str, OptionSpec] = MappingProxyType({
     "domain_id": OptionSpec(int, 0, minimum=0, maximum=232, help="ROS_DOMAIN_ID"),
     "cmd_vel": OptionSpec(str, "cmd_vel"),
@@ -81,6 +84,8 @@ ROS2_KEYS: Mapping[str, OptionSpec] = MappingProxyType({
                                         "its own name), as the robot's URDF names them"),
     "services": OptionSpec(bool, False, help="std_srvs/srv/Trigger services ~/estop, "
                                              "~/enable, ~/disable of the gateway's node"),
+    "pose_covariance_diagonal": OptionSpec(list, [0.0] * 6, help=_VARIANCES_HELP),
+    "twist_covariance_diagonal": OptionSpec(list, [0.0] * 6, help=_VARIANCES_HELP),
     "diagnostics": OptionSpec(str, "", help="topic of the gateway's, bus's and motors' "
                                             "diagnostic_msgs/msg/DiagnosticArray, once a "
                                             "second ('': none; ROS's tools read /diagnostics)"),
@@ -141,6 +146,16 @@ def _everywhere(endpoint: str) -> bool:
             return False
     mapped = getattr(address, "ipv4_mapped", None)
     return address.is_unspecified or (mapped is not None and mapped.is_unspecified)
+
+
+def _variances(value: object, where: str) -> tuple[float, ...]:
+    """Six variances (a covariance matrix's diagonal): finite numbers, none negative."""
+    if (not isinstance(value, list) or len(value) != 6 or not all(
+            isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+            and v >= 0.0 for v in value)):
+        raise ConfigError(f"{where}: expected 6 variances (x, y, z, rotation about x, y, z: "
+                          f"finite numbers >= 0, the diagonal of a covariance), got {value!r}")
+    return tuple(float(v) for v in value)
 
 
 def check_name(value: str, where: str) -> str:
@@ -256,6 +271,8 @@ def parse_bridge(raw: object, source: str, robot: str) -> tuple[BridgeSettings, 
                                   f"{taken[topic]} is")
             taken[topic] = key
         r["joints"] = _joints(r["joints"], f"{where}.ros2.joints")
+        for key in ("pose_covariance_diagonal", "twist_covariance_diagonal"):
+            r[key] = _variances(r[key], f"{where}.ros2.{key}")
         validate_node_name(str(r["node_name"]), f"{where}.ros2.node_name")
         for key in ("odom_frame", "base_frame"):
             check_name(str(r[key]), f"{where}.ros2.{key}")

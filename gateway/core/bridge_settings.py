@@ -93,6 +93,11 @@ class Ros2Settings:
         states carry (a URDF's); a wheel or actuator not named here is its own joint name.
     :param services: whether the node offers ``std_srvs/srv/Trigger`` services ``~/estop``,
         ``~/enable`` and ``~/disable`` (the control socket's requests, from the bridge).
+    :param pose_covariance_diagonal: the variances of the odometry's pose (x, y, z, rotation
+        about x, y, z; m^2, rad^2), its covariance's diagonal (zeros: not estimated), as
+        ros2_control's ``diff_drive_controller`` sets them; ``robot_localization`` needs them
+        to weigh the wheels against an IMU.
+    :param twist_covariance_diagonal: the same for the odometry's twist ((m/s)^2, (rad/s)^2).
     :param diagnostics: the topic ``diagnostic_msgs/msg/DiagnosticArray`` goes out on ('':
         none; ``/diagnostics`` is where ROS's diagnostic tools look).
     """
@@ -108,6 +113,8 @@ class Ros2Settings:
     joint_states: str = ""
     joints: tuple[tuple[str, str], ...] = ()
     services: bool = False
+    pose_covariance_diagonal: tuple[float, ...] = (0.0,) * 6
+    twist_covariance_diagonal: tuple[float, ...] = (0.0,) * 6
     diagnostics: str = ""
 
 

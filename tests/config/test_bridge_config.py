@@ -3,6 +3,7 @@ warnings, and ``check`` without Zenoh or the Foxglove SDK imported."""
 
 from __future__ import annotations
 
+import math
 import subprocess
 import sys
 from typing import TYPE_CHECKING
@@ -121,6 +122,18 @@ def test_the_attachment_of_jazzys_first_rmw_zenoh_releases() -> None:
      "bridge.ros2.diagnostics: expected a topic other than joint_states's, got '/diagnostics', "
      "which is '/diagnostics' as joint_states is"),
     ({"ros2": {"diagnostics": "diag nostics"}}, "bridge.ros2.diagnostics: expected letters"),
+    ({"ros2": {"pose_covariance_diagonal": [0.001] * 5}},
+     "bridge.ros2.pose_covariance_diagonal: expected 6 variances (x, y, z, rotation about x, "
+     "y, z: finite numbers >= 0, the diagonal of a covariance), got [0.001, 0.001, 0.001, "
+     "0.001, 0.001]"),
+    ({"ros2": {"twist_covariance_diagonal": [0.001, 0.001, -1, 0, 0, 0]}},
+     "bridge.ros2.twist_covariance_diagonal: expected 6 variances"),
+    ({"ros2": {"twist_covariance_diagonal": [0.001, 0.001, math.nan, 0, 0, 0]}},
+     "bridge.ros2.twist_covariance_diagonal: expected 6 variances"),
+    ({"ros2": {"pose_covariance_diagonal": [0, 0, 0, 0, 0, True]}},
+     "bridge.ros2.pose_covariance_diagonal: expected 6 variances"),
+    ({"ros2": {"pose_covariance_diagonal": "0.001"}},
+     "bridge.ros2.pose_covariance_diagonal: expected list, got '0.001'"),
     ({"ros2": {"joints": ["front_left"]}},
      "bridge.ros2.joints: expected dict, got ['front_left']"),
     ({"ros2": {"joints": {"front_left": "front left joint"}}},
@@ -221,6 +234,17 @@ def test_joint_states_are_off_unless_a_topic_is_given_and_joints_rename_wheels()
     assert ros2 is not None and ros2.services is True and ros2.diagnostics == ""
     ros2 = bridge(bridge={"ros2": {"diagnostics": "/diagnostics"}}).ros2
     assert ros2 is not None and ros2.diagnostics == "/diagnostics"
+
+
+def test_the_odometrys_variances_are_zero_unless_given() -> None:
+    ros2 = bridge(bridge={"ros2": {}}).ros2
+    assert ros2 is not None and ros2.pose_covariance_diagonal == (0.0,) * 6
+    assert ros2.twist_covariance_diagonal == (0.0,) * 6
+    ros2 = bridge(bridge={"ros2": {"pose_covariance_diagonal": [0.001, 0.001, 1e6, 1e6, 1e6, 0.03],
+                                   "twist_covariance_diagonal": [1, 2, 3, 4, 5, 6]}}).ros2
+    assert ros2 is not None and ros2.pose_covariance_diagonal == (0.001, 0.001, 1e6, 1e6, 1e6,
+                                                                  0.03)
+    assert ros2.twist_covariance_diagonal == (1.0, 2.0, 3.0, 4.0, 5.0, 6.0)
     ros2 = bridge(bridge={"ros2": {"joint_states": "joint_states", "joints": {
         "front_left": "fl_wheel_joint", "rear_left": "front_left"}}}).ros2
     assert ros2 is not None and ros2.joint_states == "joint_states"

@@ -77,6 +77,7 @@ def test_a_ros_node_drives_the_robot_and_reads_odometry_and_tf(
         tf = [e for e in seen if e["topic"] == "tf"]
         assert odom and tf, seen
         assert odom[-1]["frame"] == "odom" and odom[-1]["child"] == "base_link"
+        assert odom[-1]["pose_variances"] == odom[-1]["twist_variances"] == [0.0] * 6
         # The median of the messages read: a daemon starved of the CPU for a few ms (a loaded
         # CI machine) reads one velocity sample off, here 0.389 m/s once (CI run 77).
         assert abs(statistics.median(e["vx"] for e in odom) - 0.3) < 0.02
@@ -104,6 +105,25 @@ def test_a_node_of_jazzys_first_rmw_zenoh_releases(
         assert odom and {e["layout"] for e in odom} == {"labelled"}
         seqs = [e["seq"] for e in odom]
         assert seqs == list(range(seqs[0], seqs[0] + len(seqs))), seqs
+    finally:
+        ended(node)
+
+
+@pytest.mark.parametrize("gateway", [{
+    "pose_covariance_diagonal": [0.001, 0.002, 1e6, 1e6, 1e6, 0.03],
+    "twist_covariance_diagonal": [0.004, 0.005, 1e6, 1e6, 1e6, 0.06]}], indirect=True,
+    ids=["covariances"])
+def test_the_odometry_carries_the_configured_variances(
+        gateway: tuple[subprocess.Popen[bytes], str], observer: Observer) -> None:
+    """diff_drive_controller's two diagonals, for robot_localization to weigh the wheels."""
+    _, connect = gateway
+    node = spawn_ros_node(connect, "--cmd-vel", CMD_VEL, "--odom", ODOM, "--vx", "0.0")
+    try:
+        odom = [e for e in lines(node, 20) if e["topic"] == "odom"]
+        assert odom, "no odometry"
+        assert odom[-1]["pose_variances"] == [0.001, 0.002, 1e6, 1e6, 1e6, 0.03]
+        assert odom[-1]["twist_variances"] == [0.004, 0.005, 1e6, 1e6, 1e6, 0.06]
+        assert odom[-1]["off_diagonal"] is False
     finally:
         ended(node)
 

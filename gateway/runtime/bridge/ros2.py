@@ -13,10 +13,11 @@ publisher, time, GID) on every sample, and the graph as liveliness tokens under 
   commander (``ros2:<gid>``); its ``MP`` token's disappearance is the deadman's trigger, GIDs
   being the XXH3 hash of the token key (:func:`gateway.wire.ros2.keys.gid_of`).
 * **Out**: ``nav_msgs/msg/Odometry`` on ``odom`` (frame ``odom_frame``, child ``base_frame``,
-  covariances zero: not estimated) and, with ``tf: true``, ``tf2_msgs/msg/TFMessage`` with the
-  ``odom_frame`` -> ``base_frame`` transform on ``/tf`` (Nav2 needs it there); with a
-  ``joint_states`` topic, ``sensor_msgs/msg/JointState`` of every wheel (its unwrapped angle and
-  measured speed) and steering actuator (its angle; speed NaN, not measured, as ros2_control's
+  covariances the configured diagonals, zero by default: not estimated) and, with
+  ``tf: true``, ``tf2_msgs/msg/TFMessage`` with the ``odom_frame`` -> ``base_frame``
+  transform on ``/tf`` (Nav2 needs it there); with a ``joint_states`` topic,
+  ``sensor_msgs/msg/JointState`` of every wheel (its unwrapped angle and measured speed) and
+  steering actuator (its angle; speed NaN, not measured, as ros2_control's
   ``joint_state_broadcaster`` fills an interface it lacks), under the ``joints`` names, which
   ``robot_state_publisher`` turns into the wheels' transforms for RViz.  A motor not heard yet
   is left out (none of its values is known).
@@ -94,7 +95,7 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
-__all__ = ["SERVICE_OPS", "Ros2Side", "RosCall", "commander_name", "joint_state",
+__all__ = ["SERVICE_OPS", "Ros2Side", "RosCall", "commander_name", "diagonal", "joint_state",
            "twist_request"]
 
 #: The requests offered as ``std_srvs/srv/Trigger`` services of the node (``~/<op>``).
@@ -228,6 +229,8 @@ class Ros2Side:
                 EntityKind.PUBLISHER, domain, zid, 0, next(ids), ns, name, self.joints_topic,
                 JOINT_STATE, QosProfile()), settings.attachment)
         self._joint_names = dict(settings.joints)
+        self._covariances = (diagonal(settings.pose_covariance_diagonal),
+                             diagonal(settings.twist_covariance_diagonal))
         self.diagnostics_topic = (resolve_topic_name(settings.diagnostics, ns)
                                   if settings.diagnostics else "")
         self.diagnostics = None if not self.diagnostics_topic else _Publisher(
@@ -290,9 +293,10 @@ class Ros2Side:
         rotation = Quaternion(0.0, 0.0, math.sin(half), math.cos(half))
         position = Vector3(pose.x_m, pose.y_m, 0.0)
         try:
+            pose_cov, twist_cov = self._covariances
             self.odom.put(encode_odometry(Odometry(
-                header, s.base_frame, position, rotation,
-                twist=Twist3D(twist.vx_m_s, twist.vy_m_s, 0.0, 0.0, 0.0, twist.wz_rad_s))))
+                header, s.base_frame, position, rotation, pose_cov,
+                Twist3D(twist.vx_m_s, twist.vy_m_s, 0.0, 0.0, 0.0, twist.wz_rad_s), twist_cov)))
             if self.tf is not None:
                 self.tf.put(encode_tf_message(TFMessage((TransformStamped(
                     header, s.base_frame, position, rotation),))))
@@ -321,6 +325,11 @@ class Ros2Side:
                 publisher.token.undeclare()
         for entity in self._entities:
             entity.undeclare()
+
+
+def diagonal(variances: tuple[float, ...]) -> tuple[float, ...]:
+    """The 6x6 covariance, row-major, with ``variances`` on its diagonal."""
+    return tuple(variances[i // 6] if i % 7 == 0 else 0.0 for i in range(36))
 
 
 def joint_state(snap: Snapshot, names: Mapping[str, str]) -> JointState:
