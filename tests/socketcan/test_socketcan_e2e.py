@@ -72,7 +72,7 @@ ROBOTS = {
 
 
 #: The halt between two legs of the square (s): the wheels stop before the next leg starts.
-HALT_S = 1.5
+HALT_S = 0.75
 
 
 def drive_square(session: Session, config_path: Path, vcan: str, speed: float) -> None:
