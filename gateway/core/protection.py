@@ -27,7 +27,7 @@ from __future__ import annotations
 import enum
 from dataclasses import dataclass
 
-__all__ = ["Guard", "Protection", "ProtectionState", "WatchdogPolicy", "check_timeout"]
+__all__ = ["Guard", "Protection", "ProtectionState", "WatchdogPolicy", "check_timeout", "stop_text"]
 
 
 class WatchdogPolicy(str, enum.Enum):
@@ -111,3 +111,11 @@ def check_timeout(protection: Protection, period_s: float, where: str) -> str | 
             f"({3.0 * period_s:g} s), or a late cycle stops the motor"
         )
     return None
+
+
+def stop_text(guard: Guard, timeout_s: float | None, state: ProtectionState) -> str:
+    """A controller-side stop as ``status`` and the ROS diagnostics word it: ``configured
+    0.25 s (confirmed)``, ``stated 1 s``, ``none``."""
+    timeout = f" {timeout_s:g} s" if timeout_s else ""
+    return guard.value + timeout + ("" if state is ProtectionState.NOT_APPLICABLE
+                                    else f" ({state.value})")

@@ -49,6 +49,8 @@ POLL_MAX = 64
 SERVE_SHARE = 0.2
 #: The shortest time between two diagnostics reports when the state keeps changing (s).
 REPORT_MIN_S = 0.1
+#: How often the diagnostics go out (s): ``diagnostic_updater``'s default period.
+DIAGNOSTICS_PERIOD_S = 1.0
 
 
 class Remote:
@@ -69,11 +71,10 @@ class Remote:
         self.gateway = gateway
         self.latch = latch
         self._status = status
-        #: When the next diagnostics report is due, the state the last one showed, and when
-        #: it went (a report goes only with ROS 2 diagnostics configured).
+        #: When the next diagnostics report is due and the state the last one showed (a
+        #: report goes only with ROS 2 diagnostics configured).
         self._report_due_s = -math.inf
         self._report_state: GatewayState | None = None
-        self._report_s = -math.inf
         self._reports = False
         self.bridge: Bridge | None = None
         self.view: Any = None
@@ -179,7 +180,8 @@ class Remote:
 
         :param now_s: the cycle's time (monotonic), for the diagnostics' period.
         """
-        if self._reports:
+        if self._reports and (now_s >= self._report_due_s
+                              or self.gateway.state is not self._report_state):
             self._report(now_s)
         if not self._mailboxes or not outbox:
             return
@@ -197,17 +199,13 @@ class Remote:
             box.post(snapshot, status, tuple(errors))
 
     def _report(self, now_s: float) -> None:
-        """The whole status for the bridge's ROS 2 diagnostics, when due (once a
-        :data:`~gateway.runtime.bridge.diagnostics.DIAGNOSTICS_PERIOD_S`, and at a change of
-        state, at most every :data:`REPORT_MIN_S`)."""
-        state = self.gateway.state
-        if now_s < self._report_due_s and (state is self._report_state
-                                           or now_s - self._report_s < REPORT_MIN_S):
-            return
+        """The whole status for the bridge's ROS 2 diagnostics: due once a
+        :data:`DIAGNOSTICS_PERIOD_S`, or at a change of state at most every
+        :data:`REPORT_MIN_S` after the last report."""
+        if now_s < self._report_due_s - DIAGNOSTICS_PERIOD_S + REPORT_MIN_S:
+            return  # (a change of state right after a report: the next cycle looks again)
         assert self.bridge is not None  # (reports are on only with a bridge)
-        from gateway.runtime.bridge.diagnostics import DIAGNOSTICS_PERIOD_S  # noqa: PLC0415
-
-        self._report_state, self._report_s = state, now_s
+        self._report_state = self.gateway.state
         self._report_due_s = now_s + DIAGNOSTICS_PERIOD_S
         self.bridge.mailbox.post(report=self._status())
 

@@ -13,7 +13,7 @@ from gateway.cli.commands._common import daemon_runs, socket_for
 from gateway.cli.commands._guards import fail_json_of
 from gateway.core.errors import GatewayError
 from gateway.core.numfmt import fixed, short
-from gateway.core.protection import ProtectionState
+from gateway.core.protection import stop_text
 from gateway.core.status import fault_names, state_name
 from gateway.runtime.client import ControlClient
 from gateway.wire.socket.status import status_from_json, status_to_json
@@ -81,12 +81,8 @@ def status_lines(status: GatewayStatus) -> list[str]:
     for m in s.motors:
         age = m.feedback_age_s
         stop = m.controller_stop  # daemons before issue 14 do not send it
-        guard = ""
-        if stop is not None:
-            timeout = stop.timeout_s
-            guard = f"stop {stop.guard.value}" + (f" {timeout:g} s" if timeout else "") + (
-                f" ({stop.state.value})" if stop.state is not ProtectionState.NOT_APPLICABLE
-                else "")
+        guard = "" if stop is None else (
+            f"stop {stop_text(stop.guard, stop.timeout_s, stop.state)}")
         lines.append(
             f"  {m.name:<{width}} node {m.node_id:<4} {state_name(m.state):<9} "
             f"age {'-' if age is None else f'{age * 1000:.1f} ms':>9}  {guard:<30} "

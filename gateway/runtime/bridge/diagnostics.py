@@ -22,7 +22,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from gateway.core.protection import Guard, ProtectionState
+from gateway.core.protection import Guard, ProtectionState, stop_text
 from gateway.core.status import BusErrorState, fault_names, state_name
 from gateway.core.types import DriveState, GatewayState
 from gateway.wire.ros2 import (
@@ -38,14 +38,10 @@ if TYPE_CHECKING:
     from collections.abc import Mapping
 
     from gateway.core.settings import GatewayConfig
-    from gateway.core.status import BusReport, ControllerStop, GatewayStatus, MotorReport
+    from gateway.core.status import BusReport, GatewayStatus, MotorReport
     from gateway.core.types import Twist
 
-__all__ = ["DIAGNOSTICS_PERIOD_S", "diagnostic_array", "hardware_ids"]
-
-#: How often the diagnostics go out (s), and at a change of the gateway's state:
-#: ``diagnostic_updater``'s default period (its ``diagnostic_updater.period`` parameter).
-DIAGNOSTICS_PERIOD_S = 1.0
+__all__ = ["diagnostic_array", "hardware_ids"]
 
 _GATEWAY_LEVEL = {GatewayState.FAULT: DiagnosticLevel.ERROR,
                   GatewayState.ESTOP: DiagnosticLevel.WARN,
@@ -131,14 +127,6 @@ def _bus(bus: BusReport, events: Mapping[str, int], node: str) -> DiagnosticStat
                             f"{bus.interface}:{bus.channel}", tuple(values))
 
 
-def _stop_text(stop: ControllerStop | None) -> str:
-    if stop is None:
-        return UNKNOWN
-    timeout = "" if stop.timeout_s is None else f" {stop.timeout_s:g} s"
-    state = "" if stop.state is ProtectionState.NOT_APPLICABLE else f" ({stop.state.value})"
-    return f"{stop.guard.value}{timeout}{state}"
-
-
 def _motor(m: MotorReport, name: str, hardware_id: str) -> DiagnosticStatus:
     faults = ", ".join(fault_names(m.faults))
     age = m.feedback_age_s
@@ -169,6 +157,7 @@ def _motor(m: MotorReport, name: str, hardware_id: str) -> DiagnosticStatus:
         KeyValue("feedback age", _number(None if age is None else age * 1000.0, "ms")),
         KeyValue("position", _number(m.position_rad, "rad")),
         KeyValue("velocity", _number(m.velocity_rad_s, "rad/s")),
-        KeyValue("controller stop", _stop_text(stop)),
+        KeyValue("controller stop", UNKNOWN if stop is None else
+                 stop_text(stop.guard, stop.timeout_s, stop.state)),
     )
     return DiagnosticStatus(level, name, message, hardware_id, values)

@@ -92,6 +92,7 @@ if TYPE_CHECKING:
     from gateway.core.bridge_settings import AttachmentFormat, Ros2Settings
     from gateway.core.status import GatewayStatus
     from gateway.runtime.mailbox import Snapshot
+    from gateway.wire.ros2 import RosType
 
 log = logging.getLogger(__name__)
 
@@ -101,8 +102,9 @@ __all__ = ["SERVICE_OPS", "Ros2Side", "RosCall", "commander_name", "diagonal", "
 #: The requests offered as ``std_srvs/srv/Trigger`` services of the node (``~/<op>``).
 SERVICE_OPS: tuple[Op, ...] = (Op.ESTOP, Op.ENABLE, Op.DISABLE)
 
-#: ``/tf`` publishers keep 100 (tf2_ros's ``DynamicBroadcasterQoS``).
+#: ``/tf`` publishers keep 100 (tf2_ros's ``DynamicBroadcasterQoS``); the others ROS's default.
 TF_QOS = QosProfile(depth=100)
+DEFAULT_QOS = QosProfile()
 
 
 def commander_name(gid: bytes) -> str:
@@ -200,7 +202,6 @@ class Ros2Side:
         ns = "/" + namespace if namespace else "/"
         domain, zid, name = settings.domain_id, str(session.zid()), settings.node_name
         self.cmd_vel = resolve_topic_name(settings.cmd_vel, ns)
-        self.odom_topic = resolve_topic_name(settings.odom, ns)
         ids = iter(range(1, 100))
         self._entities: list[Any] = [
             session.liveliness().declare_token(node_token(domain, zid, 0, ns, name))]
@@ -215,28 +216,24 @@ class Ros2Side:
             self._entities.append(session.liveliness().declare_token(entity_token(
                 EntityKind.SUBSCRIPTION, domain, zid, 0, next(ids), ns, name, self.cmd_vel,
                 ros_type, QosProfile())))
-        self.odom = _Publisher(session, topic_key(domain, self.odom_topic, ODOMETRY), entity_token(
-            EntityKind.PUBLISHER, domain, zid, 0, next(ids), ns, name, self.odom_topic,
-            ODOMETRY, QosProfile()), settings.attachment)
-        self.tf = None if not settings.tf else _Publisher(
-            session, topic_key(domain, "/tf", TF_MESSAGE), entity_token(
-                EntityKind.PUBLISHER, domain, zid, 0, next(ids), ns, name, "/tf", TF_MESSAGE,
-                TF_QOS), settings.attachment)
-        self.joints_topic = (resolve_topic_name(settings.joint_states, ns)
-                             if settings.joint_states else "")
-        self.joints = None if not self.joints_topic else _Publisher(
-            session, topic_key(domain, self.joints_topic, JOINT_STATE), entity_token(
-                EntityKind.PUBLISHER, domain, zid, 0, next(ids), ns, name, self.joints_topic,
-                JOINT_STATE, QosProfile()), settings.attachment)
+
+        def publisher(topic: str, ros_type: RosType, qos: QosProfile = DEFAULT_QOS
+                      ) -> _Publisher | None:
+            """A publisher on ``topic`` (resolved in the namespace), none for ``""``."""
+            if not topic:
+                return None
+            full = resolve_topic_name(topic, ns)
+            return _Publisher(session, topic_key(domain, full, ros_type), entity_token(
+                EntityKind.PUBLISHER, domain, zid, 0, next(ids), ns, name, full, ros_type, qos),
+                settings.attachment)
+
+        self.odom = cast("_Publisher", publisher(settings.odom, ODOMETRY))
+        self.tf = publisher("/tf" if settings.tf else "", TF_MESSAGE, TF_QOS)
+        self.joints = publisher(settings.joint_states, JOINT_STATE)
+        self.diagnostics = publisher(settings.diagnostics, DIAGNOSTIC_ARRAY)
         self._joint_names = dict(settings.joints)
         self._covariances = (diagonal(settings.pose_covariance_diagonal),
                              diagonal(settings.twist_covariance_diagonal))
-        self.diagnostics_topic = (resolve_topic_name(settings.diagnostics, ns)
-                                  if settings.diagnostics else "")
-        self.diagnostics = None if not self.diagnostics_topic else _Publisher(
-            session, topic_key(domain, self.diagnostics_topic, DIAGNOSTIC_ARRAY), entity_token(
-                EntityKind.PUBLISHER, domain, zid, 0, next(ids), ns, name,
-                self.diagnostics_topic, DIAGNOSTIC_ARRAY, QosProfile()), settings.attachment)
         #: The services' names (``/robot1/wheelgate/estop``), by op.
         self.services: dict[Op, str] = {}
         if settings.services and call is not None:
