@@ -10,10 +10,14 @@ with the protocol's driver: every wheel must be at zero within the controller's 
 margin, and stay there.
 
 The DJI C620/C610 has no known timeout: the test shows what the configuration acknowledges,
-the wheels keep turning.  A CiA 402 drive whose heartbeat consumer fires quick-stops and, by
-its 0x1029:01 (CiA 301 7.5.2.32: 0, PRE-OPERATIONAL, which the gateway writes), sends no more
-TPDOs: its stop is read from the simulators' own state, polled, and the bus must show each
-drive's heartbeat-consumer EMCY (0x8130) and its PRE-OPERATIONAL heartbeat (0x7F).
+each ESC holds the last current it was sent and the wheels keep turning.  (How fast each wheel
+turns then is whatever that current sustains: the gateway's speed loop left each ESC its last
+output, with the loop's noise in it, so a wheel may slow down, speed up or even reverse.)
+
+A CiA 402 drive whose heartbeat consumer fires quick-stops and, by its 0x1029:01 (CiA 301
+7.5.2.32: 0, PRE-OPERATIONAL, which the gateway writes), sends no more TPDOs: its stop is read
+from the simulators' own state, polled, and the bus must show each drive's heartbeat-consumer
+EMCY (0x8130) and its PRE-OPERATIONAL heartbeat (0x7F).
 
 The emulated VM runs about 14 times slower than a host: the controller timeouts here are 1 s
 (the gateway's cycles there are late by tens of milliseconds at times), and the margin covers
@@ -33,6 +37,7 @@ import can
 import pytest
 import yaml
 
+from drivers.dji.codec import decode_command, decode_feedback
 from gateway.bus.can_bus import to_frame
 from gateway.config import load_config
 from gateway.drive.driveset import DriveSet
@@ -52,6 +57,8 @@ TIMEOUT_S = 1.0
 MARGIN_S = 1.5
 #: A wheel at most this fast (rad/s) is stopped.
 STOPPED_RAD_S = 0.05
+#: After the kill, frames already queued may still reach the controllers for this long (s).
+SETTLE_S = 0.5
 #: How long the bus is watched after the kill (s).
 WATCH_S = TIMEOUT_S + MARGIN_S + 2.0
 
@@ -131,6 +138,22 @@ def consumer_fired(frames: list[Frame], nodes: list[int], t_kill: float) -> list
             and any(f.arbitration_id == 0x700 + node and f.data[:1] == b"\x7f" for f in after)]
 
 
+def dji_currents(frames: list[Frame], since_s: float) -> tuple[dict[int, int], dict[int, set[int]]]:
+    """Per ESC ID: the current set point of the last command frame on the bus (raw), and every
+    actual current the ESC reported in its feedback frames after ``since_s``."""
+    held: dict[int, int] = {}
+    reported: dict[int, set[int]] = {}
+    for frame in frames:
+        commands = decode_command(frame)
+        if commands is not None:
+            held.update(commands)
+            continue
+        feedback = decode_feedback(frame)
+        if feedback is not None and frame.timestamp_s > since_s:
+            reported.setdefault(feedback.esc_id, set()).add(feedback.current_raw)
+    return held, reported
+
+
 def stop_time(series: list[tuple[float, list[float | None]]], t_kill: float) -> float | None:
     """Seconds from the kill until every wheel reports at most :data:`STOPPED_RAD_S` for good,
     or ``None`` if some wheel never does."""
@@ -193,8 +216,12 @@ def test_kill_9_the_controllers_stop_the_wheels(
                     f"{TIMEOUT_S} s); true wheel speeds {WATCH_S} s after: {still}\n")
     if not robot.get("stops", True):
         # The acknowledged worst case: the ESCs hold their last current, the wheels turn on.
+        held, reported = dji_currents(recorder.frames, t_kill + SETTLE_S)
+        assert any(held.values()), f"the last command frames set no current: {held}"
+        assert reported == {esc: {current} for esc, current in held.items()}, (held, reported)
+        assert all(d["armed"] for d in after["devices"]), after
         assert stopped_after is None, series[-1]
-        assert min(still) > 0.5, after
+        assert max(still) > STOPPED_RAD_S, after
         return
     assert stopped_after is not None, f"a wheel still turns: {series[-1]}"
     assert stopped_after <= TIMEOUT_S + MARGIN_S, stopped_after
