@@ -3,6 +3,7 @@ and never one message twice in a burst or in the hands of a recorder."""
 
 from __future__ import annotations
 
+import ast
 import errno
 import time
 
@@ -14,6 +15,7 @@ from hypothesis import strategies as st
 from gateway.bus.can_bus import MessagePool, drain, open_bus, to_message
 from gateway.core.errors import BusError
 from gateway.core.types import Frame
+from tests.conftest import REPO
 
 frames = st.builds(
     Frame,
@@ -121,3 +123,18 @@ def test_on_the_callers_clock_a_frame_keeps_its_own_stamp_inside_the_drains_span
     finally:
         for bus in (rx, keeps, wall):
             bus.shutdown()
+
+
+def test_no_code_reads_a_messages_is_rx_flag() -> None:
+    """A local sender's frames on a vcan (every simulator process, ``cansend``) arrive with
+    ``is_rx`` false (the socketcan tier shows it on a kernel bus), so the gateway takes frames
+    whatever the flag says: no code of it reads the flag."""
+    readers = []
+    for path in [*(REPO / "gateway").rglob("*.py"), *(REPO / "drivers").rglob("*.py")]:
+        for node in ast.walk(ast.parse(path.read_text())):
+            # (A log entry's is_rx is the direction token of a candump line, not the flag.)
+            if (isinstance(node, ast.Attribute) and node.attr == "is_rx"
+                    and isinstance(node.ctx, ast.Load)
+                    and not (isinstance(node.value, ast.Name) and node.value.id == "entry")):
+                readers.append(f"{path.relative_to(REPO)}:{node.lineno}")
+    assert readers == []

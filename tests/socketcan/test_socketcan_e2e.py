@@ -10,7 +10,6 @@ distance.  ``wheelgate odom`` then replays the recording to the gateway's pose.
 
 from __future__ import annotations
 
-import ast
 import dataclasses
 import json
 import math
@@ -27,7 +26,7 @@ from gateway.cli import main
 from gateway.config import load_config
 from gateway.core.types import Twist
 from gateway.wire.can import TwistCommand, TwistFlags, WgCodec
-from tests.conftest import CONFIG_DIR, REPO
+from tests.conftest import CONFIG_DIR
 from tests.e2e_helpers import Rig, path_legs
 from tests.socketcan_helpers import IN_VM, SIM_RATE_HZ, Session, pose_error, tier_config
 
@@ -175,11 +174,12 @@ def test_square_over_a_kernel_bus_matches_the_true_pose_and_replays(
         odo, pose, seen)
 
 
-def test_local_frames_arrive_with_is_rx_false_and_the_gateway_never_reads_it(vcan: str) -> None:
+def test_local_frames_arrive_with_is_rx_false(vcan: str) -> None:
     """vcan hands a local sender's frames to the other local sockets with MSG_DONTROUTE, which
     python-can reports as ``is_rx`` false: every simulator and ``cansend`` frame looks
     "transmitted".  The gateway must take frames whatever the flag says: no code of it reads
-    the flag (the end-to-end sessions above run on exactly such frames)."""
+    the flag (tests/bus/test_can_bus.py checks that on the host; the end-to-end sessions above
+    run on exactly such frames)."""
     a = can.Bus(interface="socketcan", channel=vcan)
     b = can.Bus(interface="socketcan", channel=vcan)
     try:
@@ -190,27 +190,19 @@ def test_local_frames_arrive_with_is_rx_false_and_the_gateway_never_reads_it(vca
     finally:
         a.shutdown()
         b.shutdown()
-    readers = []
-    for path in [*(REPO / "gateway").rglob("*.py"), *(REPO / "drivers").rglob("*.py")]:
-        for node in ast.walk(ast.parse(path.read_text())):
-            # (A log entry's is_rx is the direction token of a candump line, not the flag.)
-            if (isinstance(node, ast.Attribute) and node.attr == "is_rx"
-                    and isinstance(node.ctx, ast.Load)
-                    and not (isinstance(node.value, ast.Name) and node.value.id == "entry")):
-                readers.append(f"{path.relative_to(REPO)}:{node.lineno}")
-    assert readers == []
 
 
 def test_dji_square_over_a_kernel_bus_on_simulated_time(vcan: str) -> None:
     """The DJI robot's frames through the kernel's vcan, with the gateway and the simulated
     ESCs in this process on simulated time (1 kHz simulator steps, as the ESCs report): the
     protocol on SocketCAN wherever the two-process square cannot keep a host speed loop
-    stable (the emulated VM)."""
+    stable (the emulated VM).  At 0.8 m/s: on simulated time no stall gaps the feedback, and
+    each simulated second costs seconds of the VM's emulated CPU."""
     cfg = load_config(CONFIG_DIR / ROBOTS["dji"], {"interface": "socketcan", "channel": vcan})
     cfg = dataclasses.replace(cfg, loop=dataclasses.replace(cfg.loop, rate_hz=200.0))
     with Rig(cfg) as rig:
         rig.enable()
-        for twist, seconds in path_legs(cfg, "square", 0.4):
+        for twist, seconds in path_legs(cfg, "square", 0.8):
             for _ in range(round(seconds / 0.1)):
                 rig.send_can_twist(twist)
                 rig.advance(0.1)
@@ -223,5 +215,5 @@ def test_dji_square_over_a_kernel_bus_on_simulated_time(vcan: str) -> None:
         assert err <= 0.01 * want.distance_m, (got.pose, want.pose)
         assert abs(math.remainder(got.pose.theta_rad - want.pose.theta_rad, math.tau)) \
             <= 0.01 * want.distance_m
-        assert rig.gw.counts.can_twists > 100
+        assert rig.gw.counts.can_twists == rig.counter  # every twist frame sent was taken
         assert rig.gw.receive_filters is not None  # opened with the kernel filters
