@@ -3,15 +3,17 @@
 :class:`LiveView` serves a Foxglove WebSocket server (the Foxglove SDK's,
 https://docs.foxglove.dev/docs/sdk) and/or records the same channels to an MCAP
 file (https://mcap.dev/spec).  The channels -- ``/tf``, ``/odom/pose``, ``/odom``, ``/wheels``,
-``/steering``, ``/state``, ``/errors`` -- are listed with their schemas and fields in
-:mod:`gateway.runtime.liveview_channels`; every message is stamped with the snapshot's
-``stamp_ns`` (wall clock), the errors with the wall clock when the worker takes them.
+``/steering``, ``/state``, ``/errors``, ``/diagnostics`` -- are listed with their schemas and
+fields in :mod:`gateway.runtime.liveview_channels`; every message is stamped with the
+snapshot's ``stamp_ns`` (wall clock), the errors and the diagnostics with the wall clock when
+the worker takes them.
 
 To watch a robot: in the Foxglove app (desktop, or https://app.foxglove.dev), *Open connection*
 -> *Foxglove WebSocket* -> ``ws://127.0.0.1:8765`` (the URL the daemon logs at start; the
 ``foxglove:`` block's host and port).  A 3D panel shows ``base_link`` moving in ``odom`` (the
 ``/tf`` transforms; display frame ``odom``), a Plot panel takes paths such as
-``/wheels.front_left.measured_rad_s`` or ``/odom.twist.vx_m_s``, a Log panel shows ``/errors``.
+``/wheels.front_left.measured_rad_s`` or ``/odom.twist.vx_m_s``, a Log panel shows ``/errors``,
+the Diagnostics panels show ``/diagnostics`` (the gateway, the CAN bus and each motor).
 A recording opens with *Open local file*, and ``wheelgate odom FILE.mcap`` replays its wheels
 through the odometry (:mod:`gateway.apps.replay.mcap_source`).
 
@@ -43,7 +45,9 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from gateway.core.errors import GatewayError
+from gateway.runtime.diagnostics import diagnostic_array
 from gateway.runtime.liveview_channels import (
+    DIAGNOSTICS_TOPIC,
     ERRORS_TOPIC,
     POSE_TOPIC,
     STATE_TOPIC,
@@ -55,7 +59,7 @@ from gateway.runtime.liveview_channels import (
 from gateway.runtime.mailbox import MAX_ERRORS, Mailbox
 
 if TYPE_CHECKING:
-    from collections.abc import Callable, Sequence
+    from collections.abc import Callable, Mapping, Sequence
     from types import ModuleType
 
     from gateway.core.bridge_settings import FoxgloveSettings
@@ -108,6 +112,7 @@ class LiveViewStats:
     :param failures: messages a channel failed to take (see the log: once per channel).
     :param bad_data: snapshots whose time stamp or pose could not be used (other values that
         are not finite are written as ``null`` and not counted).
+    :param diagnostics: diagnostics reports published on ``/diagnostics``.
     """
 
     snapshots: int
@@ -115,6 +120,7 @@ class LiveViewStats:
     errors_dropped: int
     failures: int
     bad_data: int
+    diagnostics: int = 0
 
 
 class LiveView:
@@ -127,15 +133,18 @@ class LiveView:
     :param record_mcap: record to this file ('' for ``settings.mcap``; this one wins when both
         are given); an existing file is replaced.
     :param serve: serve the WebSocket server (``False``: record only).
+    :param hardware: each motor's hardware id in ``/diagnostics``, by its name in the status
+        (:func:`gateway.runtime.diagnostics.hardware_ids`).
     :raises LiveViewError: when the SDK is missing, there is nothing to do (no server and no
         file), the server cannot listen, or the file cannot be created -- naming which.
     """
 
     def __init__(self, settings: FoxgloveSettings, robot_name: str, wheel_names: Sequence[str],
                  steer_names: Sequence[str] = (), *, record_mcap: str = "",
-                 serve: bool = True) -> None:
+                 serve: bool = True, hardware: Mapping[str, str] | None = None) -> None:
         self.settings = settings
         self.robot_name = robot_name
+        self.hardware = dict(hardware or {})
         #: The file recorded to ('' for none).
         self.mcap_path = record_mcap or settings.mcap
         #: The server's address, e.g. ``ws://127.0.0.1:8765`` (the real port when 0 was
@@ -155,6 +164,7 @@ class LiveView:
         self._thread: threading.Thread | None = None
         self._closed = False
         self._snapshots = self._errors = self._dropped = self._failures = self._bad_data = 0
+        self._diagnostics = 0
         self._failed: set[str] = set()
         self._last_error_ns = 0
         self._flush_at = 0.0
@@ -255,7 +265,7 @@ class LiveView:
     def stats(self) -> LiveViewStats:
         """What the worker did so far."""
         return LiveViewStats(self._snapshots, self._errors, self._dropped, self._failures,
-                             self._bad_data)
+                             self._bad_data, self._diagnostics)
 
     def __enter__(self) -> LiveView:
         self.start()
@@ -288,6 +298,15 @@ class LiveView:
                 status.state, status.reason, self._now_ns()))
         if news.errors or news.errors_dropped:
             self._report_errors(news)
+        if news.report is not None:
+            report, t = news.report, self._now_ns()
+            try:
+                self._channels.diagnostics(
+                    diagnostic_array(report, self.robot_name, self.hardware, t), t)
+            except Exception as err:
+                self._fail(DIAGNOSTICS_TOPIC, err)
+            else:
+                self._diagnostics += 1
 
     def _flush(self) -> None:
         writer = self._writer

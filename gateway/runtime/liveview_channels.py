@@ -26,6 +26,9 @@ topic                     schema                           encoding    fields
 ``/state``                ``wheelgate.State``              json        state, code, reason
 ``/errors``               ``foxglove.Log``                 protobuf    level, ``<code>: <message>``,
                                                                        name (the robot)
+``/diagnostics``          ``diagnostic_msgs/msg/``         cdr         the gateway, the CAN bus,
+                          ``DiagnosticArray`` (ros2msg)                each motor: level, message,
+                                                                       hardware id, values
 ========================  ===============================  ==========  ============================
 
 Every number that is not finite, and every value not measured yet, is ``null`` (JSON has no
@@ -34,7 +37,11 @@ type name the Foxglove app reads.  The wheels and actuators are keys, not array 
 Plot panel takes a path such as ``/wheels.front_left.measured_rad_s``.  ``/odom``'s
 ``timestamp_s`` is the odometry's own (its last wheel feedback); every message's log time is the
 snapshot's ``stamp_ns``.  ``/errors`` holds every error at level Error, and a Warning when some
-were dropped.  ``/steering`` exists only for robots with steering actuators.
+were dropped.  ``/steering`` exists only for robots with steering actuators.  ``/diagnostics``
+is ROS 2's own message (:mod:`gateway.runtime.diagnostics`; once a second and at a change of
+state), CDR-encoded under its complete ``ros2msg`` definition, so the app's Diagnostics panels
+(which take ``diagnostic_msgs/msg/DiagnosticArray`` by that name) show it, as they would a ROS
+robot's.
 
 Well-known schemas: https://docs.foxglove.dev/docs/sdk/schemas (``/frame-transforms``,
 ``/pose-in-frame``, ``/log``); JSON channels (message encoding ``json``, schema encoding
@@ -48,18 +55,23 @@ import json
 import math
 from typing import TYPE_CHECKING, Any
 
+from gateway.wire.ros2 import DIAGNOSTIC_ARRAY, encode_diagnostic_array
+from gateway.wire.ros2.typehash import complete_definition
+
 if TYPE_CHECKING:
     from collections.abc import Callable, Sequence
     from types import ModuleType
 
     from gateway.core.kinematics.odometry import OdometryState, Pose
     from gateway.runtime.mailbox import Snapshot, SteerSample, WheelSample
+    from gateway.wire.ros2 import DiagnosticArray
 
 #: A pose in the plane, every number finite: x (m), y (m), theta (rad).
 Planar = tuple[float, float, float]
 
 __all__ = [
     "BASE_FRAME",
+    "DIAGNOSTICS_TOPIC",
     "ERRORS_TOPIC",
     "ODOM_FRAME",
     "ODOM_SCHEMA",
@@ -92,6 +104,7 @@ WHEELS_TOPIC = "/wheels"
 STEERING_TOPIC = "/steering"
 STATE_TOPIC = "/state"
 ERRORS_TOPIC = "/errors"
+DIAGNOSTICS_TOPIC = "/diagnostics"
 #: The odometry's frame id (the transform's parent) and the robot's (its child), as ROS's.
 ODOM_FRAME = "odom"
 BASE_FRAME = "base_link"
@@ -258,6 +271,10 @@ class Channels:
         self._state = fg.Channel(STATE_TOPIC, schema=STATE_SCHEMA, context=context)
         self._steering = (fg.Channel(STEERING_TOPIC, schema=steering_schema(steer_names),
                                      context=context) if steer_names else None)
+        self._diagnostics = fg.Channel(
+            DIAGNOSTICS_TOPIC, message_encoding="cdr", context=context,
+            schema=fg.Schema(name=DIAGNOSTIC_ARRAY.ros_name, encoding="ros2msg",
+                             data=complete_definition(DIAGNOSTIC_ARRAY.ros_name).encode()))
         #: ``(topic, publish)`` for every channel a snapshot goes on, in order; ``publish``
         #: takes the snapshot, its log time (ns) and its pose (``None``: not finite).
         self.per_snapshot: list[tuple[str, Callable[[Snapshot, int, Planar | None], None]]] = [
@@ -322,3 +339,7 @@ class Channels:
         self._errors.log(m.Log(timestamp=self._timestamp(t), message=text,
                                level=m.LogLevel.Error if error else m.LogLevel.Warning,
                                name=self.robot_name), log_time=t)
+
+    def diagnostics(self, report: DiagnosticArray, t: int) -> None:
+        """``/diagnostics``: the report as ROS 2 serializes it (CDR)."""
+        self._diagnostics.log(encode_diagnostic_array(report), log_time=t)

@@ -5,10 +5,10 @@
 through exactly the socket's path: newest valid wins, the limits, ``cmd_timeout_s``), acts on
 a lost commander (:mod:`gateway.runtime.bridge.deadman`), and posts the loop's news -- a
 :class:`~gateway.runtime.mailbox.Snapshot` at the odometry rate, the state, every error -- to
-each worker's mailbox, and with ROS 2 diagnostics the whole status to the bridge's once a
-second and at a change of state (:mod:`gateway.runtime.bridge.diagnostics`).  The modules
-behind it (and Zenoh, the Foxglove SDK) are imported only when the configuration asks for
-them.
+each worker's mailbox, and the whole status once a second and at a change of state to the
+live view's and, with ROS 2 diagnostics, to the bridge's (:mod:`gateway.runtime.diagnostics`).
+The modules behind it (and Zenoh, the Foxglove SDK) are imported only when the configuration
+asks for them.
 """
 
 from __future__ import annotations
@@ -71,11 +71,11 @@ class Remote:
         self.gateway = gateway
         self.latch = latch
         self._status = status
-        #: When the next diagnostics report is due and the state the last one showed (a
-        #: report goes only with ROS 2 diagnostics configured).
+        #: When the next diagnostics report is due and the state the last one showed, and
+        #: the mailboxes that take one (the live view's; the bridge's with ROS 2 diagnostics).
         self._report_due_s = -math.inf
         self._report_state: GatewayState | None = None
-        self._reports = False
+        self._report_boxes: list[Mailbox[Any]] = []
         self.bridge: Bridge | None = None
         self.view: Any = None
         self._mailboxes: list[Mailbox[Any]] = []
@@ -84,25 +84,29 @@ class Remote:
                 # Imported only with a bridge: block (and Zenoh only by the bridge).
                 from gateway.runtime.bridge.bridge import Bridge  # noqa: PLC0415
                 from gateway.runtime.bridge.deadman import Deadman  # noqa: PLC0415
-                from gateway.runtime.bridge.diagnostics import hardware_ids  # noqa: PLC0415
+                from gateway.runtime.diagnostics import hardware_ids  # noqa: PLC0415
 
                 self.bridge = Bridge(config.bridge, hardware_ids(config))
-                self._reports = bool(config.bridge.ros2 and config.bridge.ros2.diagnostics)
+                if config.bridge.ros2 and config.bridge.ros2.diagnostics:
+                    self._report_boxes.append(self.bridge.mailbox)
                 self._mailboxes.append(self.bridge.mailbox)
                 self.requests = RequestHandler(gateway, self.bridge, latch, status,
                                                Source.BRIDGE, "the Zenoh bridge")
                 self.requests.pending_twists = pending_twists
                 self.deadman = Deadman()
             if config.foxglove is not None or record_mcap:
+                from gateway.runtime.diagnostics import hardware_ids  # noqa: PLC0415
                 from gateway.runtime.liveview import LiveView  # noqa: PLC0415 - optional
 
                 wheel_names = tuple(m.wheel for m in config.motors if m is not None)
                 steer_names = tuple(a.wheel for a in config.steering)
                 self.view = LiveView(config.foxglove or FoxgloveSettings(), config.name,
                                      wheel_names, steer_names, record_mcap=record_mcap,
-                                     serve=config.foxglove is not None)
+                                     serve=config.foxglove is not None,
+                                     hardware=hardware_ids(config))
                 self.view.start()
                 self._mailboxes.append(self.view.mailbox)
+                self._report_boxes.append(self.view.mailbox)
         except BaseException:
             self.close()
             raise
@@ -180,7 +184,7 @@ class Remote:
 
         :param now_s: the cycle's time (monotonic), for the diagnostics' period.
         """
-        if self._reports and (now_s >= self._report_due_s
+        if self._report_boxes and (now_s >= self._report_due_s
                               or self.gateway.state is not self._report_state):
             self._report(now_s)
         if not self._mailboxes or not outbox:
@@ -199,15 +203,15 @@ class Remote:
             box.post(snapshot, status, tuple(errors))
 
     def _report(self, now_s: float) -> None:
-        """The whole status for the bridge's ROS 2 diagnostics: due once a
-        :data:`DIAGNOSTICS_PERIOD_S`, or at a change of state at most every
-        :data:`REPORT_MIN_S` after the last report."""
+        """The whole status for the diagnostics: due once a :data:`DIAGNOSTICS_PERIOD_S`, or
+        at a change of state at most every :data:`REPORT_MIN_S` after the last report."""
         if now_s < self._report_due_s - DIAGNOSTICS_PERIOD_S + REPORT_MIN_S:
             return  # (a change of state right after a report: the next cycle looks again)
-        assert self.bridge is not None  # (reports are on only with a bridge)
         self._report_state = self.gateway.state
         self._report_due_s = now_s + DIAGNOSTICS_PERIOD_S
-        self.bridge.mailbox.post(report=self._status())
+        report = self._status()
+        for box in self._report_boxes:
+            box.post(report=report)
 
     def close(self) -> None:
         """Stop the workers and close the session (the gateway's token disappears)."""

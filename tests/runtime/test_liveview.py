@@ -1,8 +1,7 @@
 """The live view (:mod:`gateway.runtime.liveview`): its MCAP recording (read back with the
 ``mcap`` package; protobuf by its wire format, https://protobuf.dev/programming-guides/encoding/),
-its WebSocket server (a socket speaking RFC 6455 and the Foxglove protocol,
-https://github.com/foxglove/ws-protocol/blob/main/docs/spec.md; loopback, port 0), bad data, SDK
-failures, start-up errors."""
+its WebSocket server (RFC 6455 and the Foxglove protocol, https://github.com/foxglove/ws-protocol
+docs/spec.md; loopback, port 0), bad data, SDK failures, start-up errors."""
 
 from __future__ import annotations
 
@@ -369,13 +368,14 @@ def test_server_advertises_the_channels_and_sends_a_posted_snapshot() -> None:
         client = WsClient(int(view.url.rsplit(":", 1)[1]))
         try:
             channels: dict[str, dict[str, Any]] = {}
-            while len(channels) < 7:
+            while len(channels) < 8:
                 opcode, data = client.frame()
                 message = json.loads(data) if opcode == 1 else {}
                 if message.get("op") == "advertise":
                     channels.update({c["topic"]: c for c in message["channels"]})
-            assert set(channels) == {*PER_SNAPSHOT, "/errors"}
+            assert set(channels) == {*PER_SNAPSHOT, "/errors", "/diagnostics"}
             assert channels["/tf"]["schemaName"] == "foxglove.FrameTransforms"
+            assert channels["/diagnostics"]["schemaEncoding"] == "ros2msg"  # (CDR messages)
             assert channels["/odom"]["encoding"] == "json"
             client.send_json({"op": "subscribe",
                               "subscriptions": [{"id": 7, "channelId": channels["/odom"]["id"]}]})

@@ -80,7 +80,7 @@ class Bridge:
 
     :param settings: the ``bridge:`` block.
     :param hardware: each motor's hardware id by its name, for the ROS 2 diagnostics
-        (:func:`~gateway.runtime.bridge.diagnostics.hardware_ids`).
+        (:func:`~gateway.runtime.diagnostics.hardware_ids`).
     :raises BridgeError: when Zenoh is missing, the session cannot be opened or its keys
         cannot be declared.  A client whose router cannot be reached is no error: the robot
         may boot before the machine that runs the router, so the bridge keeps trying in a

@@ -23,7 +23,7 @@ publisher, time, GID) on every sample, and the graph as liveliness tokens under 
   is left out (none of its values is known).
 * **Diagnostics**, with a ``diagnostics`` topic (``/diagnostics``):
   ``diagnostic_msgs/msg/DiagnosticArray`` of the gateway, the CAN bus and every motor, once a
-  second and at a change of state (:mod:`gateway.runtime.bridge.diagnostics`).
+  second and at a change of state (:mod:`gateway.runtime.diagnostics`).
 * **Services**, with ``services: true``: ``std_srvs/srv/Trigger`` on the node's ``~/estop``,
   ``~/enable`` and ``~/disable`` (``/robot1/wheelgate/estop``): each the control socket's
   request, through the bridge's inbox as the native ``rpc/<op>`` queries (the e-stop release
@@ -42,10 +42,10 @@ import time
 from typing import TYPE_CHECKING, Any, cast
 
 from gateway.core.errors import DecodeError, EncodeError
-from gateway.runtime.bridge.diagnostics import diagnostic_array
 from gateway.runtime.bridge.inbox import NO_REPLY, Inbound, TwistSource
 from gateway.runtime.bridge.native import parse_query
 from gateway.runtime.bridge.session import import_zenoh
+from gateway.runtime.diagnostics import diagnostic_array
 from gateway.wire.ros2 import (
     DIAGNOSTIC_ARRAY,
     JOINT_STATE,

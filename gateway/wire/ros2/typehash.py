@@ -17,6 +17,10 @@ The ``.msg`` reader here covers what ``rosidl_adapter`` turns into IDL for ordin
 primitive types, (bounded) strings, fixed arrays, bounded and unbounded sequences, nested types
 (``Type``, ``pkg/Type``; a service's parts as ``pkg/srv/Name_Request``), default values and
 constants (both ignored).  Pure: no I/O.
+
+:func:`complete_definition` writes the same definitions as one self-contained ``ros2msg``
+schema, the form an MCAP file's ROS 2 channels carry (ros2/rosbag2,
+``docs/message_definition_encoding.md``; the MCAP registry's ``ros2msg``).
 """
 
 from __future__ import annotations
@@ -247,3 +251,33 @@ def compute_type_hash(ros_name: str, definitions: Mapping[str, str] = MESSAGE_DE
     """
     digest = hashlib.sha256(canonical_json(ros_name, definitions).encode("utf-8"))
     return RIHS01_PREFIX + digest.hexdigest()
+
+
+#: The first line of the two that precede each dependency in a ``ros2msg`` schema.
+MSG_DELIMITER = "=" * 80
+
+
+def complete_definition(ros_name: str, definitions: Mapping[str, str] = MESSAGE_DEFINITIONS
+                        ) -> str:
+    """The ``ros2msg`` schema of ``ros_name``: its ``.msg`` text first, then that of every type
+    it references (directly or not, sorted by name), each after a line of 80 ``=`` and a line
+    ``MSG: <its full ROS name>``.
+
+    >>> print(complete_definition("std_msgs/msg/Header").replace("=" * 80, "=" * 8))
+    builtin_interfaces/Time stamp
+    string frame_id
+    ========
+    MSG: builtin_interfaces/msg/Time
+    int32 sec
+    uint32 nanosec
+    <BLANKLINE>
+
+    :raises DecodeError: a missing or malformed definition.
+    """
+    described = type_description(ros_name, definitions)
+    referenced = described["referenced_type_descriptions"]
+    assert isinstance(referenced, list)
+    parts = [definitions[ros_name]]
+    parts += [f"{MSG_DELIMITER}\nMSG: {ref['type_name']}\n{definitions[ref['type_name']]}"
+              for ref in referenced]
+    return "".join(parts)

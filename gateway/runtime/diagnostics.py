@@ -15,7 +15,8 @@ hardware driver, from the status model that ``wheelgate status`` prints
   stop is not known (a DJI ESC has none, a DBC controller's was not stated), else OK.
 
 The names follow ``diagnostic_updater``'s custom (``"<node name>: <task>"``), so an aggregator's
-analyzer can gather them by their prefix.  Pure: no I/O, no clock.
+analyzer can gather them by their prefix: the bridge's ROS node name, the robot's name in the
+Foxglove live view.  Pure: no I/O, no clock.
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The gateway's status as ROS 2 diagnostics (``gateway.runtime.bridge.diagnostics``): the level
+"""The gateway's status as ROS 2 diagnostics (``gateway.runtime.diagnostics``): the level
 and message of the gateway, the bus and each motor for every state that decides them, and any
 status a ``DiagnosticArray`` that goes on the wire and comes back the same."""
 
@@ -14,7 +14,7 @@ from gateway.core.errors import EncodeError
 from gateway.core.protection import Guard, ProtectionState
 from gateway.core.status import BusErrorState, BusHealth, ControllerStop, GatewayStatus
 from gateway.core.types import DriveFault, DriveState, GatewayState
-from gateway.runtime.bridge.diagnostics import diagnostic_array, hardware_ids
+from gateway.runtime.diagnostics import diagnostic_array, hardware_ids
 from gateway.wire.ros2 import (
     DiagnosticLevel,
     Time,
