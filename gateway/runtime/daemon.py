@@ -128,6 +128,7 @@ class Daemon:
         self.socket_path = path
         #: The e-stop latch on disk (see :mod:`gateway.runtime.latch`).
         self.latch = EstopLatch(latch_path(config.loop.state_file, config.name))
+        self._closers.append(self.latch.wait_durable)  # (its fsyncs run in the background)
         self._ready = False
         self._state = GatewayState.DISABLED
         #: The state last said is ENABLING while listening for another commander.

@@ -8,8 +8,15 @@ it is there, starts in ESTOP with the recorded reason.
 Where it lives: ``gateway.state_file`` when set; else ``$STATE_DIRECTORY/estop`` (systemd sets
 ``STATE_DIRECTORY`` for a unit with ``StateDirectory=wheelgate``, systemd.exec(5)); else
 ``$XDG_STATE_HOME/wheelgate/estop-<robot>`` (``~/.local/state`` when unset, XDG Base Directory
-Specification).  Writes are atomic (a temporary file renamed over the old one, then fsync of
-the directory), so a crash leaves the old latch or the new one, never half of one.
+Specification).  Writes are atomic (a temporary file renamed over the old one), so a crashed
+process leaves the old latch or the new one, never half of one.
+
+Durable, off the loop: the caller (the loop thread) only writes and renames, which the page
+cache takes at once; the fsyncs of the file and of its directory, which a slow SD card can stall
+for seconds, run in a short thread of their own (:meth:`EstopLatch.wait_durable` waits for them;
+the daemon does at its close).  A power cut before they end may lose the latch or leave it empty
+(the rename reached the disk before the data): an empty or damaged latch reads as latched, so
+the worst case is the e-stop that was never written, as a power cut a moment earlier.
 """
 
 from __future__ import annotations
@@ -18,6 +25,7 @@ import contextlib
 import json
 import logging
 import os
+import threading
 import time
 from pathlib import Path
 
@@ -53,6 +61,8 @@ class EstopLatch:
         #: The supervisor's e-stop count at the last :meth:`track` (an e-stop the daemon
         #: restored from this file counts as tracked: it is on disk already).
         self.counted = 0
+        #: The fsync threads not yet waited for (see :meth:`wait_durable`).
+        self._syncs: list[threading.Thread] = []
 
     def read(self) -> str | None:
         """The reason of a latched e-stop, ``None`` when there is none.
@@ -89,7 +99,8 @@ class EstopLatch:
                 self.set(reason)
 
     def set(self, reason: str) -> bool:
-        """Write the latch (once for one e-stop: again only after :meth:`clear`).
+        """Write the latch (once for one e-stop: again only after :meth:`clear`); made durable
+        in the background.
 
         :return: whether it was written (a failure is logged: the e-stop itself holds in
             memory regardless).
@@ -101,10 +112,7 @@ class EstopLatch:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             with tmp.open("w", encoding="utf-8") as f:
                 json.dump({"reason": reason, "time": time.time()}, f)
-                f.flush()
-                os.fsync(f.fileno())
             tmp.replace(self.path)
-            self._sync_dir()
             self._written = reason
         except OSError as err:
             log.error("e-stop latch %s could not be written (%s): the e-stop holds until this "
@@ -112,21 +120,60 @@ class EstopLatch:
             with contextlib.suppress(OSError):
                 tmp.unlink(missing_ok=True)  # (no half-written file left beside it)
             return False
+        self._sync(file=True)
         return True
 
     def clear(self) -> None:
-        """Remove the latch (an explicit enable released the e-stop)."""
+        """Remove the latch (an explicit enable released the e-stop); made durable in the
+        background."""
         self._written = None
         try:
             self.path.unlink(missing_ok=True)
-            self._sync_dir()
         except OSError as err:
             log.error("e-stop latch %s could not be removed (%s): the next start will be "
                       "e-stopped again", self.path, err)
+            return
+        self._sync(file=False)
 
-    def _sync_dir(self) -> None:
-        fd = os.open(self.path.parent, os.O_RDONLY)
+    def wait_durable(self, timeout_s: float = 5.0) -> bool:
+        """Wait up to ``timeout_s`` for the fsyncs started so far.
+
+        :return: whether they all ended (a failed one is logged, and counts as ended; one
+            still running is logged).
+        """
+        end = time.monotonic() + timeout_s
+        for thread in self._syncs:
+            thread.join(max(0.0, end - time.monotonic()))
+        self._syncs = [t for t in self._syncs if t.is_alive()]
+        if self._syncs:
+            log.warning("e-stop latch %s: still not flushed to disk after %g s", self.path,
+                        timeout_s)
+        return not self._syncs
+
+    def _sync(self, *, file: bool) -> None:
+        # (Started by the loop thread, it inherits its SCHED_FIFO, as the simulators' thread
+        # does: it holds the GIL for microseconds and waits for the disk without it.)
+        self._syncs = [t for t in self._syncs if t.is_alive()]
+        thread = threading.Thread(target=self._fsync, args=(file,), daemon=True,
+                                  name="wheelgate-latch-sync")
+        self._syncs.append(thread)
+        thread.start()
+
+    def _fsync(self, file: bool) -> None:
+        """The file's fsync (when it was written), then its directory's: in a thread."""
         try:
-            os.fsync(fd)
-        finally:
-            os.close(fd)
+            if file:
+                with contextlib.suppress(FileNotFoundError):  # (cleared since: nothing to keep)
+                    _fsync_path(self.path)
+            _fsync_path(self.path.parent)
+        except OSError as err:
+            log.error("e-stop latch %s: %s, but not flushed to disk (%s): a power cut now may "
+                      "undo it", self.path, "written" if file else "removed", err)
+
+
+def _fsync_path(path: Path) -> None:
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)

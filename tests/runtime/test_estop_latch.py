@@ -3,11 +3,13 @@ ENABLE flag unless allowed; only an explicit enable releases it."""
 
 from __future__ import annotations
 
+import errno
 import json
 import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 from typing import TYPE_CHECKING
 
@@ -64,7 +66,7 @@ def test_a_latch_that_cannot_be_written_leaves_no_temporary_file(tmp_path: Path)
 
 def test_one_estop_is_written_once(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     # The socket's request and the cycle that sees ESTOP both set the latch: one write (two
-    # fsyncs, the file's and the folder's, each a stall of the loop on a slow card).
+    # fsyncs, the file's and the folder's).
     syncs: list[int] = []
     real = os.fsync
 
@@ -76,10 +78,35 @@ def test_one_estop_is_written_once(tmp_path: Path, monkeypatch: pytest.MonkeyPat
     latch = EstopLatch(tmp_path / "estop")
     assert latch.set("e-stop requested on the control socket")
     assert latch.set("e-stop requested on the control socket")
-    assert len(syncs) == 2
+    assert latch.wait_durable() and len(syncs) == 2
     latch.clear()
     assert latch.set("e-stop requested on the control socket")  # a new e-stop: written
-    assert latch.path.exists() and len(syncs) == 5
+    assert latch.wait_durable() and latch.path.exists() and len(syncs) == 5
+
+
+def test_the_caller_never_waits_for_the_disk(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                             caplog: pytest.LogCaptureFixture) -> None:
+    # A slow SD card stalls an fsync for seconds: the loop thread (the caller) only writes
+    # and renames; the fsyncs wait in the background, and a failing one is logged.
+    release = threading.Event()
+    synced: list[int] = []
+
+    def slow(fd: int) -> None:
+        assert release.wait(10.0)
+        synced.append(fd)
+        raise OSError(errno.EIO, "Input/output error")
+
+    monkeypatch.setattr(os, "fsync", slow)
+    latch = EstopLatch(tmp_path / "estop")
+    assert latch.set("e-stop requested on the control socket")  # returns, the fsync blocked
+    assert json.loads(latch.path.read_text())["reason"] == "e-stop requested on the control socket"
+    latch.clear()
+    assert not latch.path.exists() and synced == []
+    assert not latch.wait_durable(0.05)
+    release.set()
+    assert latch.wait_durable() and len(synced) == 2  # (each thread's first fsync failed)
+    assert sorted(r.getMessage().split(": ")[1].split(",")[0] for r in caplog.records
+                  if ", but not flushed to disk" in r.getMessage()) == ["removed", "written"]
 
 
 def test_a_state_file_that_is_a_directory_is_a_config_error(tmp_path: Path) -> None:
