@@ -43,6 +43,29 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
+#: The most frames taken in one pass (the rest wait for the next: a flood starves no request).
+MAX_FRAMES_PER_PASS = 1000
+#: The oldest a message's own stamp may be and still be taken as its arrival (s): older, or in
+#: the future, it is an interface's own epoch (the arrival is then the time it was read).
+MAX_AGE_S = 60.0
+
+
+def arrival(stamp_s: float, wall_s: float, now_s: float, since_s: float) -> float:
+    """When a message arrived, on the scan's clock: ``now_s`` less its age by its own stamp
+    (the kernel's receive time on socketcan; python-can stamps with the wall clock), not
+    before ``since_s`` (when the previous pass began reading: nothing waiting now came
+    earlier; a wall clock that stepped since would say so).
+
+    >>> arrival(99.5, 100.0, 7.0, 6.0), arrival(99.5, 100.0, 7.0, 6.8)
+    (6.5, 6.8)
+    >>> arrival(5.0, 100.0, 7.0, 6.0)  # 95 s old: an interface's own epoch
+    7.0
+    """
+    age = wall_s - stamp_s
+    if not 0.0 <= age <= MAX_AGE_S:
+        return now_s
+    return max(now_s - age, since_s)
+
 
 def scan_bus(bus: can.BusABC, timing: ScanTiming, bus_name: str,
              probes: Sequence[ScanProbe] | None = None,
@@ -60,22 +83,33 @@ def scan_bus(bus: can.BusABC, timing: ScanTiming, bus_name: str,
         like (:mod:`gateway.apps.scan.classify`).
     :raises BusError: if receiving fails.
     """
-    start = clock()
+    start = since = clock()
     session = ScanSession(load_probes() if probes is None else probes, timing, start, own_ids,
                           known, claimed)
     failed: list[str] = []
+    wait = 0.0
     try:
-        while not session.finished(now := clock()):
+        while True:
+            # Every frame waiting first, each at its arrival, before an unanswered request
+            # expires: on a busy bus a slow host reads answers that came in time late.
+            msg = bus.recv(wait)
+            now, wall = clock(), time.time()
+            for _ in range(MAX_FRAMES_PER_PASS):
+                if msg is None:
+                    break
+                if not (msg.is_error_frame or msg.is_fd):
+                    t = arrival(msg.timestamp, wall, now, since)
+                    session.on_frame(to_frame(msg, t), t)
+                msg = bus.recv(0.0)
+            since = now
+            if session.finished(now):
+                break
             for frame in session.poll(now):
                 try:
                     bus.send(to_message(frame))
                 except (can.CanError, OSError) as err:
                     failed.append(f"{frame.to_cansend()}: {err}")
-            wait = min(timing.spacing_s, start + timing.timeout_s - now)
-            msg = bus.recv(max(wait, 0.0))
-            if msg is not None and not (msg.is_error_frame or msg.is_fd):
-                t = clock()
-                session.on_frame(to_frame(msg, t), t)
+            wait = max(min(timing.spacing_s, start + timing.timeout_s - now), 0.0)
     except (can.CanError, OSError) as err:
         raise BusError(f"Receiving from {bus_name} failed: {err}") from err
     report = session.report(clock(), bus_name)
