@@ -63,6 +63,7 @@ if TYPE_CHECKING:
     from types import ModuleType
 
     from gateway.core.bridge_settings import FoxgloveSettings
+    from gateway.core.status import GatewayStatus
     from gateway.runtime.liveview_channels import Planar
     from gateway.runtime.mailbox import Delivery, Snapshot
 
@@ -299,14 +300,13 @@ class LiveView:
         if news.errors or news.errors_dropped:
             self._report_errors(news)
         if news.report is not None:
-            report, t = news.report, self._now_ns()
-            try:
-                self._channels.diagnostics(
-                    diagnostic_array(report, self.robot_name, self.hardware, t), t)
-            except Exception as err:
-                self._fail(DIAGNOSTICS_TOPIC, err)
-            else:
-                self._diagnostics += 1
+            report = news.report
+            self._guarded(DIAGNOSTICS_TOPIC, lambda: self._diagnostics_report(report))
+
+    def _diagnostics_report(self, report: GatewayStatus) -> None:
+        t = self._now_ns()
+        self._channels.diagnostics(diagnostic_array(report, self.robot_name, self.hardware, t), t)
+        self._diagnostics += 1
 
     def _flush(self) -> None:
         writer = self._writer

@@ -7,6 +7,7 @@ second and at a change of state."""
 
 from __future__ import annotations
 
+import itertools
 import time
 from typing import TYPE_CHECKING, Any
 
@@ -141,11 +142,7 @@ def test_the_daemon_hands_the_view_a_report_each_second_and_at_a_change_of_state
 
     gw: Any = Gw()
     gw.config = config
-    statuses: list[int] = []
-
-    def status() -> Any:
-        statuses.append(len(statuses))
-        return len(statuses)
+    status: Any = itertools.count(1).__next__  # (each report a number: which one went where)
 
     latch: Any = None  # (no bridge: nothing sets it)
     remote = Remote(gw, latch, status, [], record_mcap=str(tmp_path / "x.mcap"))
