@@ -31,7 +31,11 @@ pass`` (the interpreter alone): instructions of
 the whole process under callgrind (hash seed 0, after one untimed run so the bytecode caches
 exist; the median of ``--instr-runs`` runs, as a whole interpreter start-up varies by a few
 per cent from run to run even so), and the median and best wall time of ``--runs`` runs each,
-interleaved.
+interleaved.  What varies is numpy's OpenBLAS: it starts a worker thread per further CPU at
+import, and what they execute while the start-up lasts depends on the scheduler (on this 2-CPU
+VM about 40 million instructions, give or take 5 million).  So every command is also counted
+with ``OPENBLAS_NUM_THREADS=1`` (no worker threads; OpenBLAS's documented variable), twice:
+those counts repeat to the instruction, and their difference is each command's own cost.
 
 ``--protocol dji``: the same robot on four DJI C620 ESCs, against :mod:`anchor_dji` (the
 builder's loop with a rotor-speed PI per motor, as the ESCs take a current only): the
@@ -166,6 +170,12 @@ def run_startup(runs: int, instr_runs: int = 5) -> dict[str, tuple[int, float, f
                 raise SystemExit(f"{label}: expected one process under callgrind, "
                                  f"got {len(counts)}")
             instr[label].append(next(iter(counts.values())))
+    exact: dict[str, list[int]] = {label: [] for label, _ in commands}
+    for _ in range(2):
+        for label, argv in commands:
+            with tempfile.TemporaryDirectory(prefix="wg-callgrind-") as tmp:
+                counts = callgrind.run(argv, Path(tmp), {**env, "OPENBLAS_NUM_THREADS": "1"})
+            exact[label].extend(counts.values())
     out: dict[str, tuple[int, float, float]] = {
         label: (int(statistics.median(instr[label])), statistics.median(wall[label]),
                 min(wall[label]))
@@ -179,6 +189,13 @@ def run_startup(runs: int, instr_runs: int = 5) -> dict[str, tuple[int, float, f
     (cli, cli_v), (lib, lib_v) = list(out.items())[:2]
     print(f"\n{cli} / {lib}: {cli_v[0] / lib_v[0]:.2f}x instructions, "
           f"{cli_v[1] / lib_v[1]:.2f}x median wall time", flush=True)
+    print("\nwith OPENBLAS_NUM_THREADS=1 (two runs each; they must agree):")
+    for label, both in exact.items():
+        same = "the same" if len(set(both)) == 1 else f"DIFFER: {both}"
+        print(f"{label:30} {both[0]:14,}  ({same})")
+    cli_x, lib_x = exact[cli][0], exact[lib][0]
+    print(f"{cli} / {lib}: {cli_x / lib_x:.3f}x instructions; wheelgate's own "
+          f"{cli_x - lib_x:,}", flush=True)
     return out
 
 
