@@ -57,7 +57,7 @@ from gateway.config.wheels import (
     stand_in_wheels,
     wheel_layout,
 )
-from gateway.config.yaml_text import MAX_BYTES, load_yaml, read_text
+from gateway.config.yaml_text import MAX_BYTES, load_yaml, not_a_mapping, read_text
 from gateway.core.errors import ConfigError, KinematicsError
 from gateway.core.kinematics import PRESETS, Limits, RobotModel
 from gateway.core.options import unknown_key, validate_block
@@ -175,7 +175,7 @@ def parse_config(
         raise ConfigError(f"{source}: the file is empty; expected a robot's configuration "
                           f"(wheelgate init writes a commented one)")
     if not isinstance(raw, dict):
-        raise ConfigError(f"{source}: expected a mapping at the top level, got {raw!r}")
+        raise not_a_mapping(raw, source)
     found = Problems()
     for key in raw:
         if key not in TOP_KEYS:

@@ -200,6 +200,32 @@ def load_yaml(text: str, source: str) -> object:
         raise ConfigError(f"{source}: not valid YAML: {err}") from err
 
 
+#: At most this many characters of a wrong top level are quoted in the error.
+_QUOTED = 60
+
+
+def not_a_mapping(data: object, source: str) -> ConfigError:
+    """The error for a document whose top level is not a mapping: what it is instead, and a
+    short quote of it (a text file passed as the configuration is one long string).
+
+    >>> str(not_a_mapping("root:x:0:0:root:/root:/bin/bash " * 9, "/etc/passwd")).split(", got ")
+    ... # doctest: +NORMALIZE_WHITESPACE
+    ["/etc/passwd: expected a mapping at the top level (a robot's configuration, key: value)",
+     "a string of 288 characters, 'root:x:0:0:root:/root:/bin/bash root:x:0:0:root:/root:/bin/..."]
+    >>> str(not_a_mapping([1, 2], "robot.yaml")).split(", got ")[1]
+    'a list, [1, 2]'
+    """
+    kind = {str: "a string", list: "a list", int: "a number", float: "a number",
+            bool: "a boolean"}.get(type(data), type(data).__name__)
+    quoted = repr(data)
+    if len(quoted) > _QUOTED:
+        quoted = quoted[:_QUOTED] + "..."
+    if isinstance(data, str) and len(data) > _QUOTED:
+        kind += f" of {len(data)} characters"
+    return ConfigError(f"{source}: expected a mapping at the top level (a robot's "
+                       f"configuration, key: value), got {kind}, {quoted}")
+
+
 def _parse(cls: type[_Strict], text: str, source: str) -> object:
     loader = None
     try:

@@ -299,3 +299,12 @@ def test_the_writer_keeps_data_comments_and_style_of_what_configurations_use() -
     assert "list: [1, 2]" in text and "empty: {}" in text and "text: 'yes'" in text
     assert max(len(line) for line in text.splitlines()) <= WIDTH
     assert text.index("# long") < text.index("- {name: b")  # a long line's end comment: above
+
+
+def test_a_document_that_is_not_a_mapping_is_named_and_quoted_briefly() -> None:
+    with pytest.raises(ConfigError) as err:
+        read("just some text, " * 40, "notes.txt")
+    assert str(err.value) == (
+        "notes.txt: expected a mapping at the top level (a robot's configuration, key: value), "
+        "got a string of 639 characters, 'just some text, just some text, just some text, just "
+        "some t...")

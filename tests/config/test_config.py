@@ -182,6 +182,14 @@ def test_file_errors(tmp_path: Path) -> None:
     bad.write_text("- a list\n")
     with pytest.raises(ConfigError, match=r"bad\.yaml: expected a mapping at the top level"):
         load_config(bad)
+    # A text file passed as the configuration (YAML reads it as one long string): the error
+    # says what it is and quotes its start, not the whole file.
+    bad.write_text("root:x:0:0:root:/root:/bin/bash\n" * 100)
+    with pytest.raises(ConfigError) as err:
+        load_config(bad)
+    assert str(err.value).endswith(
+        "got a string of 3199 characters, 'root:x:0:0:root:/root:/bin/bash root:x:0:0:root:"
+        "/root:/bin/...")
 
 
 def test_bus_precedence(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Any
 
 import yaml
 
-from gateway.config.yaml_text import load_yaml
+from gateway.config.yaml_text import load_yaml, not_a_mapping
 from gateway.core.errors import ConfigError
 
 if TYPE_CHECKING:
@@ -125,7 +125,7 @@ def read(text: str, source: str) -> Document:
     """
     data = load_yaml(text, source)
     if not isinstance(data, dict):
-        raise ConfigError(f"{source}: expected a mapping at the top level, got {data!r}")
+        raise not_a_mapping(data, source)
     root = yaml.compose(text, Loader=yaml.SafeLoader)
     lines = text.splitlines()
     walked = list(_walk(root, (), block=True)) if root is not None else []
@@ -324,5 +324,5 @@ def data_of(text: str, source: str) -> Mapping[str, Any]:
     """The data a written document holds, read back with the configuration's loader."""
     data = load_yaml(text, source)
     if not isinstance(data, dict):
-        raise ConfigError(f"{source}: expected a mapping at the top level, got {data!r}")
+        raise not_a_mapping(data, source)
     return data
