@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING
 
 import pytest
 
+import gateway.runtime.latch as latch_module
 from gateway.core.types import GatewayState, Twist
 from gateway.runtime.client import ControlClient
 from gateway.runtime.latch import EstopLatch, latch_path
@@ -23,6 +24,7 @@ from tests.conftest import CONFIG_DIR
 from tests.e2e_helpers import Rig, SocketPilot, errors_on_can, virtual_config
 
 if TYPE_CHECKING:
+    from collections.abc import Callable
     from pathlib import Path
 
 TB3 = CONFIG_DIR / "turtlebot3_burger.yaml"
@@ -64,22 +66,35 @@ def test_a_latch_that_cannot_be_written_leaves_no_temporary_file(tmp_path: Path)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["estop"]
 
 
+def own_fsyncs(monkeypatch: pytest.MonkeyPatch, tmp_path: Path,
+               mine: Callable[[Path], None]) -> None:
+    """Route the fsyncs of this test's latch (its file and folder, under ``tmp_path``) to
+    ``mine``, every other one to the real function: an earlier test's latch may still be
+    syncing in its background thread (CI run 99 counted one of those here)."""
+    real = latch_module._fsync_path
+
+    def routed(path: Path) -> None:
+        (mine if path == tmp_path or tmp_path in path.parents else real)(path)
+
+    monkeypatch.setattr(latch_module, "_fsync_path", routed)
+
+
 def test_one_estop_is_written_once(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     # The socket's request and the cycle that sees ESTOP both set the latch: one write (two
     # fsyncs, the file's and the folder's).
-    syncs: list[int] = []
-    real = os.fsync
+    syncs: list[Path] = []
+    real = latch_module._fsync_path
 
-    def counted(fd: int) -> None:
-        syncs.append(fd)
-        real(fd)
+    def counted(path: Path) -> None:
+        syncs.append(path)
+        real(path)
 
-    monkeypatch.setattr(os, "fsync", counted)
+    own_fsyncs(monkeypatch, tmp_path, counted)
     latch = EstopLatch(tmp_path / "estop")
     assert latch.set("e-stop requested on the control socket")
     assert latch.set("e-stop requested on the control socket")
-    assert latch.wait_durable() and len(syncs) == 2
-    latch.clear()
+    assert latch.wait_durable() and syncs == [latch.path, tmp_path]
+    latch.clear()  # the folder's fsync
     assert latch.set("e-stop requested on the control socket")  # a new e-stop: written
     assert latch.wait_durable() and latch.path.exists() and len(syncs) == 5
 
@@ -89,14 +104,14 @@ def test_the_caller_never_waits_for_the_disk(tmp_path: Path, monkeypatch: pytest
     # A slow SD card stalls an fsync for seconds: the loop thread (the caller) only writes
     # and renames; the fsyncs wait in the background, and a failing one is logged.
     release = threading.Event()
-    synced: list[int] = []
+    synced: list[Path] = []
 
-    def slow(fd: int) -> None:
+    def slow(path: Path) -> None:
         assert release.wait(10.0)
-        synced.append(fd)
+        synced.append(path)
         raise OSError(errno.EIO, "Input/output error")
 
-    monkeypatch.setattr(os, "fsync", slow)
+    own_fsyncs(monkeypatch, tmp_path, slow)
     latch = EstopLatch(tmp_path / "estop")
     assert latch.set("e-stop requested on the control socket")  # returns, the fsync blocked
     assert json.loads(latch.path.read_text())["reason"] == "e-stop requested on the control socket"
