@@ -16,6 +16,15 @@ from typing import TYPE_CHECKING, Any, ClassVar
 import click
 
 from gateway import __version__
+
+# numpy's OpenBLAS starts a worker thread per further CPU when numpy is imported, unless this
+# is set before: wheelgate's matrices have a few rows, which OpenBLAS does not split across
+# threads, so the workers only cost start-up and memory, all of it locked once the daemon
+# locks its memory (`lock_memory`: 345 MB locked with one worker on a 2-CPU machine, 304 MB
+# without).  The systemd unit sets it too; a value already in the environment is kept.
+# (Set here, before any command's module imports numpy; a library user's process is left
+# alone.)
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 from gateway.core.errors import ConfigError, GatewayError, InfeasibleTwistError
 
 if TYPE_CHECKING:

@@ -1,11 +1,12 @@
 """Inputs the CLI takes: twist components bounded the same way in every command (the control
 socket's bound: beyond it, or not finite, a usage error with exit status 2, before anything is
-computed or sent), the twist command's account of what the robot follows, and what ``ik``
-imports (start-up)."""
+computed or sent), the twist command's account of what the robot follows, what ``ik``
+imports (start-up), and numpy's BLAS threads."""
 
 from __future__ import annotations
 
 import ast
+import os
 import subprocess
 import sys
 from typing import TYPE_CHECKING
@@ -64,6 +65,23 @@ def test_ik_loads_nothing_it_does_not_use() -> None:
                 "gateway.config.bridge", "gateway.core.bridge_settings", "gateway.runtime",
                 "importlib.resources", "zipfile", "tempfile"}
     assert not unwanted & loaded, sorted(unwanted & loaded)
+
+
+@pytest.mark.parametrize(("given", "expected"), [(None, "1"), ("2", "2")])
+def test_the_cli_runs_numpy_without_blas_worker_threads(given: str | None, expected: str) -> None:
+    """OPENBLAS_NUM_THREADS is 1 before numpy loads (no worker threads, which a locked daemon
+    would lock too), unless the environment says otherwise."""
+    env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"}
+    if given is not None:
+        env["OPENBLAS_NUM_THREADS"] = given
+    code = ("import os\nimport gateway.cli\nimport numpy\n"
+            "print(os.environ['OPENBLAS_NUM_THREADS'], len(os.listdir('/proc/self/task')))\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=60, check=True, env=env)
+    value, threads = done.stdout.split()
+    assert value == expected
+    if given is None:
+        assert threads == "1"  # (OpenBLAS starts no worker on a 1-CPU machine either way)
 
 
 @pytest.mark.parametrize("args", [
