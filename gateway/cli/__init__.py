@@ -16,6 +16,10 @@ from typing import TYPE_CHECKING, Any, ClassVar
 import click
 
 from gateway import __version__
+from gateway.core.errors import ConfigError, GatewayError, InfeasibleTwistError
+
+if TYPE_CHECKING:
+    from collections.abc import Callable
 
 # numpy's OpenBLAS starts a worker thread per further CPU when numpy is imported, unless this
 # is set before: wheelgate's matrices have a few rows, which OpenBLAS does not split across
@@ -25,10 +29,6 @@ from gateway import __version__
 # (Set here, before any command's module imports numpy; a library user's process is left
 # alone.)
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-from gateway.core.errors import ConfigError, GatewayError, InfeasibleTwistError
-
-if TYPE_CHECKING:
-    from collections.abc import Callable
 
 #: Subcommand name -> module under ``gateway.cli.commands`` (``module:name`` for one of its
 #: commands, else its ``command``).
