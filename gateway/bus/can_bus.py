@@ -217,6 +217,27 @@ def send_frames(bus: can.BusABC, frames: Iterable[Frame], timestamp_s: float = 0
 _PLAUSIBLE_S = 1.0
 
 
+def arrival(stamp_s: float, wall_s: float, now_s: float, since_s: float,
+            max_age_s: float = _PLAUSIBLE_S) -> float:
+    """When a message arrived, on the caller's monotonic clock: ``now_s`` less its age by its
+    own stamp (python-can stamps with the wall clock; on socketcan the kernel's receive time),
+    ``wall_s`` being the wall clock at ``now_s``.  Not before ``since_s`` (when the previous
+    read began: nothing waiting now came earlier; a wall clock that stepped since would say
+    so).  A stamp older than ``max_age_s`` (an interface's own epoch) or in the future is not
+    trusted: the arrival is then ``now_s``.  (:func:`drain` applies this rule written out,
+    with the default bound: the per-frame cost of receiving.)
+
+    >>> arrival(99.5, 100.0, 7.0, 6.0), arrival(99.5, 100.0, 7.0, 6.8)
+    (6.5, 6.8)
+    >>> arrival(95.0, 100.0, 7.0, 0.0), arrival(95.0, 100.0, 7.0, 0.0, max_age_s=60.0)
+    (7.0, 2.0)
+    """
+    age = wall_s - stamp_s
+    if not 0.0 <= age <= max_age_s:
+        return now_s
+    return max(now_s - age, since_s)
+
+
 def drain(
     bus: can.BusABC,
     limit: int = 10_000,
@@ -267,7 +288,7 @@ def drain(
                 stamp = msg.timestamp
                 if not since_s < stamp <= timestamp_s:
                     stamp = timestamp_s
-            elif abs(msg.timestamp - wall) <= _PLAUSIBLE_S:
+            elif abs(msg.timestamp - wall) <= _PLAUSIBLE_S:  # arrival(), written out
                 stamp = msg.timestamp + offset
                 if stamp < since_s:
                     stamp = since_s

@@ -79,14 +79,19 @@ class Remote:
         self.bridge: Bridge | None = None
         self.view: Any = None
         self._mailboxes: list[Mailbox[Any]] = []
+        view = config.foxglove is not None or bool(record_mcap)
         try:
+            if config.bridge is not None or view:
+                # Each motor's hardware id, for the diagnostics of both workers.
+                from gateway.runtime.diagnostics import hardware_ids  # noqa: PLC0415
+
+                hardware = hardware_ids(config)
             if config.bridge is not None:
                 # Imported only with a bridge: block (and Zenoh only by the bridge).
                 from gateway.runtime.bridge.bridge import Bridge  # noqa: PLC0415
                 from gateway.runtime.bridge.deadman import Deadman  # noqa: PLC0415
-                from gateway.runtime.diagnostics import hardware_ids  # noqa: PLC0415
 
-                self.bridge = Bridge(config.bridge, hardware_ids(config))
+                self.bridge = Bridge(config.bridge, hardware)
                 if config.bridge.ros2 and config.bridge.ros2.diagnostics:
                     self._report_boxes.append(self.bridge.mailbox)
                 self._mailboxes.append(self.bridge.mailbox)
@@ -94,8 +99,7 @@ class Remote:
                                                Source.BRIDGE, "the Zenoh bridge")
                 self.requests.pending_twists = pending_twists
                 self.deadman = Deadman()
-            if config.foxglove is not None or record_mcap:
-                from gateway.runtime.diagnostics import hardware_ids  # noqa: PLC0415
+            if view:
                 from gateway.runtime.liveview import LiveView  # noqa: PLC0415 - optional
 
                 wheel_names = tuple(m.wheel for m in config.motors if m is not None)
@@ -103,7 +107,7 @@ class Remote:
                 self.view = LiveView(config.foxglove or FoxgloveSettings(), config.name,
                                      wheel_names, steer_names, record_mcap=record_mcap,
                                      serve=config.foxglove is not None,
-                                     hardware=hardware_ids(config))
+                                     hardware=hardware)
                 self.view.start()
                 self._mailboxes.append(self.view.mailbox)
                 self._report_boxes.append(self.view.mailbox)

@@ -29,7 +29,7 @@ import can
 
 from gateway.apps.scan.registry import load_probes
 from gateway.apps.scan.session import ScanSession, ScanTiming
-from gateway.bus.can_bus import open_bus, to_frame, to_message
+from gateway.bus.can_bus import arrival, open_bus, to_frame, to_message
 from gateway.bus.edge import bus_options
 from gateway.core.errors import BusError
 
@@ -45,26 +45,10 @@ log = logging.getLogger(__name__)
 
 #: The most frames taken in one pass (the rest wait for the next: a flood starves no request).
 MAX_FRAMES_PER_PASS = 1000
-#: The oldest a message's own stamp may be and still be taken as its arrival (s): older, or in
-#: the future, it is an interface's own epoch (the arrival is then the time it was read).
+#: The oldest a message's own stamp may be and still be taken as its arrival (s; see
+#: :func:`~gateway.bus.can_bus.arrival`): a slow host may read a busy bus's answers seconds
+#: late, which the loop's one-second bound would take for an interface's own epoch.
 MAX_AGE_S = 60.0
-
-
-def arrival(stamp_s: float, wall_s: float, now_s: float, since_s: float) -> float:
-    """When a message arrived, on the scan's clock: ``now_s`` less its age by its own stamp
-    (the kernel's receive time on socketcan; python-can stamps with the wall clock), not
-    before ``since_s`` (when the previous pass began reading: nothing waiting now came
-    earlier; a wall clock that stepped since would say so).
-
-    >>> arrival(99.5, 100.0, 7.0, 6.0), arrival(99.5, 100.0, 7.0, 6.8)
-    (6.5, 6.8)
-    >>> arrival(5.0, 100.0, 7.0, 6.0)  # 95 s old: an interface's own epoch
-    7.0
-    """
-    age = wall_s - stamp_s
-    if not 0.0 <= age <= MAX_AGE_S:
-        return now_s
-    return max(now_s - age, since_s)
 
 
 def scan_bus(bus: can.BusABC, timing: ScanTiming, bus_name: str,
@@ -98,7 +82,7 @@ def scan_bus(bus: can.BusABC, timing: ScanTiming, bus_name: str,
                 if msg is None:
                     break
                 if not (msg.is_error_frame or msg.is_fd):
-                    t = arrival(msg.timestamp, wall, now, since)
+                    t = arrival(msg.timestamp, wall, now, since, MAX_AGE_S)
                     session.on_frame(to_frame(msg, t), t)
                 msg = bus.recv(0.0)
             since = now
