@@ -2,11 +2,12 @@
 2's own ``diagnostic_msgs/msg/DiagnosticArray``, CDR under its complete ``ros2msg`` definition,
 as the Foxglove app's Diagnostics panels take it; read back from the recording by our decoder and
 by the MCAP maintainers' ROS 2 decoder (``mcap-ros2-support``), which parses the schema itself.
-And the daemon's side: :class:`~gateway.runtime.remote.Remote` hands the view a report once a
-second and at a change of state."""
+And the daemon's side: :class:`~gateway.runtime.remote.Remote` hands the view, and the bridge
+with ROS 2 diagnostics, a report once a second and at a change of state."""
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import time
 from typing import TYPE_CHECKING, Any
@@ -14,9 +15,15 @@ from typing import TYPE_CHECKING, Any
 import pytest
 
 from gateway.config import load_config
-from gateway.core.bridge_settings import FoxgloveSettings
+from gateway.core.bridge_settings import (
+    BridgeSettings,
+    FoxgloveSettings,
+    Ros2Settings,
+    ZenohSettings,
+)
 from gateway.core.types import GatewayState
 from gateway.runtime import liveview
+from gateway.runtime.bridge import bridge as bridge_module
 from gateway.runtime.diagnostics import diagnostic_array
 from gateway.runtime.liveview import LiveView
 from gateway.runtime.mailbox import Mailbox
@@ -113,10 +120,10 @@ def test_a_report_that_fails_is_logged_once_and_the_next_goes_out(
     assert len(logged) == 1, [r.getMessage() for r in logged]
 
 
-class FakeView:
-    """What :class:`Remote` needs of a live view: its mailbox, start and close."""
+class FakeWorker:
+    """What :class:`Remote` needs of a live view or a bridge: its mailbox, start and close."""
 
-    def __init__(self) -> None:
+    def __init__(self, *args: object, **kwargs: object) -> None:
         self.mailbox: Any = Mailbox()
 
     def start(self) -> None:
@@ -126,16 +133,27 @@ class FakeView:
         pass
 
 
-def test_the_daemon_hands_the_view_a_report_each_second_and_at_a_change_of_state(
-        monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
-    views: list[FakeView] = []
+@pytest.mark.parametrize("worker", ["live view", "bridge"])
+def test_the_daemon_hands_a_worker_a_report_each_second_and_at_a_change_of_state(
+        monkeypatch: pytest.MonkeyPatch, tmp_path: Path, worker: str) -> None:
+    """The schedule on a clock of the test's own; the bridge's ROS 2 diagnostics publish what
+    its worker takes from this mailbox (``test_bridge_ros2.py`` reads them from a ROS node)."""
+    workers: list[FakeWorker] = []
 
-    def make_view(*args: object, **kwargs: object) -> FakeView:
-        views.append(FakeView())
-        return views[-1]
+    def make_worker(*args: object, **kwargs: object) -> FakeWorker:
+        workers.append(FakeWorker())
+        return workers[-1]
 
-    monkeypatch.setattr(liveview, "LiveView", make_view)
     config = load_config()
+    if worker == "bridge":
+        monkeypatch.setattr(bridge_module, "Bridge", make_worker)
+        ros2 = Ros2Settings(diagnostics="/diagnostics")
+        config = dataclasses.replace(config, bridge=BridgeSettings(ZenohSettings(), "robot",
+                                                                   ros2=ros2))
+        record_mcap = ""
+    else:
+        monkeypatch.setattr(liveview, "LiveView", make_worker)
+        record_mcap = str(tmp_path / "x.mcap")
 
     class Gw:
         state = GatewayState.RUNNING
@@ -144,14 +162,14 @@ def test_the_daemon_hands_the_view_a_report_each_second_and_at_a_change_of_state
     gw.config = config
     status: Any = itertools.count(1).__next__  # (each report a number: which one went where)
 
-    latch: Any = None  # (no bridge: nothing sets it)
-    remote = Remote(gw, latch, status, [], record_mcap=str(tmp_path / "x.mcap"))
-    [view] = views
+    latch: Any = None  # (nothing here sets it)
+    remote = Remote(gw, latch, status, [], record_mcap=record_mcap)
+    [taker] = workers
     taken: list[tuple[float, Any]] = []
 
     def at(now_s: float) -> None:
         remote.post((), now_s)
-        report = view.mailbox.take(0.0).report
+        report = taker.mailbox.take(0.0).report
         if report is not None:
             taken.append((now_s, report))
 
