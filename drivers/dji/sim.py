@@ -40,6 +40,7 @@ from typing import TYPE_CHECKING
 from drivers.dji.codec import (
     COUNTS_PER_REV,
     ESC_MODELS,
+    M3508_GEAR_RATIO,
     RAD_S_PER_RPM,
     DjiFeedback,
     DjiFrameId,
@@ -58,6 +59,19 @@ log = logging.getLogger(__name__)
 
 _INT16_MAX = 0x7FFF
 
+#: The M3508's no-load speed at its output on 24 V (rpm): 482, with 469 rpm at its rated
+#: torque, as measured in "RoboMaster电机特性测试" (sourcelizi.github.io, 2022-02, C620 with
+#: M3508), which also describes the ESC's current falling as the voltage runs out.
+M3508_NO_LOAD_RPM = 482.0
+#: The M2006's at its output on 24 V (rpm): no measured figure is public; this is the top of
+#: the speed axis of the M2006 performance diagram in DJI's C610 user guide (24 V), an upper
+#: bound, so at worst slightly kinder than the motor.
+M2006_NO_LOAD_RPM = 450.0
+#: The share of the no-load speed over which the drivable current falls from full scale to
+#: zero: the M3508's figures above (rated torque, 3 N m, is 10 A; full scale 20 A) put it at
+#: 2 x 13 rpm of 482, about 5.4 %; the M2006 is assumed to be alike.
+KNEE_SHARE = 2.0 * (482.0 - 469.0) / 482.0
+
 
 @dataclass(slots=True)
 class DjiMotorModel(MotorModel):
@@ -68,22 +82,38 @@ class DjiMotorModel(MotorModel):
         J \\dot\\omega = k_t i - b \\omega, \\qquad \\dot\\theta = \\omega
 
     integrated exactly for a constant current over each step, so it is stable for any step.
-    There is no voltage limit (back-EMF), so the gateway's ``max_rpm`` is what bounds speed.
+
+    The supply voltage bounds the speed (back-EMF): the current the ESC can drive *with* the
+    rotation falls to zero at the motor's no-load speed, linearly over the last
+    :data:`KNEE_SHARE` of it, whatever the set point; a current against the rotation (braking)
+    is never limited.  The ESC reports the current it applies, which then falls below the set
+    point.  The limit is taken at the start of each step.  Without it a held current (the
+    gateway killed, a host loop run away) spun the simulated rotor up to where friction alone
+    balanced it, twenty and more times the no-load speed: a runaway no real motor shows.
+
     The inherited ``target_rad_s`` / ``time_constant_s`` fields are not used.
 
     :param torque_constant_nm_a: rotor-side torque per A (N m / A, > 0).
     :param inertia_kg_m2: rotor-side inertia including the reflected wheel load (kg m^2, > 0).
     :param damping_nm_s_rad: viscous friction (N m s / rad, > 0).
+    :param no_load_rad_s: rotor speed at which the supply voltage leaves no driving current
+        (rad/s, > 0).
+    :param full_scale_a: the ESC's largest current (A, > 0), what it can drive below the knee.
     """
 
-    torque_constant_nm_a: float = 0.3 / (3591.0 / 187.0)
+    torque_constant_nm_a: float = 0.3 / M3508_GEAR_RATIO
     inertia_kg_m2: float = 6e-5
     damping_nm_s_rad: float = 1.6e-5
-    #: Current the ESC applies while armed (A).
+    no_load_rad_s: float = M3508_NO_LOAD_RPM * M3508_GEAR_RATIO * RAD_S_PER_RPM
+    full_scale_a: float = 20.0
+    #: Current set point the ESC was given (A); it applies it while armed, within the limit.
     current_a: float = 0.0
+    #: Current the ESC applied over the last step (A): what it reports.
+    applied_a: float = 0.0
 
     def __post_init__(self) -> None:
-        for name in ("torque_constant_nm_a", "inertia_kg_m2", "damping_nm_s_rad"):
+        for name in ("torque_constant_nm_a", "inertia_kg_m2", "damping_nm_s_rad",
+                     "no_load_rad_s", "full_scale_a"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
                 raise ConfigError(f"DjiMotorModel.{name}: expected a number > 0, got {value!r}")
@@ -93,7 +123,8 @@ class DjiMotorModel(MotorModel):
         """Default physics for the motor an ESC type drives.
 
         M3508 (C620): 0.3 N m/A at the output (DJI datasheet figure) over 3591/187, a loaded
-        wheel of 6e-5 kg m^2 at the rotor.  M2006 (C610): 0.18 N m/A over 36, 1.2e-5 kg m^2.
+        wheel of 6e-5 kg m^2 at the rotor, no load at :data:`M3508_NO_LOAD_RPM`.  M2006
+        (C610): 0.18 N m/A over 36, 1.2e-5 kg m^2, no load at :data:`M2006_NO_LOAD_RPM`.
         The inertias and the friction are plausible round numbers, not measurements.
         """
         if esc.name == "c610":
@@ -101,20 +132,61 @@ class DjiMotorModel(MotorModel):
                 torque_constant_nm_a=0.18 / esc.gear_ratio,
                 inertia_kg_m2=1.2e-5,
                 damping_nm_s_rad=1e-6,
+                no_load_rad_s=M2006_NO_LOAD_RPM * esc.gear_ratio * RAD_S_PER_RPM,
+                full_scale_a=esc.full_scale_a,
             )
-        return cls(torque_constant_nm_a=0.3 / esc.gear_ratio)
+        return cls(torque_constant_nm_a=0.3 / esc.gear_ratio, full_scale_a=esc.full_scale_a)
+
+    def drivable_a(self, speed_rad_s: float) -> float:
+        """The largest current (A) the ESC can drive with the rotation at this rotor speed."""
+        left = self.no_load_rad_s - abs(speed_rad_s)
+        return 0.0 if left <= 0.0 else min(
+            self.full_scale_a, self.full_scale_a * left / (KNEE_SHARE * self.no_load_rad_s))
 
     def step(self, dt_s: float) -> None:
-        """Advance by ``dt_s`` seconds with the present current (zero when disarmed)."""
+        """Advance by ``dt_s`` seconds with the present set point (zero when disarmed).
+
+        Exact for any step: the speed follows one exponential per regime (the set point
+        applied; the voltage-limited current, linear in the speed; none beyond the no-load
+        speed), each piece ending where the speed crosses into the next regime.
+        """
         if dt_s <= 0.0:
             return
         current = self.current_a if self.armed else 0.0
-        tau = self.inertia_kg_m2 / self.damping_nm_s_rad
-        v_inf = self.torque_constant_nm_a * current / self.damping_nm_s_rad
-        v0 = self.velocity_rad_s
-        decay = math.exp(-dt_s / tau)
-        self.position_rad += v_inf * dt_s + (v0 - v_inf) * tau * (1.0 - decay)
-        self.velocity_rad_s = v_inf + (v0 - v_inf) * decay
+        sign = -1.0 if current < 0.0 else 1.0
+        amps = min(abs(current), self.full_scale_a)
+        j, b, kt, top = (self.inertia_kg_m2, self.damping_nm_s_rad, self.torque_constant_nm_a,
+                         self.no_load_rad_s)
+        slope = kt * self.full_scale_a / (KNEE_SHARE * top)  # the limited torque's, N m s/rad
+        # Speeds in the set point's direction: below ``knee`` the set point is applied.
+        knee = top - amps * KNEE_SHARE * top / self.full_scale_a
+        u = sign * self.velocity_rad_s
+        free = kt * amps / b  # where the set point alone would take the speed
+        x = 0.0
+        left = dt_s
+        while left > 0.0:
+            edge: float | None = None
+            if amps == 0.0 or u < knee or (u == knee and free <= knee):  # the set point
+                target, tau = free, j / b
+                edge = knee if free > knee else None
+            elif u <= top:  # the voltage limit: J u' = slope (top - u) - b u
+                target, tau = slope * top / (slope + b), j / (slope + b)
+                edge = knee if target < knee else None
+            else:  # beyond the no-load speed: no driving current
+                target, tau, edge = 0.0, j / b, top
+            span = left
+            if edge is not None and (reach := tau * math.log((target - u) / (target - edge))) > 0.0:
+                span = min(left, reach)  # (> 0: rounding at an edge cannot stall the loop)
+            else:
+                edge = None
+            decay = math.exp(-span / tau)
+            x += target * span + (u - target) * tau * (1.0 - decay)
+            u = edge if edge is not None and span < left else target + (u - target) * decay
+            left -= span
+        self.position_rad += sign * x
+        self.velocity_rad_s = sign * u
+        applied = amps if u < knee else min(amps, self.drivable_a(u))
+        self.applied_a = sign * applied
 
 
 class DjiSimulator(DeviceSimulator):
@@ -219,7 +291,7 @@ class DjiSimulator(DeviceSimulator):
         turns = self.physics.position_rad / (2.0 * math.pi)
         angle = math.floor(turns * COUNTS_PER_REV) % COUNTS_PER_REV
         rpm = round(self.physics.velocity_rad_s / RAD_S_PER_RPM)
-        current = self.esc.amps_to_raw(self.physics.current_a) if self.physics.armed else 0
+        current = self.esc.amps_to_raw(self.physics.applied_a) if self.physics.armed else 0
         if not self.esc.reports_temperature:
             temp = 0
         elif self.faults & SimFault.FAULT:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import pytest
 
 import drivers.dji.sim
@@ -10,10 +12,13 @@ from drivers.dji import (
     DjiFeedback,
 )
 from drivers.dji.codec import (
+    C620,
     COMMAND_STRUCT,
+    RAD_S_PER_RPM,
+    EscModel,
     decode_feedback,
 )
-from drivers.dji.sim import DjiMotorModel, DjiSimulator
+from drivers.dji.sim import M2006_NO_LOAD_RPM, M3508_NO_LOAD_RPM, DjiMotorModel, DjiSimulator
 from gateway.bus.can_bus import send_frames
 from gateway.core.errors import ConfigError
 from gateway.core.types import DriveFault, DriveState, Frame
@@ -40,16 +45,57 @@ def test_sim_quantises_and_reports() -> None:
 
 
 def test_sim_physics_exact_and_steady_state() -> None:
-    a, b = DjiMotorModel(current_a=2.0, armed=True), DjiMotorModel(current_a=2.0, armed=True)
+    a, b = DjiMotorModel(current_a=0.5, armed=True), DjiMotorModel(current_a=0.5, armed=True)
     a.step(0.01)
     b.step(0.005)
     b.step(0.005)
     assert a.velocity_rad_s == pytest.approx(b.velocity_rad_s)
     assert a.position_rad == pytest.approx(b.position_rad)
-    a.step(100.0)
-    assert a.velocity_rad_s == pytest.approx(a.torque_constant_nm_a * 2.0 / a.damping_nm_s_rad)
+    a.step(100.0)  # (0.5 A balances friction below the no-load speed)
+    assert a.velocity_rad_s == pytest.approx(a.torque_constant_nm_a * 0.5 / a.damping_nm_s_rad)
+    assert a.applied_a == 0.5
     with pytest.raises(ConfigError, match="inertia_kg_m2"):
         DjiMotorModel(inertia_kg_m2=0.0)
+    with pytest.raises(ConfigError, match="no_load_rad_s"):
+        DjiMotorModel(no_load_rad_s=math.inf)
+
+
+@pytest.mark.parametrize(("esc", "no_load_rpm"), [(C620, M3508_NO_LOAD_RPM),
+                                                  (C610, M2006_NO_LOAD_RPM)])
+def test_sim_a_held_full_current_stops_short_of_the_no_load_speed(
+        esc: EscModel, no_load_rpm: float) -> None:
+    """The supply voltage, not friction, bounds the speed (the ESC's current falls as it
+    runs out), and the same whatever the step: a held current spins the wheel no faster
+    than the motor's no-load speed."""
+    runs = [DjiMotorModel.for_esc(esc) for _ in range(3)]
+    for m in runs:
+        m.armed, m.current_a = True, -esc.full_scale_a
+    runs[0].step(5.0)
+    for _ in range(50):
+        runs[1].step(0.1)
+    for _ in range(5000):
+        runs[2].step(0.001)
+    output_rpm = [m.velocity_rad_s / RAD_S_PER_RPM / esc.gear_ratio for m in runs]
+    assert output_rpm == pytest.approx([output_rpm[0]] * 3, rel=1e-9)
+    assert -no_load_rpm < output_rpm[0] < -0.99 * no_load_rpm
+    assert [m.position_rad for m in runs] == pytest.approx([runs[0].position_rad] * 3)
+    fell = runs[0].applied_a
+    assert -0.1 * esc.full_scale_a < fell < 0.0  # what it reports, against a full set point
+    assert DjiSimulator(motor(1, esc=esc.name), runs[0]).measure().current_raw == \
+        esc.amps_to_raw(fell)
+
+
+def test_sim_braking_is_not_limited_and_a_faster_wheel_gets_no_drive() -> None:
+    braking = DjiMotorModel(armed=True, current_a=-20.0, velocity_rad_s=0.99 * 1000.0,
+                            no_load_rad_s=1000.0)
+    braking.step(1e-6)
+    assert braking.applied_a == -20.0
+    pushed = DjiMotorModel(armed=True, current_a=20.0, velocity_rad_s=2000.0,
+                           no_load_rad_s=1000.0)
+    pushed.step(0.01)
+    assert pushed.applied_a == 0.0
+    tau = pushed.inertia_kg_m2 / pushed.damping_nm_s_rad  # coasting on friction alone
+    assert pushed.velocity_rad_s == pytest.approx(2000.0 * math.exp(-0.01 / tau))
 
 
 @pytest.mark.parametrize(("timeout", "held"), [(None, True), (0.1, False)])
