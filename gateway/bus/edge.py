@@ -5,7 +5,8 @@ the bus (and reopens it), sends, receives, tallies and records.
 
 Sending keeps the promise of one burst per cycle as far as the bus allows.  A transmit queue
 that is full (``ENOBUFS`` from a SocketCAN interface whose controller is slower than the
-host, or python-can's "Transmit buffer full") is waited for, in steps of
+host, or the words of an interface without an ``errno``, PCAN's "Transmit queue is full":
+:data:`~gateway.bus.health.NO_ROOM_TEXT`) is waited for, in steps of
 :data:`ROOM_POLL_S`, within :data:`SEND_BUDGET` of the cycle's period; what still does not
 fit is left out of this cycle and goes *first* in the next burst
 (:class:`~gateway.bus.health.BurstTracker`), and a frame left out :data:`UNSENT_FAULT_CYCLES`
@@ -40,6 +41,7 @@ from gateway.bus.can_bus import MessagePool, drain, open_bus, to_message
 from gateway.bus.health import (
     GONE,
     NO_ROOM,
+    NO_ROOM_TEXT,
     Backoff,
     BurstTracker,
     BusErrors,
@@ -101,7 +103,7 @@ def _errno(err: BaseException) -> int | None:
 
 def _no_room(err: BaseException) -> bool:
     """Whether a send failed for want of room in the transmit queue (worth a short wait)."""
-    return _errno(err) in NO_ROOM or "buffer full" in str(err)
+    return _errno(err) in NO_ROOM or NO_ROOM_TEXT.search(str(err)) is not None
 
 
 def _gone(err: BaseException) -> bool:

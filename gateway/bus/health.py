@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import enum
 import errno
+import re
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -178,6 +179,18 @@ class BusErrors:
 
 #: ``errno`` values of a send that found no room in the transmit queue: wait and retry.
 NO_ROOM = frozenset({errno.ENOBUFS, errno.EAGAIN})
+#: The same said in words, by interfaces whose vendor library gives python-can no ``errno``:
+#: SocketCAN's send timeout ("Transmit buffer full", python-can's
+#: ``can/interfaces/socketcan/socketcan.py``), PCAN-Basic's PCAN_ERROR_QXMTFULL and
+#: PCAN_ERROR_XMTFULL ("Transmit queue is full", "Transmit buffer in CAN controller is full":
+#: ``PCANBasic.h``; python-can's ``pcan.py`` raises "Failed to send: " and the library's text),
+#: SYSTEC's ("Tx-buffer is full", "Transmit queue is full": ``systec/ucan.py``; "a CAN message
+#: did not fit into the transmit buffer": ``systec/exceptions.py``) and Kvaser's
+#: canERR_TXBUFOFL ("Transmit buffer overflow").  A queue or buffer (not SYSTEC's Rx-buffer)
+#: and "full" within a few words: no other error text of python-can's interfaces reads so.
+NO_ROOM_TEXT = re.compile(r"(?<!rx-)\b(?:queue|buffer)\b[\w\s-]{0,30}?\bfull\b"
+                          r"|transmit buffer overflow|did not fit into the transmit buffer",
+                          re.IGNORECASE)
 #: ``errno`` values of an interface that is down or gone: reopen (with backoff).
 GONE = frozenset({errno.ENETDOWN, errno.ENODEV, errno.ENXIO, errno.EBADF, errno.ENETUNREACH})
 
@@ -231,6 +244,30 @@ class BurstTracker:
             if n >= self.fault_after and (worst is None or n > worst[1]):
                 worst = (key, n)
         return worst
+
+
+def unsent_why(interface: str, channel: str, gone: str | None) -> str:
+    """Why a command frame has not gone out, and what to check, for the fault's message.
+
+    :param gone: the send error of an interface that is down or gone (``None``: the transmit
+        queue stays full, which on CAN most often means that no other node acknowledges the
+        frames, as the controller then retransmits each for ever).
+    """
+    if gone:
+        check = (f"check that {channel} is up (ip link show {channel})" if interface == "socketcan"
+                 else f"check that the {interface} interface {channel} is connected")
+        return f"sending fails ({gone}): {check}"
+    queue = ", the interface's txqueuelen" if interface == "socketcan" else ""
+    return ("the CAN transmit queue stays full (no other node acknowledges the frames, or the "
+            "bus is slower than the commands: check that the controllers are powered and "
+            f"connected, the bitrate{queue} and the bus load)")
+
+
+def bus_off_restart(interface: str, channel: str) -> str:
+    """How the interface leaves bus-off, for the fault's message ('' where python-can's
+    interface restarts itself or needs the bus reopened)."""
+    return (f" (the kernel restarts it with 'ip link set {channel} type can restart-ms 100')"
+            if interface == "socketcan" else "")
 
 
 def since_last(count: int, what: str) -> str:

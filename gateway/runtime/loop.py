@@ -29,7 +29,7 @@ import time
 from typing import TYPE_CHECKING
 
 from gateway.bus.edge import LOG_EVERY_S, BusEdge, bus_options
-from gateway.bus.health import LogThrottle, since_last
+from gateway.bus.health import LogThrottle, bus_off_restart, since_last, unsent_why
 from gateway.core.control import ZERO, Accepted, Rejection, Source, Supervisor
 from gateway.core.errors import EncodeError, GatewayError, KinematicsError
 from gateway.core.kinematics import Odometry, apply_limits
@@ -352,8 +352,8 @@ class Gateway:
             messages.append((
                 f"CAN bus-off on {bus.interface}:{bus.channel} ({edge.bus_errors.last}): the "
                 f"CAN controller stopped sending after too many transmit errors; check the "
-                f"wiring, termination and bitrate of every node (the kernel restarts it with "
-                f"'ip link set {bus.channel} type can restart-ms 100')", ()))
+                f"wiring, termination and bitrate of every node"
+                f"{bus_off_restart(bus.interface, bus.channel)}", ()))
         elif change is not None:
             sup.bus_ok = True
         if starved is not None:
@@ -363,10 +363,7 @@ class Gateway:
 
                 self._labeler = FrameLabeler(self.config)
             label = self._labeler.label_id(can_id, extended)
-            why = (f"sending fails ({edge.send_gone}): check that {bus.channel} is up (ip link "
-                   f"show {bus.channel})" if edge.send_gone else
-                   "the CAN transmit queue stays full (the bus is slower than the commands: "
-                   "check the bitrate, the interface's txqueuelen and the bus load)")
+            why = unsent_why(bus.interface, bus.channel, edge.send_gone)
             messages.append((
                 f"the frame {label.text} (ID 0x{can_id:X}) has not gone out for {n} cycles: "
                 f"{why}", tuple(w for w in label.wheels if w in self._wheel_of)))

@@ -11,6 +11,7 @@ import can
 import pytest
 
 from gateway.bus.health import (
+    NO_ROOM_TEXT,
     Backoff,
     BurstTracker,
     BusErrors,
@@ -18,6 +19,8 @@ from gateway.bus.health import (
     ErrorClass,
     ErrorFrame,
     LogThrottle,
+    bus_off_restart,
+    unsent_why,
 )
 from gateway.core.control import AUTO_RETRIES, AUTO_RETRY_DELAY_S, Source
 from gateway.core.status import BusErrorState
@@ -129,6 +132,35 @@ def test_a_log_line_per_interval_with_the_count() -> None:
     assert [throttle.note(t / 10) for t in range(1, 50)] == [None] * 49
     assert throttle.note(5.0) == 50
     assert throttle.total == 51
+
+
+#: Every wording of a full transmit queue among python-can's interfaces that give no errno
+#: (SocketCAN's send timeout, PCAN-Basic's QXMTFULL and XMTFULL, SYSTEC's, Kvaser's
+#: canERR_TXBUFOFL, Neousys's), and send errors that are not one.
+FULL_WORDS = ["Transmit buffer full", "Failed to send: Transmit queue is full",
+              "Failed to send: Transmit buffer in CAN controller is full", "Tx-buffer is full",
+              "a CAN message did not fit into the transmit buffer",
+              "Transmit buffer overflow (-13)", "Neousys message Queue is full"]
+OTHER_WORDS = ["Failed to transmit: Network is down", "Failed to send: Bus-off",
+               "Cannot send on a closed bus", "Rx-buffer is full",
+               "Receive queue was read too late"]
+
+
+@pytest.mark.parametrize("words", FULL_WORDS + OTHER_WORDS)
+def test_a_full_transmit_queue_is_known_by_its_words_without_an_errno(words: str) -> None:
+    assert (NO_ROOM_TEXT.search(words) is not None) == (words in FULL_WORDS)
+
+
+def test_what_to_check_names_the_interface() -> None:
+    assert unsent_why("socketcan", "can0", "Network is down").endswith(
+        "check that can0 is up (ip link show can0)")
+    assert unsent_why("pcan", "PCAN_USBBUS1", "Failed to send: Illegal hardware").endswith(
+        "check that the pcan interface PCAN_USBBUS1 is connected")
+    full = unsent_why("pcan", "PCAN_USBBUS1", None)
+    assert full.startswith("the CAN transmit queue stays full (no other node acknowledges")
+    assert "txqueuelen" not in full and "txqueuelen" in unsent_why("socketcan", "can0", None)
+    assert "restart-ms 100" in bus_off_restart("socketcan", "can0")
+    assert bus_off_restart("pcan", "PCAN_USBBUS1") == ""
 
 
 def test_reopen_backoff_doubles_and_resets() -> None:

@@ -10,6 +10,8 @@ import time
 from typing import TYPE_CHECKING
 
 import can
+import pytest
+from can.interfaces.pcan.pcan import PcanCanOperationError
 from can.interfaces.virtual import VirtualBus
 
 from drivers.odrive.enums import CmdId
@@ -22,19 +24,38 @@ from tests.runtime import safety_helpers
 from tests.runtime.safety_helpers import TB3, state
 
 if TYPE_CHECKING:
-    import pytest
+    from collections.abc import Callable
 
 # The shared fixtures (safety_helpers.py), bound here so that pytest finds them.
 rig = safety_helpers.rig
 pilot = safety_helpers.pilot
 
 
+def no_buffer_space() -> can.CanError:
+    """SocketCAN's full transmit queue (``ENOBUFS``)."""
+    return can.CanOperationError("Failed to transmit: No buffer space available", errno.ENOBUFS)
+
+
+#: How interfaces say that their transmit queue is full, as python-can raises it: SocketCAN's
+#: errno, and text alone where the vendor library gives no errno (PCAN-Basic's
+#: PCAN_ERROR_QXMTFULL and PCAN_ERROR_XMTFULL, worded as in its PCANBasic.h; python-can's
+#: ``can/interfaces/pcan/pcan.py`` raises "Failed to send: " and the library's text).
+FULL_QUEUE: dict[str, Callable[[], can.CanError]] = {
+    "socketcan": no_buffer_space,
+    "pcan queue": lambda: PcanCanOperationError("Failed to send: Transmit queue is full"),
+    "pcan controller": lambda: PcanCanOperationError(
+        "Failed to send: Transmit buffer in CAN controller is full"),
+}
+
+
 class BusPlan:
     """What the gateway's bus does, whichever bus object it holds after reopens: it takes
-    ``room`` frames per cycle (``None``: any number) and refuses the rest with ``ENOBUFS``, or,
-    while ``down``, refuses everything with ``ENETDOWN``.  Records what went out per cycle."""
+    ``room`` frames per cycle (``None``: any number) and refuses the rest with ``full()`` (by
+    default SocketCAN's ``ENOBUFS``), or, while ``down``, refuses everything with
+    ``ENETDOWN``.  Records what went out per cycle."""
 
-    def __init__(self, rig: Rig, monkeypatch: pytest.MonkeyPatch) -> None:
+    def __init__(self, rig: Rig, monkeypatch: pytest.MonkeyPatch,
+                 full: Callable[[], can.CanError] = no_buffer_space) -> None:
         self.rig = rig
         self.room: int | None = None
         self.down = False
@@ -52,8 +73,7 @@ class BusPlan:
                                             errno.ENETDOWN)
             if self.room is not None:
                 if self.left <= 0:
-                    raise can.CanOperationError("Failed to transmit: No buffer space available",
-                                                errno.ENOBUFS)
+                    raise full()
                 self.left -= 1
             real_send(bus, msg, timeout)
             self.sent[-1].append(msg.arbitration_id)
@@ -124,12 +144,13 @@ def test_a_full_transmit_queue_cuts_bursts_without_starving_a_wheel(
     assert state(rig) is GatewayState.RUNNING
 
 
+@pytest.mark.parametrize("interface", FULL_QUEUE)
 def test_commands_that_do_not_go_out_are_a_fault_naming_the_wheel(
-    rig: Rig, pilot: SocketPilot, monkeypatch: pytest.MonkeyPatch
+    rig: Rig, pilot: SocketPilot, monkeypatch: pytest.MonkeyPatch, interface: str
 ) -> None:
     pilot.send(op="twist", vx=0.1)
     rig.advance(0.2)
-    plan = BusPlan(rig, monkeypatch)
+    plan = BusPlan(rig, monkeypatch, FULL_QUEUE[interface])
     plan.room = 0  # the queue stays full: nothing goes out
     rig.advance((UNSENT_FAULT_CYCLES - 1) * rig.period, plan.cycle)
     assert state(rig) is GatewayState.RUNNING  # a few late commands are not a fault yet
@@ -172,7 +193,7 @@ def test_a_bus_that_stays_down_is_reopened_with_backoff_and_recovers(
     channel = rig.config.bus.channel
     assert rig.gw.supervisor.reason.endswith(
         f"sending fails (Failed to transmit: Network is down [Error Code 100]): check that "
-        f"{channel} is up (ip link show {channel})")
+        f"the virtual interface {channel} is connected")  # (socketcan: ip link show)
     # One line per kind of trouble per five seconds (send, receive, reopen, the fault).
     assert len(caplog.records) <= 6, [r.getMessage() for r in caplog.records]
     plan.down = False
