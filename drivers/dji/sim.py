@@ -8,8 +8,11 @@ What the simulated ESC does:
 * takes its int16 slot of ``0x200`` / ``0x1FF`` as a torque-current set point, clamped to the
   ESC's full scale, and applies it at once (the real ESC's FOC current loop is much faster
   than the 1 kHz bus, so it is not modelled);
+* drives that current only while the supply voltage leaves room: near the motor's no-load
+  speed the current it can drive with the rotation falls to zero (:class:`DjiMotorModel`), so
+  a held current spins a wheel up to that speed and no faster;
 * emits feedback every ``feedback_period_s`` (1 ms by default): the rotor angle quantised to
-  13 bits (``floor``), the rotor speed rounded to whole rpm, the applied current and the
+  13 bits (``floor``), the rotor speed rounded to whole rpm, the current it applies and the
   temperature (0 on a C610, which does not report one);
 * **no command timeout**: no public source says what a C620 / C610 does when the command
   frames stop, so wheelgate assumes the worst, that it holds its last current for ever
