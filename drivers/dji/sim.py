@@ -62,18 +62,19 @@ log = logging.getLogger(__name__)
 
 _INT16_MAX = 0x7FFF
 
-#: The M3508's no-load speed at its output on 24 V (rpm): 482, with 469 rpm at its rated
-#: torque, as measured in "RoboMaster电机特性测试" (sourcelizi.github.io, 2022-02, C620 with
-#: M3508), which also describes the ESC's current falling as the voltage runs out.
+#: The M3508's speeds at its output on 24 V (rpm) without load and at its rated torque (3 N m,
+#: 10 A at 0.3 N m/A), as measured in "RoboMaster电机特性测试" (sourcelizi.github.io, 2022-02,
+#: C620 with M3508), which also describes the ESC's current falling as the voltage runs out.
 M3508_NO_LOAD_RPM = 482.0
+M3508_RATED_RPM = 469.0
 #: The M2006's at its output on 24 V (rpm): no measured figure is public; this is the top of
 #: the speed axis of the M2006 performance diagram in DJI's C610 user guide (24 V), an upper
 #: bound, so at worst slightly kinder than the motor.
 M2006_NO_LOAD_RPM = 450.0
 #: The share of the no-load speed over which the drivable current falls from full scale to
-#: zero: the M3508's figures above (rated torque, 3 N m, is 10 A; full scale 20 A) put it at
-#: 2 x 13 rpm of 482, about 5.4 %; the M2006 is assumed to be alike.
-KNEE_SHARE = 2.0 * (482.0 - 469.0) / 482.0
+#: zero: the M3508's figures above put the rated 10 A 13 rpm below no load, so the C620's full
+#: scale, 20 A, 26 rpm below it: about 5.4 %.  The M2006 is assumed to be alike.
+KNEE_SHARE = (20.0 / 10.0) * (M3508_NO_LOAD_RPM - M3508_RATED_RPM) / M3508_NO_LOAD_RPM
 
 
 @dataclass(slots=True)
@@ -90,7 +91,7 @@ class DjiMotorModel(MotorModel):
     rotation falls to zero at the motor's no-load speed, linearly over the last
     :data:`KNEE_SHARE` of it, whatever the set point; a current against the rotation (braking)
     is never limited.  The ESC reports the current it applies, which then falls below the set
-    point.  The limit is taken at the start of each step.  Without it a held current (the
+    point.  Without the limit a held current (the
     gateway killed, a host loop run away) spun the simulated rotor up to where friction alone
     balanced it, twenty and more times the no-load speed: a runaway no real motor shows.
 

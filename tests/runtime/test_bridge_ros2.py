@@ -280,7 +280,7 @@ def test_a_ros_node_reads_the_diagnostics_of_the_gateway_the_bus_and_every_motor
             assert client.request({"op": "estop"})["ok"] is True
             # The next report shows the e-stop.  That it goes out at once rather than with the
             # next second's is the daemon's schedule, checked on a clock of the test's own in
-            # test_liveview_diagnostics.py (no timed assertion here: shared machines stall).
+            # test_diagnostics.py (no timed assertion here: shared machines stall).
             estop = diagnostics(node, lambda r: True)
             gw = estop["wheelgate: gateway"]
             assert gw["level"] == 1 and gw["message"].startswith("estop: "), gw

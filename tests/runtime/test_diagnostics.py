@@ -1,20 +1,29 @@
 """The gateway's status as ROS 2 diagnostics (``gateway.runtime.diagnostics``): the level
 and message of the gateway, the bus and each motor for every state that decides them, and any
-status a ``DiagnosticArray`` that goes on the wire and comes back the same."""
+status a ``DiagnosticArray`` that goes on the wire and comes back the same; and the daemon's
+side, :class:`~gateway.runtime.remote.Remote` handing the live view, and the bridge with ROS 2
+diagnostics, a report once a second and at a change of state."""
 
 from __future__ import annotations
 
 import dataclasses
+import itertools
+from typing import TYPE_CHECKING, Any
 
 import pytest
 from hypothesis import given
 
 from gateway.config import load_config
+from gateway.core.bridge_settings import BridgeSettings, Ros2Settings, ZenohSettings
 from gateway.core.errors import EncodeError
 from gateway.core.protection import Guard, ProtectionState
 from gateway.core.status import BusErrorState, BusHealth, ControllerStop, GatewayStatus
 from gateway.core.types import DriveFault, DriveState, GatewayState
+from gateway.runtime import liveview
+from gateway.runtime.bridge import bridge as bridge_module
 from gateway.runtime.diagnostics import diagnostic_array, hardware_ids
+from gateway.runtime.mailbox import Mailbox
+from gateway.runtime.remote import DIAGNOSTICS_PERIOD_S, Remote
 from gateway.wire.ros2 import (
     DiagnosticLevel,
     Time,
@@ -22,6 +31,9 @@ from gateway.wire.ros2 import (
     encode_diagnostic_array,
 )
 from tests.wire.status_samples import sample_status, statuses
+
+if TYPE_CHECKING:
+    from pathlib import Path
 
 OK, WARN, ERROR = DiagnosticLevel.OK, DiagnosticLevel.WARN, DiagnosticLevel.ERROR
 HARDWARE = {"left": "odrive node 1 on socketcan:can0"}
@@ -132,3 +144,66 @@ def test_each_motors_hardware_id_names_its_driver_node_and_bus() -> None:
     assert ids == {m.wheel: f"odrive node {m.node_id} on virtual:{config.bus.channel}"
                    for m in config.motors if m is not None}
     assert len(ids) == 4
+
+
+class FakeWorker:
+    """What :class:`Remote` needs of a live view or a bridge: its mailbox, start and close."""
+
+    def __init__(self, *args: object, **kwargs: object) -> None:
+        self.mailbox: Any = Mailbox()
+
+    def start(self) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+
+@pytest.mark.parametrize("worker", ["live view", "bridge"])
+def test_the_daemon_hands_a_worker_a_report_each_second_and_at_a_change_of_state(
+        monkeypatch: pytest.MonkeyPatch, tmp_path: Path, worker: str) -> None:
+    """The schedule on a clock of the test's own; the bridge's ROS 2 diagnostics publish what
+    its worker takes from this mailbox (``test_bridge_ros2.py`` reads them from a ROS node)."""
+    workers: list[FakeWorker] = []
+
+    def make_worker(*args: object, **kwargs: object) -> FakeWorker:
+        workers.append(FakeWorker())
+        return workers[-1]
+
+    config = load_config()
+    if worker == "bridge":
+        monkeypatch.setattr(bridge_module, "Bridge", make_worker)
+        ros2 = Ros2Settings(diagnostics="/diagnostics")
+        config = dataclasses.replace(config, bridge=BridgeSettings(ZenohSettings(), "robot",
+                                                                   ros2=ros2))
+        record_mcap = ""
+    else:
+        monkeypatch.setattr(liveview, "LiveView", make_worker)
+        record_mcap = str(tmp_path / "x.mcap")
+
+    class Gw:
+        state = GatewayState.RUNNING
+
+    gw: Any = Gw()
+    gw.config = config
+    status: Any = itertools.count(1).__next__  # (each report a number: which one went where)
+
+    latch: Any = None  # (nothing here sets it)
+    remote = Remote(gw, latch, status, [], record_mcap=record_mcap)
+    [taker] = workers
+    taken: list[tuple[float, Any]] = []
+
+    def at(now_s: float) -> None:
+        remote.post((), now_s)
+        report = taker.mailbox.take(0.0).report
+        if report is not None:
+            taken.append((now_s, report))
+
+    for k in range(25):  # 2.5 s at 10 Hz
+        at(10.0 + 0.1 * k)
+    gw.state = GatewayState.ESTOP
+    at(12.5)
+    at(12.55)  # (the same state again: nothing)
+    assert [round(t, 2) for t, _ in taken] == [10.0, 11.0, 12.0, 12.5]
+    assert [r for _, r in taken] == [1, 2, 3, 4]
+    assert DIAGNOSTICS_PERIOD_S == 1.0

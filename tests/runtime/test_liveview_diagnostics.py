@@ -2,32 +2,18 @@
 2's own ``diagnostic_msgs/msg/DiagnosticArray``, CDR under its complete ``ros2msg`` definition,
 as the Foxglove app's Diagnostics panels take it; read back from the recording by our decoder and
 by the MCAP maintainers' ROS 2 decoder (``mcap-ros2-support``), which parses the schema itself.
-And the daemon's side: :class:`~gateway.runtime.remote.Remote` hands the view, and the bridge
-with ROS 2 diagnostics, a report once a second and at a change of state."""
+The daemon's schedule of those reports is tested in ``test_diagnostics.py``."""
 
 from __future__ import annotations
 
-import dataclasses
-import itertools
 import time
 from typing import TYPE_CHECKING, Any
 
 import pytest
 
-from gateway.config import load_config
-from gateway.core.bridge_settings import (
-    BridgeSettings,
-    FoxgloveSettings,
-    Ros2Settings,
-    ZenohSettings,
-)
-from gateway.core.types import GatewayState
-from gateway.runtime import liveview
-from gateway.runtime.bridge import bridge as bridge_module
+from gateway.core.bridge_settings import FoxgloveSettings
 from gateway.runtime.diagnostics import diagnostic_array
 from gateway.runtime.liveview import LiveView
-from gateway.runtime.mailbox import Mailbox
-from gateway.runtime.remote import DIAGNOSTICS_PERIOD_S, Remote
 from gateway.wire.ros2 import decode_diagnostic_array
 from tests.wire.status_samples import sample_status
 
@@ -118,66 +104,3 @@ def test_a_report_that_fails_is_logged_once_and_the_next_goes_out(
     assert len(diagnostics_in(path)) == 1
     logged = [r for r in caplog.records if "/diagnostics" in r.getMessage()]
     assert len(logged) == 1, [r.getMessage() for r in logged]
-
-
-class FakeWorker:
-    """What :class:`Remote` needs of a live view or a bridge: its mailbox, start and close."""
-
-    def __init__(self, *args: object, **kwargs: object) -> None:
-        self.mailbox: Any = Mailbox()
-
-    def start(self) -> None:
-        pass
-
-    def close(self) -> None:
-        pass
-
-
-@pytest.mark.parametrize("worker", ["live view", "bridge"])
-def test_the_daemon_hands_a_worker_a_report_each_second_and_at_a_change_of_state(
-        monkeypatch: pytest.MonkeyPatch, tmp_path: Path, worker: str) -> None:
-    """The schedule on a clock of the test's own; the bridge's ROS 2 diagnostics publish what
-    its worker takes from this mailbox (``test_bridge_ros2.py`` reads them from a ROS node)."""
-    workers: list[FakeWorker] = []
-
-    def make_worker(*args: object, **kwargs: object) -> FakeWorker:
-        workers.append(FakeWorker())
-        return workers[-1]
-
-    config = load_config()
-    if worker == "bridge":
-        monkeypatch.setattr(bridge_module, "Bridge", make_worker)
-        ros2 = Ros2Settings(diagnostics="/diagnostics")
-        config = dataclasses.replace(config, bridge=BridgeSettings(ZenohSettings(), "robot",
-                                                                   ros2=ros2))
-        record_mcap = ""
-    else:
-        monkeypatch.setattr(liveview, "LiveView", make_worker)
-        record_mcap = str(tmp_path / "x.mcap")
-
-    class Gw:
-        state = GatewayState.RUNNING
-
-    gw: Any = Gw()
-    gw.config = config
-    status: Any = itertools.count(1).__next__  # (each report a number: which one went where)
-
-    latch: Any = None  # (nothing here sets it)
-    remote = Remote(gw, latch, status, [], record_mcap=record_mcap)
-    [taker] = workers
-    taken: list[tuple[float, Any]] = []
-
-    def at(now_s: float) -> None:
-        remote.post((), now_s)
-        report = taker.mailbox.take(0.0).report
-        if report is not None:
-            taken.append((now_s, report))
-
-    for k in range(25):  # 2.5 s at 10 Hz
-        at(10.0 + 0.1 * k)
-    gw.state = GatewayState.ESTOP
-    at(12.5)
-    at(12.55)  # (the same state again: nothing)
-    assert [round(t, 2) for t, _ in taken] == [10.0, 11.0, 12.0, 12.5]
-    assert [r for _, r in taken] == [1, 2, 3, 4]
-    assert DIAGNOSTICS_PERIOD_S == 1.0
