@@ -11,8 +11,8 @@ import can
 from gateway.bus.can_bus import drain, send_frames
 from gateway.config import load_config
 from gateway.core.errors import BusError
-from gateway.core.kinematics import Odometry
 from gateway.core.kinematics.limits import speed_scale
+from gateway.core.kinematics.odometry import Odometry
 from gateway.core.types import GatewayState, Twist
 from gateway.runtime.daemon import Daemon
 from gateway.runtime.loop import Gateway

@@ -33,7 +33,8 @@ from drivers.odrive.enums import AxisState
 from drivers.odrive.messages import Heartbeat
 from gateway.apps.replay.replay import Replay
 from gateway.config import load_config
-from gateway.core.kinematics import Pose, compose, se2_exp, wrap_angle
+from gateway.core.kinematics import wrap_angle
+from gateway.core.kinematics.odometry import Pose, compose, se2_exp
 from gateway.core.types import Twist
 from gateway.drive.driveset import DriveSet
 from gateway.wire.candump import read_lines

@@ -21,6 +21,7 @@ from gateway.core.kinematics import WheelType
 from gateway.core.options import OptionSpec
 from gateway.core.protection import WatchdogPolicy
 from gateway.core.settings import (
+    DEFAULT_LIMITS,
     EstopRelease,
     FaultAction,
     FeedbackRecovery,
@@ -28,7 +29,6 @@ from gateway.core.settings import (
     Linkage,
     LoopConfig,
 )
-from gateway.core.tracking import DEFAULT_LIMITS
 
 if TYPE_CHECKING:
     import enum

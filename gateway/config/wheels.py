@@ -3,7 +3,6 @@ generic``'s ``wheels:`` list (read by :func:`gateway.config.load.parse_config`).
 
 from __future__ import annotations
 
-import difflib
 import math
 from typing import TYPE_CHECKING
 
@@ -101,6 +100,8 @@ def _other_drives_key(
     """The error for a ``geometry:`` key that is (nearly) another preset drive's key and not
     this one's (``wheelbase`` on a differential drive); ``None`` for any other unknown key."""
     theirs = sorted({k for p in PRESETS.values() for k in p.params} - set(specs))
+    import difflib  # noqa: PLC0415 - only where a suggestion is made (start-up)
+
     close = difflib.get_close_matches(str(key), [*theirs, *specs], n=1, cutoff=0.7)
     if not close or close[0] not in theirs:
         return None

@@ -44,7 +44,7 @@ motion, one pass in C), and wheel by wheel only when that fails.
 
 Pure: no clock, no I/O.  What to integrate it with (the steering angles, a subset of the
 wheels) is the caller's: :meth:`OdomFeed.sample` returns the sample, which the caller passes to
-:meth:`gateway.core.kinematics.Odometry.update`.
+:meth:`gateway.core.kinematics.odometry.Odometry.update`.
 """
 
 from __future__ import annotations

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import difflib
 import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
@@ -115,6 +114,8 @@ def unknown_key(where: str, key: object, known: Mapping[str, Iterable[str]]) -> 
 odrive keys: firmware)
     """
     names = sorted({k for keys in known.values() for k in keys})
+    import difflib  # noqa: PLC0415 - only where a suggestion is made (start-up)
+
     close = difflib.get_close_matches(str(key), names, n=1, cutoff=0.7)
     hint = f"; did you mean {close[0]!r}?" if close else ""
     groups = "; ".join(f"{what}: {', '.join(sorted(keys)) or 'none'}"

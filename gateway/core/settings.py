@@ -3,7 +3,8 @@
 * :class:`GatewayConfig`: the whole file: the robot (its wheel-constraint model, one
   :class:`~gateway.core.types.MotorConfig` per driven wheel, the limits) and the settings below.
 * :class:`BusConfig`: the ``bus:`` block, where the motor controllers are.
-* :class:`LoopConfig`: the ``gateway:`` block, the daemon's settings.
+* :class:`LoopConfig`: the ``gateway:`` block, the daemon's settings, with the tracking-error
+  check's :class:`TrackingLimits` (the check itself is :mod:`gateway.core.tracking`).
 
 The choices of the ``gateway:`` block (:class:`InfeasiblePolicy`, :class:`FeedbackRecovery`,
 :class:`FaultAction`, :class:`EstopRelease`) and of a steering block (:class:`Linkage`) are
@@ -24,7 +25,6 @@ from typing import TYPE_CHECKING
 from gateway.core.can_ids import CanIds
 from gateway.core.choice import Choice, choice
 from gateway.core.protection import WatchdogPolicy
-from gateway.core.tracking import DEFAULT_LIMITS, TrackingLimits
 
 if TYPE_CHECKING:
     import enum
@@ -101,6 +101,36 @@ class BusConfig:
     interface: str = "virtual"
     channel: str = "wheelgate"
     bitrate: int = 500_000
+
+
+@dataclass(frozen=True, slots=True)
+class TrackingLimits:
+    """How far and how long a wheel may be off its command (the rule is
+    :mod:`gateway.core.tracking`'s).
+
+    :param tolerance_rad_s: the window's half-width at standstill (wheel rad/s).
+    :param tolerance_ratio: how much the window widens per rad/s of command.
+    :param time_s: how long a wheel may stay outside the window; 0 disables the check.
+    :param steer_tolerance_rad: the largest steering-angle error of a steering actuator (rad).
+    """
+
+    tolerance_rad_s: float = 1.0
+    tolerance_ratio: float = 0.2
+    time_s: float = 0.5
+    steer_tolerance_rad: float = 0.2
+
+    @property
+    def enabled(self) -> bool:
+        """Whether the check runs at all."""
+        return self.time_s > 0.0
+
+    def window(self, command_rad_s: float) -> float:
+        """The largest allowed error for this command (rad/s)."""
+        return self.tolerance_rad_s + self.tolerance_ratio * abs(command_rad_s)
+
+
+#: The defaults, which the ``gateway:`` block's ``tracking_*`` keys take from here.
+DEFAULT_LIMITS = TrackingLimits()
 
 
 @dataclass(frozen=True, slots=True)

@@ -25,7 +25,7 @@ if TYPE_CHECKING:
 
     from gateway.core.kinematics.odometry import OdometryState
     from gateway.core.protection import Guard, ProtectionState
-    from gateway.core.tracking import TrackingLimits
+    from gateway.core.settings import TrackingLimits
     from gateway.core.types import DriveFault, DriveState, ErrorCode, GatewayState, Twist
 
 __all__ = [

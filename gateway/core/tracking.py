@@ -53,40 +53,12 @@ from gateway.core.numfmt import fixed
 if TYPE_CHECKING:
     from collections.abc import Sequence
 
+    from gateway.core.settings import TrackingLimits
     from gateway.core.types import WheelFeedback
 
 
 #: The most a runaway wheel's count may advance per second (see the module docstring).
 RUNAWAY_WEIGHT_MAX = 10.0
-
-
-@dataclass(frozen=True, slots=True)
-class TrackingLimits:
-    """How far and how long a wheel may be off its command.
-
-    :param tolerance_rad_s: the window's half-width at standstill (wheel rad/s).
-    :param tolerance_ratio: how much the window widens per rad/s of command.
-    :param time_s: how long a wheel may stay outside the window; 0 disables the check.
-    :param steer_tolerance_rad: the largest steering-angle error of a steering actuator (rad).
-    """
-
-    tolerance_rad_s: float = 1.0
-    tolerance_ratio: float = 0.2
-    time_s: float = 0.5
-    steer_tolerance_rad: float = 0.2
-
-    @property
-    def enabled(self) -> bool:
-        """Whether the check runs at all."""
-        return self.time_s > 0.0
-
-    def window(self, command_rad_s: float) -> float:
-        """The largest allowed error for this command (rad/s)."""
-        return self.tolerance_rad_s + self.tolerance_ratio * abs(command_rad_s)
-
-
-#: The defaults, which the ``gateway:`` block's ``tracking_*`` keys take from here.
-DEFAULT_LIMITS = TrackingLimits()
 
 
 @dataclass(frozen=True, slots=True)

@@ -32,7 +32,8 @@ from gateway.bus.edge import LOG_EVERY_S, BusEdge, bus_options
 from gateway.bus.health import LogThrottle, bus_off_restart, since_last, unsent_why
 from gateway.core.control import ZERO, Accepted, Rejection, Source, Supervisor
 from gateway.core.errors import EncodeError, GatewayError, KinematicsError
-from gateway.core.kinematics import Odometry, apply_limits
+from gateway.core.kinematics import apply_limits
+from gateway.core.kinematics.odometry import Odometry
 from gateway.core.odom_feed import OdomFeed
 from gateway.core.status import BusErrorState
 from gateway.core.types import ErrorCode, Frame, GatewayState, Twist

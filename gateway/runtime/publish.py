@@ -33,7 +33,8 @@ if TYPE_CHECKING:
 
     from gateway.core.control import Rejection, Supervisor
     from gateway.core.events import OutboxEvent
-    from gateway.core.kinematics import LimitReport, Odometry
+    from gateway.core.kinematics import LimitReport
+    from gateway.core.kinematics.odometry import Odometry
     from gateway.core.settings import LoopConfig
     from gateway.core.types import Frame
     from gateway.runtime.timing import LoopTimer

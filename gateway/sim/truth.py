@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING, Any
 
-from gateway.core.kinematics import Odometry
+from gateway.core.kinematics.odometry import Odometry
 from gateway.core.numfmt import fixed
 from gateway.core.steer_log import fixed_subset
 

@@ -26,7 +26,7 @@ if TYPE_CHECKING:
     from collections.abc import Callable
     from pathlib import Path
 
-    from gateway.core.kinematics import OdometryState
+    from gateway.core.kinematics.odometry import OdometryState
     from gateway.core.settings import GatewayConfig
 
 OBJ = {"interface": None, "channel": None, "debug": False}

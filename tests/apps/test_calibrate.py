@@ -23,7 +23,7 @@ from gateway.apps.calibrate.fit import fit
 from gateway.apps.calibrate.runs import end_poses, factors_of, read_run
 from gateway.cli import main
 from gateway.config import parse_config
-from gateway.core.kinematics import Pose
+from gateway.core.kinematics.odometry import Pose
 from gateway.core.types import Twist
 from tests.apps.odom_helpers import DIFF, drive, record, replay_file
 from tests.conftest import CONFIG_DIR

@@ -22,7 +22,8 @@ from gateway.apps.replay import candump_report
 from gateway.apps.replay.replay import Replay, SteeringSource, fixed_subset, reconstruct_steer
 from gateway.cli.commands.odom import command
 from gateway.config import load_config
-from gateway.core.kinematics import RobotModel, se2_exp
+from gateway.core.kinematics import RobotModel
+from gateway.core.kinematics.odometry import se2_exp
 from gateway.core.types import Twist
 from gateway.wire.candump import parse_line
 from tests.apps import odom_helpers

@@ -25,7 +25,8 @@ from gateway.apps.replay.plot import (
 )
 from gateway.apps.replay.replay import Sample
 from gateway.config import load_config
-from gateway.core.kinematics import PRESETS, Pose, compose, se2_exp
+from gateway.core.kinematics import PRESETS
+from gateway.core.kinematics.odometry import Pose, compose, se2_exp
 from gateway.core.types import Twist
 from tests.conftest import CONFIG_DIR
 

@@ -24,7 +24,7 @@ from gateway.apps.replay.mcap_source import INSTALL_HINT
 from gateway.cli import main
 from gateway.config import load_config
 from gateway.core.bridge_settings import FoxgloveSettings
-from gateway.core.kinematics import OdometryState, Pose
+from gateway.core.kinematics.odometry import OdometryState, Pose
 from gateway.core.types import GatewayState, Twist
 from gateway.runtime import liveview
 from gateway.runtime.mailbox import Snapshot, SteerSample, WheelSample

@@ -53,8 +53,8 @@ def test_the_twist_command_says_what_the_robot_follows_and_why() -> None:
 
 def test_ik_loads_nothing_it_does_not_use() -> None:
     """Start-up is measured in tools/bench_anchor.py; this guards its cheapest losses: the
-    bridge's and the socket's wire formats, python-can, Zenoh and the optional blocks' settings
-    are not imported to compute wheel speeds."""
+    bridge's and the socket's wire formats, python-can, Zenoh, the optional blocks' settings,
+    the odometry, the tracking check and difflib are not imported to compute wheel speeds."""
     code = ("import sys\nfrom gateway.cli import main\n"
             "try:\n    main(['ik', '--vx', '0.1'])\nexcept SystemExit:\n    pass\n"
             "print(sorted(sys.modules))\n")
@@ -63,7 +63,8 @@ def test_ik_loads_nothing_it_does_not_use() -> None:
     loaded = set(ast.literal_eval(done.stdout.strip().splitlines()[-1]))
     unwanted = {"can", "zenoh", "foxglove", "gateway.wire.ros2", "gateway.wire.socket",
                 "gateway.config.bridge", "gateway.core.bridge_settings", "gateway.runtime",
-                "importlib.resources", "zipfile", "tempfile"}
+                "importlib.resources", "zipfile", "tempfile", "gateway.core.kinematics.odometry",
+                "gateway.core.tracking", "difflib"}
     assert not unwanted & loaded, sorted(unwanted & loaded)
 
 

@@ -12,16 +12,8 @@ import numpy as np
 import pytest
 
 from gateway.core.errors import InfeasibleTwistError
-from gateway.core.kinematics import (
-    PRESETS,
-    Odometry,
-    Pose,
-    RobotModel,
-    Wheel,
-    WheelType,
-    compose,
-    se2_exp,
-)
+from gateway.core.kinematics import PRESETS, RobotModel, Wheel, WheelType
+from gateway.core.kinematics.odometry import Odometry, Pose, compose, se2_exp
 from gateway.core.types import Twist
 
 SQ3 = math.sqrt(3.0)

@@ -7,7 +7,8 @@ import math
 import pytest
 
 from gateway.core.errors import KinematicsError
-from gateway.core.kinematics import PRESETS, Odometry, Pose, RobotModel, compose, se2_exp
+from gateway.core.kinematics import PRESETS, RobotModel
+from gateway.core.kinematics.odometry import Odometry, Pose, compose, se2_exp
 from gateway.core.types import Twist
 
 

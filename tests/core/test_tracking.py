@@ -13,8 +13,8 @@ from gateway.config import parse_config
 from gateway.core.control import Fault, StatusBoard, Supervisor
 from gateway.core.errors import ConfigError
 from gateway.core.kinematics import PRESETS, RobotModel
-from gateway.core.settings import LoopConfig
-from gateway.core.tracking import RUNAWAY_WEIGHT_MAX, TrackingFault, TrackingLimits, TrackingMonitor
+from gateway.core.settings import LoopConfig, TrackingLimits
+from gateway.core.tracking import RUNAWAY_WEIGHT_MAX, TrackingFault, TrackingMonitor
 from gateway.core.types import DriveFault, DriveState, ErrorCode, GatewayState, MotorStatus, Twist
 from gateway.core.types import WheelFeedback as Fb
 from tests.conftest import SIM_ODRIVE_ENDPOINTS

@@ -19,8 +19,8 @@ import pytest
 from gateway.bus.can_bus import drain, to_message
 from gateway.config import load_config, parse_config
 from gateway.core.control import StatusBoard, Supervisor
-from gateway.core.settings import LoopConfig
-from gateway.core.tracking import TrackingLimits, TrackingMonitor
+from gateway.core.settings import LoopConfig, TrackingLimits
+from gateway.core.tracking import TrackingMonitor
 from gateway.core.types import (
     DriveFault,
     DriveState,

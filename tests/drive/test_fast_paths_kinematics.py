@@ -21,8 +21,8 @@ import gateway.runtime.loop
 from gateway.config import load_config
 from gateway.core.control import Accepted, Source
 from gateway.core.errors import KinematicsError
-from gateway.core.kinematics import Odometry, apply_limits
-from gateway.core.kinematics.odometry import OdometryState, Pose, compose, se2_exp
+from gateway.core.kinematics import apply_limits
+from gateway.core.kinematics.odometry import Odometry, OdometryState, Pose, compose, se2_exp
 from gateway.core.types import (
     GatewayState,
     Twist,

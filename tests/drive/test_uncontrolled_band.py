@@ -13,7 +13,8 @@ import pytest
 
 from gateway.cli import main
 from gateway.config import load_config
-from gateway.core.tracking import TrackingFault, TrackingLimits, TrackingMonitor
+from gateway.core.settings import TrackingLimits
+from gateway.core.tracking import TrackingFault, TrackingMonitor
 from gateway.core.types import WheelFeedback
 from gateway.drive.driveset import DriveSet
 from tests.conftest import CONFIG_DIR

@@ -19,7 +19,7 @@ from tests.conftest import CONFIG_DIR
 from tests.e2e_helpers import Rig, virtual_config
 
 if TYPE_CHECKING:
-    from gateway.core.kinematics import Pose
+    from gateway.core.kinematics.odometry import Pose
 
 FORWARD = Twist(0.3, 0.0, 0.1)
 

@@ -50,7 +50,7 @@ from tests.e2e_helpers import Rig, SocketPilot, virtual_config
 if TYPE_CHECKING:
     from collections.abc import Sequence
 
-    from gateway.core.kinematics import Pose
+    from gateway.core.kinematics.odometry import Pose
     from gateway.core.settings import GatewayConfig
 
 #: Largest growth of traced memory allowed from the end of the warm-up to the end (bytes).

@@ -13,7 +13,7 @@ from drivers.odrive.commands import SetInputPos, decode_command
 from drivers.odrive.enums import AxisState, CmdId, ControlMode
 from gateway.cli import main
 from gateway.config import load_config
-from gateway.core.kinematics import Odometry
+from gateway.core.kinematics.odometry import Odometry
 from gateway.core.types import ErrorCode, GatewayState, Twist
 from gateway.drive.driveset import DriveSet
 from gateway.sim.device import SimFault

@@ -12,6 +12,7 @@ from hypothesis import strategies as st
 
 from gateway.core.kinematics.odometry import OdometryState, Pose
 from gateway.core.protection import Guard, ProtectionState
+from gateway.core.settings import TrackingLimits
 from gateway.core.status import (
     BusErrorState,
     BusHealth,
@@ -30,7 +31,6 @@ from gateway.core.status import (
     TimingReport,
     TrackingReport,
 )
-from gateway.core.tracking import TrackingLimits
 from gateway.core.types import DriveFault, DriveState, ErrorCode, GatewayState, Twist
 
 if TYPE_CHECKING:

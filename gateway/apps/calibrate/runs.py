@@ -20,7 +20,8 @@ from typing import TYPE_CHECKING
 from gateway.apps.replay.replay import Replay, Update
 from gateway.config.wheels import preset_wheels
 from gateway.core.errors import ConfigError, KinematicsError
-from gateway.core.kinematics import Odometry, Pose, RobotModel, wrap_angle
+from gateway.core.kinematics import RobotModel, wrap_angle
+from gateway.core.kinematics.odometry import Odometry, Pose
 from gateway.core.steer_log import SteeringSource, fixed_subset
 
 if TYPE_CHECKING:

@@ -21,7 +21,8 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from gateway.core.errors import DecodeError
-from gateway.core.kinematics import Pose, wrap_angle
+from gateway.core.kinematics import wrap_angle
+from gateway.core.kinematics.odometry import Pose
 from gateway.wire.can import WgCodec, unwrap_position_m
 
 if TYPE_CHECKING:

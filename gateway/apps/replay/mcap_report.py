@@ -19,7 +19,7 @@ from gateway.runtime.liveview_channels import ODOM_TOPIC, STEERING_TOPIC, WHEELS
 
 if TYPE_CHECKING:
     from gateway.apps.replay.mcap_source import McapSummary
-    from gateway.core.kinematics import Pose
+    from gateway.core.kinematics.odometry import Pose
     from gateway.core.settings import GatewayConfig
 
 __all__ = ["failure", "pose_text", "summary_json", "summary_lines", "warnings"]

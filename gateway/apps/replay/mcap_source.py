@@ -4,8 +4,8 @@
 view's channels (:mod:`gateway.runtime.liveview_channels`).  :class:`McapReplay` reads one back:
 
 * every ``/wheels`` message gives each driven wheel's measured angle (``position_rad``, by the
-  wheel's name) and :meth:`gateway.core.kinematics.Odometry.update` integrates them in model
-  order, stamped with the message's log time, as the daemon's loop does with its feedback;
+  wheel's name) and :meth:`gateway.core.kinematics.odometry.Odometry.update` integrates them
+  in model order, stamped with the message's log time, as the daemon's loop does with its feedback;
   wheels the recording does not name (passive ones) are ``None``, and the odometry starts once
   every driven wheel has an angle (:class:`gateway.core.odom_feed.OdomFeed`'s rule);
 * steered wheels take the angles of their actuators from ``/steering`` -- measured, else
@@ -36,7 +36,7 @@ from typing import IO, TYPE_CHECKING, Any
 
 from gateway.apps.replay.replay import Sample
 from gateway.core.errors import GatewayError, KinematicsError
-from gateway.core.kinematics import Odometry, OdometryState, Pose
+from gateway.core.kinematics.odometry import Odometry, OdometryState, Pose
 from gateway.core.odom_feed import OdomFeed
 from gateway.core.steer_log import SteeringSource, fixed_subset
 from gateway.core.types import Twist, WheelFeedback

@@ -27,7 +27,8 @@ if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
     from gateway.apps.replay.replay import Sample
-    from gateway.core.kinematics import Pose, Wheel
+    from gateway.core.kinematics import Wheel
+    from gateway.core.kinematics.odometry import Pose
     from gateway.core.settings import GatewayConfig
 
 #: Colours of seed 000: path, body, wheels, wheel speeds.

@@ -44,7 +44,7 @@ from gateway.apps.replay.results import ReplaySummary, Sample
 from gateway.apps.replay.rounds import STAMP_SLACK_S, Rounds
 from gateway.apps.replay.timeline import MAX_GAP_S, Timeline
 from gateway.core.errors import DecodeError, KinematicsError
-from gateway.core.kinematics import Odometry
+from gateway.core.kinematics.odometry import Odometry
 from gateway.core.odom_feed import OdomFeed
 from gateway.core.steer_log import SteeringSource, fixed_subset, reconstruct_steer
 from gateway.drive.driveset import DriveSet
@@ -54,7 +54,7 @@ from gateway.wire.can import WgCodec
 if TYPE_CHECKING:
     from collections.abc import Iterable, Iterator, Sequence
 
-    from gateway.core.kinematics import OdometryState
+    from gateway.core.kinematics.odometry import OdometryState
     from gateway.core.settings import GatewayConfig
     from gateway.core.types import Frame, Twist
     from gateway.wire.candump import CandumpError, LogEntry

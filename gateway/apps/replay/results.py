@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from gateway.apps.replay.gateway_pose import PoseCheck
-    from gateway.core.kinematics import Pose
+    from gateway.core.kinematics.odometry import Pose
     from gateway.core.steer_log import SteeringSource
     from gateway.core.types import Twist
     from gateway.drive.rejections import RejectedFrames

@@ -35,7 +35,7 @@ from gateway.cli import config_option, json_option
 from gateway.cli.commands._common import json_failures, load
 from gateway.config.keys import MAX_MULTIPLIER, MIN_MULTIPLIER
 from gateway.core.errors import ConfigError
-from gateway.core.kinematics import Pose
+from gateway.core.kinematics.odometry import Pose
 
 if TYPE_CHECKING:
     from gateway.apps.calibrate.runs import Run

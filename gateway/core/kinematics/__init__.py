@@ -1,10 +1,10 @@
-"""The general wheel-constraint model, its presets, limits and odometry (pure numpy)."""
+"""The general wheel-constraint model, its presets and limits (pure numpy); the odometry that
+integrates the wheels' feedback is :mod:`gateway.core.kinematics.odometry`."""
 
 from __future__ import annotations
 
 from gateway.core.kinematics.limits import LimitReport, Limits, apply_limits
 from gateway.core.kinematics.model import FkResult, IkResult, Mobility, RobotModel
-from gateway.core.kinematics.odometry import Odometry, OdometryState, Pose, compose, se2_exp
 from gateway.core.kinematics.presets import PRESETS, Preset
 from gateway.core.kinematics.wheels import Wheel, WheelType, forward_beta, wrap_angle
 
@@ -15,16 +15,11 @@ __all__ = [
     "LimitReport",
     "Limits",
     "Mobility",
-    "Odometry",
-    "OdometryState",
-    "Pose",
     "Preset",
     "RobotModel",
     "Wheel",
     "WheelType",
     "apply_limits",
-    "compose",
     "forward_beta",
-    "se2_exp",
     "wrap_angle",
 ]

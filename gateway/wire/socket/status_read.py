@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, Final, NoReturn, TypeVar
 
 from gateway.core.kinematics.odometry import OdometryState, Pose
 from gateway.core.protection import Guard, ProtectionState
+from gateway.core.settings import TrackingLimits
 from gateway.core.status import (
     BusErrorState,
     BusHealth,
@@ -34,7 +35,6 @@ from gateway.core.status import (
     TrackingReport,
     state_name,
 )
-from gateway.core.tracking import TrackingLimits
 from gateway.core.types import DriveFault, DriveState, ErrorCode, GatewayState, Twist
 from gateway.wire.socket.messages import ProtocolError, quoted, short_json
 
