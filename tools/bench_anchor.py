@@ -147,6 +147,15 @@ def _run(argv: list[str], env: dict[str, str] | None = None) -> float:
     return elapsed
 
 
+def _instructions(label: str, argv: list[str], env: dict[str, str]) -> int:
+    """The instructions of one run of ``argv`` under callgrind (one process expected)."""
+    with tempfile.TemporaryDirectory(prefix="wg-callgrind-") as tmp:
+        counts = callgrind.run(argv, Path(tmp), env)
+    if len(counts) != 1:
+        raise SystemExit(f"{label}: expected one process under callgrind, got {len(counts)}")
+    return next(iter(counts.values()))
+
+
 def run_startup(runs: int, instr_runs: int = 5) -> dict[str, tuple[int, float, float]]:
     """Per command: (instructions, median wall s, best wall s); prints the table."""
     print("\n" + _doc("Start-up") + "\n", flush=True)
@@ -164,18 +173,12 @@ def run_startup(runs: int, instr_runs: int = 5) -> dict[str, tuple[int, float, f
     instr: dict[str, list[int]] = {label: [] for label, _ in commands}
     for _ in range(instr_runs):
         for label, argv in commands:
-            with tempfile.TemporaryDirectory(prefix="wg-callgrind-") as tmp:
-                counts = callgrind.run(argv, Path(tmp), env)
-            if len(counts) != 1:
-                raise SystemExit(f"{label}: expected one process under callgrind, "
-                                 f"got {len(counts)}")
-            instr[label].append(next(iter(counts.values())))
+            instr[label].append(_instructions(label, argv, env))
     exact: dict[str, list[int]] = {label: [] for label, _ in commands}
+    single = {**env, "OPENBLAS_NUM_THREADS": "1"}
     for _ in range(2):
         for label, argv in commands:
-            with tempfile.TemporaryDirectory(prefix="wg-callgrind-") as tmp:
-                counts = callgrind.run(argv, Path(tmp), {**env, "OPENBLAS_NUM_THREADS": "1"})
-            exact[label].extend(counts.values())
+            exact[label].append(_instructions(label, argv, single))
     out: dict[str, tuple[int, float, float]] = {
         label: (int(statistics.median(instr[label])), statistics.median(wall[label]),
                 min(wall[label]))

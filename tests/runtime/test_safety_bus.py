@@ -128,8 +128,7 @@ def test_a_full_transmit_queue_cuts_bursts_without_starving_a_wheel(
 
     def slow(bus: VirtualBus, msg: can.Message, timeout: float | None = None) -> None:
         if bus is rig.gw.edge.bus and time.perf_counter() < free_at[0]:
-            raise can.CanOperationError("Failed to transmit: No buffer space available",
-                                        errno.ENOBUFS)
+            raise no_buffer_space()
         real_send(bus, msg, timeout)
 
     monkeypatch.setattr(VirtualBus, "send", slow)
