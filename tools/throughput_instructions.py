@@ -25,6 +25,7 @@ import tempfile
 import traceback
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import callgrind
 import can
@@ -34,6 +35,9 @@ from can.interfaces.virtual import VirtualBus
 from throughput_rig import PERIOD_S, PROTOCOLS, TWIST, Bench, robot_raw
 
 from gateway.core.types import GatewayState
+
+if TYPE_CHECKING:
+    from collections.abc import Sequence
 
 MIXES = ("1 kHz mix", "saturated")
 #: The measured loops: the gateway's cycle, python-can alone, and the harness common to both
@@ -233,18 +237,23 @@ class Row:
         return self.per_cycle[side] - self.per_cycle["harness"]
 
 
-def measure(protocol: str, cycles: int, verify: bool, anchor: bool = False
-            ) -> tuple[list[Row], float]:
+def measure(protocol: str, cycles: int, verify: bool, anchor: bool = False,
+            launcher: Sequence[str] | None = None) -> tuple[list[Row], float]:
     """One protocol under callgrind: its rows and the parent's drift per fork.
 
     :param anchor: also measure the hand-written loop (ODrive: :mod:`anchor_loop`, DJI:
         :mod:`anchor_dji`).
+    :param launcher: the command line before :func:`main`'s arguments in the measured
+        process (default: this module, run by this interpreter); another script that calls
+        :func:`main` with the rest of its arguments (``cycle_ablation.py``).
     """
     multiples = (1, 2, 1, 3) if verify else (1, 2)
     sides = (*SIDES, ANCHOR) if anchor else SIDES
     with tempfile.TemporaryDirectory(prefix="wg-callgrind-") as tmp:
         outdir = Path(tmp)
-        argv = [sys.executable, str(Path(__file__).resolve()), protocol, str(outdir),
+        start = [sys.executable, str(Path(__file__).resolve())] if launcher is None \
+            else list(launcher)
+        argv = [*start, protocol, str(outdir),
                 "--cycles", str(cycles), "--multiples", ",".join(map(str, multiples)),
                 *(["--anchor"] if anchor else [])]
         counts = callgrind.run(argv, outdir, {"PYTHONHASHSEED": "0"})
