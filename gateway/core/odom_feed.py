@@ -15,7 +15,11 @@ The odometry integrates every wheel's position at one time, the newest feedback'
   wheel's step solves to a diagonal with a turn, four of them add up to the straight line
   again, but the distance grows by up to sqrt(2) (41 %) and the odometry's twist is each
   wheel's alone (at 0.5 m/s straight: 0.42 m/s forward, 0.42 m/s sideways and 1.1 rad/s of
-  turn).  The replay chooses its rounds itself (:mod:`gateway.apps.replay.rounds`);
+  turn).  After a stall of every wheel (no feedback at all for longer than ``silent_s``: a
+  bus unplugged, a stalled sender) every driven wheel is waited for again, up to ``silent_s``:
+  the first wheel back would otherwise find the others silent, and its position, the motion
+  of the whole stall, against their old ones is a turn the robot did not make.  The replay
+  chooses its rounds itself (:mod:`gateway.apps.replay.rounds`);
 * every position newer than the last sample's is carried to the sample's time with its own
   wheel's speed (``position + velocity * (time - its time)``): the wheels of one round were
   measured up to a feedback period apart.  A wheel whose position is not newer, or older than
@@ -151,6 +155,9 @@ class OdomFeed:
         # the first jump.
         self._from_raw: list[float] = []
         self._from_out: list[float] = []
+        # When every wheel's feedback came back after a silence of all of them longer than
+        # silent_s (a stall; -inf: none yet): a round waits for every driven wheel again.
+        self._resumed_s = -math.inf
 
     def last_jump_text(self, names: Sequence[str]) -> str:
         """:attr:`last_jump` described with its wheel's name (``names``: model order); empty
@@ -178,6 +185,8 @@ class OdomFeed:
         if newest <= last:
             return None
         self.stamp_s = newest
+        if newest - last > self.silent_s > 0.0 and last > -math.inf:
+            self._resumed_s = newest  # every wheel was silent: a stall (see _round_over)
         sampled = self.sampled_s
         if None in feedback:  # (else every wheel has reported: the oldest in C)
             for i in self.driven:
@@ -206,10 +215,15 @@ class OdomFeed:
     def _round_over(self, feedback: Sequence[WheelFeedback | None], newest: float,
                     sampled: float, silent: float) -> bool:
         """Whether every driven wheel has a position newer than ``sampled`` or has sent none
-        for ``silent`` up to ``newest`` (whole rounds)."""
+        for ``silent`` up to ``newest`` (whole rounds) while others did: within ``silent`` of
+        the end of a stall of every wheel, every one is waited for.  Otherwise the first wheel
+        back would count the others as silent, and its new position, the motion of the whole
+        stall, integrated against their old ones would be a turn the robot did not make,
+        undone by the next sample, the translation between them going the wrong way."""
+        stalled = newest - self._resumed_s < silent
         for i in self.driven:
             t = cast("WheelFeedback", feedback[i]).timestamp_s
-            if sampled >= t > newest - silent:
+            if sampled >= t and (stalled or t > newest - silent):
                 return False
         return True
 

@@ -229,14 +229,6 @@ def test_arc_is_exact_whatever_the_rate() -> None:
         assert pose.theta_rad == pytest.approx(want.theta_rad, abs=1e-5)
 
 
-def test_a_wheel_that_falls_silent_delays_updates_by_the_longest_interval() -> None:
-    cfg = load_config(DIFF)
-    log = [line(0.0, 1, 0.0), line(0.0, 2, 0.0)]
-    log += [line(k * 0.01, 1, k * 0.01) for k in range(1, 51)]   # right falls silent
-    got = times(Replay(cfg, 0.0, max_interval_s=0.1), log)
-    assert got == [0.0, 0.1, 0.2, 0.3, 0.4, 0.5]
-
-
 def test_a_wheel_never_heard_from_is_named() -> None:
     cfg = load_config(DIFF)
     replay = Replay(cfg, 0.0)

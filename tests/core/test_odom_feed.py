@@ -147,6 +147,23 @@ def test_a_silent_wheel_holds_whole_rounds_back_for_the_wait_only() -> None:
     assert feed.sample([Fb(0.28, 1.0, 0.28), Fb(0.3, 1.0, 0.265)]) is None
 
 
+def test_after_a_stall_of_every_wheel_whole_rounds_wait_for_every_one() -> None:
+    """Both wheels silent for 0.5 s (a bus unplugged while the robot rolls on), then wheel 0
+    comes back first: not a round yet, though wheel 1's last position is older than
+    ``silent_s``; a round once wheel 1 is back, or ``silent_s`` after the stall without it."""
+    feed = OdomFeed((0, 1), silent_s=0.25, whole_rounds=True)
+    for k in range(3):
+        assert feed.sample([Fb(0.1 * k, 1.0, 0.01 * k), Fb(0.1 * k, 1.0, 0.01 * k)]) is not None
+    assert feed.sample([Fb(0.6, 1.0, 0.52), Fb(0.02, 1.0, 0.02)]) is None
+    assert feed.sample([Fb(0.61, 1.0, 0.53), Fb(0.62, 1.0, 0.525)]) == (
+        0.53, [0.61, pytest.approx(0.625)])
+    # Another stall, after which wheel 1 does not come back: on without it (held where it
+    # was) silent_s after the stall's end.
+    for t in (1.2, 1.3, 1.44):
+        assert feed.sample([Fb(t, 1.0, t), Fb(0.62, 1.0, 0.525)]) is None
+    assert feed.sample([Fb(1.45, 1.0, 1.45), Fb(0.62, 1.0, 0.525)]) == (1.45, [1.45, 0.62])
+
+
 # ----------------------------------------------------------------- position jumps
 
 #: Top speeds of three wheels (rad/s): the jump bound is JUMP_SPEED_FACTOR times these.

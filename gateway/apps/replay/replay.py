@@ -16,7 +16,8 @@ When the odometry is updated
     stamps each frame on its own and the controllers answer one after the other), and at most
     once per ``min_interval_s`` of log time (by default the configured control period, as the
     gateway); a round that comes sooner is passed over, its motion is in the next update's.  A
-    wheel that falls silent delays an update by at most ``max_interval_s``.  Positions are
+    wheel that falls silent delays an update by at most ``max_interval_s`` from the first new
+    position after the last round (a stall of every sender silences no wheel).  Positions are
     absolute, so fewer updates lose no motion: the SE(2) step is exact while the twist is
     constant, and a twist that changes within an interval costs a second-order error
     (``tools/bench_replay.py`` measures it).  Whatever is pending is integrated at the end of
@@ -74,6 +75,13 @@ log = logging.getLogger(__name__)
 
 #: Default log time after which a pending update waits no longer for every wheel, s.
 DEFAULT_MAX_INTERVAL_S = 0.1
+#: A silence of every controller longer than the longest interval and this many times the
+#: usual time between two of their frames is a stall, not a wheel falling silent: a log whose
+#: controllers send at 10 Hz or slower has no stalls by this rule, and a silent wheel is still
+#: found there after the longest interval.
+STALL_FACTOR = 4.0
+#: The weight of each new time between two feedback frames in their moving average.
+GAP_WEIGHT = 0.1
 
 #: What one odometry update takes: every wheel's position, the stamp, the steering angles.
 Update = tuple[tuple[float | None, ...], float, tuple[float | None, ...]]
@@ -86,8 +94,9 @@ class Replay:
     :param min_interval_s: least log time between two odometry updates, s; by default the
         control period of the configuration (``gateway.rate_hz``), the gateway's own cadence.
     :param max_interval_s: log time after which the odometry is updated even though some
-        driven wheel has no new sample (a wheel that fell silent), s; a position older than
-        this is not carried on to an update's time by its speed.
+        driven wheel has no new sample (a wheel that fell silent), counted from the first new
+        position after the last round, s; a position older than this is not carried on to an
+        update's time by its speed.
     :param max_gap_s: the largest step forward of the log's time that is no jump, s
         (:mod:`gateway.apps.replay.timeline`).
     :raises DriverNotFoundError: if a driver cannot be loaded.
@@ -156,6 +165,10 @@ class Replay:
         self._entries = 0
         self._received = 0
         self._motor_frames = 0
+        # The last feedback frame's time and the usual time between two (a moving average):
+        # a much longer silence of every controller is a stall (see feed).
+        self._motor_s = -math.inf
+        self._motor_gap_s = 0.0
         self._updates = 0
         self._skipped = 0
 
@@ -185,8 +198,7 @@ class Replay:
             if self._pending and (
                 rounds.taken >= self._n_needed
                 or rounds.held is not None
-                or (self._group_s or 0.0) - self._last_update_s + STAMP_SLACK_S
-                >= self.max_interval_s
+                or self._waited() + STAMP_SLACK_S >= self.max_interval_s
             ):
                 out = self._update(final=False)
             self._group_s = t
@@ -200,6 +212,13 @@ class Replay:
             self._motor_frames += 1
             self._rounds.taken += 1
             self._pending = True
+            gap, self._motor_s = t - self._motor_s, t
+            if gap < math.inf:
+                if gap > self.max_interval_s and gap > STALL_FACTOR * self._motor_gap_s:
+                    # Every controller was silent (a stalled bus or sender, a starved candump):
+                    # no wheel fell silent then, the wait for a round starts again.
+                    self._rounds.resume(t)
+                self._motor_gap_s += (gap - self._motor_gap_s) * GAP_WEIGHT
         elif (
             self._wg is not None
             and frame.arbitration_id == self._velocity_id[0]
@@ -229,8 +248,13 @@ class Replay:
         group = self._group_s if self._group_s is not None else 0.0
         elapsed = group - self._last_update_s
         rounds = self._rounds
-        if not final and elapsed + STAMP_SLACK_S < self.max_interval_s:
-            found = rounds.due(self.drives.feedback_by_wheel())
+        now = self.drives.feedback_by_wheel()
+        # A round while no wheel is silent: the longest interval not over, or every driven
+        # wheel has a new position however long it took (a stall of every sender between
+        # two wheels' positions silences no wheel).
+        if not final and (self._waited() + STAMP_SLACK_S < self.max_interval_s
+                          or rounds.is_new(now)):
+            found = rounds.due(now)
             if found is None:
                 return None
             feedback, later = found, True
@@ -238,7 +262,6 @@ class Replay:
                 return None  # too soon: passed over (its positions are in the next update's)
         else:  # the longest interval is over (a wheel fell silent), or the log: the round
             # held, else what there is
-            now = self.drives.feedback_by_wheel()
             held = rounds.held
             later = held is not None
             feedback = held if held is not None else now
@@ -273,6 +296,11 @@ class Replay:
             tuple(None if fb is None else fb.velocity_rad_s for fb in feedback),
             self._steer,
         )
+
+    def _waited(self) -> float:
+        """How long new positions have waited for a round at the current time stamp group
+        (:meth:`Rounds.waited <gateway.apps.replay.rounds.Rounds.waited>`)."""
+        return self._rounds.waited(self.drives.feedback_by_wheel, self._group_s or 0.0)
 
     def _integrate(self, positions: Sequence[float | None], stamp: float) -> OdometryState:
         if self.steering is SteeringSource.ACTUATORS:
