@@ -59,17 +59,33 @@ class SimulatedControllers(Closing):
         self.failure: BaseException | None = None
         self.bus = open_bus(interface, channel, **bus_kwargs)
         self._open = True
+        self._stepped_s = float("-inf")  # the last real-time step's time (drain's since_s)
 
-    def step(self, now_s: float) -> int:
+    def step(self, now_s: float, real_time: bool = False) -> int:
         """Handle every waiting frame, tick every simulator, send what they emit.
 
+        :param real_time: ``now_s`` is ``time.monotonic()`` (the background thread): each
+            frame is handled at its own receive time, the motors advanced to it first, as a
+            real controller answers a frame when it comes (a CiA 402 drive's TPDO holds its
+            position at the SYNC).  Handled all at ``now_s`` instead, the frames that waited
+            while this process was starved (a loaded machine) were answered with the position
+            of before the wait, and the next answer stepped by the whole wait at once.
+            Otherwise (stepped by hand on simulated time) every frame is handled at ``now_s``.
         :return: the number of frames sent.
         """
         with self._lock:
             out = []
-            for frame in drain(self.bus):
+            if real_time:
+                frames = drain(self.bus, since_s=self._stepped_s)  # monotonic receive times
+                self._stepped_s = now_s
+            else:
+                frames = drain(self.bus)
+            for frame in frames:
+                t = min(frame.timestamp_s, now_s) if real_time else now_s
                 for sim in self.simulators:
-                    out.extend(sim.handle(frame, now_s))
+                    if real_time:
+                        sim.advance(t)
+                    out.extend(sim.handle(frame, t))
             for sim in self.simulators:
                 out.extend(sim.tick(now_s))
             if self.on_step is not None:
@@ -103,7 +119,7 @@ class SimulatedControllers(Closing):
             if now - deadline >= self.period_s:
                 self.late_steps += 1
             try:
-                self.step(now)
+                self.step(now, real_time=True)
             except BusError as err:
                 self.errors += 1
                 log.warning("simulated controllers: %s", err)

@@ -175,16 +175,28 @@ class DeviceSimulator(abc.ABC):
     def tick(self, now_s: float) -> list[Frame]:
         """Advance the motor to ``now_s``; return the periodic frames due."""
         if self._last_tick_s is not None:
-            if self.faults & SimFault.STALL:
-                self.model.velocity_rad_s = 0.0  # blocked: the shaft does not turn
-            else:
-                self.model.step(now_s - self._last_tick_s)
+            self._move(now_s - self._last_tick_s)
         self._last_tick_s = now_s
         out = self._on_tick(now_s)
         if self.faults & (SimFault.SILENT | SimFault.MUTE):
             self._held.clear()
             return []
         return self._emit(out, now_s)
+
+    def advance(self, now_s: float) -> None:
+        """Advance the motor to ``now_s`` (after its first tick, never back), sending nothing:
+        what it measures when a frame arrives at ``now_s`` between two ticks (a CiA 402
+        drive's TPDO samples its position at the SYNC)."""
+        last = self._last_tick_s
+        if last is not None and now_s > last:
+            self._move(now_s - last)
+            self._last_tick_s = now_s
+
+    def _move(self, dt_s: float) -> None:
+        if self.faults & SimFault.STALL:
+            self.model.velocity_rad_s = 0.0  # blocked: the shaft does not turn
+        else:
+            self.model.step(dt_s)
 
     def due(self, due_s: float | None, now_s: float, period_s: float) -> float:
         """When a cyclic frame of period ``period_s`` is due: ``due_s`` once scheduled; the
