@@ -45,12 +45,8 @@ if TYPE_CHECKING:
     from gateway.core.types import WheelFeedback
 
 
-def _no_running_check(self: Supervisor, *args: object) -> None:
-    return None
-
-
-def _no_tracking(self: TrackingMonitor, *args: object) -> None:
-    return None
+def _nothing(self: object, *args: object) -> None:
+    """The no-op of a part whose result the cycle does not need (``None``: no fault)."""
 
 
 def _heard_oldest_only(self: Liveness, index: int, stream: int, t: float) -> None:
@@ -74,14 +70,6 @@ def _fit_without_residual(self: FkPlan, n: int, rhs: list[float], per_wheel: boo
     return vx, vy, wz, 0.0, [0.0] * n if per_wheel else None
 
 
-def _no_tally(self: BusEdge, *args: object) -> None:
-    return None
-
-
-def _no_odometry(self: Gateway) -> None:
-    return None
-
-
 @dataclass(frozen=True)
 class Part:
     """One part of the cycle and the no-op that replaces it.
@@ -100,18 +88,18 @@ class Part:
 
 PARTS: dict[str, Part] = {
     "supervision": Part("the supervisor's checks of the running motors (faults, liveness, "
-                        "the tracking check)", Supervisor, "_running_check", _no_running_check),
+                        "the tracking check)", Supervisor, "_running_check", _nothing),
     "tracking": Part("the tracking check alone (part of supervision)", TrackingMonitor, "check",
-                     _no_tracking),
+                     _nothing),
     "liveness": Part("the liveness bookkeeping per feedback frame (the newest time kept)",
                      Liveness, "heard", _heard_oldest_only),
     "jumps": Part("the odometry's position-jump test", OdomFeed, "positions",
                   _positions_as_they_are),
     "residual": Part("the odometry's slip residual", FkPlan, "_fit", _fit_without_residual),
     "tallies": Part("the frame tallies per identifier (monitor, bus load)", BusEdge, "_tally",
-                    _no_tally),
+                    _nothing),
     "odometry": Part("the whole odometry (feed and integration)", Gateway, "_integrate",
-                     _no_odometry),
+                     _nothing),
 }
 
 #: What the gateway does every cycle and a hand-written loop does not: removed together.

@@ -185,8 +185,9 @@ class OdomFeed:
         if newest <= last:
             return None
         self.stamp_s = newest
-        if newest - last > self.silent_s > 0.0 and last > -math.inf:
-            self._resumed_s = newest  # every wheel was silent: a stall (see _round_over)
+        if newest - last > self.silent_s:
+            self._resumed_s = newest  # every wheel was silent (or none reported before): a
+            # stall, see _round_over
         sampled = self.sampled_s
         if None in feedback:  # (else every wheel has reported: the oldest in C)
             for i in self.driven:

@@ -198,7 +198,8 @@ class Replay:
             if self._pending and (
                 rounds.taken >= self._n_needed
                 or rounds.held is not None
-                or self._waited() + STAMP_SLACK_S >= self.max_interval_s
+                or rounds.waited(self.drives.feedback_by_wheel, self._group_s or 0.0)
+                + STAMP_SLACK_S >= self.max_interval_s
             ):
                 out = self._update(final=False)
             self._group_s = t
@@ -252,8 +253,8 @@ class Replay:
         # A round while no wheel is silent: the longest interval not over, or every driven
         # wheel has a new position however long it took (a stall of every sender between
         # two wheels' positions silences no wheel).
-        if not final and (self._waited() + STAMP_SLACK_S < self.max_interval_s
-                          or rounds.is_new(now)):
+        if not final and (rounds.waited(lambda: now, group) + STAMP_SLACK_S
+                          < self.max_interval_s or rounds.is_new(now)):
             found = rounds.due(now)
             if found is None:
                 return None
@@ -296,11 +297,6 @@ class Replay:
             tuple(None if fb is None else fb.velocity_rad_s for fb in feedback),
             self._steer,
         )
-
-    def _waited(self) -> float:
-        """How long new positions have waited for a round at the current time stamp group
-        (:meth:`Rounds.waited <gateway.apps.replay.rounds.Rounds.waited>`)."""
-        return self._rounds.waited(self.drives.feedback_by_wheel, self._group_s or 0.0)
 
     def _integrate(self, positions: Sequence[float | None], stamp: float) -> OdometryState:
         if self.steering is SteeringSource.ACTUATORS:
